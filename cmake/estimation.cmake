@@ -1,0 +1,1 @@
+# Component: estimation (targets are added by the component's owner)

@@ -1,0 +1,1 @@
+# Component: kitti (targets are added by the component's owner)

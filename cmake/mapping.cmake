@@ -1,0 +1,1 @@
+# Component: mapping (targets are added by the component's owner)

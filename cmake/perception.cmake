@@ -1,0 +1,1 @@
+# Component: perception (targets are added by the component's owner)

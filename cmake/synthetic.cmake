@@ -1,0 +1,1 @@
+# Component: synthetic (targets are added by the component's owner)

@@ -1,0 +1,1 @@
+# Component: system (targets are added by the component's owner)

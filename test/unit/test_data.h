@@ -1,0 +1,52 @@
+// Where unit tests find data. Third-party data lives in ../shared beside the repository (never
+// in it); a test that needs it calls ISM_REQUIRE_SHARED(...) and is skipped with a loud message
+// when it is absent. ISM_SHARED_DIR in the environment overrides the compiled-in default.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <unistd.h>
+
+namespace inekf_semantic_mapping {
+namespace test {
+
+inline std::string sharedDir() {
+  const char* from_env = std::getenv("ISM_SHARED_DIR");
+  return from_env && *from_env ? std::string(from_env) : std::string(ISM_SHARED_DIR_DEFAULT);
+}
+
+inline std::string sharedPath(const std::string& relative) {
+  return sharedDir() + "/" + relative;
+}
+
+inline std::string repoPath(const std::string& relative) {
+  return std::string(ISM_REPO_ROOT) + "/" + relative;
+}
+
+// A fresh temporary directory for one test; removed by the caller if it wants to.
+inline std::string makeTempDir(const std::string& tag) {
+  namespace fs = std::filesystem;
+  fs::path dir = fs::temp_directory_path() /
+                 ("ism_" + tag + "_" + std::to_string(static_cast<long>(::getpid())));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+}  // namespace test
+}  // namespace inekf_semantic_mapping
+
+// Skips the current test, loudly, when ../shared/<relative> does not exist.
+#define ISM_REQUIRE_SHARED(relative)                                                         \
+  do {                                                                                       \
+    const std::string ism_required_path = ::inekf_semantic_mapping::test::sharedPath(relative); \
+    if (!std::filesystem::exists(ism_required_path)) {                                       \
+      std::cerr << "\n*** SKIPPED: shared data not found: " << ism_required_path            \
+                << "\n*** (put the shared/ data folder beside the repository to run this test)\n"; \
+      GTEST_SKIP() << "shared data not found: " << ism_required_path;                      \
+    }                                                                                        \
+  } while (0)
