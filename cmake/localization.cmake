@@ -1,0 +1,1 @@
+# Component: localization (targets are added by the component's owner)
