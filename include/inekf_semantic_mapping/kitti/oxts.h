@@ -1,0 +1,48 @@
+// OXTS RT3003 GPS/IMU records of KITTI raw drives (oxts/dataformat.txt).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace inekf_semantic_mapping {
+namespace kitti {
+
+// The 30 fields of one oxts/data/%010d.txt line, named and ordered as in dataformat.txt.
+struct OxtsRecord {
+  double lat = 0, lon = 0, alt = 0;           // deg, deg, m (WGS84)
+  double roll = 0, pitch = 0, yaw = 0;        // rad; yaw 0 = east, positive counter-clockwise
+  double vn = 0, ve = 0;                      // m/s north, east
+  double vf = 0, vl = 0, vu = 0;              // m/s forward, left, up (body frame)
+  double ax = 0, ay = 0, az = 0;              // m/s^2 body frame x y z (specific force)
+  double af = 0, al = 0, au = 0;              // m/s^2 levelled forward/left/up (NOT body frame)
+  double wx = 0, wy = 0, wz = 0;              // rad/s body frame
+  double wf = 0, wl = 0, wu = 0;              // rad/s levelled (NOT body frame)
+  double pos_accuracy = 0, vel_accuracy = 0;  // m, m/s
+  int navstat = 0, numsats = 0, posmode = 0, velmode = 0, orimode = 0;
+};
+
+struct OxtsFrame {
+  std::int64_t stamp_ns = 0;  // from oxts/timestamps.txt
+  OxtsRecord record;
+  double stampSeconds() const { return static_cast<double>(stamp_ns) * 1e-9; }
+};
+
+constexpr int kOxtsFieldCount = 30;
+
+// Parses one line of 30 whitespace-separated numbers. The integer flags are accepted as
+// "4" or "4.00000000000000" (2011_10_03 files) but not as "4.5". Throws KittiFormatError
+// naming file_for_errors:line_number and the field on a short line, an extra value or a
+// non-numeric/non-finite value (lat/lon/alt/roll/pitch/yaw must be finite).
+OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_errors,
+                         int line_number);
+
+// Reads the first line of one oxts/data/%010d.txt file.
+OxtsRecord readOxtsFile(const std::string& path);
+
+// Reads oxts/data/%010d.txt (0..N-1, contiguous) with oxts/timestamps.txt. The number of data
+// files must equal the number of timestamps, else KittiFormatError naming the folder.
+std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir);
+
+}  // namespace kitti
+}  // namespace inekf_semantic_mapping

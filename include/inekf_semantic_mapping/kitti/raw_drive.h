@@ -1,0 +1,76 @@
+// A KITTI raw drive folder: <date>/<date>_drive_<nnnn>_sync/ (10 Hz, synchronized) or
+// _extract/ (100 Hz OXTS, unsynchronized), with whatever sensors it has.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
+
+namespace inekf_semantic_mapping {
+namespace kitti {
+
+// One sensor folder (oxts, velodyne_points, image_00..03).
+struct SensorStream {
+  std::string name;                           // "oxts", "velodyne_points", "image_02", ...
+  std::string dir;                            // <drive>/<name>
+  bool present = false;                       // dir/data and dir/timestamps.txt exist
+  std::vector<std::int64_t> stamps_ns;        // timestamps.txt
+  std::vector<std::int64_t> start_stamps_ns;  // velodyne timestamps_start.txt (may be empty)
+  std::vector<std::int64_t> end_stamps_ns;    // velodyne timestamps_end.txt (may be empty)
+  std::string extension;                      // of the data files: ".txt", ".bin", ".png"
+
+  std::size_t size() const { return stamps_ns.size(); }
+  // <dir>/data/%010d<extension>
+  std::string framePath(std::size_t frame) const;
+};
+
+class RawDrive {
+ public:
+  static constexpr int kNumCameras = 4;
+
+  // Opens the drive: finds the sensors, reads their timestamps and checks that each sensor has
+  // as many data files as timestamps (KittiFormatError naming the folder otherwise). calib_dir
+  // empty: the drive's parent folder (the date folder). Missing calibration is allowed.
+  explicit RawDrive(const std::string& drive_dir, const std::string& calib_dir = "");
+
+  const std::string& driveDir() const { return drive_dir_; }
+  bool isExtract() const { return is_extract_; }  // the folder name ends in _extract
+
+  const SensorStream& oxts() const { return oxts_; }
+  const SensorStream& velodyne() const { return velodyne_; }
+  const SensorStream& camera(int index) const;  // image_00 .. image_03
+
+  bool hasOxts() const { return oxts_.present; }
+  bool hasVelodyne() const { return velodyne_.present; }
+  bool hasCamera(int index) const { return camera(index).present; }
+
+  // Reads every OXTS frame (stamps from oxts/timestamps.txt). Throws if there is no oxts/.
+  std::vector<OxtsFrame> readOxts() const;
+
+  // The folder with calib_*.txt, or "" when none was found.
+  const std::string& calibrationDir() const { return calibration_dir_; }
+  bool hasCalibration() const { return !calibration_dir_.empty(); }
+  RawCalibration readCalibration() const;  // throws when !hasCalibration()
+
+  // Human-readable names of what is absent ("velodyne_points", "image_02", "calibration"),
+  // for one warning that tells the user what will not be published.
+  std::vector<std::string> missingParts() const;
+
+  // Earliest stamp over all present sensors (0 if none).
+  std::int64_t firstStampNs() const;
+
+ private:
+  SensorStream openSensor(const std::string& name) const;
+
+  std::string drive_dir_;
+  bool is_extract_ = false;
+  SensorStream oxts_, velodyne_;
+  SensorStream cameras_[kNumCameras];
+  std::string calibration_dir_;
+};
+
+}  // namespace kitti
+}  // namespace inekf_semantic_mapping
