@@ -1,0 +1,59 @@
+// Semantic segmentation of camera images with OpenCV's dnn module (CPU). ROS-free: the
+// segmentation_node and the segment_image tool are thin faces over this class.
+#pragma once
+
+#include <memory>
+#include <opencv2/core/mat.hpp>
+#include <stdexcept>
+#include <string>
+
+#include "inekf_semantic_mapping/perception/model_card.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+
+// Thrown for unusable models (unknown format, output channels that do not match the card) and
+// unusable images (empty, unsupported pixel type).
+class SegmentationError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct Segmentation {
+  cv::Mat label_ids;   // CV_8UC1 Cityscapes labelIds, same size as the input image
+  cv::Mat confidence;  // CV_32FC1 softmax probability of the chosen class, same size
+};
+
+class Segmenter {
+ public:
+  // Loads `.onnx` (readNetFromONNX) or Torch7 `.net`/`.t7` (readNetFromTorch) and checks with one
+  // forward pass that the network's output channel count equals the card's.
+  Segmenter(const std::string& model_path, const ModelCard& card, int num_threads = 2);
+  ~Segmenter();
+  Segmenter(Segmenter&&) noexcept;
+  Segmenter& operator=(Segmenter&&) noexcept;
+
+  // image: CV_8UC3 BGR, CV_8UC4 BGRA or CV_8UC1 gray, any size. Not thread-safe (one network).
+  Segmentation segment(const cv::Mat& image);
+
+  const ModelCard& card() const { return card_; }
+  const std::string& modelPath() const { return model_path_; }
+
+ private:
+  struct Network;
+  std::string model_path_;
+  ModelCard card_;
+  std::unique_ptr<Network> network_;
+};
+
+// CV_8UC1 labelIds -> CV_8UC3 RGB colors from the Cityscapes palette.
+cv::Mat colorizeLabelIds(const cv::Mat& label_ids);
+
+// Blends the palette colors over a BGR image: RGB result, alpha = weight of the label colors.
+cv::Mat overlayLabelIds(const cv::Mat& bgr_image, const cv::Mat& label_ids, double alpha);
+
+// labelIds -> trainIds (255 for ignored classes), per pixel.
+cv::Mat labelIdsToTrainIds(const cv::Mat& label_ids);
+
+}  // namespace perception
+}  // namespace inekf_semantic_mapping

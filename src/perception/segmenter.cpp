@@ -1,0 +1,265 @@
+#include "inekf_semantic_mapping/perception/segmenter.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/dnn.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+namespace {
+
+namespace fs = std::filesystem;
+
+cv::dnn::Net readNetwork(const std::string& model_path) {
+  if (!fs::exists(model_path)) throw SegmentationError("model file not found: " + model_path);
+  const std::string extension = fs::path(model_path).extension().string();
+  try {
+    if (extension == ".onnx") return cv::dnn::readNetFromONNX(model_path);
+    if (extension == ".net" || extension == ".t7") return cv::dnn::readNetFromTorch(model_path);
+  } catch (const cv::Exception& e) {
+    throw SegmentationError("cannot load model " + model_path + ": " + e.what());
+  }
+  throw SegmentationError("unknown model format '" + extension + "' of " + model_path +
+                          " (expected .onnx, or Torch7 .net / .t7)");
+}
+
+// The image as 8-bit BGR, whatever of the supported pixel types it came in.
+cv::Mat toBgr(const cv::Mat& image) {
+  if (image.empty()) throw SegmentationError("segment(): empty image");
+  if (image.depth() != CV_8U)
+    throw SegmentationError("segment(): unsupported pixel depth " + std::to_string(image.depth()) +
+                            " (need 8-bit gray, BGR or BGRA)");
+  cv::Mat bgr;
+  switch (image.channels()) {
+    case 1:
+      cv::cvtColor(image, bgr, cv::COLOR_GRAY2BGR);
+      return bgr;
+    case 3:
+      return image;
+    case 4:
+      cv::cvtColor(image, bgr, cv::COLOR_BGRA2BGR);
+      return bgr;
+    default:
+      throw SegmentationError("segment(): unsupported channel count " +
+                              std::to_string(image.channels()) + " (need 1, 3 or 4)");
+  }
+}
+
+int roundUpToMultiple(int value, int multiple) {
+  return (value + multiple - 1) / multiple * multiple;
+}
+
+// The network input made from an image, and where the image lies in it.
+struct PreparedInput {
+  cv::Mat network_image;  // BGR, what blobFromImage receives
+  cv::Rect valid_region;  // the image's pixels inside network_image (output is cropped to it)
+};
+
+PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
+  PreparedInput prepared;
+  switch (card.resize_policy) {
+    case ResizePolicy::kResize:
+      cv::resize(bgr, prepared.network_image, cv::Size(card.input_width, card.input_height), 0, 0,
+                 cv::INTER_LINEAR);
+      prepared.valid_region = cv::Rect(0, 0, card.input_width, card.input_height);
+      break;
+    case ResizePolicy::kLetterbox: {
+      const double scale = std::min(static_cast<double>(card.input_width) / bgr.cols,
+                                    static_cast<double>(card.input_height) / bgr.rows);
+      const int width =
+          std::clamp(static_cast<int>(std::lround(bgr.cols * scale)), 1, card.input_width);
+      const int height =
+          std::clamp(static_cast<int>(std::lround(bgr.rows * scale)), 1, card.input_height);
+      const int left = (card.input_width - width) / 2;
+      const int top = (card.input_height - height) / 2;
+      cv::Mat resized;
+      cv::resize(bgr, resized, cv::Size(width, height), 0, 0, cv::INTER_LINEAR);
+      // Pad with the mean color so the padding normalizes to zero.
+      const cv::Scalar mean_bgr = card.swap_rb
+                                      ? cv::Scalar(card.mean[2], card.mean[1], card.mean[0])
+                                      : cv::Scalar(card.mean[0], card.mean[1], card.mean[2]);
+      cv::copyMakeBorder(resized, prepared.network_image, top, card.input_height - height - top,
+                         left, card.input_width - width - left, cv::BORDER_CONSTANT, mean_bgr);
+      prepared.valid_region = cv::Rect(left, top, width, height);
+      break;
+    }
+    case ResizePolicy::kPadToMultiple: {
+      cv::Mat resized = bgr;
+      if (card.input_width > 0 && card.input_height > 0 &&
+          (bgr.cols != card.input_width || bgr.rows != card.input_height)) {
+        cv::resize(bgr, resized, cv::Size(card.input_width, card.input_height), 0, 0,
+                   cv::INTER_AREA);
+      }
+      const int padded_width = roundUpToMultiple(resized.cols, card.pad_multiple);
+      const int padded_height = roundUpToMultiple(resized.rows, card.pad_multiple);
+      // Reflect (not zero) padding: the network has seen no black borders in training.
+      const int border = std::max(padded_width - resized.cols, padded_height - resized.rows);
+      if (border >= std::min(resized.cols, resized.rows)) {
+        cv::copyMakeBorder(resized, prepared.network_image, 0, padded_height - resized.rows, 0,
+                           padded_width - resized.cols, cv::BORDER_REPLICATE);
+      } else {
+        cv::copyMakeBorder(resized, prepared.network_image, 0, padded_height - resized.rows, 0,
+                           padded_width - resized.cols, cv::BORDER_REFLECT_101);
+      }
+      prepared.valid_region = cv::Rect(0, 0, resized.cols, resized.rows);
+      break;
+    }
+  }
+  return prepared;
+}
+
+}  // namespace
+
+struct Segmenter::Network {
+  cv::dnn::Net net;
+  cv::Mat label_lut;  // 1x256 CV_8U: channel index -> labelId
+};
+
+Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int num_threads)
+    : model_path_(model_path), card_(card), network_(std::make_unique<Network>()) {
+  if (card_.output_label_ids.empty())
+    throw SegmentationError("model card " + card_.source + " has no output_label_ids");
+  if (card_.numOutputChannels() > 256)
+    throw SegmentationError("model card " + card_.source + ": more than 256 output channels");
+  cv::setNumThreads(num_threads);
+  network_->net = readNetwork(model_path);
+  network_->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+  network_->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+  network_->label_lut = cv::Mat::zeros(1, 256, CV_8U);
+  for (int i = 0; i < card_.numOutputChannels(); ++i)
+    network_->label_lut.at<std::uint8_t>(i) = card_.output_label_ids[i];
+
+  // One forward pass on a neutral image: catches a card that does not fit the model now,
+  // not on the first camera frame (and warms up the network).
+  const int probe_width =
+      card_.input_width > 0 ? card_.input_width : std::max(64, 4 * card_.pad_multiple);
+  const int probe_height =
+      card_.input_height > 0 ? card_.input_height : std::max(64, 4 * card_.pad_multiple);
+  segment(cv::Mat(probe_height, probe_width, CV_8UC3, cv::Scalar(127, 127, 127)));
+}
+
+Segmenter::~Segmenter() = default;
+Segmenter::Segmenter(Segmenter&&) noexcept = default;
+Segmenter& Segmenter::operator=(Segmenter&&) noexcept = default;
+
+Segmentation Segmenter::segment(const cv::Mat& image) {
+  const cv::Mat bgr = toBgr(image);
+  PreparedInput prepared;
+  cv::Mat output;
+  {
+    ScopedTimer timer("segmentation/preprocess");
+    prepared = prepareInput(bgr, card_);
+  }
+  {
+    ScopedTimer timer("segmentation/forward");
+    const cv::Scalar mean(card_.mean[0], card_.mean[1], card_.mean[2]);
+    const cv::Mat blob = cv::dnn::blobFromImage(prepared.network_image, card_.scale, cv::Size(),
+                                                mean, card_.swap_rb, false, CV_32F);
+    try {
+      network_->net.setInput(blob);
+      output = network_->net.forward();
+    } catch (const cv::Exception& e) {
+      throw SegmentationError("forward pass of " + model_path_ + " on a " +
+                              std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
+                              " input failed: " + e.what());
+    }
+  }
+  const int channels = output.dims == 4 ? output.size[1] : -1;
+  if (output.dims != 4 || output.size[0] != 1 || channels != card_.numOutputChannels()) {
+    std::ostringstream msg;
+    msg << "model " << model_path_ << " outputs " << (output.dims == 4 ? channels : -1)
+        << " channels (output dims " << output.dims << ") but its card " << card_.source << " maps "
+        << card_.numOutputChannels() << " channels to labelIds";
+    throw SegmentationError(msg.str());
+  }
+  const int height = output.size[2];
+  const int width = output.size[3];
+
+  Segmentation result;
+  {
+    ScopedTimer timer("segmentation/argmax");
+    cv::Mat best_score(height, width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
+    cv::Mat best_index(height, width, CV_8U, cv::Scalar(0));
+    const auto plane = [&](int c) {
+      return cv::Mat(height, width, CV_32F, output.ptr<float>(0, c));
+    };
+    const std::size_t pixels = static_cast<std::size_t>(height) * width;
+    float* best = best_score.ptr<float>();
+    std::uint8_t* index = best_index.ptr<std::uint8_t>();
+    for (int c = 0; c < channels; ++c) {
+      const float* score = output.ptr<float>(0, c);
+      for (std::size_t i = 0; i < pixels; ++i) {
+        if (score[i] > best[i]) {
+          best[i] = score[i];
+          index[i] = static_cast<std::uint8_t>(c);
+        }
+      }
+    }
+    // Softmax probability of the winner: 1 / sum_c exp(score_c - best).
+    cv::Mat exp_sum(height, width, CV_32F, cv::Scalar(0));
+    cv::Mat shifted;
+    for (int c = 0; c < channels; ++c) {
+      cv::subtract(plane(c), best_score, shifted);
+      cv::exp(shifted, shifted);
+      exp_sum += shifted;
+    }
+    cv::Mat confidence;
+    cv::divide(1.0, exp_sum, confidence);
+    cv::Mat label_ids;
+    cv::LUT(best_index, network_->label_lut, label_ids);
+
+    // Back to the input image: crop the padding, nearest-neighbour to the input size.
+    const cv::Rect valid = prepared.valid_region & cv::Rect(0, 0, width, height);
+    label_ids = label_ids(valid);
+    confidence = confidence(valid);
+    if (label_ids.size() != bgr.size()) {
+      cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST);
+      cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_NEAREST);
+    } else {
+      result.label_ids = label_ids.clone();
+      result.confidence = confidence.clone();
+    }
+  }
+  return result;
+}
+
+cv::Mat colorizeLabelIds(const cv::Mat& label_ids) {
+  CV_Assert(label_ids.type() == CV_8UC1);
+  cv::Mat lut(1, 256, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (const cityscapes::LabelInfo& info : cityscapes::kLabels)
+    lut.at<cv::Vec3b>(info.label_id) = cv::Vec3b(info.r, info.g, info.b);
+  cv::Mat three_channel, rgb;
+  cv::cvtColor(label_ids, three_channel, cv::COLOR_GRAY2BGR);
+  cv::LUT(three_channel, lut, rgb);
+  return rgb;
+}
+
+cv::Mat overlayLabelIds(const cv::Mat& bgr_image, const cv::Mat& label_ids, double alpha) {
+  const cv::Mat colors = colorizeLabelIds(label_ids);
+  cv::Mat rgb_image;
+  cv::cvtColor(toBgr(bgr_image), rgb_image, cv::COLOR_BGR2RGB);
+  if (rgb_image.size() != colors.size())
+    throw SegmentationError("overlay: image and label image differ in size");
+  cv::Mat blended;
+  cv::addWeighted(colors, alpha, rgb_image, 1.0 - alpha, 0.0, blended);
+  return blended;
+}
+
+cv::Mat labelIdsToTrainIds(const cv::Mat& label_ids) {
+  CV_Assert(label_ids.type() == CV_8UC1);
+  cv::Mat lut(1, 256, CV_8U);
+  for (int i = 0; i < 256; ++i) lut.at<std::uint8_t>(i) = cityscapes::labelIdToTrainId(i);
+  cv::Mat train_ids;
+  cv::LUT(label_ids, lut, train_ids);
+  return train_ids;
+}
+
+}  // namespace perception
+}  // namespace inekf_semantic_mapping

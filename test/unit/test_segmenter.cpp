@@ -1,0 +1,247 @@
+// Segmenter and model cards: ENet accuracy on the real Cityscapes sample, the committed U-Net
+// on wide images, card parsing, and the error paths a user hits with a wrong model or image.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/model_card.h"
+#include "inekf_semantic_mapping/perception/segmenter.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+namespace {
+
+namespace fs = std::filesystem;
+using test::makeTempDir;
+using test::repoPath;
+using test::sharedPath;
+
+constexpr char kEnetModel[] = "models/enet-cityscapes/enet-model.net";
+constexpr char kCityscapesImage[] =
+    "data/cityscapes/leftImg8bit/val/frankfurt/frankfurt_000000_000294_leftImg8bit.png";
+constexpr char kCityscapesTrainIds[] =
+    "data/cityscapes/gtFine/val/frankfurt/frankfurt_000000_000294_gtFine_labelTrainIds.png";
+
+std::string writeFile(const std::string& dir, const std::string& name, const std::string& text) {
+  const std::string path = dir + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+// Fraction of pixels with a valid trainId (not 255) where prediction and truth agree.
+double pixelAccuracy(const cv::Mat& predicted_train_ids, const cv::Mat& truth_train_ids) {
+  const cv::Mat valid = truth_train_ids != cityscapes::kIgnoreTrainId;
+  const cv::Mat correct = (predicted_train_ids == truth_train_ids) & valid;
+  return static_cast<double>(cv::countNonZero(correct)) / cv::countNonZero(valid);
+}
+
+TEST(SegmenterEnet, ReachesPixelAccuracyOnCityscapesSample) {
+  ISM_REQUIRE_SHARED(kEnetModel);
+  ISM_REQUIRE_SHARED(kCityscapesImage);
+  const cv::Mat image = cv::imread(sharedPath(kCityscapesImage), cv::IMREAD_COLOR);
+  const cv::Mat truth = cv::imread(sharedPath(kCityscapesTrainIds), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(image.empty());
+  ASSERT_EQ(truth.type(), CV_8UC1);
+
+  Segmenter segmenter(sharedPath(kEnetModel), defaultModelCardFor(sharedPath(kEnetModel)));
+  const Segmentation result = segmenter.segment(image);
+  ASSERT_EQ(result.label_ids.size(), image.size());
+  ASSERT_EQ(result.confidence.size(), image.size());
+  ASSERT_EQ(result.confidence.type(), CV_32FC1);
+
+  const double accuracy = pixelAccuracy(labelIdsToTrainIds(result.label_ids), truth);
+  std::cout << "ENet pixel accuracy on the Cityscapes sample: " << accuracy << "\n";
+  EXPECT_GE(accuracy, 0.78);
+
+  double min_confidence = 0, max_confidence = 0;
+  cv::minMaxLoc(result.confidence, &min_confidence, &max_confidence);
+  EXPECT_GE(min_confidence, 1.0 / 20.0 - 1e-6);  // the winner of 20 classes has >= 1/20
+  EXPECT_LE(max_confidence, 1.0 + 1e-6);
+  // Every produced id is a real labelId.
+  double max_label = 0;
+  cv::minMaxLoc(result.label_ids, nullptr, &max_label);
+  EXPECT_LT(max_label, cityscapes::kNumLabelIds);
+}
+
+TEST(SegmenterEnet, WrongChannelCountInCardIsRejectedNamingModelAndCard) {
+  ISM_REQUIRE_SHARED(kEnetModel);
+  ModelCard card = builtinEnetCityscapesCard();
+  card.output_label_ids.pop_back();  // 19 instead of 20
+  card.source = "my_card.yaml";
+  try {
+    Segmenter segmenter(sharedPath(kEnetModel), card);
+    FAIL() << "a 19-channel card was accepted for a 20-channel model";
+  } catch (const SegmentationError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("enet-model.net"), std::string::npos) << what;
+    EXPECT_NE(what.find("my_card.yaml"), std::string::npos) << what;
+    EXPECT_NE(what.find("20"), std::string::npos) << what;
+  }
+}
+
+TEST(SegmenterEnet, RejectsEmptyAndNon8BitImages) {
+  ISM_REQUIRE_SHARED(kEnetModel);
+  Segmenter segmenter(sharedPath(kEnetModel), builtinEnetCityscapesCard());
+  EXPECT_THROW(segmenter.segment(cv::Mat()), SegmentationError);
+  EXPECT_THROW(segmenter.segment(cv::Mat(100, 200, CV_16UC1, cv::Scalar(0))), SegmentationError);
+  EXPECT_THROW(segmenter.segment(cv::Mat(100, 200, CV_8UC2, cv::Scalar(0))), SegmentationError);
+  // Gray images are accepted and come back at their own size.
+  const Segmentation gray = segmenter.segment(cv::Mat(37, 124, CV_8UC1, cv::Scalar(90)));
+  EXPECT_EQ(gray.label_ids.size(), cv::Size(124, 37));
+}
+
+TEST(SegmenterUnet, CommittedModelSegmentsWideKittiSizedImagesAtInputResolution) {
+  const std::string model = repoPath("models/unet_synthetic.onnx");
+  if (!fs::exists(model)) GTEST_SKIP() << "models/unet_synthetic.onnx not committed yet";
+  const ModelCard card = defaultModelCardFor(model);
+  EXPECT_EQ(card.resize_policy, ResizePolicy::kPadToMultiple);
+  Segmenter segmenter(model, card);
+  cv::Mat image(375, 1242, CV_8UC3);
+  cv::randu(image, cv::Scalar::all(0), cv::Scalar::all(255));
+  const Segmentation result = segmenter.segment(image);
+  EXPECT_EQ(result.label_ids.size(), image.size());
+  // Only ids the card maps to can appear.
+  for (int id = 0; id < 256; ++id) {
+    const bool in_card = std::find(card.output_label_ids.begin(), card.output_label_ids.end(),
+                                   id) != card.output_label_ids.end();
+    if (!in_card) {
+      EXPECT_EQ(cv::countNonZero(result.label_ids == id), 0) << "labelId " << id;
+    }
+  }
+}
+
+TEST(ModelCard, ParsesEveryField) {
+  const std::string dir = makeTempDir("card_parse");
+  const std::string path = writeFile(dir, "unet.yaml",
+                                     "name: test_unet\n"
+                                     "input: {width: 624, height: 188}\n"
+                                     "resize_policy: pad_to_multiple\n"
+                                     "pad_multiple: 16\n"
+                                     "mean: [1.5, 2.5, 3.5]\n"
+                                     "scale: 0.5\n"
+                                     "swap_rb: false\n"
+                                     "num_output_channels: 3\n"
+                                     "output_label_ids: [7, 26, 23]\n");
+  const ModelCard card = loadModelCard(path);
+  EXPECT_EQ(card.name, "test_unet");
+  EXPECT_EQ(card.input_width, 624);
+  EXPECT_EQ(card.input_height, 188);
+  EXPECT_EQ(card.resize_policy, ResizePolicy::kPadToMultiple);
+  EXPECT_EQ(card.pad_multiple, 16);
+  EXPECT_DOUBLE_EQ(card.mean[2], 3.5);
+  EXPECT_DOUBLE_EQ(card.scale, 0.5);
+  EXPECT_FALSE(card.swap_rb);
+  EXPECT_EQ(card.output_label_ids, (std::vector<std::uint8_t>{7, 26, 23}));
+
+  // What saveModelCard writes, loadModelCard reads back unchanged.
+  const std::string saved = dir + "/saved.yaml";
+  saveModelCard(card, saved);
+  const ModelCard reloaded = loadModelCard(saved);
+  EXPECT_EQ(reloaded.output_label_ids, card.output_label_ids);
+  EXPECT_EQ(reloaded.resize_policy, card.resize_policy);
+  EXPECT_EQ(reloaded.input_width, card.input_width);
+  EXPECT_DOUBLE_EQ(reloaded.mean[0], card.mean[0]);
+  EXPECT_EQ(reloaded.swap_rb, card.swap_rb);
+  fs::remove_all(dir);
+}
+
+// The error message of loading `text` as a card (empty when it loads).
+std::string cardError(const std::string& text) {
+  const std::string dir = makeTempDir("card_error");
+  const std::string path = writeFile(dir, "bad.yaml", text);
+  try {
+    loadModelCard(path);
+  } catch (const ModelCardError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path), std::string::npos) << "error does not name the file: " << what;
+    return what;
+  }
+  return "";
+}
+
+TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\n").find("output_label_ids"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nresize_policy: stretchy\n"
+                      "output_label_ids: [7]\n")
+                .find("stretchy"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7, 40]\n").find("40"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nnum_output_channels: 3\n"
+                      "output_label_ids: [7, 8]\n")
+                .find("num_output_channels"),
+            std::string::npos);
+  EXPECT_NE(cardError("resize_policy: resize\noutput_label_ids: [7]\n").find("input"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nscale: abc\noutput_label_ids: [7]\n")
+                .find("scale"),
+            std::string::npos);
+  EXPECT_NE(cardError("output_label_ids: [7\n").find("syntax"), std::string::npos);
+  EXPECT_EQ(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7]\n"), "");
+  EXPECT_THROW(loadModelCard("/nonexistent/card.yaml"), ModelCardError);
+}
+
+TEST(ModelCard, DefaultCardFollowsTheModelFile) {
+  const ModelCard enet = defaultModelCardFor("/somewhere/enet-model.net");
+  ASSERT_EQ(enet.numOutputChannels(), 20);
+  EXPECT_EQ(enet.output_label_ids[0], cityscapes::kUnlabeled);
+  EXPECT_EQ(enet.output_label_ids[1], cityscapes::kRoad);  // trainId 0
+  EXPECT_EQ(enet.output_label_ids[14], cityscapes::kCar);  // trainId 13
+  EXPECT_EQ(enet.output_label_ids[19], cityscapes::kBicycle);
+
+  const std::string dir = makeTempDir("card_default");
+  EXPECT_THROW(defaultModelCardFor(dir + "/net.onnx"), ModelCardError);
+  writeFile(dir, "net.yaml", "input: {width: 32, height: 16}\noutput_label_ids: [7, 11]\n");
+  EXPECT_EQ(defaultModelCardFor(dir + "/net.onnx").numOutputChannels(), 2);
+  fs::remove_all(dir);
+}
+
+TEST(Segmenter, UnknownModelFormatAndMissingFileAreClearErrors) {
+  const std::string dir = makeTempDir("seg_format");
+  const std::string weights = writeFile(dir, "model.pb2", "not a model");
+  try {
+    Segmenter segmenter(weights, builtinEnetCityscapesCard());
+    FAIL() << "unknown format accepted";
+  } catch (const SegmentationError& e) {
+    EXPECT_NE(std::string(e.what()).find(".pb2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(Segmenter(dir + "/absent.onnx", builtinEnetCityscapesCard()), SegmentationError);
+  const std::string garbage = writeFile(dir, "garbage.onnx", "not a protobuf");
+  EXPECT_THROW(Segmenter(garbage, builtinEnetCityscapesCard()), SegmentationError);
+  fs::remove_all(dir);
+}
+
+TEST(Palette, ColorsAndTrainIdsFollowCityscapesTable) {
+  cv::Mat labels(1, 3, CV_8UC1);
+  labels.at<std::uint8_t>(0) = cityscapes::kRoad;
+  labels.at<std::uint8_t>(1) = cityscapes::kCar;
+  labels.at<std::uint8_t>(2) = cityscapes::kUnlabeled;
+  const cv::Mat rgb = colorizeLabelIds(labels);
+  EXPECT_EQ(rgb.at<cv::Vec3b>(0), cv::Vec3b(128, 64, 128));
+  EXPECT_EQ(rgb.at<cv::Vec3b>(1), cv::Vec3b(0, 0, 142));
+  EXPECT_EQ(rgb.at<cv::Vec3b>(2), cv::Vec3b(0, 0, 0));
+  const cv::Mat train = labelIdsToTrainIds(labels);
+  EXPECT_EQ(train.at<std::uint8_t>(0), 0);
+  EXPECT_EQ(train.at<std::uint8_t>(1), 13);
+  EXPECT_EQ(train.at<std::uint8_t>(2), 255);
+
+  // Overlay with alpha 1 is the palette, with alpha 0 the image in RGB order.
+  const cv::Mat bgr(1, 3, CV_8UC3, cv::Scalar(10, 20, 30));
+  EXPECT_EQ(overlayLabelIds(bgr, labels, 1.0).at<cv::Vec3b>(0), cv::Vec3b(128, 64, 128));
+  EXPECT_EQ(overlayLabelIds(bgr, labels, 0.0).at<cv::Vec3b>(0), cv::Vec3b(30, 20, 10));
+}
+
+}  // namespace
+}  // namespace perception
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
