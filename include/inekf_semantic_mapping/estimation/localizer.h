@@ -1,0 +1,112 @@
+// The streaming front end shared by inekf_offline and inekf_node (same code, same behaviour):
+// stamps checks, gaps, stale fixes, gating, lazy initialization, statistics.
+//
+// Conventions and policies:
+//  - An IMU sample stamped t_k propagates the state from the previous sample's stamp t_{k-1} to
+//    t_k: the sample is held over the interval BEFORE it, (t_{k-1}, t_k]. On the real KITTI OXTS
+//    data this fits the rotation far better than (t_k, t_{k+1}] (measured, see inekf.yaml).
+//  - Out of order (t_k < t_{k-1}) or duplicate (|t_k - t_{k-1}| < 1 us) samples are dropped and
+//    counted. A gap longer than max_imu_gap_s is bridged by propagating over it with the process
+//    noise inflated by gap_noise_scale (the covariance grows honestly); the status says kGap.
+//    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the node calls reset().
+//  - A sample flagged `interpolated` propagates with noise inflated by interpolated_noise_scale.
+//  - A fix whose stamp differs from the state's by at most max_fix_age_s is applied at the
+//    state's time with its covariance inflated by (speed * age)^2 per axis; older or newer ones
+//    are rejected ("stale fix"). Fix sigmas below min_gps_sigma_m are raised to it.
+//  - Any update that would produce a non-finite value is rejected; the last good state is kept.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "inekf_semantic_mapping/estimation/navigation_filter.h"
+#include "inekf_semantic_mapping/estimation/types.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+struct LocalizerConfig {
+  FilterType filter_type = FilterType::kLeftInvariant;
+  ImuNoise imu_noise;
+
+  // Initial 1-sigma uncertainties.
+  double initial_rotation_sigma_deg = 2.0;  // roll and pitch (about the map x and y axes)
+  double initial_yaw_sigma_deg = 5.0;       // about the map z axis
+  double initial_velocity_sigma_mps = 0.5;
+  double initial_position_sigma_m = 2.0;
+  double initial_gyro_bias_sigma_radps = 0.005;
+  double initial_accel_bias_sigma_mps2 = 0.1;
+
+  double gps_gate_mahalanobis_squared = 30.0;  // 3 dof
+  double min_gps_sigma_m = 0.3;
+  double max_imu_gap_s = 0.5;
+  double gap_noise_scale = 10.0;           // multiplies the noise densities over a gap
+  double interpolated_noise_scale = 10.0;  // ... over a sample flagged `interpolated`
+  double max_fix_age_s = 0.5;
+
+  // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
+  // OXTS orientation of the first Imu message) instead of levelling with yaw 0 and zero speed.
+  bool init_orientation_from_reference = true;
+
+  // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above).
+  // Throws std::runtime_error naming the file and the key on a bad value or an unknown key.
+  static LocalizerConfig fromYamlFile(const std::string& path);
+};
+
+class Localizer {
+ public:
+  enum class ImuStatus { kUsed, kDroppedOutOfOrder, kDroppedDuplicate, kGap, kNotInitialized };
+
+  struct Statistics {
+    std::int64_t imu_used = 0;
+    std::int64_t imu_dropped = 0;
+    std::int64_t imu_gaps = 0;
+    std::int64_t gps_used = 0;
+    std::int64_t gps_rejected = 0;
+    double last_mahalanobis_squared = 0.0;
+  };
+
+  explicit Localizer(LocalizerConfig config);
+
+  // Explicit initialization at initial.stamp_s with the configured initial sigmas; the next IMU
+  // sample propagates from initial.stamp_s.
+  void initialize(const NavState& initial);
+  // Same, with an explicit covariance in world-frame Euclidean coordinates (order rotation about
+  // map axes, velocity, position, gyro bias, accel bias).
+  void initialize(const NavState& initial, const ErrorCovariance& world_covariance);
+  bool initialized() const { return initialized_; }
+
+  // Lazy initialization: while not initialized, IMU samples are only remembered (kNotInitialized)
+  // and the first valid fix initializes the state at the fix (rotation and velocity from the
+  // reference when one was given and init_orientation_from_reference, else roll/pitch levelled
+  // from the latest specific force, yaw 0, zero velocity).
+  void setInitialReference(const Eigen::Matrix3d& rotation, const Eigen::Vector3d& velocity_map);
+
+  ImuStatus addImu(const ImuSample& sample);
+  CorrectionResult addPositionFix(const PositionFix& fix);
+
+  // Forgets the state (e.g. the bag looped); statistics are kept.
+  void reset();
+
+  const NavigationFilter& filter() const { return *filter_; }
+  const NavState& state() const { return filter_->state(); }
+  Statistics statistics() const { return statistics_; }
+  const LocalizerConfig& config() const { return config_; }
+
+  // The initial world-frame covariance built from the configured sigmas.
+  ErrorCovariance initialWorldCovariance() const;
+
+ private:
+  LocalizerConfig config_;
+  std::unique_ptr<NavigationFilter> filter_;
+  bool initialized_ = false;
+  std::optional<ImuSample> last_imu_;  // latest sample, also before initialization
+  std::optional<Eigen::Matrix3d> reference_rotation_;
+  Eigen::Vector3d reference_velocity_ = Eigen::Vector3d::Zero();
+  Statistics statistics_;
+};
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,62 @@
+// One interface for the three IMU + GPS filters (robot_localization's FilterBase idea), so the
+// Localizer, inekf_offline and inekf_node run any of them unchanged.
+//
+// Error coordinates (15-dim: rotation, velocity, position, gyro bias, accel bias):
+//  - kLeftInvariant:  eta = X_est^-1 X_true = exp(xi): rotation/velocity/position errors in the
+//                     BODY frame (xi_v = R^T (v_true - v_est) to first order).
+//  - kRightInvariant: eta = X_true X_est^-1 = exp(xi): errors in the MAP frame, position error
+//                     about the map origin (xi_p = p_true - R_true R_est^T p_est).
+//  - kQuaternionEskf: R_true = R_est Exp(dtheta) (body small angle), v/p errors additive in map.
+// Bias errors are additive (true - estimate) in all three.
+#pragma once
+
+#include <memory>
+
+#include "inekf_semantic_mapping/estimation/types.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+class NavigationFilter {
+ public:
+  virtual ~NavigationFilter() = default;
+
+  virtual FilterType type() const = 0;
+
+  // Sets the state and its covariance, in this filter's own error coordinates (order above).
+  virtual void initialize(const NavState& state, const ErrorCovariance& covariance) = 0;
+
+  // Integrates one IMU sample held constant over dt seconds (closed form on SE_2(3) with the
+  // bias-corrected sample) and propagates the covariance with the exact discrete transition.
+  // The state's stamp advances by dt. Non-finite input or dt <= 0 is ignored (state kept).
+  virtual void propagate(const ImuSample& sample, double dt) = 0;
+
+  // Multiplies the noise densities (white and random walk) used by propagate() from now on;
+  // the Localizer raises it over gaps and interpolated samples. 1 = nominal.
+  virtual void setProcessNoiseScale(double scale) = 0;
+
+  // GPS position fix of the IMU in the map frame. Rejected (state unchanged) when the squared
+  // Mahalanobis distance of the innovation exceeds gate_mahalanobis_squared, when the input is
+  // not finite, or when the update would produce a non-finite state or covariance.
+  virtual CorrectionResult correctPosition(const PositionFix& fix,
+                                           double gate_mahalanobis_squared) = 0;
+
+  virtual const NavState& state() const = 0;
+  virtual ErrorCovariance covariance() const = 0;
+
+  // Euclidean pose covariance for ROS (geometry_msgs PoseWithCovariance order): position error in
+  // the map frame (m) first, then the rotation error as a BODY-frame small angle
+  // (R_true = R_est Exp(delta), rad). Computed from covariance() to first order.
+  virtual PoseCovariance poseCovariance() const = 0;
+
+  // Maps a "world-frame Euclidean" error [dtheta_map (R_true = Exp(dtheta) R_est), dv_map,
+  // dp_map, dbg, dba] into this filter's error coordinates at `state` (first order). Used to
+  // build initial covariances (e.g. a yaw sigma about the map z axis) for any filter.
+  virtual ErrorCovariance fromWorldCovariance(const NavState& state,
+                                              const ErrorCovariance& world_covariance) const = 0;
+};
+
+std::unique_ptr<NavigationFilter> makeFilter(FilterType type, const ImuNoise& noise);
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
