@@ -1,1 +1,10 @@
-# Component: kitti (targets are added by the component's owner)
+# Component: kitti — KITTI raw I/O core (Eigen only), ROS conversions, kitti_player, kitti2bag.
+ism_add_core_library(${PROJECT_NAME}_kitti
+  SOURCES
+    src/kitti/calibration.cpp
+    src/kitti/gps_degradation.cpp
+    src/kitti/mercator.cpp
+    src/kitti/oxts.cpp
+    src/kitti/raw_drive.cpp
+    src/kitti/timestamps.cpp
+    src/kitti/velodyne.cpp)

@@ -1,0 +1,111 @@
+#include "inekf_semantic_mapping/kitti/oxts.h"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/kitti/timestamps.h"
+#include "text_parsing.h"
+
+namespace inekf_semantic_mapping {
+namespace kitti {
+namespace {
+
+constexpr const char* kFieldNames[kOxtsFieldCount] = {
+    "lat",          "lon",     "alt",     "roll",    "pitch",   "yaw",    "vn", "ve",
+    "vf",           "vl",      "vu",      "ax",      "ay",      "az",     "af", "al",
+    "au",           "wx",      "wy",      "wz",      "wf",      "wl",     "wu", "pos_accuracy",
+    "vel_accuracy", "navstat", "numsats", "posmode", "velmode", "orimode"};
+
+}  // namespace
+
+OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_errors,
+                         int line_number) {
+  const std::vector<std::string> tokens = detail::splitWhitespace(line);
+  if (tokens.size() != kOxtsFieldCount) {
+    throw KittiFormatError(file_for_errors, line_number,
+                           "expected " + std::to_string(kOxtsFieldCount) + " OXTS values, found " +
+                               std::to_string(tokens.size()));
+  }
+  double values[kOxtsFieldCount];
+  for (int i = 0; i < kOxtsFieldCount; ++i) {
+    if (!detail::parseDouble(tokens[i], &values[i])) {
+      throw KittiFormatError(file_for_errors, line_number,
+                             std::string("field ") + std::to_string(i + 1) + " (" + kFieldNames[i] +
+                                 ") is not a number: '" + tokens[i] + "'");
+    }
+  }
+  // The pose must be finite; the remaining doubles may legitimately be NaN in broken logs and
+  // are left for consumers to reject.
+  for (int i = 0; i < 6; ++i) {
+    if (!std::isfinite(values[i])) {
+      throw KittiFormatError(file_for_errors, line_number,
+                             std::string("field ") + kFieldNames[i] + " is not finite");
+    }
+  }
+  int flags[5];
+  for (int i = 0; i < 5; ++i) {
+    const double v = values[25 + i];
+    // 2011_10_03 prints the flags as "4.00000000000000": accept integral values only.
+    if (!std::isfinite(v) || v != std::round(v) || std::fabs(v) > 1e6) {
+      throw KittiFormatError(file_for_errors, line_number,
+                             std::string("field ") + kFieldNames[25 + i] +
+                                 " must be an integer, got '" + tokens[25 + i] + "'");
+    }
+    flags[i] = static_cast<int>(std::lround(v));
+  }
+  OxtsRecord r;
+  double* doubles[25] = {&r.lat, &r.lon, &r.alt,          &r.roll,        &r.pitch, &r.yaw, &r.vn,
+                         &r.ve,  &r.vf,  &r.vl,           &r.vu,          &r.ax,    &r.ay,  &r.az,
+                         &r.af,  &r.al,  &r.au,           &r.wx,          &r.wy,    &r.wz,  &r.wf,
+                         &r.wl,  &r.wu,  &r.pos_accuracy, &r.vel_accuracy};
+  for (int i = 0; i < 25; ++i) *doubles[i] = values[i];
+  r.navstat = flags[0];
+  r.numsats = flags[1];
+  r.posmode = flags[2];
+  r.velmode = flags[3];
+  r.orimode = flags[4];
+  return r;
+}
+
+OxtsRecord readOxtsFile(const std::string& path) {
+  std::ifstream stream = detail::openOrThrow(path);
+  std::string line;
+  int line_number = 0;
+  while (std::getline(stream, line)) {
+    ++line_number;
+    if (!detail::trim(line).empty()) return parseOxtsLine(line, path, line_number);
+  }
+  throw KittiFormatError(path, "empty OXTS file");
+}
+
+std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir) {
+  namespace fs = std::filesystem;
+  const std::string timestamps_path = oxts_dir + "/timestamps.txt";
+  const std::vector<std::int64_t> stamps = readTimestampsFile(timestamps_path);
+  const fs::path data_dir = fs::path(oxts_dir) / "data";
+  if (!fs::is_directory(data_dir)) {
+    throw KittiFormatError(data_dir.string(), "OXTS data folder is missing");
+  }
+  std::size_t file_count = 0;
+  for (const auto& entry : fs::directory_iterator(data_dir)) {
+    if (entry.path().extension() == ".txt") ++file_count;
+  }
+  if (file_count != stamps.size()) {
+    throw KittiFormatError(oxts_dir, "frame count mismatch: " + std::to_string(file_count) +
+                                         " files in data/ but " + std::to_string(stamps.size()) +
+                                         " lines in timestamps.txt");
+  }
+  std::vector<OxtsFrame> frames(stamps.size());
+  char name[32];
+  for (std::size_t i = 0; i < stamps.size(); ++i) {
+    std::snprintf(name, sizeof(name), "%010zu.txt", i);
+    frames[i].stamp_ns = stamps[i];
+    frames[i].record = readOxtsFile((data_dir / name).string());
+  }
+  return frames;
+}
+
+}  // namespace kitti
+}  // namespace inekf_semantic_mapping

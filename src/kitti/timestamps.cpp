@@ -1,0 +1,97 @@
+#include "inekf_semantic_mapping/kitti/timestamps.h"
+
+#include <cctype>
+#include <string>
+
+#include "inekf_semantic_mapping/kitti/errors.h"
+#include "text_parsing.h"
+
+namespace inekf_semantic_mapping {
+namespace kitti {
+namespace {
+
+// Howard Hinnant's days_from_civil: days since 1970-01-01 of a proleptic Gregorian date.
+std::int64_t daysFromCivil(std::int64_t year, unsigned month, unsigned day) {
+  year -= month <= 2;
+  const std::int64_t era = (year >= 0 ? year : year - 399) / 400;
+  const unsigned year_of_era = static_cast<unsigned>(year - era * 400);
+  const unsigned day_of_year = (153 * (month + (month > 2 ? -3 : 9)) + 2) / 5 + day - 1;
+  const unsigned day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+  return era * 146097 + static_cast<std::int64_t>(day_of_era) - 719468;
+}
+
+// Reads exactly `digits` decimal digits at text[*pos].
+bool readDigits(const std::string& text, std::size_t* pos, int digits, int* value) {
+  *value = 0;
+  for (int i = 0; i < digits; ++i, ++*pos) {
+    if (*pos >= text.size() || !std::isdigit(static_cast<unsigned char>(text[*pos]))) return false;
+    *value = *value * 10 + (text[*pos] - '0');
+  }
+  return true;
+}
+
+bool expectChar(const std::string& text, std::size_t* pos, char c) {
+  if (*pos >= text.size() || text[*pos] != c) return false;
+  ++*pos;
+  return true;
+}
+
+}  // namespace
+
+std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
+  const std::string text = detail::trim(raw_text);
+  auto fail = [&](const std::string& why) {
+    return KittiFormatError("<timestamp '" + text + "'>",
+                            why + " (expected YYYY-MM-DD HH:MM:SS[.fraction])");
+  };
+  std::size_t pos = 0;
+  int year, month, day, hour, minute, second;
+  if (!readDigits(text, &pos, 4, &year) || !expectChar(text, &pos, '-') ||
+      !readDigits(text, &pos, 2, &month) || !expectChar(text, &pos, '-') ||
+      !readDigits(text, &pos, 2, &day) || !expectChar(text, &pos, ' ') ||
+      !readDigits(text, &pos, 2, &hour) || !expectChar(text, &pos, ':') ||
+      !readDigits(text, &pos, 2, &minute) || !expectChar(text, &pos, ':') ||
+      !readDigits(text, &pos, 2, &second)) {
+    throw fail("malformed date/time");
+  }
+  if (month < 1 || month > 12 || day < 1 || day > 31 || hour > 23 || minute > 59 || second > 60) {
+    throw fail("date/time field out of range");
+  }
+  std::int64_t fraction_ns = 0;
+  if (pos < text.size()) {
+    if (!expectChar(text, &pos, '.')) throw fail("unexpected character after seconds");
+    int digits = 0;
+    while (pos < text.size()) {
+      const char c = text[pos++];
+      if (!std::isdigit(static_cast<unsigned char>(c))) throw fail("non-digit in the fraction");
+      if (++digits > 9) throw fail("more than 9 fraction digits");
+      fraction_ns = fraction_ns * 10 + (c - '0');
+    }
+    if (digits == 0) throw fail("empty fraction");
+    for (int i = digits; i < 9; ++i) fraction_ns *= 10;
+  }
+  const std::int64_t days =
+      daysFromCivil(year, static_cast<unsigned>(month), static_cast<unsigned>(day));
+  const std::int64_t seconds = days * 86400 + hour * 3600 + minute * 60 + second;
+  return seconds * 1000000000LL + fraction_ns;
+}
+
+std::vector<std::int64_t> readTimestampsFile(const std::string& path) {
+  std::ifstream stream = detail::openOrThrow(path);
+  std::vector<std::int64_t> stamps;
+  std::string line;
+  int line_number = 0;
+  while (std::getline(stream, line)) {
+    ++line_number;
+    if (detail::trim(line).empty()) continue;
+    try {
+      stamps.push_back(parseKittiTimestampNs(line));
+    } catch (const KittiFormatError& error) {
+      throw KittiFormatError(path, line_number, error.what());
+    }
+  }
+  return stamps;
+}
+
+}  // namespace kitti
+}  // namespace inekf_semantic_mapping
