@@ -1,1 +1,33 @@
-# Component: system (targets are added by the component's owner)
+# Component: system — end-to-end and robustness rostests (launch/, rviz/, scripts/demo.sh and
+# bench/realtime_pipeline.sh need no build step).
+#
+# A rostest is registered only when the executables it drives are targets of this build, so the
+# fragment configures (and the suite stays green) while components are still landing; a missing
+# one is reported at configure time.
+
+# ism_add_system_rostest(FILE NEEDS target...)
+function(ism_add_system_rostest file)
+  cmake_parse_arguments(ARG "" "" "NEEDS" ${ARGN})
+  set(missing "")
+  foreach(target ${ARG_NEEDS})
+    if(NOT TARGET ${target})
+      list(APPEND missing ${target})
+    endif()
+  endforeach()
+  if(missing)
+    message(STATUS "system: ${file} not registered, missing targets: ${missing}")
+    return()
+  endif()
+  add_rostest(${file} DEPENDENCIES ${ARG_NEEDS})
+endfunction()
+
+if(CATKIN_ENABLE_TESTING)
+  set(ISM_PIPELINE_TARGETS
+    generate_synthetic_drive kitti2bag inekf_node segmentation_node semantic_octomap_node)
+  ism_add_system_rostest(test/ros/e2e_synthetic.test NEEDS ${ISM_PIPELINE_TARGETS})
+  ism_add_system_rostest(test/ros/e2e_real_oxts.test NEEDS kitti2bag inekf_node)
+  ism_add_system_rostest(test/ros/robustness_gps_outage.test
+    NEEDS generate_synthetic_drive kitti2bag inekf_node)
+  ism_add_system_rostest(test/ros/robustness_bag_loop.test NEEDS ${ISM_PIPELINE_TARGETS})
+  ism_add_system_rostest(test/ros/robustness_node_restart.test NEEDS ${ISM_PIPELINE_TARGETS})
+endif()

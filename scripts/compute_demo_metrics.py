@@ -1,0 +1,241 @@
+#!/usr/bin/python3
+"""Metrics of one end-to-end run (demo, benchmark, rostests): trajectory accuracy, rates and
+dropped messages, and the semantic map's classes and mIoU.
+
+  scripts/compute_demo_metrics.py --monitor-dir output/demo --bag output/demo/drive.bag \
+      --map-ply output/demo/semantic_map.ply [--ground-truth DRIVE/ground_truth] \
+      --output output/demo/metrics.json [--plot output/demo/trajectory.png]
+
+The functions are imported by test/ros/e2e_*.py, so the tests and the demo compute the same
+figures the same way.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+SCAN_TOPIC = "/kitti/velo/pointcloud"
+IMAGE_TOPIC = "/kitti/camera_color_left/image_raw"
+
+
+# ----------------------------------------------------------------------------------------------
+# Trajectories
+# ----------------------------------------------------------------------------------------------
+def read_tum(path):
+    """N x 8 array: stamp x y z qx qy qz qw (empty file: 0 x 8)."""
+    rows = []
+    with open(path) as f:
+        for line_number, line in enumerate(f, 1):
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            values = line.split()
+            if len(values) != 8:
+                raise ValueError("%s:%d: expected 8 values (TUM), got %d" % (path, line_number, len(values)))
+            rows.append([float(v) for v in values])
+    return np.array(rows, dtype=float).reshape(-1, 8)
+
+
+def quaternion_to_matrix(q):
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def associate(estimate, truth, max_dt=0.02):
+    """Pairs (estimate row, truth row) with the nearest truth stamp within max_dt.
+
+    A bag played in a loop repeats stamps: only the last pass (after the last jump back in time)
+    of each trajectory is used."""
+    def last_pass(traj):
+        if len(traj) < 2:
+            return traj
+        jumps = np.nonzero(np.diff(traj[:, 0]) < -1.0)[0]
+        return traj[jumps[-1] + 1:] if len(jumps) else traj
+    estimate, truth = last_pass(estimate), last_pass(truth)
+    if len(estimate) == 0 or len(truth) == 0:
+        return estimate[:0], truth[:0]
+    order = np.argsort(truth[:, 0])
+    truth = truth[order]
+    idx = np.clip(np.searchsorted(truth[:, 0], estimate[:, 0]), 1, len(truth) - 1)
+    left, right = truth[idx - 1, 0], truth[idx, 0]
+    idx = np.where(np.abs(estimate[:, 0] - left) <= np.abs(estimate[:, 0] - right), idx - 1, idx)
+    if len(truth) == 1:
+        idx = np.zeros(len(estimate), dtype=int)
+    keep = np.abs(truth[idx, 0] - estimate[:, 0]) <= max_dt
+    return estimate[keep], truth[idx[keep]]
+
+
+def trajectory_errors(estimate, truth, max_dt=0.02):
+    """Unaligned errors in the map frame (both trajectories are there by construction)."""
+    est, gt = associate(estimate, truth, max_dt)
+    if len(est) == 0:
+        return {"matched_poses": 0}
+    position_errors = np.linalg.norm(est[:, 1:4] - gt[:, 1:4], axis=1)
+    rotation_errors_deg, yaw_errors_deg = [], []
+    for e, g in zip(est, gt):
+        Re, Rg = quaternion_to_matrix(e[4:8]), quaternion_to_matrix(g[4:8])
+        dR = Rg.T @ Re
+        rotation_errors_deg.append(math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(dR) - 1) / 2)))))
+        dyaw = math.atan2(Re[1, 0], Re[0, 0]) - math.atan2(Rg[1, 0], Rg[0, 0])
+        yaw_errors_deg.append(math.degrees(math.atan2(math.sin(dyaw), math.cos(dyaw))))
+    rot, yaw = np.array(rotation_errors_deg), np.array(yaw_errors_deg)
+    return {
+        "matched_poses": int(len(est)),
+        "duration_s": float(est[-1, 0] - est[0, 0]),
+        "ate_rmse_m": float(np.sqrt(np.mean(position_errors ** 2))),
+        "position_error_max_m": float(position_errors.max()),
+        "position_error_final_m": float(position_errors[-1]),
+        "rotation_rmse_deg": float(np.sqrt(np.mean(rot ** 2))),
+        "yaw_rmse_deg": float(np.sqrt(np.mean(yaw ** 2))),
+        "path_length_m": float(np.sum(np.linalg.norm(np.diff(gt[:, 1:4], axis=0), axis=1))),
+        "finite": bool(np.all(np.isfinite(est))),
+    }
+
+
+def plot_trajectories(estimate, truth, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    est, gt = associate(estimate, truth)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 5))
+    ax1.plot(truth[:, 1], truth[:, 2], "g-", label="ground truth (OXTS)")
+    ax1.plot(estimate[:, 1], estimate[:, 2], "r--", label="InEKF estimate")
+    ax1.set_xlabel("x east [m]"); ax1.set_ylabel("y north [m]"); ax1.axis("equal"); ax1.legend()
+    if len(est):
+        ax2.plot(est[:, 0] - est[0, 0], np.linalg.norm(est[:, 1:4] - gt[:, 1:4], axis=1))
+    ax2.set_xlabel("time [s]"); ax2.set_ylabel("position error [m]"); ax2.grid(True)
+    fig.tight_layout()
+    tmp = path + ".tmp.png"
+    fig.savefig(tmp, dpi=90)
+    os.replace(tmp, path)
+
+
+# ----------------------------------------------------------------------------------------------
+# Message counts (dropped scans / images)
+# ----------------------------------------------------------------------------------------------
+def bag_message_counts(bag_path):
+    import rosbag
+    with rosbag.Bag(bag_path) as bag:
+        info = bag.get_type_and_topic_info()
+        counts = {topic: t.message_count for topic, t in info.topics.items()}
+        return counts, bag.get_end_time() - bag.get_start_time()
+
+
+def rates_and_drops(monitor, bag_counts=None):
+    """Per pipeline stage: how many inputs were received and how many outputs came out."""
+    topics = monitor["topics"]
+    def n(topic):
+        return topics.get(topic, {}).get("messages", 0)
+    result = {topic: {k: v for k, v in entry.items() if k in ("messages", "rate_hz")}
+              for topic, entry in topics.items()}
+    drops = {
+        "images_without_segmentation": n(IMAGE_TOPIC) - n("/segmentation/labels"),
+        "scans_without_map_update": n(SCAN_TOPIC) - n("/semantic_map/labeled_cloud"),
+    }
+    if bag_counts:
+        drops["scans_in_bag_not_received"] = bag_counts.get(SCAN_TOPIC, 0) - n(SCAN_TOPIC)
+        drops["images_in_bag_not_received"] = bag_counts.get(IMAGE_TOPIC, 0) - n(IMAGE_TOPIC)
+    return {"topics": result, "dropped": drops,
+            "scan_to_map_latency_s": monitor.get("scan_to_map_latency_s"),
+            "image_to_labels_latency_s": monitor.get("image_to_labels_latency_s")}
+
+
+# ----------------------------------------------------------------------------------------------
+# Semantic map (PLY of occupied voxels: x y z label red green blue)
+# ----------------------------------------------------------------------------------------------
+PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+             "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4",
+             "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+
+
+def read_ply_vertices(path):
+    """Structured numpy array of the vertex element (ascii or binary little/big endian)."""
+    with open(path, "rb") as f:
+        if f.readline().strip() != b"ply":
+            raise ValueError("%s: not a PLY file (first line is not 'ply')" % path)
+        fmt, count, props, in_vertex = None, 0, [], False
+        while True:
+            line = f.readline()
+            if not line:
+                raise ValueError("%s: PLY header has no end_header" % path)
+            words = line.decode("ascii", "replace").split()
+            if not words:
+                continue
+            if words[0] == "format":
+                fmt = words[1]
+            elif words[0] == "element":
+                in_vertex = words[1] == "vertex"
+                if in_vertex:
+                    count = int(words[2])
+            elif words[0] == "property" and in_vertex:
+                if words[1] == "list":
+                    raise ValueError("%s: list properties in vertex element are not supported" % path)
+                props.append((words[2], PLY_TYPES[words[1]]))
+            elif words[0] == "end_header":
+                break
+        if fmt == "ascii":
+            data = np.loadtxt(f, max_rows=count, ndmin=2) if count else np.zeros((0, len(props)))
+            out = np.zeros(count, dtype=[(n, t) for n, t in props])
+            for i, (name, _) in enumerate(props):
+                out[name] = data[:, i]
+            return out
+        endian = "<" if fmt == "binary_little_endian" else ">"
+        dtype = np.dtype([(n, endian + t) for n, t in props])
+        out = np.frombuffer(f.read(dtype.itemsize * count), dtype=dtype, count=count)
+        if len(out) != count:
+            raise ValueError("%s: PLY truncated: %d of %d vertices" % (path, len(out), count))
+        return out
+
+
+def map_class_histogram(vertices):
+    labels, counts = np.unique(vertices["label"].astype(int), return_counts=True)
+    return {int(l): int(c) for l, c in zip(labels, counts)}
+
+
+def write_json_atomic(path, data):
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(data, f, indent=2, sort_keys=True)
+    os.replace(tmp, path)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--monitor-dir", required=True, help="pipeline_monitor.py output folder")
+    parser.add_argument("--bag", help="the input bag (for message counts)")
+    parser.add_argument("--map-ply", help="the saved semantic map PLY")
+    parser.add_argument("--ground-truth", help="synthetic drive ground_truth/ folder (map mIoU)")
+    parser.add_argument("--output", required=True)
+    parser.add_argument("--plot", help="trajectory PNG")
+    parser.add_argument("--extra", action="append", default=[], help="KEY=JSON value added to the output")
+    args = parser.parse_args()
+
+    with open(os.path.join(args.monitor_dir, "monitor.json")) as f:
+        monitor = json.load(f)
+    estimate = read_tum(os.path.join(args.monitor_dir, "estimate_tum.txt"))
+    truth = read_tum(os.path.join(args.monitor_dir, "truth_tum.txt"))
+    metrics = {"trajectory": trajectory_errors(estimate, truth)}
+    bag_counts, bag_duration = (bag_message_counts(args.bag) if args.bag else (None, None))
+    metrics["messages"] = rates_and_drops(monitor, bag_counts)
+    if bag_counts:
+        metrics["messages"]["bag"] = {"counts": bag_counts, "duration_s": bag_duration}
+    if args.map_ply and os.path.exists(args.map_ply):
+        vertices = read_ply_vertices(args.map_ply)
+        metrics["map"] = {"occupied_voxels": int(len(vertices)), "classes": map_class_histogram(vertices)}
+    for item in args.extra:
+        key, value = item.split("=", 1)
+        metrics[key] = json.loads(value)
+    if args.plot and len(estimate) and len(truth):
+        plot_trajectories(estimate, truth, args.plot)
+    write_json_atomic(args.output, metrics)
+    print(json.dumps(metrics.get("trajectory"), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
