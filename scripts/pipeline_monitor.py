@@ -26,8 +26,11 @@ IMAGE_TOPIC = "/kitti/camera_color_left/image_raw"
 WATCHED_TOPICS = [
     "/kitti/oxts/imu", "/kitti/oxts/gps/fix", SCAN_TOPIC, IMAGE_TOPIC,
     "/segmentation/labels", "/segmentation/overlay", "/semantic_map/labeled_cloud",
-    "/semantic_map/markers", "/inekf/odometry", "/inekf/status", "/semantic_map/info",
+    "/semantic_map/markers", "/inekf/status", "/semantic_map/info",
 ]
+# Subscribed with their type (a rospy process has one subscription type per topic), and logged
+# like the raw ones.
+ODOMETRY_TOPICS = ["/inekf/odometry", "/kitti/oxts/ground_truth"]
 # Topics whose first field is a std_msgs/Header (the others are only counted).
 STAMPED_TOPICS = {t for t in WATCHED_TOPICS if t not in ("/semantic_map/markers", "/semantic_map/info")}
 
@@ -50,7 +53,7 @@ class TopicLog:
 class PipelineMonitor:
     def __init__(self, topics=WATCHED_TOPICS):
         self.lock = threading.Lock()
-        self.logs = {t: TopicLog() for t in topics}
+        self.logs = {t: TopicLog() for t in list(topics) + ODOMETRY_TOPICS}
         self.estimate = []
         self.truth = []
         self.last_message_wall = None
@@ -59,10 +62,10 @@ class PipelineMonitor:
         for topic in topics:
             rospy.Subscriber(topic, rospy.AnyMsg, self.on_raw, callback_args=topic,
                              queue_size=200, buff_size=2 ** 25, tcp_nodelay=True)
-        rospy.Subscriber("/inekf/odometry", Odometry, self.on_odometry, callback_args=self.estimate,
+        rospy.Subscriber(ODOMETRY_TOPICS[0], Odometry, self.on_odometry, callback_args=self.estimate,
                          queue_size=200)
-        rospy.Subscriber("/kitti/oxts/ground_truth", Odometry, self.on_odometry,
-                         callback_args=self.truth, queue_size=200)
+        rospy.Subscriber(ODOMETRY_TOPICS[1], Odometry, self.on_odometry, callback_args=self.truth,
+                         queue_size=200)
 
     def on_raw(self, msg, topic):
         now = time.time()
@@ -76,9 +79,16 @@ class PipelineMonitor:
             self.last_message_wall = now
 
     def on_odometry(self, msg, store):
+        now = time.time()
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        topic = ODOMETRY_TOPICS[0] if store is self.estimate else ODOMETRY_TOPICS[1]
         with self.lock:
             stamp = msg.header.stamp.to_sec()
+            log = self.logs[topic]
+            log.count += 1
+            log.arrivals.append(now)
+            log.stamps.append(stamp)
+            self.last_message_wall = now
             if store is self.estimate and store and stamp < store[-1][0] - 1.0:
                 self.clock_jumps_back += 1
             store.append((stamp, p.x, p.y, p.z, q.x, q.y, q.z, q.w))
