@@ -8,3 +8,7 @@ ism_add_core_library(${PROJECT_NAME}_kitti
     src/kitti/raw_drive.cpp
     src/kitti/timestamps.cpp
     src/kitti/velodyne.cpp)
+
+ism_add_gtest(test_kitti_io SOURCES test/unit/test_kitti_io.cpp LINK ${PROJECT_NAME}_kitti)
+ism_add_gtest(test_kitti_gps_degradation
+  SOURCES test/unit/test_kitti_gps_degradation.cpp LINK ${PROJECT_NAME}_kitti)

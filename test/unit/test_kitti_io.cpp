@@ -1,0 +1,410 @@
+// KITTI raw I/O on the real data in ../shared (skipped loudly when absent) and on small files
+// the tests write themselves (bad input).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/raw_drive.h"
+#include "inekf_semantic_mapping/kitti/timestamps.h"
+#include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace kitti {
+namespace {
+
+namespace fs = std::filesystem;
+using test::makeTempDir;
+using test::sharedPath;
+
+const char kDrive0001[] = "data/kitti_raw/2011_09_26/2011_09_26_drive_0001_sync";
+const char kDrive0005[] = "data/kitti_raw/2011_09_26/2011_09_26_drive_0005_sync";
+const char kDate0926[] = "data/kitti_raw/2011_09_26";
+
+void writeFile(const std::string& path, const std::string& content) {
+  fs::create_directories(fs::path(path).parent_path());
+  std::ofstream(path, std::ios::binary) << content;
+}
+
+// Runs `body`, expects a KittiFormatError whose message contains every fragment.
+template <typename Body>
+void expectFormatError(Body body, const std::vector<std::string>& fragments) {
+  try {
+    body();
+    ADD_FAILURE() << "expected KittiFormatError";
+  } catch (const KittiFormatError& error) {
+    for (const auto& fragment : fragments) {
+      EXPECT_NE(std::string(error.what()).find(fragment), std::string::npos)
+          << "'" << fragment << "' not in: " << error.what();
+    }
+  }
+}
+
+const char kLine0001Frame0[] =
+    "49.015003823272 8.4342971002335 116.43032836914 0.035752 0.00903 -2.6087069803847 "
+    "-6.811441479104 -11.275641809511 13.172716663769 -0.12475264293164 -0.032919903047354 "
+    "-0.44519814607457 0.042957369847256 10.209865300506 -0.34030092211055 -0.31686915378551 "
+    "10.209117821189 0.0090951755733632 -0.023140741253985 -0.017909034508194 "
+    "0.0089018002187228 -0.022495299354602 -0.018809330937153 0.027658633371879 "
+    "0.012727922061358 4 11 6 6 6";
+
+// ---------------------------------------------------------------------------- timestamps
+TEST(KittiTimestamps, ParsesAsUtcNanoseconds) {
+  // 2011-09-26 is day 15243 after 1970-01-01: 15243*86400 + 13*3600 + 2*60 + 25 = 1317042145 s.
+  EXPECT_EQ(parseKittiTimestampNs("2011-09-26 13:02:25.964389445"), 1317042145964389445LL);
+  EXPECT_EQ(parseKittiTimestampNs("1970-01-01 00:00:00.000000001"), 1);
+  EXPECT_EQ(parseKittiTimestampNs("1970-01-02 00:00:00"), 86400LL * 1000000000LL);
+  // Leap day, short fraction (".5" is half a second, not 5 ns).
+  EXPECT_EQ(
+      parseKittiTimestampNs("2012-03-01 00:00:00.5") - parseKittiTimestampNs("2012-02-28 00:00:00"),
+      2 * 86400LL * 1000000000LL + 500000000LL);
+}
+
+TEST(KittiTimestamps, RejectsMalformedText) {
+  EXPECT_THROW(parseKittiTimestampNs("2011-09-26T13:02:25"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs("2011-13-26 13:02:25"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs("2011-09-26 13:02:25.1234567890"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs("2011-09-26 13:02:25.12x"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs(""), KittiFormatError);
+}
+
+TEST(KittiTimestamps, ReadsRealFileAndNamesBadLine) {
+  ISM_REQUIRE_SHARED(kDrive0001);
+  const auto stamps = readTimestampsFile(sharedPath(kDrive0001) + "/oxts/timestamps.txt");
+  ASSERT_EQ(stamps.size(), 108u);
+  EXPECT_EQ(stamps[0], 1317042145964389445LL);
+  EXPECT_EQ(stamps[1] - stamps[0], 109958171LL);  // 26.074347616 - 25.964389445
+  for (std::size_t i = 1; i < stamps.size(); ++i) EXPECT_GT(stamps[i], stamps[i - 1]);
+
+  const std::string dir = makeTempDir("kitti_ts");
+  writeFile(dir + "/timestamps.txt", "2011-09-26 13:02:25.964389445\nnot a time\n");
+  expectFormatError([&] { readTimestampsFile(dir + "/timestamps.txt"); },
+                    {dir + "/timestamps.txt:2"});
+  expectFormatError([&] { readTimestampsFile(dir + "/missing.txt"); }, {"missing.txt"});
+  fs::remove_all(dir);
+}
+
+// ---------------------------------------------------------------------------- OXTS
+TEST(KittiOxts, ParsesAllThirtyFields) {
+  const OxtsRecord r = parseOxtsLine(kLine0001Frame0, "f.txt", 1);
+  EXPECT_DOUBLE_EQ(r.lat, 49.015003823272);
+  EXPECT_DOUBLE_EQ(r.lon, 8.4342971002335);
+  EXPECT_DOUBLE_EQ(r.alt, 116.43032836914);
+  EXPECT_DOUBLE_EQ(r.yaw, -2.6087069803847);
+  EXPECT_DOUBLE_EQ(r.vn, -6.811441479104);
+  EXPECT_DOUBLE_EQ(r.vf, 13.172716663769);
+  EXPECT_DOUBLE_EQ(r.ax, -0.44519814607457);
+  EXPECT_DOUBLE_EQ(r.az, 10.209865300506);
+  EXPECT_DOUBLE_EQ(r.af, -0.34030092211055);
+  EXPECT_DOUBLE_EQ(r.wx, 0.0090951755733632);
+  EXPECT_DOUBLE_EQ(r.wz, -0.017909034508194);
+  EXPECT_DOUBLE_EQ(r.wu, -0.018809330937153);
+  EXPECT_DOUBLE_EQ(r.pos_accuracy, 0.027658633371879);
+  EXPECT_DOUBLE_EQ(r.vel_accuracy, 0.012727922061358);
+  EXPECT_EQ(r.navstat, 4);
+  EXPECT_EQ(r.numsats, 11);
+  EXPECT_EQ(r.posmode, 6);
+  EXPECT_EQ(r.velmode, 6);
+  EXPECT_EQ(r.orimode, 6);
+}
+
+TEST(KittiOxts, ParsesFourteenDecimalIntegersOfTheLaterDates) {
+  // 2011_10_03 style: the flags printed as "4.00000000000000", here with posmode -1.
+  const std::string dir = makeTempDir("kitti_oxts14");
+  std::string line = kLine0001Frame0;
+  line = line.substr(0, line.rfind(" 4 11 6 6 6")) +
+         " 4.00000000000000 9.00000000000000 -1.00000000000000 2.00000000000000 0.00000000000000";
+  writeFile(dir + "/0000000000.txt", line + "\n");
+  const OxtsRecord r = readOxtsFile(dir + "/0000000000.txt");
+  EXPECT_EQ(r.navstat, 4);
+  EXPECT_EQ(r.numsats, 9);
+  EXPECT_EQ(r.posmode, -1);
+  EXPECT_EQ(r.velmode, 2);
+  EXPECT_EQ(r.orimode, 0);
+  fs::remove_all(dir);
+}
+
+TEST(KittiOxts, RealFourteenDecimalFileWithoutGpsSolution) {
+  ISM_REQUIRE_SHARED(kDrive0005);
+  const OxtsRecord r = readOxtsFile(sharedPath(kDrive0005) + "/oxts/data/0000000096.txt");
+  EXPECT_DOUBLE_EQ(r.lat, 49.01101238314250);
+  EXPECT_DOUBLE_EQ(r.wz, -0.24245760150804);
+  EXPECT_EQ(r.numsats, 9);
+  EXPECT_EQ(r.posmode, -1);
+}
+
+TEST(KittiOxts, BadLinesNameFileLineAndField) {
+  std::string line = kLine0001Frame0;
+  expectFormatError([&] { parseOxtsLine(line.substr(0, line.rfind(' ')), "a.txt", 3); },
+                    {"a.txt:3", "found 29"});
+  std::string non_numeric = line;
+  non_numeric.replace(non_numeric.find("0.035752"), 8, "0.03x752");
+  expectFormatError([&] { parseOxtsLine(non_numeric, "b.txt", 1); }, {"b.txt:1", "roll"});
+  std::string fractional_flag = line.substr(0, line.rfind(" 6")) + " 6.5";
+  expectFormatError([&] { parseOxtsLine(fractional_flag, "c.txt", 1); }, {"c.txt", "orimode"});
+  std::string nan_lat = line;
+  nan_lat.replace(0, 15, "nan");
+  expectFormatError([&] { parseOxtsLine(nan_lat, "d.txt", 1); }, {"d.txt", "lat"});
+  expectFormatError([&] { readOxtsFile("/nonexistent/0000000000.txt"); },
+                    {"/nonexistent/0000000000.txt"});
+}
+
+TEST(KittiOxts, ReadsRealFolder) {
+  ISM_REQUIRE_SHARED(kDrive0001);
+  const auto frames = readOxtsFolder(sharedPath(kDrive0001) + "/oxts");
+  ASSERT_EQ(frames.size(), 108u);
+  EXPECT_DOUBLE_EQ(frames[1].record.lat, 49.014997147797);
+  EXPECT_DOUBLE_EQ(frames[1].record.az, 10.078281781295);
+  EXPECT_NEAR(frames[0].stampSeconds(), 1317042145.964389445, 1e-6);
+}
+
+TEST(KittiOxts, FolderCountMismatchNamesTheFolder) {
+  const std::string dir = makeTempDir("kitti_oxts_count");
+  writeFile(dir + "/oxts/data/0000000000.txt", std::string(kLine0001Frame0) + "\n");
+  writeFile(dir + "/oxts/timestamps.txt",
+            "2011-09-26 13:02:25.964389445\n2011-09-26 13:02:26.074347616\n");
+  expectFormatError([&] { readOxtsFolder(dir + "/oxts"); }, {dir + "/oxts", "1 files", "2 lines"});
+  expectFormatError([&] { RawDrive drive(dir); }, {dir + "/oxts", "mismatch"});
+  fs::remove_all(dir);
+}
+
+// ---------------------------------------------------------------------------- Mercator
+TEST(KittiMercator, FirstTwoFramesOfDrive0001) {
+  const OxtsRecord r0 = parseOxtsLine(kLine0001Frame0, "f", 1);
+  const MercatorProjection projection = MercatorProjection::atFirstFix(r0);
+  EXPECT_NEAR(projection.scale(), std::cos(49.015003823272 * M_PI / 180.0), 1e-15);
+  EXPECT_LT(projection.toMap(r0.lat, r0.lon, r0.alt).norm(), 1e-9);
+  // Devkit by hand: s = cos(lat0), mx = s*er*lon*pi/180, my = s*er*log(tan((90+lat)*pi/360)).
+  const Eigen::Vector3d p1 = projection.toMap(49.014997147797, 8.4342801643975, 116.43227386475);
+  EXPECT_NEAR(p1.x(), -1.2364879969973117, 1e-6);  // moving west-south-west (yaw -2.61)
+  EXPECT_NEAR(p1.y(), -0.7431104257702827, 1e-6);
+  EXPECT_NEAR(p1.z(), 0.0019454956100020127, 1e-9);
+  // 0.11 s at ~13.2 m/s forward: the step length must agree with the speed.
+  EXPECT_NEAR(p1.head<2>().norm(), 13.17 * 0.10996, 0.05);
+}
+
+TEST(KittiMercator, PoseRotationIsRzRyRx) {
+  OxtsRecord r;
+  r.lat = 49.0;
+  r.lon = 8.4;
+  r.alt = 100.0;
+  r.roll = 0.1;
+  r.pitch = -0.2;
+  r.yaw = 1.3;
+  const Eigen::Isometry3d pose = MercatorProjection::atFirstFix(r).poseInMap(r);
+  const double cr = std::cos(0.1), sr = std::sin(0.1), cp = std::cos(-0.2), sp = std::sin(-0.2),
+               cy = std::cos(1.3), sy = std::sin(1.3);
+  Eigen::Matrix3d rx, ry, rz;
+  rx << 1, 0, 0, 0, cr, -sr, 0, sr, cr;
+  ry << cp, 0, sp, 0, 1, 0, -sp, 0, cp;
+  rz << cy, -sy, 0, sy, cy, 0, 0, 0, 1;
+  EXPECT_TRUE(pose.linear().isApprox(rz * ry * rx, 1e-12));
+  EXPECT_LT(pose.translation().norm(), 1e-9);
+  // Body x axis points along yaw in the east-north plane (yaw 0 = east).
+  const Eigen::Vector3d forward =
+      rotationFromRollPitchYaw(0, 0, M_PI / 2) * Eigen::Vector3d::UnitX();
+  EXPECT_TRUE(forward.isApprox(Eigen::Vector3d::UnitY(), 1e-12));
+}
+
+TEST(KittiMercator, ToGeodeticInvertsToMap) {
+  const MercatorProjection projection(49.015, 8.434, 116.4);
+  for (const Eigen::Vector3d& p : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(-1234.5, 876.25, -3.5),
+                                   Eigen::Vector3d(5000, -4000, 20)}) {
+    double lat, lon, alt;
+    projection.toGeodetic(p, &lat, &lon, &alt);
+    EXPECT_LT((projection.toMap(lat, lon, alt) - p).norm(), 1e-6) << p.transpose();
+  }
+}
+
+// ---------------------------------------------------------------------------- calibration
+TEST(KittiCalibration, ReadsRawCalibrationOf20110926) {
+  ISM_REQUIRE_SHARED(kDate0926);
+  const RawCalibration calib = readRawCalibration(sharedPath(kDate0926));
+  EXPECT_NEAR(calib.T_velo_imu.translation().x(), -8.086759e-01, 1e-9);
+  EXPECT_NEAR(calib.T_velo_imu.linear()(1, 2), -1.482298e-02, 1e-6);
+  EXPECT_NEAR(calib.T_cam0_velo.translation().z(), -2.717806e-01, 1e-9);
+  EXPECT_NEAR(calib.T_cam0_velo.linear()(0, 1), -9.999714e-01, 1e-6);
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(calib.cameras[i].present) << i;
+  const CameraCalibration& cam2 = calib.cameras[2];
+  EXPECT_DOUBLE_EQ(cam2.P_rect(0, 3), 4.485728e+01);
+  EXPECT_DOUBLE_EQ(cam2.P_rect(2, 3), 2.745884e-03);
+  EXPECT_DOUBLE_EQ(cam2.K(1, 2), 2.241806e+02);
+  EXPECT_DOUBLE_EQ(cam2.D[4], -6.770705e-02);
+  EXPECT_DOUBLE_EQ(cam2.T.x(), 5.956621e-02);
+  EXPECT_EQ(cam2.S_rect, Eigen::Vector2d(1242, 375));
+
+  const CameraProjection projection = calib.projection(2);
+  EXPECT_EQ(projection.width, 1242);
+  EXPECT_EQ(projection.height, 375);
+  // R_rect_00 for every camera (the devkit chain), not R_rect_02.
+  EXPECT_DOUBLE_EQ(projection.R_rect(0, 1), 9.837760e-03);
+  // A point 10 m ahead of the velodyne lands near the principal point, a bit right of it
+  // (cam2 sits 6 cm left of cam0; the velodyne 27 cm behind the cameras).
+  const Eigen::Vector3d h = projection.projectHomogeneous(Eigen::Vector3d(10, 0, 0));
+  ASSERT_GT(h.z(), 0);
+  EXPECT_NEAR(h.x() / h.z(), 609.6 + 721.5 * (0.06 + 0.0) / 10.3, 15.0);
+  EXPECT_NEAR(h.y() / h.z(), 172.9, 15.0);
+  // The tf chain must reproduce the devkit projection: K * (T_cam2_velo * x) == P_rect * ...
+  const Eigen::Vector3d x_velo(12.0, -3.0, 0.5);
+  const Eigen::Vector3d via_frame =
+      projection.rectifiedIntrinsics() * (projection.T_rectified_camera_velo() * x_velo);
+  const Eigen::Vector3d devkit = projection.projectHomogeneous(x_velo);
+  EXPECT_NEAR(via_frame.x() / via_frame.z(), devkit.x() / devkit.z(), 1e-3);
+  EXPECT_NEAR(via_frame.y() / via_frame.z(), devkit.y() / devkit.z(), 1e-3);
+}
+
+TEST(KittiCalibration, ReadsObjectCalibration) {
+  const std::string path = "data/kitti_object/training/calib/000000.txt";
+  ISM_REQUIRE_SHARED(path);
+  const ObjectCalibration calib = readObjectCalibration(sharedPath(path));
+  EXPECT_DOUBLE_EQ(calib.P[2](0, 3), 4.575831e+01);
+  EXPECT_DOUBLE_EQ(calib.P[3](1, 3), 2.330660e+00);
+  EXPECT_DOUBLE_EQ(calib.R0_rect(1, 0), -1.012729e-02);
+  EXPECT_NEAR(calib.Tr_velo_to_cam.translation().z(), -3.321029e-01, 1e-12);
+  ASSERT_TRUE(calib.has_imu_to_velo);
+  EXPECT_NEAR(calib.Tr_imu_to_velo.translation().x(), -8.086759e-01, 1e-12);
+  const CameraProjection projection = calib.projection(2, 1242, 375);
+  EXPECT_EQ(projection.width, 1242);
+  EXPECT_DOUBLE_EQ(projection.P_rect(0, 0), 7.070493e+02);
+}
+
+TEST(KittiCalibration, OdometryCalibTxtAndErrors) {
+  const std::string dir = makeTempDir("kitti_calib");
+  const std::string p = "7 0 6 0 0 7 1 0 0 0 1 0";
+  writeFile(dir + "/calib.txt", "P0: " + p + "\nP1: " + p + "\nP2: " + p + "\nP3: " + p +
+                                    "\nTr: 0 -1 0 0.1 0 0 -1 0.2 1 0 0 0.3\n");
+  const ObjectCalibration calib = readObjectCalibration(dir + "/calib.txt");
+  EXPECT_TRUE(calib.R0_rect.isIdentity());
+  EXPECT_FALSE(calib.has_imu_to_velo);
+  EXPECT_EQ(calib.Tr_velo_to_cam.translation(), Eigen::Vector3d(0.1, 0.2, 0.3));
+
+  writeFile(dir + "/short.txt", "P0: " + p + "\nP1: 1 2 3\n");
+  expectFormatError([&] { readObjectCalibration(dir + "/short.txt"); },
+                    {dir + "/short.txt:2", "P1", "3 values"});
+  writeFile(dir + "/nan.txt", "P0: 1 2 x\n");
+  expectFormatError([&] { readObjectCalibration(dir + "/nan.txt"); }, {"nan.txt:1", "'x'"});
+  expectFormatError([&] { readRawCalibration(dir); }, {"calib_imu_to_velo.txt"});
+  fs::remove_all(dir);
+}
+
+// ---------------------------------------------------------------------------- velodyne
+TEST(KittiVelodyne, ReadsRealScanAndRecoversRings) {
+  const std::string path = "data/kitti_object/training/velodyne/000000.bin";
+  ISM_REQUIRE_SHARED(path);
+  const VelodyneScan scan = readVelodyneBin(sharedPath(path));
+  EXPECT_EQ(scan.size() * 16, fs::file_size(sharedPath(path)));
+  EXPECT_GT(scan.size(), 100000u);
+  const auto rings = computeRings(scan);
+  ASSERT_EQ(rings.size(), scan.size());
+  EXPECT_EQ(*std::max_element(rings.begin(), rings.end()), 63);
+  // Rings are in scan order and the HDL-64E writes them top laser first: the mean elevation
+  // must fall from ring to ring (a ring detector that splits or merges lasers breaks this).
+  std::vector<double> sum(64, 0.0);
+  std::vector<int> count(64, 0);
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const float* p = scan.point(i);
+    sum[rings[i]] += std::atan2(p[2], std::hypot(p[0], p[1]));
+    ++count[rings[i]];
+    if (i > 0) {
+      ASSERT_GE(rings[i], rings[i - 1]);
+    }
+  }
+  int decreasing = 0;
+  for (int k = 0; k + 1 < 64; ++k) {
+    ASSERT_GT(count[k], 100) << "ring " << k;
+    decreasing += sum[k] / count[k] > sum[k + 1] / count[k + 1];
+  }
+  EXPECT_GE(decreasing, 60);  // a few low rings see the ground at similar mean elevation
+}
+
+TEST(KittiVelodyne, BadSizeAndMissingFileNameTheFile) {
+  const std::string dir = makeTempDir("kitti_velo");
+  writeFile(dir + "/bad.bin", std::string(20, '\0'));
+  expectFormatError([&] { readVelodyneBin(dir + "/bad.bin"); }, {dir + "/bad.bin", "20 bytes"});
+  expectFormatError([&] { readVelodyneBin(dir + "/none.bin"); }, {dir + "/none.bin"});
+  const float points[8] = {1, 2, 3, 0.5f, -4, 5, -6, 0.25f};
+  writeFile(dir + "/ok.bin", std::string(reinterpret_cast<const char*>(points), sizeof(points)));
+  const VelodyneScan scan = readVelodyneScan(dir + "/ok.bin");
+  ASSERT_EQ(scan.size(), 2u);
+  EXPECT_EQ(scan.point(1)[2], -6.0f);
+  EXPECT_EQ(scan.point(1)[3], 0.25f);
+  writeFile(dir + "/scan.txt", "1 2 3 0.5\n4 5 6\n");
+  expectFormatError([&] { readVelodyneScan(dir + "/scan.txt"); }, {"scan.txt:2"});
+  fs::remove_all(dir);
+}
+
+TEST(KittiVelodyne, ReadsSemanticKittiLabels) {
+  const std::string labels = "data/semantickitti_format/sequences/00/labels/000000.label";
+  ISM_REQUIRE_SHARED(labels);
+  const auto raw = readLabelFile(sharedPath(labels));
+  const VelodyneScan scan =
+      readVelodyneBin(sharedPath("data/semantickitti_format/sequences/00/velodyne/000000.bin"));
+  EXPECT_EQ(raw.size(), scan.size());
+  for (std::uint32_t label : raw) EXPECT_LT(semanticClass(label), 260);  // SemanticKITTI ids
+  EXPECT_EQ(semanticClass(0x00050028u), 40);
+  EXPECT_EQ(instanceId(0x00050028u), 5);
+}
+
+// ---------------------------------------------------------------------------- raw drive
+TEST(KittiRawDrive, OpensOxtsOnlyDriveWithCalibration) {
+  ISM_REQUIRE_SHARED(kDrive0001);
+  const RawDrive drive(sharedPath(kDrive0001));
+  EXPECT_TRUE(drive.hasOxts());
+  EXPECT_FALSE(drive.hasVelodyne());
+  EXPECT_FALSE(drive.hasCamera(2));
+  EXPECT_FALSE(drive.isExtract());
+  EXPECT_EQ(drive.oxts().size(), 108u);
+  EXPECT_EQ(drive.oxts().extension, ".txt");
+  EXPECT_EQ(drive.oxts().framePath(7), sharedPath(kDrive0001) + "/oxts/data/0000000007.txt");
+  EXPECT_TRUE(drive.hasCalibration());
+  EXPECT_EQ(fs::canonical(drive.calibrationDir()), fs::canonical(sharedPath(kDate0926)));
+  const auto missing = drive.missingParts();
+  EXPECT_NE(std::find(missing.begin(), missing.end(), "velodyne_points"), missing.end());
+  EXPECT_EQ(std::find(missing.begin(), missing.end(), "calibration"), missing.end());
+  const auto frames = drive.readOxts();
+  ASSERT_EQ(frames.size(), 108u);
+  EXPECT_EQ(frames[0].stamp_ns, drive.firstStampNs());
+}
+
+TEST(KittiRawDrive, DriveWithoutCalibrationAndMissingFolder) {
+  ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_29/2011_09_29_drive_0071_sync");
+  const RawDrive drive(sharedPath("data/kitti_raw/2011_09_29/2011_09_29_drive_0071_sync"));
+  EXPECT_FALSE(drive.hasCalibration());
+  EXPECT_THROW(drive.readCalibration(), KittiFormatError);
+  expectFormatError([] { RawDrive("/nonexistent/2011_09_26_drive_0001_sync"); },
+                    {"/nonexistent/2011_09_26_drive_0001_sync"});
+}
+
+TEST(KittiRawDrive, VelodyneCountMismatchNamesTheSensorFolder) {
+  const std::string dir = makeTempDir("kitti_drive") + "/2011_09_26_drive_0001_extract";
+  writeFile(dir + "/velodyne_points/data/0000000000.bin", std::string(16, '\0'));
+  writeFile(dir + "/velodyne_points/timestamps.txt", "2011-09-26 13:02:25.9\n");
+  writeFile(dir + "/velodyne_points/timestamps_start.txt", "2011-09-26 13:02:25.85\n");
+  {
+    const RawDrive drive(dir);
+    EXPECT_TRUE(drive.isExtract());
+    EXPECT_TRUE(drive.hasVelodyne());
+    EXPECT_EQ(drive.velodyne().start_stamps_ns.size(), 1u);
+    EXPECT_TRUE(drive.velodyne().end_stamps_ns.empty());
+    EXPECT_EQ(drive.velodyne().extension, ".bin");
+  }
+  writeFile(dir + "/velodyne_points/data/0000000001.bin", std::string(16, '\0'));
+  expectFormatError([&] { RawDrive drive(dir); }, {dir + "/velodyne_points", "2 files"});
+  fs::remove_all(fs::path(dir).parent_path());
+}
+
+}  // namespace
+}  // namespace kitti
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
