@@ -197,6 +197,29 @@ def map_class_histogram(vertices):
     return {int(l): int(c) for l, c in zip(labels, counts)}
 
 
+def run_evaluate_trajectory(script, estimate, truth, work_dir, plot_path):
+    """Runs the localization evaluation (evaluate_trajectory.py) on pose pairs matched by stamp
+    (it wants one pose per frame in both files). Returns (its JSON or an error, plotted)."""
+    import subprocess
+    est, gt = associate(estimate, truth)
+    if len(est) < 2:
+        return {"error": "fewer than 2 matched poses"}, False
+    paths = {name: os.path.join(work_dir, name) for name in
+             ("estimate_matched_tum.txt", "truth_matched_tum.txt", "evaluate_trajectory.json")}
+    for name, poses in (("estimate_matched_tum.txt", est), ("truth_matched_tum.txt", gt)):
+        np.savetxt(paths[name], poses, fmt="%.9f")
+    command = [sys.executable, script, "--estimate", paths["estimate_matched_tum.txt"],
+               "--truth", paths["truth_matched_tum.txt"], "--json", paths["evaluate_trajectory.json"],
+               "--label", "inekf_node"]
+    if plot_path:
+        command += ["--plot", plot_path]
+    result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if result.returncode != 0:
+        return {"error": "%s exited %d: %s" % (script, result.returncode, result.stdout[-800:])}, False
+    with open(paths["evaluate_trajectory.json"]) as f:
+        return json.load(f), bool(plot_path and os.path.exists(plot_path))
+
+
 def write_json_atomic(path, data):
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
@@ -212,6 +235,8 @@ def main():
     parser.add_argument("--ground-truth", help="synthetic drive ground_truth/ folder (map mIoU)")
     parser.add_argument("--output", required=True)
     parser.add_argument("--plot", help="trajectory PNG")
+    parser.add_argument("--evaluate-trajectory",
+                        help="scripts/evaluate_trajectory.py: also run it on the matched poses")
     parser.add_argument("--extra", action="append", default=[], help="KEY=JSON value added to the output")
     args = parser.parse_args()
 
@@ -230,7 +255,11 @@ def main():
     for item in args.extra:
         key, value = item.split("=", 1)
         metrics[key] = json.loads(value)
-    if args.plot and len(estimate) and len(truth):
+    plotted = False
+    if args.evaluate_trajectory:
+        metrics["trajectory_evaluation"], plotted = run_evaluate_trajectory(
+            args.evaluate_trajectory, estimate, truth, args.monitor_dir, args.plot)
+    if args.plot and not plotted and len(estimate) and len(truth):
         plot_trajectories(estimate, truth, args.plot)
     write_json_atomic(args.output, metrics)
     print(json.dumps(metrics.get("trajectory"), indent=2))

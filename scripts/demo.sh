@@ -26,6 +26,8 @@ if [[ ${ISM_DEMO_SKIP_BUILD:-0} != 1 ]]; then
     tail -n 40 "$ISM_ROOT/output/demo_build.log"; echo "[demo] BUILD FAILED"; exit 1; }
 fi
 ism_source_workspace
+# rviz finds its plugins' media through rospack: Debian's ROS packages live in /usr/share.
+[[ :${ROS_PACKAGE_PATH:-}: == *:/usr/share:* ]] || export ROS_PACKAGE_PATH=${ROS_PACKAGE_PATH:+$ROS_PACKAGE_PATH:}/usr/share
 for exe in kitti2bag inekf_node segmentation_node semantic_octomap_node; do
   [[ -x $ISM_BIN/$exe ]] || { echo "[demo] $ISM_BIN/$exe missing: build failed?"; exit 1; }
 done
