@@ -8,3 +8,15 @@ ism_add_core_library(${PROJECT_NAME}_perception
 ism_add_gtest(test_segmenter
   SOURCES test/unit/test_segmenter.cpp
   LINK ${PROJECT_NAME}_perception)
+
+ism_add_tool(segment_image
+  SOURCES src/tools/segment_image.cpp
+  LINK ${PROJECT_NAME}_perception)
+
+ism_add_gtest(test_segmenter_frame_buffer
+  SOURCES test/unit/test_segmenter_frame_buffer.cpp
+  LINK ${PROJECT_NAME}_perception)
+
+ism_add_ros_executable(segmentation_node
+  SOURCES src/nodes/segmentation_node.cpp
+  LINK ${PROJECT_NAME}_perception)

@@ -56,6 +56,8 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
       (card.input_width == 0 || card.input_height == 0))
     fail(path, root["input"], "resize and letterbox need input width and height > 0");
   if (card.pad_multiple < 1) fail(path, root["pad_multiple"], "pad_multiple must be >= 1");
+  if (!(card.resize_factor > 0.0 && card.resize_factor <= 8.0))
+    fail(path, root["resize_factor"], "resize_factor must be in (0, 8]");
   if (!(card.scale > 0.0)) fail(path, root["scale"], "scale must be > 0");
   if (card.output_label_ids.empty())
     fail(path, root["output_label_ids"], "output_label_ids must list one labelId per channel");
@@ -97,6 +99,7 @@ ModelCard loadModelCard(const std::string& yaml_path) {
   card.resize_policy =
       parsePolicy(yaml_path, root["resize_policy"] ? root["resize_policy"] : YAML::Node("resize"));
   card.pad_multiple = readOr<int>(yaml_path, root, "pad_multiple", 1);
+  card.resize_factor = readOr<double>(yaml_path, root, "resize_factor", 1.0);
   if (root["mean"]) {
     const auto mean = read<std::vector<double>>(yaml_path, root, "mean");
     if (mean.size() != 3) fail(yaml_path, root["mean"], "mean must have 3 values");
@@ -131,6 +134,7 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
       << card.input_height << YAML::EndMap;
   out << YAML::Key << "resize_policy" << YAML::Value << resizePolicyName(card.resize_policy);
   out << YAML::Key << "pad_multiple" << YAML::Value << card.pad_multiple;
+  out << YAML::Key << "resize_factor" << YAML::Value << card.resize_factor;
   out << YAML::Key << "mean" << YAML::Value << YAML::Flow << YAML::BeginSeq << card.mean[0]
       << card.mean[1] << card.mean[2] << YAML::EndSeq;
   out << YAML::Key << "scale" << YAML::Value << card.scale;

@@ -92,11 +92,16 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
     }
     case ResizePolicy::kPadToMultiple: {
       cv::Mat resized = bgr;
-      if (card.input_width > 0 && card.input_height > 0 &&
-          (bgr.cols != card.input_width || bgr.rows != card.input_height)) {
-        cv::resize(bgr, resized, cv::Size(card.input_width, card.input_height), 0, 0,
-                   cv::INTER_AREA);
+      cv::Size target = bgr.size();
+      if (card.input_width > 0 && card.input_height > 0) {
+        target = cv::Size(card.input_width, card.input_height);
+      } else if (card.resize_factor != 1.0) {
+        target =
+            cv::Size(std::max(1, static_cast<int>(std::lround(bgr.cols * card.resize_factor))),
+                     std::max(1, static_cast<int>(std::lround(bgr.rows * card.resize_factor))));
       }
+      // INTER_AREA: what scripts/train_unet.py uses to make its training images.
+      if (target != bgr.size()) cv::resize(bgr, resized, target, 0, 0, cv::INTER_AREA);
       const int padded_width = roundUpToMultiple(resized.cols, card.pad_multiple);
       const int padded_height = roundUpToMultiple(resized.rows, card.pad_multiple);
       // Reflect (not zero) padding: the network has seen no black borders in training.

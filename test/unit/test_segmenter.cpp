@@ -122,6 +122,7 @@ TEST(ModelCard, ParsesEveryField) {
                                      "input: {width: 624, height: 188}\n"
                                      "resize_policy: pad_to_multiple\n"
                                      "pad_multiple: 16\n"
+                                     "resize_factor: 0.5\n"
                                      "mean: [1.5, 2.5, 3.5]\n"
                                      "scale: 0.5\n"
                                      "swap_rb: false\n"
@@ -133,6 +134,7 @@ TEST(ModelCard, ParsesEveryField) {
   EXPECT_EQ(card.input_height, 188);
   EXPECT_EQ(card.resize_policy, ResizePolicy::kPadToMultiple);
   EXPECT_EQ(card.pad_multiple, 16);
+  EXPECT_DOUBLE_EQ(card.resize_factor, 0.5);
   EXPECT_DOUBLE_EQ(card.mean[2], 3.5);
   EXPECT_DOUBLE_EQ(card.scale, 0.5);
   EXPECT_FALSE(card.swap_rb);
@@ -145,6 +147,7 @@ TEST(ModelCard, ParsesEveryField) {
   EXPECT_EQ(reloaded.output_label_ids, card.output_label_ids);
   EXPECT_EQ(reloaded.resize_policy, card.resize_policy);
   EXPECT_EQ(reloaded.input_width, card.input_width);
+  EXPECT_DOUBLE_EQ(reloaded.resize_factor, card.resize_factor);
   EXPECT_DOUBLE_EQ(reloaded.mean[0], card.mean[0]);
   EXPECT_EQ(reloaded.swap_rb, card.swap_rb);
   fs::remove_all(dir);

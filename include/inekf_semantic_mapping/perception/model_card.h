@@ -28,6 +28,9 @@ struct ModelCard {
   int input_height = 0;
   ResizePolicy resize_policy = ResizePolicy::kResize;
   int pad_multiple = 1;
+  // kPadToMultiple with a 0 x 0 input size: the image is first scaled by this factor (a network
+  // trained at half resolution keeps its scale on any image size).
+  double resize_factor = 1.0;
   // blob = (pixel - mean) * scale, in the channel order the network expects.
   std::array<double, 3> mean{{0.0, 0.0, 0.0}};
   double scale = 1.0 / 255.0;

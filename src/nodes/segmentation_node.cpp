@@ -1,0 +1,174 @@
+// segmentation_node: camera image -> /segmentation/labels (mono8 Cityscapes labelIds) and
+// /segmentation/overlay (rgb8), both with the input image's header.
+//
+// Inference runs on a worker thread fed through a one-slot LatestFrameBuffer: when the network
+// is slower than the camera, stale frames are dropped (and counted) instead of queueing latency.
+//
+// Parameters (~, see config/segmentation.yaml): model, model_card ("" = the model's default
+// card), image_topic, publish_overlay, overlay_alpha, num_threads, rate_log_period_s.
+#include <cv_bridge/cv_bridge.h>
+#include <image_transport/image_transport.h>
+#include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <thread>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/perception/latest_frame_buffer.h"
+#include "inekf_semantic_mapping/perception/model_card.h"
+#include "inekf_semantic_mapping/perception/segmenter.h"
+#include "inekf_semantic_mapping/ros/names.h"
+
+namespace inekf_semantic_mapping {
+namespace {
+
+namespace enc = sensor_msgs::image_encodings;
+
+struct Frame {
+  std_msgs::Header header;
+  cv::Mat image;  // BGR or gray, owned
+};
+
+class SegmentationNode {
+ public:
+  SegmentationNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : transport_(nh) {
+    const std::string model = pnh.param<std::string>("model", "");
+    const std::string card_path = pnh.param<std::string>("model_card", "");
+    const std::string image_topic =
+        pnh.param<std::string>("image_topic", topics::kCameraColorLeftImage);
+    publish_overlay_ = pnh.param("publish_overlay", true);
+    overlay_alpha_ = pnh.param("overlay_alpha", 0.5);
+    const int num_threads = pnh.param("num_threads", 2);
+    rate_log_period_s_ = pnh.param("rate_log_period_s", 10.0);
+    if (model.empty()) throw std::runtime_error("parameter ~model is not set");
+
+    const perception::ModelCard card = card_path.empty() ? perception::defaultModelCardFor(model)
+                                                         : perception::loadModelCard(card_path);
+    segmenter_ = std::make_unique<perception::Segmenter>(model, card, num_threads);
+    ROS_INFO_STREAM("segmentation_node: model "
+                    << model << ", card " << card.source << " (" << card.numOutputChannels()
+                    << " classes, " << perception::resizePolicyName(card.resize_policy) << ")");
+
+    labels_publisher_ = transport_.advertise(topics::kSegmentationLabels, 1);
+    overlay_publisher_ = transport_.advertise(topics::kSegmentationOverlay, 1);
+    worker_ = std::thread([this] { inferenceLoop(); });
+    image_subscriber_ =
+        transport_.subscribe(image_topic, 1, &SegmentationNode::imageCallback, this);
+    ROS_INFO_STREAM("segmentation_node: listening on " << image_subscriber_.getTopic());
+  }
+
+  ~SegmentationNode() {
+    image_subscriber_.shutdown();
+    frames_.close();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  void imageCallback(const sensor_msgs::ImageConstPtr& msg) {
+    Frame frame;
+    frame.header = msg->header;
+    try {
+      if (msg->encoding == enc::BGR8 || msg->encoding == enc::RGB8) {
+        frame.image = cv_bridge::toCvCopy(msg, enc::BGR8)->image;
+      } else if (msg->encoding == enc::MONO8) {
+        frame.image = cv_bridge::toCvCopy(msg, enc::MONO8)->image;
+      } else {
+        ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: image on "
+                                           << image_subscriber_.getTopic() << " has encoding '"
+                                           << msg->encoding
+                                           << "'; only bgr8, rgb8 and mono8 are segmented "
+                                              "(frame skipped)");
+        return;
+      }
+    } catch (const cv_bridge::Exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: cannot convert image ("
+                                         << msg->width << "x" << msg->height << " " << msg->encoding
+                                         << "): " << e.what());
+      return;
+    }
+    frames_.put(std::move(frame));
+  }
+
+  void inferenceLoop() {
+    auto last_log = std::chrono::steady_clock::now();
+    std::uint64_t processed_since_log = 0;
+    std::uint64_t dropped_at_log = 0;
+    double inference_s_since_log = 0.0;
+    while (std::optional<Frame> frame = frames_.take()) {
+      const auto start = std::chrono::steady_clock::now();
+      try {
+        segmentAndPublish(*frame);
+      } catch (const std::exception& e) {
+        ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: frame at "
+                                           << frame->header.stamp << " (" << frame->image.cols
+                                           << "x" << frame->image.rows << "): " << e.what());
+      }
+      const auto now = std::chrono::steady_clock::now();
+      inference_s_since_log += std::chrono::duration<double>(now - start).count();
+      ++processed_since_log;
+      const double since_log_s = std::chrono::duration<double>(now - last_log).count();
+      if (since_log_s >= rate_log_period_s_) {
+        const std::uint64_t dropped = frames_.droppedCount();
+        ROS_INFO_STREAM("segmentation_node: " << processed_since_log / since_log_s << " Hz, "
+                                              << 1e3 * inference_s_since_log / processed_since_log
+                                              << " ms per frame, dropped "
+                                              << dropped - dropped_at_log << " stale frames ("
+                                              << dropped << " of " << frames_.putCount()
+                                              << " in total)");
+        last_log = now;
+        processed_since_log = 0;
+        dropped_at_log = dropped;
+        inference_s_since_log = 0.0;
+      }
+    }
+  }
+
+  void segmentAndPublish(const Frame& frame) {
+    perception::Segmentation result;
+    {
+      ScopedTimer timer("segmentation_node/segment");
+      result = segmenter_->segment(frame.image);
+    }
+    labels_publisher_.publish(
+        cv_bridge::CvImage(frame.header, enc::MONO8, result.label_ids).toImageMsg());
+    if (publish_overlay_ && overlay_publisher_.getNumSubscribers() > 0) {
+      const cv::Mat overlay =
+          perception::overlayLabelIds(frame.image, result.label_ids, overlay_alpha_);
+      overlay_publisher_.publish(cv_bridge::CvImage(frame.header, enc::RGB8, overlay).toImageMsg());
+    }
+  }
+
+  image_transport::ImageTransport transport_;
+  image_transport::Subscriber image_subscriber_;
+  image_transport::Publisher labels_publisher_;
+  image_transport::Publisher overlay_publisher_;
+  std::unique_ptr<perception::Segmenter> segmenter_;
+  perception::LatestFrameBuffer<Frame> frames_;
+  std::thread worker_;
+  bool publish_overlay_ = true;
+  double overlay_alpha_ = 0.5;
+  double rate_log_period_s_ = 10.0;
+};
+
+}  // namespace
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "segmentation_node");
+  ros::NodeHandle nh;
+  ros::NodeHandle pnh("~");
+  try {
+    inekf_semantic_mapping::SegmentationNode node(nh, pnh);
+    ros::spin();
+  } catch (const std::exception& e) {
+    // Without a usable model there is nothing to do: say why, once, and exit.
+    ROS_FATAL_STREAM("segmentation_node: " << e.what());
+    return 1;
+  }
+  return 0;
+}
