@@ -20,3 +20,11 @@ ism_add_gtest(test_segmenter_frame_buffer
 ism_add_ros_executable(segmentation_node
   SOURCES src/nodes/segmentation_node.cpp
   LINK ${PROJECT_NAME}_perception)
+
+if(benchmark_FOUND)
+  ism_add_tool(bench_segmentation
+    SOURCES bench/bench_segmentation.cpp
+    LINK ${PROJECT_NAME}_perception benchmark::benchmark)
+  target_compile_definitions(bench_segmentation PRIVATE
+    ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}" ISM_REPO_ROOT="${ISM_REPO_ROOT}")
+endif()
