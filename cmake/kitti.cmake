@@ -2,6 +2,7 @@
 ism_add_core_library(${PROJECT_NAME}_kitti
   SOURCES
     src/kitti/calibration.cpp
+    src/kitti/drive_timeline.cpp
     src/kitti/gps_degradation.cpp
     src/kitti/mercator.cpp
     src/kitti/oxts.cpp
@@ -12,3 +13,11 @@ ism_add_core_library(${PROJECT_NAME}_kitti
 ism_add_gtest(test_kitti_io SOURCES test/unit/test_kitti_io.cpp LINK ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_kitti_gps_degradation
   SOURCES test/unit/test_kitti_gps_degradation.cpp LINK ${PROJECT_NAME}_kitti)
+
+# KITTI -> ROS message conversions shared by kitti_player and kitti2bag (ROS-facing, not core).
+add_library(${PROJECT_NAME}_kitti_ros src/ros/kitti_conversions.cpp)
+target_include_directories(${PROJECT_NAME}_kitti_ros PUBLIC ${ISM_ROS_INCLUDE_DIRS})
+target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PUBLIC ${OpenCV_INCLUDE_DIRS})
+target_link_libraries(${PROJECT_NAME}_kitti_ros PUBLIC
+  ${PROJECT_NAME}_kitti ${catkin_LIBRARIES} opencv_core opencv_imgcodecs)
+add_dependencies(${PROJECT_NAME}_kitti_ros ${catkin_EXPORTED_TARGETS})
