@@ -1,1 +1,11 @@
-# Component: estimation (targets are added by the component's owner)
+# Component: estimation — Lie groups, the InEKF / ESKF filters, the streaming Localizer,
+# inekf_offline, their tests and benchmark.
+ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cpp)
+ism_add_core_library(${PROJECT_NAME}_estimation
+  SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
+          src/estimation/localizer.cpp
+  LINK ${PROJECT_NAME}_lie yaml-cpp)
+
+ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
+ism_add_gtest(test_imu_filters SOURCES test/unit/test_imu_filters.cpp
+  LINK ${PROJECT_NAME}_estimation)

@@ -1,0 +1,90 @@
+// The three NavigationFilter implementations. They share the state propagation and the exact
+// left-invariant transition (error_dynamics.h), mapped into each filter's error coordinates by
+// errorFromLeft(); they differ in how the error is defined and how a fix corrects the state.
+#pragma once
+
+#include <Eigen/Geometry>
+
+#include "inekf_semantic_mapping/estimation/error_dynamics.h"
+#include "inekf_semantic_mapping/estimation/navigation_filter.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+class ImuFilterBase : public NavigationFilter {
+ public:
+  explicit ImuFilterBase(const ImuNoise& noise) : noise_(noise) {}
+
+  void initialize(const NavState& state, const ErrorCovariance& covariance) override;
+  void propagate(const ImuSample& sample, double dt) override;
+  void setProcessNoiseScale(double scale) override { noise_scale_ = scale; }
+  const NavState& state() const override { return state_; }
+  ErrorCovariance covariance() const override { return covariance_; }
+  PoseCovariance poseCovariance() const override;
+  ErrorCovariance fromWorldCovariance(const NavState& state,
+                                      const ErrorCovariance& world_covariance) const override;
+
+  // Linear map from the left-invariant error at `state` to this filter's error (first order).
+  virtual Matrix15d errorFromLeft(const NavState& state) const = 0;
+  virtual Matrix15d leftFromError(const NavState& state) const = 0;
+
+ protected:
+  // Accepts the candidate state and covariance if all finite; returns false otherwise.
+  bool commit(const NavState& state, const ErrorCovariance& covariance);
+  // Shared Kalman algebra: innovation nu, Jacobian H (3x15), noise N (3x3). Fills the correction
+  // delta and the Joseph-form covariance; returns the result (gate, finiteness).
+  CorrectionResult kalmanUpdate(const Eigen::Vector3d& innovation,
+                                const Eigen::Matrix<double, 3, 15>& jacobian,
+                                const Eigen::Matrix3d& noise, double gate_mahalanobis_squared,
+                                Eigen::Matrix<double, 15, 1>* correction,
+                                ErrorCovariance* updated_covariance) const;
+  static bool finiteFix(const PositionFix& fix);
+
+  ImuNoise noise_;
+  double noise_scale_ = 1.0;
+  NavState state_;
+  ErrorCovariance covariance_ = ErrorCovariance::Identity();
+};
+
+// Left-invariant EKF: body-frame errors; the GPS fix is a left-invariant observation Y = X b,
+// so H = [0 0 I 0 0] does not depend on the state: innovation R^T (y - p), noise R^T N R,
+// update X <- X exp(K nu) (biases additive).
+class LeftInvariantEkf : public ImuFilterBase {
+ public:
+  using ImuFilterBase::ImuFilterBase;
+  FilterType type() const override { return FilterType::kLeftInvariant; }
+  CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
+  Matrix15d errorFromLeft(const NavState& state) const override;
+  Matrix15d leftFromError(const NavState& state) const override;
+};
+
+// Right-invariant EKF: map-frame errors (X_true = exp(xi) X_est). For a position fix
+// H = [-p^ 0 I 0 0] (state dependent: GPS is not a right-invariant observation), update
+// X <- exp(K nu) X.
+class RightInvariantEkf : public ImuFilterBase {
+ public:
+  using ImuFilterBase::ImuFilterBase;
+  FilterType type() const override { return FilterType::kRightInvariant; }
+  CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
+  Matrix15d errorFromLeft(const NavState& state) const override;
+  Matrix15d leftFromError(const NavState& state) const override;
+};
+
+// Conventional quaternion error-state EKF: R_true = R Exp(dtheta_body), v and p additive in the
+// map frame; H = [0 0 I 0 0]; the attitude is kept as a unit quaternion.
+class QuaternionEskf : public ImuFilterBase {
+ public:
+  using ImuFilterBase::ImuFilterBase;
+  FilterType type() const override { return FilterType::kQuaternionEskf; }
+  void initialize(const NavState& state, const ErrorCovariance& covariance) override;
+  void propagate(const ImuSample& sample, double dt) override;
+  CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
+  Matrix15d errorFromLeft(const NavState& state) const override;
+  Matrix15d leftFromError(const NavState& state) const override;
+
+ private:
+  Eigen::Quaterniond attitude_ = Eigen::Quaterniond::Identity();
+};
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,89 @@
+#include "inekf_semantic_mapping/estimation/error_dynamics.h"
+
+#include "inekf_semantic_mapping/lie/so3.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+using lie::gamma0;
+using lie::gamma1;
+using lie::gamma2;
+using lie::hat;
+
+// 4-point Gauss-Legendre on [-1, 1].
+constexpr double kNodes[4] = {-0.8611363115940526, -0.3399810435848563, 0.3399810435848563,
+                              0.8611363115940526};
+constexpr double kWeights[4] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
+                                0.3478548451374538};
+
+}  // namespace
+
+NavState integrateImu(const NavState& state, const Eigen::Vector3d& measured_angular_velocity,
+                      const Eigen::Vector3d& measured_specific_force, double gravity_mps2,
+                      double dt) {
+  const Eigen::Vector3d w = measured_angular_velocity - state.gyro_bias;
+  const Eigen::Vector3d a = measured_specific_force - state.accel_bias;
+  const Eigen::Vector3d g(0.0, 0.0, -gravity_mps2);
+  const Eigen::Vector3d phi = w * dt;
+  NavState next = state;
+  next.rotation = state.rotation * gamma0(phi);
+  next.velocity_map = state.velocity_map + state.rotation * gamma1(phi) * a * dt + g * dt;
+  next.position_map = state.position_map + state.velocity_map * dt +
+                      state.rotation * gamma2(phi) * a * (dt * dt) + 0.5 * g * (dt * dt);
+  next.stamp_s = state.stamp_s + dt;
+  return next;
+}
+
+Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a, double dt) {
+  const Eigen::Vector3d phi = w * dt;
+  const Eigen::Matrix3d delta_rt = gamma0(phi).transpose();
+  const Eigen::Matrix3d g1 = gamma1(phi), g2 = gamma2(phi);
+
+  // Gyro-bias couplings: int_0^dt M(u) du and int_0^dt (dt - u) M(u) du with
+  // M(u) = (Exp(w u) a)^ u Gamma1(w u).
+  Eigen::Matrix3d int_m = Eigen::Matrix3d::Zero(), int_weighted_m = Eigen::Matrix3d::Zero();
+  for (int i = 0; i < 4; ++i) {
+    const double u = 0.5 * dt * (kNodes[i] + 1.0);
+    const Eigen::Vector3d wu = w * u;
+    const Eigen::Matrix3d m = hat(gamma0(wu) * a) * (u * gamma1(wu));
+    const double weight = 0.5 * dt * kWeights[i];
+    int_m += weight * m;
+    int_weighted_m += weight * (dt - u) * m;
+  }
+
+  Matrix15d phi_matrix = Matrix15d::Identity();
+  phi_matrix.block<3, 3>(0, 0) = delta_rt;
+  phi_matrix.block<3, 3>(0, 9) = -delta_rt * g1 * dt;
+  phi_matrix.block<3, 3>(3, 0) = -delta_rt * hat(g1 * a * dt);
+  phi_matrix.block<3, 3>(3, 3) = delta_rt;
+  phi_matrix.block<3, 3>(3, 9) = delta_rt * int_m;
+  phi_matrix.block<3, 3>(3, 12) = -delta_rt * g1 * dt;
+  phi_matrix.block<3, 3>(6, 0) = -delta_rt * hat(g2 * a * (dt * dt));
+  phi_matrix.block<3, 3>(6, 3) = delta_rt * dt;
+  phi_matrix.block<3, 3>(6, 6) = delta_rt;
+  phi_matrix.block<3, 3>(6, 9) = delta_rt * int_weighted_m;
+  phi_matrix.block<3, 3>(6, 12) = -delta_rt * g2 * (dt * dt);
+  return phi_matrix;
+}
+
+Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
+                           const ImuNoise& noise, double noise_scale, double dt) {
+  Eigen::Matrix<double, 15, 1> diagonal;
+  const double s2 = noise_scale * noise_scale;
+  diagonal << Eigen::Vector3d::Constant(s2 * noise.gyro_noise_density * noise.gyro_noise_density),
+      Eigen::Vector3d::Constant(s2 * noise.accel_noise_density * noise.accel_noise_density),
+      Eigen::Vector3d::Zero(),
+      Eigen::Vector3d::Constant(s2 * noise.gyro_bias_random_walk * noise.gyro_bias_random_walk),
+      Eigen::Vector3d::Constant(s2 * noise.accel_bias_random_walk * noise.accel_bias_random_walk);
+  // Noise injected at time s reaches dt through Phi(dt - s): Simpson over s.
+  const Matrix15d phi_full = leftErrorTransition(w, a, dt);
+  const Matrix15d phi_half = leftErrorTransition(w, a, 0.5 * dt);
+  const auto l = diagonal.asDiagonal();
+  Matrix15d q = (dt / 6.0) * (Matrix15d(phi_full * l * phi_full.transpose()) +
+                              4.0 * Matrix15d(phi_half * l * phi_half.transpose()) + Matrix15d(l));
+  return 0.5 * (q + q.transpose());
+}
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,294 @@
+#include "inekf_semantic_mapping/estimation/imu_filters.h"
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/lie/se23.h"
+#include "inekf_semantic_mapping/lie/so3.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+using Vector15d = Eigen::Matrix<double, 15, 1>;
+using lie::ExtendedPose;
+
+ErrorCovariance symmetrized(const ErrorCovariance& p) { return 0.5 * (p + p.transpose()); }
+
+bool finiteState(const NavState& s) {
+  return std::isfinite(s.stamp_s) && s.rotation.allFinite() && s.velocity_map.allFinite() &&
+         s.position_map.allFinite() && s.gyro_bias.allFinite() && s.accel_bias.allFinite();
+}
+
+ExtendedPose extendedPose(const NavState& s) {
+  ExtendedPose x;
+  x.rotation = s.rotation;
+  x.velocity = s.velocity_map;
+  x.position = s.position_map;
+  return x;
+}
+
+void setExtendedPose(const ExtendedPose& x, NavState* s) {
+  s->rotation = x.rotation;
+  s->velocity_map = x.velocity;
+  s->position_map = x.position;
+}
+
+Eigen::Matrix<double, 3, 15> positionJacobian() {
+  Eigen::Matrix<double, 3, 15> h = Eigen::Matrix<double, 3, 15>::Zero();
+  h.block<3, 3>(0, 6).setIdentity();
+  return h;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// ImuFilterBase
+
+void ImuFilterBase::initialize(const NavState& state, const ErrorCovariance& covariance) {
+  state_ = state;
+  state_.rotation = lie::normalizeRotation(state.rotation);
+  covariance_ = symmetrized(covariance);
+}
+
+void ImuFilterBase::propagate(const ImuSample& sample, double dt) {
+  if (!(dt > 0.0) || !std::isfinite(dt) || !sample.angular_velocity.allFinite() ||
+      !sample.specific_force.allFinite()) {
+    return;
+  }
+  const Eigen::Vector3d w = sample.angular_velocity - state_.gyro_bias;
+  const Eigen::Vector3d a = sample.specific_force - state_.accel_bias;
+  const NavState next =
+      integrateImu(state_, sample.angular_velocity, sample.specific_force, noise_.gravity_mps2, dt);
+  const Matrix15d phi = leftErrorTransition(w, a, dt);
+  const Matrix15d q = leftProcessNoise(w, a, noise_, noise_scale_, dt);
+  ErrorCovariance next_covariance;
+  if (type() == FilterType::kLeftInvariant) {
+    next_covariance = phi * covariance_ * phi.transpose() + q;
+  } else {
+    const Matrix15d to_left = leftFromError(state_);
+    const Matrix15d from_left = errorFromLeft(next);
+    const Matrix15d transition = from_left * phi * to_left;
+    next_covariance =
+        transition * covariance_ * transition.transpose() + from_left * q * from_left.transpose();
+  }
+  commit(next, symmetrized(next_covariance));
+}
+
+bool ImuFilterBase::commit(const NavState& state, const ErrorCovariance& covariance) {
+  if (!finiteState(state) || !covariance.allFinite()) return false;
+  state_ = state;
+  state_.rotation = lie::normalizeRotation(state.rotation);
+  covariance_ = covariance;
+  return true;
+}
+
+PoseCovariance ImuFilterBase::poseCovariance() const {
+  const Matrix15d to_left = leftFromError(state_);
+  const ErrorCovariance left = to_left * covariance_ * to_left.transpose();
+  Eigen::Matrix<double, 6, 15> j = Eigen::Matrix<double, 6, 15>::Zero();
+  j.block<3, 3>(0, 6) = state_.rotation;  // dp_map = R xi_p
+  j.block<3, 3>(3, 0).setIdentity();      // body small angle = xi_R
+  const PoseCovariance pose = j * left * j.transpose();
+  return 0.5 * (pose + pose.transpose());
+}
+
+ErrorCovariance ImuFilterBase::fromWorldCovariance(const NavState& state,
+                                                   const ErrorCovariance& world) const {
+  Matrix15d world_to_left = Matrix15d::Identity();
+  const Eigen::Matrix3d rt = state.rotation.transpose();
+  for (int block = 0; block < 3; ++block) world_to_left.block<3, 3>(3 * block, 3 * block) = rt;
+  const Matrix15d world_to_error = errorFromLeft(state) * world_to_left;
+  return symmetrized(world_to_error * world * world_to_error.transpose());
+}
+
+CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Vector3d& innovation,
+                                             const Eigen::Matrix<double, 3, 15>& h,
+                                             const Eigen::Matrix3d& noise, double gate,
+                                             Eigen::Matrix<double, 15, 1>* correction,
+                                             ErrorCovariance* updated) const {
+  CorrectionResult result;
+  const Eigen::Matrix<double, 15, 3> pht = covariance_ * h.transpose();
+  const Eigen::Matrix3d s = h * pht + noise;
+  Eigen::LLT<Eigen::Matrix3d> llt(s);
+  if (!s.allFinite() || !innovation.allFinite() || llt.info() != Eigen::Success) {
+    result.reason = "innovation covariance not positive definite or not finite";
+    return result;
+  }
+  result.mahalanobis_squared = innovation.dot(llt.solve(innovation));
+  if (!(result.mahalanobis_squared <= gate)) {
+    char text[128];
+    std::snprintf(text, sizeof(text), "outlier: Mahalanobis^2 %.1f > gate %.1f",
+                  result.mahalanobis_squared, gate);
+    result.reason = text;
+    return result;
+  }
+  const Eigen::Matrix<double, 15, 3> gain = llt.solve(pht.transpose()).transpose();
+  *correction = gain * innovation;
+  const Matrix15d i_kh = Matrix15d::Identity() - gain * h;
+  *updated = symmetrized(i_kh * covariance_ * i_kh.transpose() + gain * noise * gain.transpose());
+  result.accepted = true;
+  return result;
+}
+
+bool ImuFilterBase::finiteFix(const PositionFix& fix) {
+  return std::isfinite(fix.stamp_s) && fix.position_map.allFinite() &&
+         fix.covariance_map.allFinite();
+}
+
+namespace {
+CorrectionResult rejectNonFinite(CorrectionResult result) {
+  result.accepted = false;
+  result.reason = "update would produce a non-finite state";
+  return result;
+}
+CorrectionResult rejectBadFix() {
+  CorrectionResult result;
+  result.reason = "non-finite fix";
+  return result;
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// LeftInvariantEkf
+
+CorrectionResult LeftInvariantEkf::correctPosition(const PositionFix& fix, double gate) {
+  if (!finiteFix(fix)) return rejectBadFix();
+  const Eigen::Matrix3d& r = state_.rotation;
+  const Eigen::Vector3d innovation = r.transpose() * (fix.position_map - state_.position_map);
+  const Eigen::Matrix3d noise = r.transpose() * fix.covariance_map * r;
+  Vector15d delta;
+  ErrorCovariance updated;
+  CorrectionResult result =
+      kalmanUpdate(innovation, positionJacobian(), noise, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  NavState next = state_;
+  setExtendedPose(extendedPose(state_) * lie::expSE23(delta.head<9>()), &next);
+  next.gyro_bias += delta.segment<3>(9);
+  next.accel_bias += delta.segment<3>(12);
+  return commit(next, updated) ? result : rejectNonFinite(result);
+}
+
+Matrix15d LeftInvariantEkf::errorFromLeft(const NavState&) const { return Matrix15d::Identity(); }
+Matrix15d LeftInvariantEkf::leftFromError(const NavState&) const { return Matrix15d::Identity(); }
+
+// ---------------------------------------------------------------------------------------------
+// RightInvariantEkf
+
+CorrectionResult RightInvariantEkf::correctPosition(const PositionFix& fix, double gate) {
+  if (!finiteFix(fix)) return rejectBadFix();
+  const Eigen::Vector3d innovation = fix.position_map - state_.position_map;
+  Eigen::Matrix<double, 3, 15> h = positionJacobian();
+  h.block<3, 3>(0, 0) = -lie::hat(state_.position_map);
+  Vector15d delta;
+  ErrorCovariance updated;
+  CorrectionResult result = kalmanUpdate(innovation, h, fix.covariance_map, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  NavState next = state_;
+  setExtendedPose(lie::expSE23(delta.head<9>()) * extendedPose(state_), &next);
+  next.gyro_bias += delta.segment<3>(9);
+  next.accel_bias += delta.segment<3>(12);
+  return commit(next, updated) ? result : rejectNonFinite(result);
+}
+
+Matrix15d RightInvariantEkf::errorFromLeft(const NavState& state) const {
+  Matrix15d t = Matrix15d::Identity();
+  t.block<9, 9>(0, 0) = extendedPose(state).adjoint();
+  return t;
+}
+
+Matrix15d RightInvariantEkf::leftFromError(const NavState& state) const {
+  Matrix15d t = Matrix15d::Identity();
+  t.block<9, 9>(0, 0) = extendedPose(state).inverse().adjoint();
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------------
+// QuaternionEskf
+
+void QuaternionEskf::initialize(const NavState& state, const ErrorCovariance& covariance) {
+  ImuFilterBase::initialize(state, covariance);
+  attitude_ = Eigen::Quaterniond(state_.rotation).normalized();
+}
+
+void QuaternionEskf::propagate(const ImuSample& sample, double dt) {
+  ImuFilterBase::propagate(sample, dt);
+  attitude_ = Eigen::Quaterniond(state_.rotation).normalized();
+}
+
+CorrectionResult QuaternionEskf::correctPosition(const PositionFix& fix, double gate) {
+  if (!finiteFix(fix)) return rejectBadFix();
+  const Eigen::Vector3d innovation = fix.position_map - state_.position_map;
+  Vector15d delta;
+  ErrorCovariance updated;
+  CorrectionResult result =
+      kalmanUpdate(innovation, positionJacobian(), fix.covariance_map, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  NavState next = state_;
+  const Eigen::Vector3d dtheta = delta.head<3>();
+  const double angle = dtheta.norm();
+  const Eigen::Quaterniond dq = angle > 0.0
+                                    ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, dtheta / angle))
+                                    : Eigen::Quaterniond::Identity();
+  const Eigen::Quaterniond attitude = (attitude_ * dq).normalized();
+  next.rotation = attitude.toRotationMatrix();
+  next.velocity_map += delta.segment<3>(3);
+  next.position_map += delta.segment<3>(6);
+  next.gyro_bias += delta.segment<3>(9);
+  next.accel_bias += delta.segment<3>(12);
+  if (!commit(next, updated)) return rejectNonFinite(result);
+  attitude_ = attitude;
+  return result;
+}
+
+Matrix15d QuaternionEskf::errorFromLeft(const NavState& state) const {
+  Matrix15d t = Matrix15d::Identity();
+  t.block<3, 3>(3, 3) = state.rotation;
+  t.block<3, 3>(6, 6) = state.rotation;
+  return t;
+}
+
+Matrix15d QuaternionEskf::leftFromError(const NavState& state) const {
+  Matrix15d t = Matrix15d::Identity();
+  t.block<3, 3>(3, 3) = state.rotation.transpose();
+  t.block<3, 3>(6, 6) = state.rotation.transpose();
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+std::unique_ptr<NavigationFilter> makeFilter(FilterType type, const ImuNoise& noise) {
+  switch (type) {
+    case FilterType::kLeftInvariant:
+      return std::make_unique<LeftInvariantEkf>(noise);
+    case FilterType::kRightInvariant:
+      return std::make_unique<RightInvariantEkf>(noise);
+    case FilterType::kQuaternionEskf:
+      return std::make_unique<QuaternionEskf>(noise);
+  }
+  throw std::invalid_argument("makeFilter: unknown filter type");
+}
+
+FilterType filterTypeFromString(const std::string& text) {
+  if (text == "left") return FilterType::kLeftInvariant;
+  if (text == "right") return FilterType::kRightInvariant;
+  if (text == "ekf") return FilterType::kQuaternionEskf;
+  throw std::invalid_argument("unknown filter type '" + text + "' (expected left, right or ekf)");
+}
+
+std::string toString(FilterType type) {
+  switch (type) {
+    case FilterType::kLeftInvariant:
+      return "left";
+    case FilterType::kRightInvariant:
+      return "right";
+    case FilterType::kQuaternionEskf:
+      return "ekf";
+  }
+  return "unknown";
+}
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,273 @@
+#include "inekf_semantic_mapping/estimation/localizer.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/lie/so3.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+constexpr double kDuplicateStampS = 1e-6;
+
+// Reads YAML keys into a config, naming the file and the key on any problem, and rejecting
+// unknown keys (a typo must not silently leave a default in place).
+class YamlReader {
+ public:
+  YamlReader(const std::string& path, const YAML::Node& root) : path_(path), root_(root) {}
+
+  void number(const std::string& section, const std::string& key, double* out, bool positive) {
+    const YAML::Node node = lookup(section, key);
+    if (!node) return;
+    double value;
+    try {
+      value = node.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(section, key, "is not a number");
+    }
+    if (!std::isfinite(value) || value < 0.0 || (positive && value == 0.0)) {
+      fail(section, key, positive ? "must be a positive number" : "must be >= 0");
+    }
+    *out = value;
+  }
+
+  void boolean(const std::string& section, const std::string& key, bool* out) {
+    const YAML::Node node = lookup(section, key);
+    if (!node) return;
+    try {
+      *out = node.as<bool>();
+    } catch (const YAML::Exception&) {
+      fail(section, key, "is not true/false");
+    }
+  }
+
+  void filterType(const std::string& key, FilterType* out) {
+    const YAML::Node node = lookup("", key);
+    if (!node) return;
+    try {
+      *out = filterTypeFromString(node.as<std::string>());
+    } catch (const std::exception& e) {
+      fail("", key, e.what());
+    }
+  }
+
+  // Throws on keys nobody read, except the sections listed in `ignored` (read by others).
+  void rejectUnknown(const std::set<std::string>& ignored) const {
+    for (const auto& entry : root_) {
+      const std::string key = entry.first.as<std::string>();
+      if (ignored.count(key)) continue;
+      if (!entry.second.IsMap()) {
+        if (!used_.count(key)) fail("", key, "is not a known key");
+        continue;
+      }
+      for (const auto& sub : entry.second) {
+        const std::string sub_key = sub.first.as<std::string>();
+        if (!used_.count(key + "." + sub_key)) fail(key, sub_key, "is not a known key");
+      }
+    }
+  }
+
+ private:
+  YAML::Node lookup(const std::string& section, const std::string& key) {
+    used_.insert(section.empty() ? key : section + "." + key);
+    if (section.empty()) return root_[key];
+    const YAML::Node parent = root_[section];
+    if (!parent) return YAML::Node();
+    if (!parent.IsMap()) fail("", section, "must be a mapping");
+    return parent[key];
+  }
+
+  [[noreturn]] void fail(const std::string& section, const std::string& key,
+                         const std::string& what) const {
+    throw std::runtime_error(path_ + ": key '" + (section.empty() ? key : section + "." + key) +
+                             "' " + what);
+  }
+
+  std::string path_;
+  YAML::Node root_;
+  std::set<std::string> used_;
+};
+
+}  // namespace
+
+LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(path + ": cannot read YAML: " + e.what());
+  }
+  LocalizerConfig config;
+  if (root.IsNull()) return config;
+  if (!root.IsMap()) throw std::runtime_error(path + ": top level must be a mapping");
+  YamlReader reader(path, root);
+  reader.filterType("filter", &config.filter_type);
+  ImuNoise& n = config.imu_noise;
+  reader.number("imu_noise", "gyro_noise_density", &n.gyro_noise_density, true);
+  reader.number("imu_noise", "accel_noise_density", &n.accel_noise_density, true);
+  reader.number("imu_noise", "gyro_bias_random_walk", &n.gyro_bias_random_walk, false);
+  reader.number("imu_noise", "accel_bias_random_walk", &n.accel_bias_random_walk, false);
+  reader.number("imu_noise", "gravity_mps2", &n.gravity_mps2, true);
+  reader.number("initial_sigma", "rotation_deg", &config.initial_rotation_sigma_deg, true);
+  reader.number("initial_sigma", "yaw_deg", &config.initial_yaw_sigma_deg, true);
+  reader.number("initial_sigma", "velocity_mps", &config.initial_velocity_sigma_mps, true);
+  reader.number("initial_sigma", "position_m", &config.initial_position_sigma_m, true);
+  reader.number("initial_sigma", "gyro_bias_radps", &config.initial_gyro_bias_sigma_radps, true);
+  reader.number("initial_sigma", "accel_bias_mps2", &config.initial_accel_bias_sigma_mps2, true);
+  reader.number("gps", "gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared, true);
+  reader.number("gps", "min_sigma_m", &config.min_gps_sigma_m, false);
+  reader.number("gps", "max_fix_age_s", &config.max_fix_age_s, false);
+  reader.number("imu", "max_gap_s", &config.max_imu_gap_s, true);
+  reader.number("imu", "gap_noise_scale", &config.gap_noise_scale, true);
+  reader.number("imu", "interpolated_noise_scale", &config.interpolated_noise_scale, true);
+  reader.boolean("", "init_orientation_from_reference", &config.init_orientation_from_reference);
+  reader.rejectUnknown({"node"});
+  return config;
+}
+
+Localizer::Localizer(LocalizerConfig config)
+    : config_(std::move(config)), filter_(makeFilter(config_.filter_type, config_.imu_noise)) {}
+
+ErrorCovariance Localizer::initialWorldCovariance() const {
+  Eigen::Matrix<double, 15, 1> sigma;
+  const double tilt = config_.initial_rotation_sigma_deg * kDegToRad;
+  sigma << tilt, tilt, config_.initial_yaw_sigma_deg * kDegToRad,
+      Eigen::Vector3d::Constant(config_.initial_velocity_sigma_mps),
+      Eigen::Vector3d::Constant(config_.initial_position_sigma_m),
+      Eigen::Vector3d::Constant(config_.initial_gyro_bias_sigma_radps),
+      Eigen::Vector3d::Constant(config_.initial_accel_bias_sigma_mps2);
+  return sigma.cwiseAbs2().asDiagonal();
+}
+
+void Localizer::initialize(const NavState& initial) {
+  initialize(initial, initialWorldCovariance());
+}
+
+void Localizer::initialize(const NavState& initial, const ErrorCovariance& world_covariance) {
+  filter_->initialize(initial, filter_->fromWorldCovariance(initial, world_covariance));
+  filter_->setProcessNoiseScale(1.0);
+  initialized_ = true;
+}
+
+void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
+                                    const Eigen::Vector3d& velocity_map) {
+  if (!rotation.allFinite() || !velocity_map.allFinite()) return;
+  reference_rotation_ = lie::normalizeRotation(rotation);
+  reference_velocity_ = velocity_map;
+}
+
+Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
+  if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
+      !sample.specific_force.allFinite()) {
+    ++statistics_.imu_dropped;
+    return ImuStatus::kDroppedDuplicate;  // unusable; counted with the drops
+  }
+  if (!initialized_) {
+    last_imu_ = sample;
+    return ImuStatus::kNotInitialized;
+  }
+  const double dt = sample.stamp_s - filter_->state().stamp_s;
+  if (std::abs(dt) < kDuplicateStampS) {
+    ++statistics_.imu_dropped;
+    return ImuStatus::kDroppedDuplicate;
+  }
+  if (dt < 0.0) {
+    ++statistics_.imu_dropped;
+    return ImuStatus::kDroppedOutOfOrder;
+  }
+  const bool gap = dt > config_.max_imu_gap_s;
+  double scale = 1.0;
+  if (gap) scale = std::max(scale, config_.gap_noise_scale);
+  if (sample.interpolated) scale = std::max(scale, config_.interpolated_noise_scale);
+  filter_->setProcessNoiseScale(scale);
+  filter_->propagate(sample, dt);
+  filter_->setProcessNoiseScale(1.0);
+  last_imu_ = sample;
+  ++statistics_.imu_used;
+  if (gap) {
+    ++statistics_.imu_gaps;
+    return ImuStatus::kGap;
+  }
+  return ImuStatus::kUsed;
+}
+
+CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
+  CorrectionResult result;
+  if (!std::isfinite(fix.stamp_s) || !fix.position_map.allFinite() ||
+      !fix.covariance_map.allFinite()) {
+    result.reason = "non-finite fix";
+    ++statistics_.gps_rejected;
+    return result;
+  }
+  PositionFix used = fix;
+  // Floor the fix's uncertainty: a receiver claiming centimetres must not freeze the filter.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(
+      0.5 * (fix.covariance_map + fix.covariance_map.transpose()));
+  const double floor = config_.min_gps_sigma_m * config_.min_gps_sigma_m;
+  used.covariance_map = eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(floor).asDiagonal() *
+                        eigen.eigenvectors().transpose();
+
+  if (!initialized_) {
+    NavState initial;
+    initial.stamp_s = fix.stamp_s;
+    initial.position_map = fix.position_map;
+    if (config_.init_orientation_from_reference && reference_rotation_) {
+      initial.rotation = *reference_rotation_;
+      initial.velocity_map = reference_velocity_;
+    } else if (last_imu_ && last_imu_->specific_force.norm() > 1.0) {
+      // Level from the specific force (gravity reaction), yaw 0.
+      const Eigen::Vector3d f = last_imu_->specific_force.normalized();
+      const double roll = std::atan2(f.y(), f.z());
+      const double pitch = std::atan2(-f.x(), std::hypot(f.y(), f.z()));
+      initial.rotation = (Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+                          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+                             .toRotationMatrix();
+    }
+    ErrorCovariance world = initialWorldCovariance();
+    world.block<3, 3>(6, 6) = used.covariance_map;
+    initialize(initial, world);
+    result.accepted = true;
+    result.reason = "initialized";
+    ++statistics_.gps_used;
+    return result;
+  }
+
+  const double age = filter_->state().stamp_s - fix.stamp_s;
+  if (std::abs(age) > config_.max_fix_age_s) {
+    result.reason = "stale fix: " + std::to_string(age) + " s from the state's time";
+    ++statistics_.gps_rejected;
+    return result;
+  }
+  // Applied at the state's time: the car moved by about speed * age meanwhile.
+  const double moved = filter_->state().velocity_map.norm() * std::abs(age);
+  used.covariance_map += Eigen::Matrix3d::Identity() * moved * moved;
+  used.stamp_s = filter_->state().stamp_s;
+
+  result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
+  statistics_.last_mahalanobis_squared = result.mahalanobis_squared;
+  if (result.accepted) {
+    ++statistics_.gps_used;
+  } else {
+    ++statistics_.gps_rejected;
+  }
+  return result;
+}
+
+void Localizer::reset() {
+  initialized_ = false;
+  last_imu_.reset();
+  reference_rotation_.reset();
+  reference_velocity_.setZero();
+  filter_ = makeFilter(config_.filter_type, config_.imu_noise);
+}
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,382 @@
+// The three navigation filters: exact transition vs numerical linearization, error-coordinate
+// maps, noise-free reproduction of a simulated drive, GPS update, gating, non-finite input,
+// and consistency (NEES) over Monte-Carlo runs.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "inekf_semantic_mapping/estimation/error_dynamics.h"
+#include "inekf_semantic_mapping/estimation/imu_filters.h"
+#include "inekf_semantic_mapping/lie/se23.h"
+#include "inekf_semantic_mapping/lie/so3.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+using Vector15d = Eigen::Matrix<double, 15, 1>;
+using lie::ExtendedPose;
+
+constexpr double kGravity = 9.81;
+const FilterType kAllFilters[] = {FilterType::kLeftInvariant, FilterType::kRightInvariant,
+                                  FilterType::kQuaternionEskf};
+
+NavState someState() {
+  NavState s;
+  s.stamp_s = 10.0;
+  s.rotation = lie::expSO3(Eigen::Vector3d(0.1, -0.2, 2.0));
+  s.velocity_map = Eigen::Vector3d(8.0, -3.0, 0.2);
+  s.position_map = Eigen::Vector3d(120.0, -45.0, 3.0);
+  s.gyro_bias = Eigen::Vector3d(0.002, -0.001, 0.003);
+  s.accel_bias = Eigen::Vector3d(0.05, -0.02, 0.1);
+  return s;
+}
+
+ExtendedPose poseOf(const NavState& s) {
+  ExtendedPose x;
+  x.rotation = s.rotation;
+  x.velocity = s.velocity_map;
+  x.position = s.position_map;
+  return x;
+}
+
+NavState perturbLeft(const NavState& s, const Vector15d& xi) {
+  NavState t = s;
+  const ExtendedPose x = poseOf(s) * lie::expSE23(xi.head<9>());
+  t.rotation = x.rotation;
+  t.velocity_map = x.velocity;
+  t.position_map = x.position;
+  t.gyro_bias += xi.segment<3>(9);
+  t.accel_bias += xi.segment<3>(12);
+  return t;
+}
+
+Vector15d leftError(const NavState& estimate, const NavState& truth) {
+  Vector15d xi;
+  xi.head<9>() = lie::logSE23(poseOf(estimate).inverse() * poseOf(truth));
+  xi.segment<3>(9) = truth.gyro_bias - estimate.gyro_bias;
+  xi.segment<3>(12) = truth.accel_bias - estimate.accel_bias;
+  return xi;
+}
+
+TEST(ErrorDynamics, TransitionMatchesNumericalLinearization) {
+  const NavState s = someState();
+  const Eigen::Vector3d gyro(0.3, -0.5, 1.2), accel(1.5, -0.7, 9.9);
+  for (double dt : {0.01, 0.1, 0.5}) {
+    const NavState next = integrateImu(s, gyro, accel, kGravity, dt);
+    Matrix15d numeric;
+    const double eps = 1e-6;
+    for (int i = 0; i < 15; ++i) {
+      const Vector15d d = eps * Vector15d::Unit(i);
+      const NavState plus = integrateImu(perturbLeft(s, d), gyro, accel, kGravity, dt);
+      const NavState minus = integrateImu(perturbLeft(s, -d), gyro, accel, kGravity, dt);
+      numeric.col(i) = (leftError(next, plus) - leftError(next, minus)) / (2.0 * eps);
+    }
+    const Matrix15d phi = leftErrorTransition(gyro - s.gyro_bias, accel - s.accel_bias, dt);
+    EXPECT_LT((phi - numeric).norm(), 1e-6 * numeric.norm()) << "dt " << dt << "\n"
+                                                             << phi - numeric;
+  }
+}
+
+TEST(ErrorDynamics, TransitionComposesOverSubsteps) {
+  // Phi(2 dt) = Phi(dt) Phi(dt) for a constant input: checks the closed form at large w dt too.
+  const Eigen::Vector3d w(0.8, -0.4, 2.0), a(2.0, 1.0, 9.0);
+  const double dt = 0.15;  // |w| 2 dt = 0.7 rad: far beyond a 10 Hz car's turn per step
+  const Matrix15d twice = leftErrorTransition(w, a, dt) * leftErrorTransition(w, a, dt);
+  EXPECT_LT((leftErrorTransition(w, a, 2 * dt) - twice).norm(), 1e-7 * twice.norm());
+}
+
+TEST(ErrorCoordinates, MapsMatchNumericalDifferences) {
+  const NavState s = someState();
+  for (FilterType type : {FilterType::kRightInvariant, FilterType::kQuaternionEskf}) {
+    auto filter = makeFilter(type, ImuNoise());
+    const auto* base = dynamic_cast<const ImuFilterBase*>(filter.get());
+    ASSERT_NE(base, nullptr);
+    // Perturb by a left error, measure the filter's own error numerically.
+    Matrix15d numeric;
+    const double eps = 1e-6;
+    for (int i = 0; i < 15; ++i) {
+      const Vector15d d = eps * Vector15d::Unit(i);
+      auto own_error = [&](const NavState& t) {
+        Vector15d e;
+        if (type == FilterType::kRightInvariant) {
+          e.head<9>() = lie::logSE23(poseOf(t) * poseOf(s).inverse());
+        } else {
+          e.head<3>() = lie::logSO3(s.rotation.transpose() * t.rotation);
+          e.segment<3>(3) = t.velocity_map - s.velocity_map;
+          e.segment<3>(6) = t.position_map - s.position_map;
+        }
+        e.segment<3>(9) = t.gyro_bias - s.gyro_bias;
+        e.segment<3>(12) = t.accel_bias - s.accel_bias;
+        return e;
+      };
+      numeric.col(i) = (own_error(perturbLeft(s, d)) - own_error(perturbLeft(s, -d))) / (2 * eps);
+    }
+    EXPECT_LT((base->errorFromLeft(s) - numeric).norm(), 1e-6 * numeric.norm()) << toString(type);
+    EXPECT_LT((base->leftFromError(s) * base->errorFromLeft(s) - Matrix15d::Identity()).norm(),
+              1e-9);
+  }
+}
+
+// A drive with piecewise-constant body rates (turning and accelerating), integrated
+// independently by RK4 with fine substeps.
+struct SimulatedDrive {
+  std::vector<NavState> truth;  // at each sample stamp
+  std::vector<ImuSample> imu;   // imu[k] holds over (t_{k-1}, t_k]; imu[0] unused
+};
+
+SimulatedDrive simulateDrive(int steps, double dt) {
+  SimulatedDrive drive;
+  NavState s;
+  s.rotation = lie::expSO3(Eigen::Vector3d(0.02, -0.03, 0.7));
+  s.velocity_map = s.rotation * Eigen::Vector3d(5.0, 0.0, 0.0);
+  drive.truth.push_back(s);
+  drive.imu.push_back(ImuSample());
+  const Eigen::Vector3d g(0, 0, -kGravity);
+  for (int k = 1; k <= steps; ++k) {
+    ImuSample sample;
+    sample.stamp_s = k * dt;
+    sample.angular_velocity =
+        Eigen::Vector3d(0.02 * std::sin(0.3 * k), 0.01, 0.25 * std::cos(0.05 * k));
+    sample.specific_force =
+        Eigen::Vector3d(0.6, 0.25 * std::sin(0.1 * k), kGravity + 0.1 * std::cos(0.2 * k));
+    const int substeps = 50;
+    const double h = dt / substeps;
+    Eigen::Matrix3d r = s.rotation;
+    Eigen::Vector3d v = s.velocity_map, p = s.position_map;
+    const Eigen::Matrix3d w = lie::hat(sample.angular_velocity);
+    const Eigen::Vector3d f = sample.specific_force;
+    for (int i = 0; i < substeps; ++i) {
+      // RK4 on (R, v, p) with dR = R w^, dv = R f + g, dp = v.
+      const Eigen::Matrix3d k1r = r * w;
+      const Eigen::Vector3d k1v = r * f + g, k1p = v;
+      const Eigen::Matrix3d r2 = r + 0.5 * h * k1r;
+      const Eigen::Matrix3d k2r = r2 * w;
+      const Eigen::Vector3d k2v = r2 * f + g, k2p = v + 0.5 * h * k1v;
+      const Eigen::Matrix3d r3 = r + 0.5 * h * k2r;
+      const Eigen::Matrix3d k3r = r3 * w;
+      const Eigen::Vector3d k3v = r3 * f + g, k3p = v + 0.5 * h * k2v;
+      const Eigen::Matrix3d r4 = r + h * k3r;
+      const Eigen::Matrix3d k4r = r4 * w;
+      const Eigen::Vector3d k4v = r4 * f + g, k4p = v + h * k3v;
+      r += h / 6 * (k1r + 2 * k2r + 2 * k3r + k4r);
+      v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v);
+      p += h / 6 * (k1p + 2 * k2p + 2 * k3p + k4p);
+    }
+    s.rotation = lie::normalizeRotation(r);
+    s.velocity_map = v;
+    s.position_map = p;
+    s.stamp_s = sample.stamp_s;
+    drive.truth.push_back(s);
+    drive.imu.push_back(sample);
+  }
+  return drive;
+}
+
+TEST(Filters, NoiseFreePropagationReproducesTheDrive) {
+  const double dt = 0.1;
+  const SimulatedDrive drive = simulateDrive(200, dt);  // 20 s, ~100 m, ~1 rad of turn
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(drive.truth[0], ErrorCovariance::Identity() * 1e-4);
+    double worst_position = 0.0, worst_angle = 0.0, worst_velocity = 0.0;
+    for (std::size_t k = 1; k < drive.imu.size(); ++k) {
+      filter->propagate(drive.imu[k], dt);
+      const NavState& est = filter->state();
+      worst_position =
+          std::max(worst_position, (est.position_map - drive.truth[k].position_map).norm());
+      worst_velocity =
+          std::max(worst_velocity, (est.velocity_map - drive.truth[k].velocity_map).norm());
+      worst_angle = std::max(
+          worst_angle, lie::logSO3(est.rotation.transpose() * drive.truth[k].rotation).norm());
+    }
+    EXPECT_LT(worst_position, 1e-6) << toString(type);
+    EXPECT_LT(worst_velocity, 1e-7) << toString(type);
+    EXPECT_LT(worst_angle, 1e-9) << toString(type);
+    EXPECT_NEAR(filter->state().stamp_s, drive.truth.back().stamp_s, 1e-9);
+    EXPECT_GT((drive.truth.back().position_map - drive.truth[0].position_map).norm(), 50.0);
+  }
+}
+
+TEST(Filters, PoseCovarianceAgreesAcrossFiltersWithoutUpdates) {
+  // The three are linear maps of one linearization: with no update their Euclidean pose
+  // covariances must coincide.
+  const double dt = 0.1;
+  const SimulatedDrive drive = simulateDrive(50, dt);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 0.01, 0.02, 0.3, 0.2, 0.2, 0.1, 1.0, 1.5, 2.0, 1e-3, 1e-3, 1e-3, 0.05, 0.05, 0.05;
+  const ErrorCovariance world = sigma.cwiseAbs2().asDiagonal();
+  std::vector<PoseCovariance> results;
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(drive.truth[0], filter->fromWorldCovariance(drive.truth[0], world));
+    for (std::size_t k = 1; k < drive.imu.size(); ++k) filter->propagate(drive.imu[k], dt);
+    results.push_back(filter->poseCovariance());
+  }
+  EXPECT_LT((results[1] - results[0]).norm(), 1e-8 * results[0].norm());
+  EXPECT_LT((results[2] - results[0]).norm(), 1e-8 * results[0].norm());
+}
+
+PositionFix fixAt(const Eigen::Vector3d& p, double stamp, double sigma) {
+  PositionFix fix;
+  fix.stamp_s = stamp;
+  fix.position_map = p;
+  fix.covariance_map = Eigen::Matrix3d::Identity() * sigma * sigma;
+  return fix;
+}
+
+TEST(Filters, PositionUpdateMovesTowardTheFixAndShrinksTheCovariance) {
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    const NavState s = someState();
+    Eigen::Matrix<double, 15, 1> sigma;
+    sigma << 0.05, 0.05, 0.1, 0.5, 0.5, 0.5, 2.0, 2.0, 2.0, 1e-3, 1e-3, 1e-3, 0.05, 0.05, 0.05;
+    const ErrorCovariance world = sigma.cwiseAbs2().asDiagonal();
+    filter->initialize(s, filter->fromWorldCovariance(s, world));
+    const Eigen::Vector3d target = s.position_map + Eigen::Vector3d(2.0, -1.0, 0.5);
+    const double before = (filter->state().position_map - target).norm();
+    const double trace_before = filter->poseCovariance().topLeftCorner<3, 3>().trace();
+    const CorrectionResult result = filter->correctPosition(fixAt(target, s.stamp_s, 1.0), 100.0);
+    ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+    EXPECT_GT(result.mahalanobis_squared, 0.0);
+    const double after = (filter->state().position_map - target).norm();
+    EXPECT_LT(after, 0.5 * before) << toString(type);
+    const double trace_after = filter->poseCovariance().topLeftCorner<3, 3>().trace();
+    EXPECT_LT(trace_after, 0.5 * trace_before) << toString(type);
+    // The covariance stays symmetric positive definite.
+    Eigen::LLT<ErrorCovariance> llt(filter->covariance());
+    EXPECT_EQ(llt.info(), Eigen::Success);
+    EXPECT_LT((filter->covariance() - filter->covariance().transpose()).norm(), 1e-12);
+  }
+}
+
+TEST(Filters, GateRejectsAnOutlierAndKeepsTheState) {
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    const NavState s = someState();
+    filter->initialize(s, filter->fromWorldCovariance(s, ErrorCovariance::Identity()));
+    const ErrorCovariance covariance = filter->covariance();
+    const CorrectionResult result = filter->correctPosition(
+        fixAt(s.position_map + Eigen::Vector3d(80.0, 0.0, 0.0), s.stamp_s, 1.0), 16.0);
+    EXPECT_FALSE(result.accepted) << toString(type);
+    EXPECT_GT(result.mahalanobis_squared, 16.0);
+    EXPECT_NE(result.reason.find("outlier"), std::string::npos) << result.reason;
+    EXPECT_EQ(filter->state().position_map, s.position_map);
+    EXPECT_EQ(filter->covariance(), covariance);
+  }
+}
+
+TEST(Filters, NonFiniteInputIsRejected) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(someState(), ErrorCovariance::Identity());
+    const NavState s = filter->state();
+    ImuSample bad;
+    bad.angular_velocity = Eigen::Vector3d(nan, 0, 0);
+    filter->propagate(bad, 0.1);
+    EXPECT_EQ(filter->state().rotation, s.rotation);
+    EXPECT_EQ(filter->state().stamp_s, s.stamp_s);
+    ImuSample good;
+    good.specific_force = Eigen::Vector3d(0, 0, kGravity);
+    filter->propagate(good, nan);
+    filter->propagate(good, -0.1);
+    EXPECT_EQ(filter->state().stamp_s, s.stamp_s);
+    PositionFix fix = fixAt(Eigen::Vector3d(nan, 0, 0), s.stamp_s, 1.0);
+    EXPECT_FALSE(filter->correctPosition(fix, 100.0).accepted);
+    fix = fixAt(s.position_map, s.stamp_s, 1.0);
+    fix.covariance_map(0, 0) = nan;
+    EXPECT_FALSE(filter->correctPosition(fix, 1e9).accepted);
+    EXPECT_TRUE(filter->state().position_map.allFinite());
+    EXPECT_TRUE(filter->covariance().allFinite());
+  }
+}
+
+// Average pose NEES (6 dof) over Monte-Carlo runs of a noisy simulated drive with GPS.
+double averagePoseNees(FilterType type, int runs, int steps) {
+  const double dt = 0.1;
+  ImuNoise noise;
+  noise.gyro_noise_density = 2e-3;
+  noise.accel_noise_density = 3e-2;
+  noise.gyro_bias_random_walk = 1e-4;
+  noise.accel_bias_random_walk = 1e-3;
+  const double gps_sigma = 1.0;
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 0.01, 0.01, 0.05, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0, 2e-3, 2e-3, 2e-3, 0.05, 0.05, 0.05;
+  const ErrorCovariance world = sigma.cwiseAbs2().asDiagonal();
+  const SimulatedDrive drive = simulateDrive(steps, dt);
+  std::mt19937 rng(42);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  auto gaussian3 = [&]() { return Eigen::Vector3d(normal(rng), normal(rng), normal(rng)); };
+  double nees_sum = 0.0;
+  int count = 0;
+  for (int run = 0; run < runs; ++run) {
+    // The estimate starts at truth minus a draw from the initial covariance (world frame).
+    Eigen::Matrix<double, 15, 1> e;
+    for (int i = 0; i < 15; ++i) e(i) = sigma(i) * normal(rng);
+    NavState truth = drive.truth[0];
+    truth.gyro_bias = e.segment<3>(9);
+    truth.accel_bias = e.segment<3>(12);
+    NavState start = drive.truth[0];
+    start.rotation = lie::expSO3(-e.head<3>()) * truth.rotation;
+    start.velocity_map = truth.velocity_map - e.segment<3>(3);
+    start.position_map = truth.position_map - e.segment<3>(6);
+    auto filter = makeFilter(type, noise);
+    filter->initialize(start, filter->fromWorldCovariance(start, world));
+    for (int k = 1; k <= steps; ++k) {
+      // The true state follows the noise-free inputs; the filter sees them biased and noisy.
+      ImuSample measured = drive.imu[k];
+      NavState true_next = integrateImu(truth, measured.angular_velocity + truth.gyro_bias,
+                                        measured.specific_force + truth.accel_bias, kGravity, dt);
+      // integrateImu subtracts truth's bias: feed it measured = true + bias, it recovers truth.
+      true_next.rotation = drive.truth[k].rotation;  // exact truth pose of the drive
+      true_next.velocity_map = drive.truth[k].velocity_map;
+      true_next.position_map = drive.truth[k].position_map;
+      measured.angular_velocity +=
+          truth.gyro_bias + noise.gyro_noise_density / std::sqrt(dt) * gaussian3();
+      measured.specific_force +=
+          truth.accel_bias + noise.accel_noise_density / std::sqrt(dt) * gaussian3();
+      true_next.gyro_bias =
+          truth.gyro_bias + noise.gyro_bias_random_walk * std::sqrt(dt) * gaussian3();
+      true_next.accel_bias =
+          truth.accel_bias + noise.accel_bias_random_walk * std::sqrt(dt) * gaussian3();
+      truth = true_next;
+      filter->propagate(measured, dt);
+      if (k % 10 == 0) {
+        filter->correctPosition(
+            fixAt(truth.position_map + gps_sigma * gaussian3(), k * dt, gps_sigma), 1e9);
+      }
+      if (k >= 10) {
+        Eigen::Matrix<double, 6, 1> pose_error;
+        pose_error.head<3>() = truth.position_map - filter->state().position_map;
+        pose_error.tail<3>() = lie::logSO3(filter->state().rotation.transpose() * truth.rotation);
+        nees_sum += pose_error.dot(filter->poseCovariance().ldlt().solve(pose_error));
+        ++count;
+      }
+    }
+  }
+  return nees_sum / count;
+}
+
+TEST(Filters, PoseNeesIsWithinTheChiSquareBand) {
+  // 25 runs: the run-averaged NEES of 6 dof lies in [chi2_150(0.025), chi2_150(0.975)] / 25
+  // = [4.68, 7.45] with 95 % probability at each time; the time average is tighter still.
+  for (FilterType type : kAllFilters) {
+    const double nees = averagePoseNees(type, 25, 200);
+    EXPECT_GT(nees, 4.68) << toString(type);
+    EXPECT_LT(nees, 7.45) << toString(type);
+    std::printf("[ NEES     ] %s: average pose NEES %.2f (6 dof)\n", toString(type).c_str(), nees);
+  }
+}
+
+}  // namespace
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
