@@ -192,6 +192,138 @@ def read_ply_vertices(path):
         return out
 
 
+def ply_resolution(path):
+    """The map resolution from the PLY header comment '... resolution R m' (None if absent)."""
+    with open(path, "rb") as f:
+        for raw in f:
+            line = raw.decode("ascii", "replace").split()
+            if line[:1] == ["end_header"]:
+                return None
+            if line[:1] == ["comment"] and "resolution" in line:
+                try:
+                    return float(line[line.index("resolution") + 1])
+                except (IndexError, ValueError):
+                    return None
+    return None
+
+
+def read_kitti_poses(path):
+    """N x 4 x 4 from a KITTI 12-numbers-per-line pose file."""
+    rows = np.loadtxt(path, ndmin=2)
+    if rows.shape[1] != 12:
+        raise ValueError("%s: expected 12 numbers per line, got %d" % (path, rows.shape[1]))
+    poses = np.tile(np.eye(4), (len(rows), 1, 1))
+    poses[:, :3, :4] = rows.reshape(-1, 3, 4)
+    return poses
+
+
+def read_calib_rigid(path):
+    """4x4 from a KITTI calib file with 'R:' (9 numbers) and 'T:' (3 numbers) lines."""
+    values = {}
+    with open(path) as f:
+        for line in f:
+            key, _, rest = line.partition(":")
+            values[key.strip()] = rest.split()
+    try:
+        transform = np.eye(4)
+        transform[:3, :3] = np.array(values["R"], dtype=float).reshape(3, 3)
+        transform[:3, 3] = np.array(values["T"], dtype=float)
+    except (KeyError, ValueError) as error:
+        raise ValueError("%s: no valid R:/T: lines (%s)" % (path, error))
+    return transform
+
+
+# Cityscapes labelIds 0..6 are void (unlabeled, ego vehicle, ..., ground): not evaluated.
+FIRST_EVALUATED_LABEL_ID = 7
+
+
+def _voxel_keys(points, resolution):
+    index = np.floor(points / resolution).astype(np.int64) + (1 << 20)
+    return (index[:, 0] << 42) | (index[:, 1] << 21) | index[:, 2]
+
+
+def _majority_label(keys, labels):
+    """Unique keys and the most frequent label of each (keys use all 63 bits: no packing)."""
+    order = np.lexsort((labels, keys))
+    keys, labels = keys[order], labels[order]
+    run_start = np.ones(len(keys), dtype=bool)
+    run_start[1:] = (keys[1:] != keys[:-1]) | (labels[1:] != labels[:-1])
+    starts = np.nonzero(run_start)[0]
+    counts = np.diff(np.append(starts, len(keys)))
+    run_keys, run_labels = keys[starts], labels[starts]
+    best = np.lexsort((-counts, run_keys))  # by key, most counts first
+    run_keys, run_labels = run_keys[best], run_labels[best]
+    first = np.ones(len(run_keys), dtype=bool)
+    first[1:] = run_keys[1:] != run_keys[:-1]
+    return run_keys[first], run_labels[first]
+
+
+def ground_truth_voxels(ground_truth_dir, resolution, scan_step=2, max_range_m=None):
+    """Voxel keys and majority labelIds of the generator's labeled lidar points in the map frame
+    (velodyne_points + ground_truth/velodyne_labels + poses_imu_map + calib_imu_to_velo)."""
+    drive_dir = os.path.dirname(os.path.abspath(ground_truth_dir))
+    poses = read_kitti_poses(os.path.join(ground_truth_dir, "poses_imu_map.txt"))
+    velo_from_imu = read_calib_rigid(os.path.join(os.path.dirname(drive_dir), "calib_imu_to_velo.txt"))
+    imu_from_velo = np.linalg.inv(velo_from_imu)
+    all_keys, all_labels = [], []
+    for frame in range(0, len(poses), scan_step):
+        scan_path = os.path.join(drive_dir, "velodyne_points", "data", "%010d.bin" % frame)
+        label_path = os.path.join(ground_truth_dir, "velodyne_labels", "%010d.label" % frame)
+        if not (os.path.exists(scan_path) and os.path.exists(label_path)):
+            continue
+        points = np.fromfile(scan_path, dtype=np.float32).reshape(-1, 4)[:, :3].astype(float)
+        labels = (np.fromfile(label_path, dtype=np.uint32) & 0xFFFF).astype(np.int64)
+        if len(labels) != len(points):
+            raise ValueError("%s: %d labels for %d points" % (label_path, len(labels), len(points)))
+        if max_range_m:
+            keep = np.linalg.norm(points, axis=1) <= max_range_m
+            points, labels = points[keep], labels[keep]
+        map_from_velo = poses[frame] @ imu_from_velo
+        world = points @ map_from_velo[:3, :3].T + map_from_velo[:3, 3]
+        evaluated = labels >= FIRST_EVALUATED_LABEL_ID
+        all_keys.append(_voxel_keys(world[evaluated], resolution))
+        all_labels.append(labels[evaluated])
+    if not all_keys:
+        raise ValueError("%s: no labeled scans found" % ground_truth_dir)
+    return _majority_label(np.concatenate(all_keys), np.concatenate(all_labels))
+
+
+def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_step=2, max_range_m=None):
+    """Semantic accuracy of the map's occupied voxels: on the voxels that are both occupied in the
+    map and hit by labeled ground-truth lidar points, the IoU of each class between the map's
+    label and the ground-truth majority label; mIoU over the classes present in the ground
+    truth. Also coverage (ground-truth voxels the map has) and how many map voxels are matched."""
+    if resolution is None and ply_path:
+        resolution = ply_resolution(ply_path)
+    if not resolution:
+        raise ValueError("map resolution unknown (no 'resolution' comment in the PLY)")
+    gt_keys, gt_labels = ground_truth_voxels(ground_truth_dir, resolution, scan_step, max_range_m)
+    points = np.stack([vertices["x"], vertices["y"], vertices["z"]], axis=1).astype(float)
+    map_keys = _voxel_keys(points, resolution)
+    map_labels = vertices["label"].astype(np.int64)
+    _, gt_index, map_index = np.intersect1d(gt_keys, map_keys, return_indices=True)
+    truth, predicted = gt_labels[gt_index], map_labels[map_index]
+    per_class = {}
+    for label in np.unique(gt_labels):
+        tp = int(np.sum((truth == label) & (predicted == label)))
+        fp = int(np.sum((truth != label) & (predicted == label)))
+        fn = int(np.sum((truth == label) & (predicted != label)))
+        if tp + fn < 20:  # too few matched voxels of this class to judge
+            continue
+        per_class[int(label)] = {"iou": tp / float(tp + fp + fn), "voxels": tp + fn}
+    ious = [c["iou"] for c in per_class.values()]
+    return {
+        "miou": float(np.mean(ious)) if ious else 0.0,
+        "per_class": per_class,
+        "voxel_accuracy": float(np.mean(truth == predicted)) if len(truth) else 0.0,
+        "matched_voxels": int(len(truth)),
+        "ground_truth_voxels": int(len(gt_keys)),
+        "map_voxels": int(len(map_keys)),
+        "coverage": float(len(truth)) / max(1, len(gt_keys)),
+        "resolution_m": resolution,
+    }
+
+
 def map_class_histogram(vertices):
     labels, counts = np.unique(vertices["label"].astype(int), return_counts=True)
     return {int(l): int(c) for l, c in zip(labels, counts)}
@@ -252,6 +384,11 @@ def main():
     if args.map_ply and os.path.exists(args.map_ply):
         vertices = read_ply_vertices(args.map_ply)
         metrics["map"] = {"occupied_voxels": int(len(vertices)), "classes": map_class_histogram(vertices)}
+        if args.ground_truth:
+            try:
+                metrics["map"]["semantic"] = map_miou(vertices, args.ground_truth, ply_path=args.map_ply)
+            except (OSError, ValueError) as error:
+                metrics["map"]["semantic"] = {"error": str(error)}
     for item in args.extra:
         key, value = item.split("=", 1)
         metrics[key] = json.loads(value)

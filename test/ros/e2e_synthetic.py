@@ -70,7 +70,7 @@ class EndToEndSynthetic(unittest.TestCase):
             vertices = e2e.metrics.read_ply_vertices(ply)
             results["map_classes"] = e2e.metrics.map_class_histogram(vertices)
             gt_dir = e2e.ground_truth_dir(drive)
-            results["map_miou"] = e2e.metrics.map_miou(vertices, gt_dir) if gt_dir else None
+            results["map_miou"] = (e2e.metrics.map_miou(vertices, gt_dir, ply_path=ply) if gt_dir else None)
         with open(os.path.join(out_dir, "results.json"), "w") as f:
             json.dump(results, f, indent=2, default=str)
         rospy.loginfo("%s results: %s", NAME, json.dumps({k: results.get(k) for k in
