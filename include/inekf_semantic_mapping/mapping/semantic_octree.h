@@ -1,0 +1,148 @@
+// SemanticOcTree: an OctoMap occupancy octree whose voxels also carry class evidence.
+//
+// Each node keeps octomap's occupancy log-odds plus a small fixed array of (class index, count)
+// pairs: the classes observed in that voxel and how often. With the symmetric confusion model
+// the Bayesian posterior depends only on these counts (see FusionRule), so the same node serves
+// the Bayes and the Dirichlet rule. Keeping the kSlots most observed classes bounds the node at
+// 24 bytes (plain OcTreeNode: 16) whatever the size of the class set. When a voxel sees a
+// (kSlots+1)-th class, the least observed slot is replaced: its evidence is lost, which only
+// matters for voxels that have seen more than kSlots classes.
+//
+// The tree registers itself with octomap's factory, so AbstractOcTree::read("map.ot") returns a
+// SemanticOcTree; its class table (label id <-> index) is written before the node data.
+#pragma once
+
+#include <octomap/OcTreeNode.h>
+#include <octomap/OccupancyOcTreeBase.h>
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/mapping/semantic_classes.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+
+class SemanticOcTree;
+
+class SemanticOcTreeNode : public octomap::OcTreeNode {
+ public:
+  static constexpr int kSlots = 4;
+  static constexpr std::uint16_t kMaxCount = 0xFFFF;
+
+  SemanticOcTreeNode() : OcTreeNode() { clearSemantics(); }
+  SemanticOcTreeNode(const SemanticOcTreeNode& rhs) = default;
+
+  bool operator==(const SemanticOcTreeNode& rhs) const {
+    return rhs.value == value && sameSemantics(rhs);
+  }
+  bool sameSemantics(const SemanticOcTreeNode& rhs) const {
+    return classes_ == rhs.classes_ && counts_ == rhs.counts_;
+  }
+  void copyData(const SemanticOcTreeNode& from) {
+    OcTreeNode::copyData(from);
+    classes_ = from.classes_;
+    counts_ = from.counts_;
+  }
+
+  // Adds `count` observations of class `index` (saturating; all counts are halved when one
+  // would overflow, which keeps their ratios).
+  void addClassEvidence(ClassIndex index, std::uint32_t count = 1);
+  // Merges another node's evidence (inner-node aggregation).
+  void mergeClassEvidence(const SemanticOcTreeNode& other);
+  void clearSemantics() {
+    classes_.fill(kNoClass);
+    counts_.fill(0);
+  }
+
+  // Slot accessors (unused slots: class kNoClass, count 0).
+  ClassIndex slotClass(int slot) const { return classes_[slot]; }
+  std::uint16_t slotCount(int slot) const { return counts_[slot]; }
+  std::uint32_t totalCount() const;
+  bool hasSemantics() const { return classes_[0] != kNoClass; }
+  // The class with most evidence (kNoClass if none). Ties: the lower index.
+  ClassIndex mostLikelyClass() const;
+  // Posterior probability of class `index` under `model` with `num_classes` classes.
+  double classProbability(ClassIndex index, const FusionModel& model, int num_classes) const;
+
+  std::istream& readData(std::istream& s);
+  std::ostream& writeData(std::ostream& s) const;
+
+ protected:
+  std::array<ClassIndex, kSlots> classes_;
+  std::array<std::uint16_t, kSlots> counts_;
+  friend class SemanticOcTree;
+};
+
+// One scan to insert: points in the map frame, the sensor origin, one label id per point.
+struct LabeledScan {
+  Eigen::Matrix3Xf points_map;  // 3 x N
+  Eigen::Vector3f sensor_origin_map{0, 0, 0};
+  std::vector<std::uint32_t> label_ids;         // N, or empty (no semantics)
+  std::uint32_t unknown_label_id = 0xFFFFFFFF;  // label id that carries no class evidence
+};
+
+class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
+ public:
+  explicit SemanticOcTree(double resolution);
+  SemanticOcTree(double resolution, ClassSet classes, FusionModel fusion);
+
+  SemanticOcTree* create() const override { return new SemanticOcTree(resolution); }
+  std::string getTreeType() const override { return "SemanticOcTree"; }
+
+  const ClassSet& classSet() const { return classes_; }
+  ClassSet& mutableClassSet() { return classes_; }
+  const FusionModel& fusionModel() const { return fusion_; }
+  void setFusionModel(const FusionModel& fusion) { fusion_ = fusion; }
+
+  // Batched scan insertion: endpoints are grouped per voxel (each occupied voxel gets one hit
+  // per scan, and one class observation per point), free voxels along all rays are collected
+  // into a key set (endpoints removed) and each is updated once. Rays longer than max_range_m
+  // (<= 0: unlimited) clear free space up to max_range_m and insert no endpoint. Updates inner
+  // occupancy and prunes along the way; class evidence of inner nodes is refreshed by
+  // updateInnerOccupancy(). Returns the number of points with a label in the class set.
+  std::size_t insertLabeledScan(const LabeledScan& scan, double max_range_m);
+
+  // Adds one hit with class evidence at a leaf (max depth), expanding pruned nodes.
+  SemanticOcTreeNode* updateOccupiedVoxel(const octomap::OcTreeKey& key, ClassIndex index,
+                                          std::uint32_t class_count);
+
+  // Recomputes all inner nodes: occupancy = max of children, class evidence = merged children.
+  void updateInnerOccupancy();
+
+  // Children collapse only with identical occupancy AND identical class evidence.
+  bool isNodeCollapsible(const SemanticOcTreeNode* node) const override;
+  bool pruneNode(SemanticOcTreeNode* node) override;
+
+  // Most likely label id of a node in the input id space; `fallback` when it has no evidence.
+  std::uint32_t mostLikelyLabel(const SemanticOcTreeNode& node, std::uint32_t fallback) const;
+
+  std::istream& readData(std::istream& s) override;
+  std::ostream& writeData(std::ostream& s) const override;
+
+ protected:
+  void updateInnerOccupancyRecurs(SemanticOcTreeNode* node, unsigned int depth);
+  SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
+                                                 const SemanticOcTreeNode& evidence);
+  SemanticOcTreeNode* updateOccupiedRecurs(SemanticOcTreeNode* node, bool node_just_created,
+                                           const octomap::OcTreeKey& key, unsigned int depth,
+                                           const SemanticOcTreeNode& evidence);
+
+  ClassSet classes_;
+  FusionModel fusion_;
+
+  // Registers the tree type with octomap's factory once (ColorOcTree's idiom).
+  class StaticMemberInitializer {
+   public:
+    StaticMemberInitializer();
+    void ensureLinking() {}
+  };
+  static StaticMemberInitializer semantic_octree_member_init_;
+};
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,178 @@
+#include "inekf_semantic_mapping/mapping/map_io.h"
+
+#include <octomap/AbstractOcTree.h>
+#include <octomap/ColorOcTree.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+
+#include "inekf_semantic_mapping/mapping/semantic_octree.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+namespace {
+
+// Writes through `write_body` into a temporary file beside `path`, then renames it over `path`.
+void writeAtomically(const std::string& path,
+                     const std::function<void(std::ostream&)>& write_body) {
+  if (path.empty()) throw MapIoError("cannot save map: empty output path");
+  const std::string tmp_path = path + ".tmp." + std::to_string(static_cast<long>(::getpid()));
+  {
+    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      throw MapIoError("cannot write map to '" + path + "': cannot create '" + tmp_path +
+                       "': " + std::strerror(errno));
+    }
+    write_body(out);
+    out.flush();
+    if (!out) {
+      const std::string reason = std::strerror(errno);
+      out.close();
+      std::remove(tmp_path.c_str());
+      throw MapIoError("cannot write map to '" + path + "': write failed: " + reason);
+    }
+  }
+  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
+    const std::string reason = std::strerror(errno);
+    std::remove(tmp_path.c_str());
+    throw MapIoError("cannot write map to '" + path + "': rename failed: " + reason);
+  }
+}
+
+std::size_t countOccupiedLeaves(const SemanticOcTree& tree) {
+  std::size_t count = 0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (tree.isNodeOccupied(*it)) ++count;
+  }
+  return count;
+}
+
+// A ColorOcTree that can be built as a node-by-node mirror of a SemanticOcTree (same structure
+// and occupancy, color = palette color of the most likely class).
+class MirrorColorOcTree : public octomap::ColorOcTree {
+ public:
+  explicit MirrorColorOcTree(double resolution) : ColorOcTree(resolution) {}
+
+  void mirror(const SemanticOcTree& source) {
+    clear();
+    if (!source.getRoot()) return;
+    root = new octomap::ColorOcTreeNode();
+    tree_size = 1;
+    copyRecurs(source, source.getRoot(), root);
+  }
+
+ private:
+  void copyRecurs(const SemanticOcTree& source, const SemanticOcTreeNode* from,
+                  octomap::ColorOcTreeNode* to) {
+    to->setLogOdds(from->getLogOdds());
+    const ClassIndex index = from->mostLikelyClass();
+    if (index != kNoClass && index < source.classSet().size()) {
+      const auto& rgb = source.classSet().info(index).rgb;
+      to->setColor(rgb[0], rgb[1], rgb[2]);
+    } else {
+      to->setColor(128, 128, 128);  // occupied, no class evidence
+    }
+    for (unsigned int i = 0; i < 8; ++i) {
+      if (source.nodeChildExists(from, i)) {
+        copyRecurs(source, source.getNodeChild(from, i), createNodeChild(to, i));
+      }
+    }
+  }
+};
+
+}  // namespace
+
+MapFormat parseMapFormat(const std::string& format, const std::string& path) {
+  if (format == "ot") return MapFormat::kSemanticOt;
+  if (format == "color_ot") return MapFormat::kColorOt;
+  if (format == "ply") return MapFormat::kPly;
+  if (format.empty()) {
+    const std::string extension = std::filesystem::path(path).extension().string();
+    return extension == ".ply" ? MapFormat::kPly : MapFormat::kSemanticOt;
+  }
+  throw MapIoError("unknown map format '" + format + "' (expected ot, color_ot or ply)");
+}
+
+std::size_t countOccupiedFinestVoxels(const SemanticOcTree& tree) {
+  std::size_t count = 0;
+  const unsigned int max_depth = tree.getTreeDepth();
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (tree.isNodeOccupied(*it)) count += std::size_t{1} << (3 * (max_depth - it.getDepth()));
+  }
+  return count;
+}
+
+std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format) {
+  tree.updateInnerOccupancy();
+  switch (format) {
+    case MapFormat::kSemanticOt: {
+      writeAtomically(path, [&](std::ostream& out) { tree.write(out); });
+      return countOccupiedLeaves(tree);
+    }
+    case MapFormat::kColorOt: {
+      MirrorColorOcTree color(tree.getResolution());
+      color.mirror(tree);
+      writeAtomically(path, [&](std::ostream& out) { color.write(out); });
+      return countOccupiedLeaves(tree);
+    }
+    case MapFormat::kPly: {
+      const std::size_t vertex_count = countOccupiedFinestVoxels(tree);
+      const unsigned int max_depth = tree.getTreeDepth();
+      writeAtomically(path, [&](std::ostream& out) {
+        out << "ply\nformat ascii 1.0\ncomment inekf_semantic_mapping semantic map, resolution "
+            << tree.getResolution() << " m\nelement vertex " << vertex_count
+            << "\nproperty float x\nproperty float y\nproperty float z\nproperty uint label\n"
+               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+        char line[128];
+        for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+          if (!tree.isNodeOccupied(*it)) continue;
+          const ClassIndex index = it->mostLikelyClass();
+          const bool known = index != kNoClass && index < tree.classSet().size();
+          const std::uint32_t label = known ? tree.classSet().info(index).label_id : 0;
+          const std::array<std::uint8_t, 3> rgb =
+              known ? tree.classSet().info(index).rgb
+                    : std::array<std::uint8_t, 3>{{128, 128, 128}};
+          // A pruned leaf stands for 2^(3k) finest voxels: one vertex for each.
+          const unsigned int cells = 1u << (max_depth - it.getDepth());
+          const octomap::OcTreeKey base_key = it.getIndexKey();
+          for (unsigned int dx = 0; dx < cells; ++dx) {
+            for (unsigned int dy = 0; dy < cells; ++dy) {
+              for (unsigned int dz = 0; dz < cells; ++dz) {
+                const octomap::OcTreeKey key(base_key[0] + dx, base_key[1] + dy, base_key[2] + dz);
+                const octomap::point3d center = tree.keyToCoord(key);
+                std::snprintf(line, sizeof(line), "%.4f %.4f %.4f %u %u %u %u\n", center.x(),
+                              center.y(), center.z(), label, rgb[0], rgb[1], rgb[2]);
+                out << line;
+              }
+            }
+          }
+        }
+      });
+      return vertex_count;
+    }
+  }
+  throw MapIoError("unhandled map format");
+}
+
+std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw MapIoError("cannot read map '" + path + "': " + std::strerror(errno));
+  std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(in));
+  if (!tree) throw MapIoError("cannot read map '" + path + "': not a valid octomap .ot file");
+  if (in.fail()) throw MapIoError("cannot read map '" + path + "': truncated or corrupt data");
+  auto* semantic = dynamic_cast<SemanticOcTree*>(tree.get());
+  if (!semantic) {
+    throw MapIoError("map '" + path + "' holds a " + tree->getTreeType() +
+                     ", not a SemanticOcTree");
+  }
+  tree.release();
+  return std::unique_ptr<SemanticOcTree>(semantic);
+}
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
