@@ -21,3 +21,10 @@ target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PUBLIC ${OpenCV_INCL
 target_link_libraries(${PROJECT_NAME}_kitti_ros PUBLIC
   ${PROJECT_NAME}_kitti ${catkin_LIBRARIES} opencv_core opencv_imgcodecs)
 add_dependencies(${PROJECT_NAME}_kitti_ros ${catkin_EXPORTED_TARGETS})
+
+ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp
+  LINK ${PROJECT_NAME}_kitti_ros)
+
+if(CATKIN_ENABLE_TESTING)
+  add_rostest(test/ros/kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR})
+endif()
