@@ -28,3 +28,5 @@ ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR})
 endif()
+
+ism_add_ros_executable(kitti2bag SOURCES src/tools/kitti2bag.cpp LINK ${PROJECT_NAME}_kitti_ros)

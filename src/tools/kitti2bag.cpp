@@ -1,0 +1,222 @@
+// kitti2bag: writes a KITTI raw drive into a rosbag with the same topics, frames and stamps as
+// kitti_player (both go through ros_conversions::DriveMessageFactory). No ROS master needed.
+//
+//   kitti2bag --drive DIR [--calib-dir DIR] --output FILE.bag [--start S] [--duration D]
+//             [--gps-sigma-h M] [--gps-sigma-v M] [--gps-every N] [--gps-outage START:DURATION]...
+//             [--seed S] [--no-velodyne] [--no-camera]
+#include <ros/time.h>
+#include <rosbag/bag.h>
+#include <tf2_msgs/TFMessage.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/kitti/drive_timeline.h"
+#include "inekf_semantic_mapping/ros/kitti_conversions.h"
+#include "inekf_semantic_mapping/ros/names.h"
+
+namespace {
+
+using namespace inekf_semantic_mapping;  // NOLINT: a small CLI
+namespace conv = ros_conversions;
+
+const char kUsage[] =
+    "usage: kitti2bag --drive DIR --output FILE.bag [options]\n"
+    "  --drive DIR            <date>_drive_<nnnn>_sync (or _extract) folder\n"
+    "  --calib-dir DIR        folder with calib_*.txt (default: the drive's parent)\n"
+    "  --output FILE.bag      written atomically (FILE.bag.partial, then renamed)\n"
+    "  --start S              skip the first S seconds (default 0)\n"
+    "  --duration D           write D seconds (default: to the end)\n"
+    "  --gps-sigma-h M        horizontal GPS noise std dev, metres (default 0)\n"
+    "  --gps-sigma-v M        vertical GPS noise std dev, metres (default 0)\n"
+    "  --gps-every N          keep every N-th GPS fix (default 1)\n"
+    "  --gps-outage S:D       no GPS fix for D seconds from S s after the first frame\n"
+    "                         (repeatable)\n"
+    "  --seed S               GPS noise seed (default 0)\n"
+    "  --no-velodyne          leave the point clouds out\n"
+    "  --no-camera            leave the color left camera out\n";
+
+struct Arguments {
+  std::string drive_dir, calib_dir, output;
+  kitti::TimelineOptions timeline;
+  kitti::GpsDegradationOptions gps;
+};
+
+double parseNumber(const std::string& flag, const std::string& text) {
+  std::size_t used = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::logic_error&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size()) {
+    throw std::invalid_argument(flag + ": '" + text + "' is not a number");
+  }
+  return value;
+}
+
+Arguments parseArguments(int argc, char** argv) {
+  Arguments args;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw std::invalid_argument(flag + " needs a value");
+      return argv[++i];
+    };
+    if (flag == "--help" || flag == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    } else if (flag == "--drive") {
+      args.drive_dir = value();
+    } else if (flag == "--calib-dir") {
+      args.calib_dir = value();
+    } else if (flag == "--output") {
+      args.output = value();
+    } else if (flag == "--start") {
+      args.timeline.start_offset_s = parseNumber(flag, value());
+    } else if (flag == "--duration") {
+      args.timeline.duration_s = parseNumber(flag, value());
+    } else if (flag == "--gps-sigma-h") {
+      args.gps.sigma_horizontal_m = parseNumber(flag, value());
+    } else if (flag == "--gps-sigma-v") {
+      args.gps.sigma_vertical_m = parseNumber(flag, value());
+    } else if (flag == "--gps-every") {
+      args.gps.every_n_frames = static_cast<int>(parseNumber(flag, value()));
+    } else if (flag == "--gps-outage") {
+      args.gps.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(value()));
+    } else if (flag == "--seed") {
+      args.gps.seed = static_cast<std::uint64_t>(parseNumber(flag, value()));
+    } else if (flag == "--no-velodyne") {
+      args.timeline.velodyne = false;
+    } else if (flag == "--no-camera") {
+      args.timeline.cameras[2] = false;
+    } else {
+      throw std::invalid_argument("unknown argument '" + flag + "'");
+    }
+  }
+  if (args.drive_dir.empty() || args.output.empty()) {
+    throw std::invalid_argument("--drive and --output are required");
+  }
+  args.gps.validate();
+  return args;
+}
+
+// A latched connection so that `rosbag play` republishes /tf_static latched, like a
+// StaticTransformBroadcaster.
+boost::shared_ptr<ros::M_string> latchedConnectionHeader(const std::string& topic) {
+  using Traits = tf2_msgs::TFMessage;
+  auto header = boost::make_shared<ros::M_string>();
+  (*header)["topic"] = topic;
+  (*header)["type"] = ros::message_traits::datatype<Traits>();
+  (*header)["md5sum"] = ros::message_traits::md5sum<Traits>();
+  (*header)["message_definition"] = ros::message_traits::definition<Traits>();
+  (*header)["callerid"] = "/kitti2bag";
+  (*header)["latching"] = "1";
+  return header;
+}
+
+void printProgress(std::size_t done, std::size_t total) {
+  const int width = 40;
+  const int filled = total ? static_cast<int>(width * done / total) : width;
+  std::fprintf(stderr, "\r[%s%s] %zu/%zu", std::string(filled, '#').c_str(),
+               std::string(width - filled, ' ').c_str(), done, total);
+  if (done == total) std::fputc('\n', stderr);
+  std::fflush(stderr);
+}
+
+int run(const Arguments& args) {
+  const kitti::RawDrive drive(args.drive_dir, args.calib_dir);
+  for (const std::string& part : drive.missingParts()) {
+    std::cerr << "kitti2bag: warning: " << drive.driveDir() << " has no " << part
+              << ": not written\n";
+  }
+  kitti::TimelineOptions timeline_options = args.timeline;
+  if (timeline_options.cameras[2] && drive.hasCamera(2) && !drive.hasCalibration()) {
+    std::cerr << "kitti2bag: warning: image_02 without calibration: camera not written\n";
+    timeline_options.cameras[2] = false;
+  }
+  conv::DriveMessageFactory factory(drive, args.gps);
+  const std::vector<kitti::TimelineEvent> timeline =
+      kitti::buildDriveTimeline(drive, timeline_options);
+  if (timeline.empty()) throw std::invalid_argument("nothing to write in the chosen window");
+
+  const std::string partial = args.output + ".partial";
+  std::size_t messages = 0;
+  {
+    rosbag::Bag bag(partial, rosbag::bagmode::Write);
+    const ros::Time first = conv::toRosTime(timeline.front().stamp_ns);
+    tf2_msgs::TFMessage tf_static;
+    tf_static.transforms = factory.staticTransformMessages(first);
+    bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
+    ++messages;
+    const bool interactive = isatty(STDERR_FILENO);
+    for (std::size_t i = 0; i < timeline.size(); ++i) {
+      const kitti::TimelineEvent& event = timeline[i];
+      const ros::Time stamp = conv::toRosTime(event.stamp_ns);
+      switch (event.sensor) {
+        case kitti::DriveSensor::kOxts: {
+          ScopedTimer timer("kitti2bag/oxts");
+          const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
+          bag.write(topics::kImu, stamp, oxts.imu);
+          if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
+          bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
+          bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
+          messages += oxts.gps_fix ? 4 : 3;
+          break;
+        }
+        case kitti::DriveSensor::kVelodyne: {
+          ScopedTimer timer("kitti2bag/velodyne");
+          bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
+          ++messages;
+          break;
+        }
+        case kitti::DriveSensor::kCamera2: {
+          ScopedTimer timer("kitti2bag/camera");
+          const auto [image, info] = factory.cameraMessages(2, event.frame);
+          bag.write(topics::kCameraColorLeftImage, stamp, image);
+          bag.write(topics::kCameraColorLeftInfo, stamp, info);
+          messages += 2;
+          break;
+        }
+        default:
+          break;
+      }
+      if (interactive ? (i % 20 == 0 || i + 1 == timeline.size())
+                      : (i % 1000 == 0 || i + 1 == timeline.size())) {
+        printProgress(i + 1, timeline.size());
+      }
+    }
+    bag.close();
+  }
+  std::filesystem::rename(partial, args.output);
+  std::cerr << "kitti2bag: wrote " << messages << " messages ("
+            << kitti::secondsBetween(timeline.front().stamp_ns, timeline.back().stamp_ns)
+            << " s) to " << args.output << "\n"
+            << TimingRegistry::instance().report();
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Arguments args;
+  try {
+    args = parseArguments(argc, argv);
+  } catch (const std::exception& error) {
+    std::cerr << "kitti2bag: " << error.what() << "\n" << kUsage;
+    return 2;
+  }
+  try {
+    return run(args);
+  } catch (const std::exception& error) {
+    std::cerr << "kitti2bag: " << error.what() << "\n";
+    std::filesystem::remove(args.output + ".partial");
+    return 1;
+  }
+}
