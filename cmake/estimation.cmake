@@ -9,3 +9,10 @@ ism_add_core_library(${PROJECT_NAME}_estimation
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
 ism_add_gtest(test_imu_filters SOURCES test/unit/test_imu_filters.cpp
   LINK ${PROJECT_NAME}_estimation)
+
+# Runs the Localizer over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
+ism_add_core_library(${PROJECT_NAME}_estimation_oxts
+  SOURCES src/estimation/oxts_run.cpp
+  LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti)
+ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts)

@@ -1,0 +1,51 @@
+// Runs the Localizer over a KITTI raw OXTS sequence under the evaluation protocol: the one
+// implementation behind inekf_offline, the real-drive tests and the benchmark.
+//
+// After frame 0 only the timestamps, ax..az, wx..wz and (degraded) lat/lon/alt fixes reach the
+// filter; frame 0's roll/pitch/yaw and vn/ve/vu initialize it (plus an optional injected yaw
+// error), its degraded fix gives the initial position. Frames with posmode < 0 (KITTI filled
+// them by interpolation) are fed as `interpolated` samples, so their IMU noise is inflated.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <vector>
+
+#include "inekf_semantic_mapping/estimation/localizer.h"
+#include "inekf_semantic_mapping/kitti/gps_degradation.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+struct OxtsRunOptions {
+  LocalizerConfig config;
+  kitti::GpsDegradationOptions gps;
+  double init_yaw_error_deg = 0.0;  // added to frame 0's yaw (tests convergence)
+};
+
+struct OxtsRunResult {
+  std::vector<NavState> states;                  // one per OXTS frame
+  std::vector<PoseCovariance> pose_covariances;  // one per OXTS frame (see NavigationFilter)
+  std::vector<Eigen::Isometry3d> truth;          // T_map_imu from the OXTS solution
+  Localizer::Statistics statistics;
+  int fixes_offered = 0;  // fixes the degrader produced
+};
+
+// Throws std::invalid_argument on an empty sequence.
+OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
+                                 const OxtsRunOptions& options);
+
+// Quick accuracy figures against the truth (unaligned): RMS position error, RMS of the rotation
+// error angle, RMS yaw error; over frames [first, last) (last < 0: to the end).
+struct TrajectoryErrors {
+  double ate_m = 0.0;
+  double rotation_rmse_deg = 0.0;
+  double yaw_rmse_deg = 0.0;
+};
+TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first = 0, int last = -1);
+
+// Signed yaw error (deg, in (-180, 180]) of frame k: heading of the estimate minus the truth's.
+double yawErrorDeg(const OxtsRunResult& run, int frame);
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
