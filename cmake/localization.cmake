@@ -1,5 +1,21 @@
 # Component: localization — trajectory evaluation scripts (scripts/evaluate_trajectory.py,
-# scripts/compare_filters.py) and inekf_node (ROS face of the estimation library).
+# scripts/compare_filters.py) and inekf_node (ROS face of the estimation library's Localizer).
+
+# inekf_node needs the estimation and KITTI libraries: added once both components define them.
+if(TARGET ${PROJECT_NAME}_estimation AND TARGET ${PROJECT_NAME}_kitti)
+  ism_add_ros_executable(inekf_node
+    SOURCES src/nodes/inekf_node.cpp src/ros/localization_conversions.cpp
+    LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti roslib)
+  if(CATKIN_ENABLE_TESTING)
+    # A real OXTS drive from ../shared played into inekf_node (skips without ../shared).
+    add_rostest(test/ros/inekf_node.test
+      DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+    add_rostest(test/ros/inekf_node_robustness.test
+      DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+  endif()
+else()
+  message(STATUS "localization: inekf_node not added (needs ${PROJECT_NAME}_estimation and ${PROJECT_NAME}_kitti)")
+endif()
 
 if(CATKIN_ENABLE_TESTING)
   # Python unit tests of the evaluation scripts (no ROS graph needed; rostest records them).

@@ -1,0 +1,280 @@
+#!/usr/bin/python3
+"""rostest node for inekf_node (test/ros/inekf_node*.test).
+
+Plays a real KITTI OXTS drive from ../shared into inekf_node the way kitti_player does
+(/kitti/oxts/imu with the OXTS orientation, /kitti/oxts/gps/fix degraded by Gaussian noise and
+used every N-th frame, STATUS_NO_FIX where posmode <= 0, /kitti/oxts/gps/vel), faster than real
+time, and checks what the node publishes against the OXTS truth of the same frames:
+RMS position error under a margin, no NaN, a symmetric positive-definite pose covariance, tf
+map -> base_link, FilterStatus. Optionally injects a duplicate and an out-of-order IMU message
+(~inject_faults) and replays the start of the drive (~loop_frames: time jumps back as in a bag
+loop: the node must reset and localize again). Skips loudly (and passes) without ../shared.
+
+Parameters (private): drive, first_frame, frames, rate, gps_every, gps_sigma_h, gps_sigma_v,
+seed, max_rms_m, inject_faults, loop_frames.
+"""
+
+import calendar
+import datetime
+import math
+import os
+import sys
+import time
+import unittest
+
+import numpy as np
+import rospy
+import tf2_ros
+from geometry_msgs.msg import TwistStamped
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+
+from inekf_semantic_mapping.msg import FilterStatus
+
+PACKAGE = "inekf_semantic_mapping"
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+EARTH_RADIUS_M = 6378137.0  # the KITTI devkit's er
+
+
+def shared_dir():
+    return os.environ.get("ISM_SHARED_DIR") or os.path.join(os.path.dirname(REPO_ROOT), "shared")
+
+
+def read_kitti_stamp(text):
+    day, clock = text.strip().split()
+    seconds_part, _, fraction = clock.partition(".")
+    moment = datetime.datetime.strptime(day + " " + seconds_part, "%Y-%m-%d %H:%M:%S")
+    return calendar.timegm(moment.timetuple()), int((fraction + "000000000")[:9])
+
+
+def rotation_rpy(roll, pitch, yaw):
+    """Rz(yaw) Ry(pitch) Rx(roll): the OXTS body -> map rotation (KITTI devkit)."""
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                              math.cos(yaw), math.sin(yaw))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def quaternion_rpy(roll, pitch, yaw):
+    """(x, y, z, w) of Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+class OxtsDrive:
+    """The frames of a KITTI raw oxts/ folder and their truth positions in the map frame (devkit
+    Mercator at frame 0; the .test sets inekf_node's origin to that same fix)."""
+
+    def __init__(self, oxts_dir, first_frame, frames):
+        with open(os.path.join(oxts_dir, "timestamps.txt")) as stream:
+            stamps = [read_kitti_stamp(line) for line in stream if line.strip()]
+        last = min(len(stamps), first_frame + frames)
+        self.records, self.stamps = [], []
+        for index in range(first_frame, last):
+            with open(os.path.join(oxts_dir, "data", "%010d.txt" % index)) as stream:
+                self.records.append([float(v) for v in stream.read().split()])
+            self.stamps.append(rospy.Time(*stamps[index]))
+        lat0, lon0, alt0 = self.records[0][:3]
+        self.scale = math.cos(math.radians(lat0))
+        self.origin = self.mercator(lat0, lon0, alt0)
+        self.truth = {stamp.to_nsec(): self.mercator(*record[:3]) - self.origin
+                      for stamp, record in zip(self.stamps, self.records)}
+        self.origin_fix = (lat0, lon0, alt0)
+
+    def mercator(self, lat, lon, alt):
+        return np.array([self.scale * math.radians(lon) * EARTH_RADIUS_M,
+                         self.scale * EARTH_RADIUS_M * math.log(math.tan(math.radians(90.0 + lat) / 2)),
+                         alt])
+
+
+class InekfNodeTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("inekf_node_test", anonymous=True)
+        cls.drive_name = rospy.get_param("~drive", "2011_09_30/2011_09_30_drive_0027_sync")
+        cls.oxts_dir = os.path.join(shared_dir(), "data", "kitti_raw", cls.drive_name, "oxts")
+        cls.odometry, cls.paths, cls.statuses = [], [], []
+        rospy.Subscriber("/inekf/odometry", Odometry, cls.odometry.append, queue_size=1000)
+        rospy.Subscriber("/inekf/path", Path, cls.paths.append, queue_size=10)
+        rospy.Subscriber("/inekf/status", FilterStatus, cls.statuses.append, queue_size=1000)
+        cls.imu_publisher = rospy.Publisher("/kitti/oxts/imu", Imu, queue_size=100)
+        cls.fix_publisher = rospy.Publisher("/kitti/oxts/gps/fix", NavSatFix, queue_size=100)
+        cls.velocity_publisher = rospy.Publisher("/kitti/oxts/gps/vel", TwistStamped, queue_size=100)
+        cls.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(1e6))
+        cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
+
+    def setUp(self):
+        if not os.path.isdir(self.oxts_dir):
+            sys.stderr.write("\n*** SKIPPED: shared data not found: %s\n*** (put the shared/ data "
+                             "folder beside the repository to run this test)\n" % self.oxts_dir)
+            self.skipTest("shared data not found: %s" % self.oxts_dir)
+
+    # ---------------------------------------------------------------------------------------
+    def wait_for_node(self, timeout_s=30.0):
+        deadline = time.time() + timeout_s
+        while time.time() < deadline and not rospy.is_shutdown():
+            if (self.imu_publisher.get_num_connections() > 0 and
+                    self.fix_publisher.get_num_connections() > 0):
+                time.sleep(0.5)  # let the node's other subscriptions connect too
+                return
+            time.sleep(0.1)
+        self.fail("inekf_node did not subscribe to /kitti/oxts/imu and /kitti/oxts/gps/fix "
+                  "within %.0f s" % timeout_s)
+
+    def imu_message(self, record, stamp):
+        message = Imu()
+        message.header.stamp = stamp
+        message.header.frame_id = "imu_link"
+        message.angular_velocity.x, message.angular_velocity.y, message.angular_velocity.z = record[17:20]
+        (message.linear_acceleration.x, message.linear_acceleration.y,
+         message.linear_acceleration.z) = record[11:14]
+        q = quaternion_rpy(*record[3:6])
+        message.orientation.x, message.orientation.y, message.orientation.z, message.orientation.w = q
+        message.orientation_covariance = [1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4]
+        return message
+
+    def fix_message(self, record, stamp, noise_m, sigma_h, sigma_v):
+        message = NavSatFix()
+        message.header.stamp = stamp
+        message.header.frame_id = "imu_link"
+        lat, lon, alt = record[:3]
+        # Noise in metres (east, north, up) turned into degrees on the local sphere.
+        message.latitude = lat + math.degrees(noise_m[1] / EARTH_RADIUS_M)
+        message.longitude = lon + math.degrees(noise_m[0] / (EARTH_RADIUS_M * math.cos(math.radians(lat))))
+        message.altitude = alt + noise_m[2]
+        message.status.service = NavSatStatus.SERVICE_GPS
+        message.status.status = NavSatStatus.STATUS_FIX if record[27] > 0 else NavSatStatus.STATUS_NO_FIX
+        message.position_covariance = [sigma_h ** 2, 0, 0, 0, sigma_h ** 2, 0, 0, 0, sigma_v ** 2]
+        message.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
+        return message
+
+    def velocity_message(self, record, stamp):
+        message = TwistStamped()
+        message.header.stamp = stamp
+        message.header.frame_id = "imu_link"  # kitti2bag: body-frame vf, vl, vu
+        message.twist.linear.x, message.twist.linear.y, message.twist.linear.z = record[8:11]
+        return message
+
+    def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False):
+        """Publishes the drive's frames at `rate` times real time. With faults: a duplicate of
+        frame 100's IMU message, and at frame 150 the IMU message of frame 145 (out of order)."""
+        count = len(drive.records) if frames is None else min(frames, len(drive.records))
+        for index in range(count):
+            if rospy.is_shutdown():
+                return
+            record, stamp = drive.records[index], drive.stamps[index]
+            imu = self.imu_message(record, stamp)
+            self.velocity_publisher.publish(self.velocity_message(record, stamp))
+            self.imu_publisher.publish(imu)
+            if faults and index == 100:
+                self.imu_publisher.publish(imu)  # duplicate stamp
+            if faults and index == 150:
+                self.imu_publisher.publish(self.imu_message(drive.records[145], drive.stamps[145]))
+            if index % gps_every == 0:
+                noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
+                self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
+            if index + 1 < count:
+                time.sleep(max(0.0, (drive.stamps[index + 1] - stamp).to_sec() / rate))
+        time.sleep(1.0)  # let the last messages through
+
+    def position_errors(self, drive, odometry):
+        errors = []
+        for message in odometry:
+            # The node republishes the IMU message's stamp: exact (a rounded one would be a bug).
+            truth = drive.truth.get(message.header.stamp.to_nsec())
+            self.assertIsNotNone(truth, "odometry stamp %s is not a frame stamp" % message.header.stamp)
+            p = message.pose.pose.position
+            errors.append(np.linalg.norm(np.array([p.x, p.y, p.z]) - truth))
+        return np.array(errors)
+
+    def check_odometry_messages(self, odometry):
+        for message in odometry:
+            p, q = message.pose.pose.position, message.pose.pose.orientation
+            values = [p.x, p.y, p.z, q.x, q.y, q.z, q.w] + list(message.pose.covariance)
+            self.assertTrue(all(math.isfinite(v) for v in values), "NaN in %s" % message.header)
+            self.assertAlmostEqual(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2, 1.0, places=6)
+            self.assertEqual(message.header.frame_id, "map")
+            self.assertEqual(message.child_frame_id, "base_link")
+            covariance = np.array(message.pose.covariance).reshape(6, 6)
+            np.testing.assert_allclose(covariance, covariance.T, atol=1e-9 * np.abs(covariance).max())
+            self.assertGreater(np.linalg.eigvalsh(covariance).min(), 0.0,
+                               "pose covariance not positive definite at %s" % message.header.stamp)
+
+    # ---------------------------------------------------------------------------------------
+    def test_localizes_a_real_drive(self):
+        first_frame = rospy.get_param("~first_frame", 0)
+        frames = rospy.get_param("~frames", 450)
+        rate = rospy.get_param("~rate", 10.0)
+        gps_every = rospy.get_param("~gps_every", 10)
+        sigma_h = rospy.get_param("~gps_sigma_h", 1.5)
+        sigma_v = rospy.get_param("~gps_sigma_v", 3.0)
+        max_rms_m = rospy.get_param("~max_rms_m", 5.0)
+        inject_faults = rospy.get_param("~inject_faults", False)
+        loop_frames = rospy.get_param("~loop_frames", 0)
+        rng = np.random.default_rng(rospy.get_param("~seed", 1))
+        drive = OxtsDrive(self.oxts_dir, first_frame, frames)
+        self.wait_for_node()
+
+        self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, faults=inject_faults)
+        first_pass = list(self.odometry)
+        self.assertGreater(len(first_pass), 0.8 * len(drive.records),
+                           "inekf_node published %d odometry messages for %d IMU frames" %
+                           (len(first_pass), len(drive.records)))
+        self.check_odometry_messages(first_pass)
+        errors = self.position_errors(drive, first_pass)
+        rms = float(np.sqrt(np.mean(errors ** 2)))
+        rospy.loginfo("inekf_node_test: %s frames %d..%d: %d odometry messages, position RMS "
+                      "%.2f m, max %.2f m", self.drive_name, first_frame, first_frame + frames - 1,
+                      len(first_pass), rms, errors.max())
+        sys.stderr.write("\n[inekf_node_test] %s: position RMS %.2f m (max %.2f m) over %d poses\n" %
+                         (self.drive_name, rms, errors.max(), len(errors)))
+        self.assertLess(rms, max_rms_m)
+        # The node kept publishing up to the end of the drive.
+        self.assertEqual(first_pass[-1].header.stamp, drive.stamps[-1])
+
+        transform = self.tf_buffer.lookup_transform("map", "base_link", rospy.Time(0),
+                                                    rospy.Duration(2.0))
+        last = first_pass[-1].pose.pose.position
+        self.assertAlmostEqual(transform.transform.translation.x, last.x, places=6)
+        self.assertAlmostEqual(transform.transform.translation.y, last.y, places=6)
+
+        self.assertTrue(self.statuses, "no FilterStatus on /inekf/status")
+        status = self.statuses[-1]
+        expected_fixes = len(range(0, len(drive.records), gps_every))
+        self.assertGreater(status.gps_fixes_used, 0.5 * expected_fixes)
+        self.assertGreater(status.imu_samples, 0.8 * len(drive.records))
+        for bias in (status.gyro_bias, status.accel_bias):
+            self.assertTrue(all(math.isfinite(v) for v in (bias.x, bias.y, bias.z)))
+        if inject_faults:
+            self.assertGreaterEqual(status.imu_samples_dropped, 2,
+                                    "the duplicate and the out-of-order IMU messages were not counted")
+        self.assertTrue(self.paths and len(self.paths[-1].poses) > 0, "no path on /inekf/path")
+
+        if loop_frames > 0:
+            # Time jumps back to the start of the drive: the node must reset and localize again.
+            del self.odometry[:]
+            del self.paths[:]
+            self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, frames=loop_frames)
+            second_pass = list(self.odometry)
+            self.assertGreater(len(second_pass), 0.8 * loop_frames,
+                               "inekf_node stopped publishing after the time jump back")
+            self.check_odometry_messages(second_pass)
+            loop_errors = self.position_errors(drive, second_pass)
+            loop_rms = float(np.sqrt(np.mean(loop_errors ** 2)))
+            sys.stderr.write("[inekf_node_test] after the loop: position RMS %.2f m over %d poses\n" %
+                             (loop_rms, len(loop_errors)))
+            self.assertLess(loop_rms, max_rms_m)
+            # The path was cleared: it holds only poses of the second pass.
+            self.assertTrue(self.paths, "no path after the loop")
+            path = self.paths[-1]
+            self.assertLessEqual(len(path.poses), loop_frames)
+            self.assertLessEqual(path.poses[-1].header.stamp, drive.stamps[loop_frames - 1])
+
+
+if __name__ == "__main__":
+    import rostest
+    rostest.rosrun(PACKAGE, "inekf_node_test", InekfNodeTest)
