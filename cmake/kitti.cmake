@@ -30,3 +30,12 @@ if(CATKIN_ENABLE_TESTING)
 endif()
 
 ism_add_ros_executable(kitti2bag SOURCES src/tools/kitti2bag.cpp LINK ${PROJECT_NAME}_kitti_ros)
+
+# Conversions + kitti2bag end to end on a synthetic drive the test writes (no ../shared needed).
+ism_add_gtest(test_kitti_conversions SOURCES test/unit/test_kitti_conversions.cpp
+  LINK ${PROJECT_NAME}_kitti_ros)
+if(TARGET test_kitti_conversions)
+  target_compile_definitions(test_kitti_conversions PRIVATE
+    KITTI2BAG_PATH="$<TARGET_FILE:kitti2bag>")
+  add_dependencies(test_kitti_conversions kitti2bag)
+endif()
