@@ -12,6 +12,10 @@ if(TARGET ${PROJECT_NAME}_estimation AND TARGET ${PROJECT_NAME}_kitti)
       DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
     add_rostest(test/ros/inekf_node_robustness.test
       DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+    if(TARGET kitti_player)
+      add_rostest(test/ros/inekf_node_kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR}
+        DEPENDENCIES inekf_node kitti_player ${PROJECT_NAME}_generate_messages_py)
+    endif()
   endif()
 else()
   message(STATUS "localization: inekf_node not added (needs ${PROJECT_NAME}_estimation and ${PROJECT_NAME}_kitti)")

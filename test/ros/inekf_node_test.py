@@ -10,8 +10,12 @@ map -> base_link, FilterStatus. Optionally injects a duplicate and an out-of-ord
 (~inject_faults) and replays the start of the drive (~loop_frames: time jumps back as in a bag
 loop: the node must reset and localize again). Skips loudly (and passes) without ../shared.
 
-Parameters (private): drive, first_frame, frames, rate, gps_every, gps_sigma_h, gps_sigma_v,
-seed, max_rms_m, inject_faults, loop_frames.
+With ~source:=kitti_player the test publishes nothing: kitti_player (started paused by the
+.test) plays the drive, the test resumes it through ~pause and compares /inekf/odometry with
+/kitti/oxts/ground_truth at the same stamps.
+
+Parameters (private): source (self | kitti_player), drive, first_frame, frames, rate, gps_every,
+gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames.
 """
 
 import calendar
@@ -28,6 +32,7 @@ import tf2_ros
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from std_srvs.srv import SetBool
 
 from inekf_semantic_mapping.msg import FilterStatus
 
@@ -104,6 +109,8 @@ class InekfNodeTest(unittest.TestCase):
         cls.imu_publisher = rospy.Publisher("/kitti/oxts/imu", Imu, queue_size=100)
         cls.fix_publisher = rospy.Publisher("/kitti/oxts/gps/fix", NavSatFix, queue_size=100)
         cls.velocity_publisher = rospy.Publisher("/kitti/oxts/gps/vel", TwistStamped, queue_size=100)
+        cls.ground_truth = {}
+        rospy.Subscriber("/kitti/oxts/ground_truth", Odometry, cls.on_ground_truth, queue_size=1000)
         cls.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(1e6))
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
 
@@ -112,6 +119,11 @@ class InekfNodeTest(unittest.TestCase):
             sys.stderr.write("\n*** SKIPPED: shared data not found: %s\n*** (put the shared/ data "
                              "folder beside the repository to run this test)\n" % self.oxts_dir)
             self.skipTest("shared data not found: %s" % self.oxts_dir)
+
+    @classmethod
+    def on_ground_truth(cls, message):
+        p = message.pose.pose.position
+        cls.ground_truth[message.header.stamp.to_nsec()] = np.array([p.x, p.y, p.z])
 
     # ---------------------------------------------------------------------------------------
     def wait_for_node(self, timeout_s=30.0):
@@ -206,6 +218,56 @@ class InekfNodeTest(unittest.TestCase):
 
     # ---------------------------------------------------------------------------------------
     def test_localizes_a_real_drive(self):
+        if rospy.get_param("~source", "self") == "kitti_player":
+            self.check_drive_played_by_kitti_player()
+        else:
+            self.check_drive_played_by_this_test()
+
+    def check_drive_played_by_kitti_player(self):
+        max_rms_m = rospy.get_param("~max_rms_m", 5.0)
+        player_frames = rospy.get_param("~player_frames", 450)
+        self.wait_for_node_to_subscribe("/kitti/oxts/imu")
+        rospy.wait_for_service("/kitti_player/pause", timeout=30.0)
+        rospy.ServiceProxy("/kitti_player/pause", SetBool)(False)  # start playing
+        # Played once (no loop): done when odometry stops arriving.
+        deadline, last_count, quiet_since = time.time() + 75.0, -1, time.time()
+        while time.time() < deadline and not rospy.is_shutdown():
+            if len(self.odometry) != last_count:
+                last_count, quiet_since = len(self.odometry), time.time()
+            elif last_count > 0 and time.time() - quiet_since > 2.0:
+                break
+            time.sleep(0.2)
+        odometry = list(self.odometry)
+        self.assertGreater(len(odometry), 0.8 * player_frames,
+                           "%d odometry messages for about %d frames" % (len(odometry), player_frames))
+        self.check_odometry_messages(odometry)
+        errors = []
+        for message in odometry:
+            truth = self.ground_truth.get(message.header.stamp.to_nsec())
+            self.assertIsNotNone(truth, "no ground truth at the odometry stamp %s" % message.header.stamp)
+            p = message.pose.pose.position
+            errors.append(np.linalg.norm(np.array([p.x, p.y, p.z]) - truth))
+        errors = np.array(errors)
+        rms = float(np.sqrt(np.mean(errors ** 2)))
+        sys.stderr.write("\n[inekf_node_test] kitti_player %s: position RMS %.2f m (max %.2f m) "
+                         "over %d poses\n" % (self.drive_name, rms, errors.max(), len(errors)))
+        self.assertLess(rms, max_rms_m)
+        self.tf_buffer.lookup_transform("map", "base_link", rospy.Time(0), rospy.Duration(2.0))
+        self.assertTrue(self.statuses, "no FilterStatus on /inekf/status")
+        self.assertGreater(self.statuses[-1].gps_fixes_used, 0)
+
+    def wait_for_node_to_subscribe(self, topic, timeout_s=30.0):
+        import rosgraph
+        master = rosgraph.Master(rospy.get_name())
+        deadline = time.time() + timeout_s
+        while time.time() < deadline and not rospy.is_shutdown():
+            _, subscribers, _ = master.getSystemState()
+            if any(name == topic and "/inekf_node" in nodes for name, nodes in subscribers):
+                return
+            time.sleep(0.2)
+        self.fail("inekf_node did not subscribe to %s within %.0f s" % (topic, timeout_s))
+
+    def check_drive_played_by_this_test(self):
         first_frame = rospy.get_param("~first_frame", 0)
         frames = rospy.get_param("~frames", 450)
         rate = rospy.get_param("~rate", 10.0)
