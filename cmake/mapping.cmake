@@ -8,7 +8,8 @@ ism_add_core_library(${PROJECT_NAME}_mapping
     src/mapping/semantic_classes.cpp
     src/mapping/semantic_octree.cpp
     src/mapping/map_io.cpp
-  LINK ${OCTOMAP_LIBRARIES}
+    src/mapping/offline_mapping.cpp
+  LINK ${PROJECT_NAME}_kitti ${OCTOMAP_LIBRARIES}
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
 
 ism_add_gtest(test_projection
@@ -16,4 +17,15 @@ ism_add_gtest(test_projection
   LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
+  LINK ${PROJECT_NAME}_mapping)
+
+ism_add_tool(project_cloud
+  SOURCES src/tools/project_cloud.cpp
+  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti ${OpenCV_LIBS})
+target_include_directories(project_cloud SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
+ism_add_tool(semantic_map_offline
+  SOURCES src/tools/semantic_map_offline.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_semantic_octree_offline
+  SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)

@@ -1,0 +1,135 @@
+// project_cloud: projects a velodyne scan into camera 2 of a KITTI object-format calibration.
+//
+//   project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png --output POINTS.csv
+//                 [--overlay OVERLAY.png]
+// CSV: header `index,u,v,depth`, one row per point inside the image with depth > 0 (index = the
+// point's row in the .bin, u/v in pixels, depth in metres). The image is read for its size and
+// as the overlay's background (points colored by depth).
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "inekf_semantic_mapping/perception/projection.h"
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png "
+    "--output POINTS.csv [--overlay OVERLAY.png]\n";
+
+// Writes to a temporary file beside `path`, then renames (no half-written outputs).
+std::string temporaryPathFor(const std::string& path) {
+  const std::filesystem::path p(path);
+  return (p.parent_path() / (".tmp." + std::to_string(::getpid()) + "." + p.filename().string()))
+      .string();
+}
+
+void commit(const std::string& tmp_path, const std::string& path) {
+  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
+    std::remove(tmp_path.c_str());
+    throw std::runtime_error("cannot write '" + path + "' (rename failed)");
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace inekf_semantic_mapping;
+  std::map<std::string, std::string> args;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "-h" || flag == "--help") {
+      std::cout << kUsage;
+      return 0;
+    }
+    if ((flag != "--calib" && flag != "--velodyne" && flag != "--image" && flag != "--output" &&
+         flag != "--overlay") ||
+        i + 1 >= argc) {
+      std::cerr << "project_cloud: bad argument '" << flag << "'\n" << kUsage;
+      return 2;
+    }
+    args[flag] = argv[++i];
+  }
+  for (const char* required : {"--calib", "--velodyne", "--image", "--output"}) {
+    if (!args.count(required)) {
+      std::cerr << "project_cloud: missing " << required << "\n" << kUsage;
+      return 2;
+    }
+  }
+  try {
+    cv::Mat image;
+    {
+      ScopedTimer timer("project_cloud/read");
+      image = cv::imread(args["--image"], cv::IMREAD_COLOR);
+      if (image.empty()) throw std::runtime_error(args["--image"] + ": cannot read image");
+    }
+    const kitti::CameraProjection camera =
+        kitti::readObjectCalibration(args["--calib"]).projection(2, image.cols, image.rows);
+    const kitti::VelodyneScan scan = kitti::readVelodyneBin(args["--velodyne"]);
+    const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
+                                               image.cols, image.rows);
+    perception::ProjectedPoints projected;
+    {
+      ScopedTimer timer("project_cloud/project");
+      Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+          scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
+      projector.project(buffer.topRows<3>(), &projected);
+    }
+    {
+      ScopedTimer timer("project_cloud/write_csv");
+      const std::string tmp = temporaryPathFor(args["--output"]);
+      std::ofstream csv(tmp);
+      if (!csv) throw std::runtime_error("cannot write '" + args["--output"] + "'");
+      csv << "index,u,v,depth\n";
+      char line[96];
+      for (std::size_t i = 0; i < projected.size(); ++i) {
+        if (!projected.valid[i]) continue;
+        std::snprintf(line, sizeof(line), "%zu,%.3f,%.3f,%.4f\n", i, projected.u[i], projected.v[i],
+                      projected.depth[i]);
+        csv << line;
+      }
+      csv.close();
+      if (!csv) throw std::runtime_error("cannot write '" + args["--output"] + "'");
+      commit(tmp, args["--output"]);
+    }
+    std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
+              << " points inside the " << image.cols << "x" << image.rows << " image -> "
+              << args["--output"] << "\n";
+    if (args.count("--overlay")) {
+      ScopedTimer timer("project_cloud/overlay");
+      cv::Mat overlay = image.clone();
+      // Near = red, far (>= 50 m) = blue: OpenCV's JET colormap, computed once as a table.
+      cv::Mat ramp(1, 256, CV_8UC1), jet;
+      for (int k = 0; k < 256; ++k) ramp.at<std::uint8_t>(0, k) = static_cast<std::uint8_t>(k);
+      cv::applyColorMap(ramp, jet, cv::COLORMAP_JET);
+      for (std::size_t i = 0; i < projected.size(); ++i) {
+        if (!projected.valid[i]) continue;
+        const double scaled = std::min(1.0, projected.depth[i] / 50.0);
+        const int level = static_cast<int>(255 * (1.0 - scaled));
+        cv::circle(overlay,
+                   cv::Point(static_cast<int>(projected.u[i]), static_cast<int>(projected.v[i])), 1,
+                   cv::Scalar(jet.at<cv::Vec3b>(0, level)), cv::FILLED);
+      }
+      const std::string& path = args["--overlay"];
+      const std::string tmp = temporaryPathFor(path) + ".png";
+      if (!cv::imwrite(tmp, overlay)) throw std::runtime_error("cannot write '" + path + "'");
+      commit(tmp, path);
+      std::cerr << "[project_cloud] overlay -> " << path << "\n";
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "project_cloud: error: " << e.what() << "\n";
+    return 1;
+  }
+  std::cerr << TimingRegistry::instance().report();
+  return 0;
+}

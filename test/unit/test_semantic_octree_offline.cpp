@@ -1,0 +1,128 @@
+// buildSemanticMapFromSequence (semantic_map_offline's core) on a small sequence written here:
+// the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input errors.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/offline_mapping.h"
+#include "inekf_semantic_mapping/mapping/semantic_octree.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+namespace {
+
+template <typename T>
+void writeBinary(const std::string& path, const std::vector<T>& values) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(values.data()),
+            static_cast<std::streamsize>(values.size() * sizeof(T)));
+}
+
+// Velodyne -> cam0 of KITTI: x_cam = -y_velo, y_cam = -z_velo, z_cam = x_velo, plus an offset.
+const char kCalib[] =
+    "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n"
+    "P1: 700 0 600 -380 0 700 180 0 0 0 1 0\n"
+    "P2: 700 0 600 45 0 700 180 0 0 0 1 0\n"
+    "P3: 700 0 600 -330 0 700 180 0 0 0 1 0\n"
+    "Tr: 0 -1 0 0.1 0 0 -1 -0.2 1 0 0 -0.3\n";
+
+class OfflineMappingTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = test::makeTempDir("offline_mapping");
+    std::filesystem::create_directories(dir_ + "/velodyne");
+    std::filesystem::create_directories(dir_ + "/labels");
+    std::ofstream(dir_ + "/calib.txt") << kCalib;
+    // Scan 0 at the origin; scan 1 with cam0 moved 3 m forward (cam z) and 1 m right (cam x).
+    std::ofstream(dir_ + "/poses.txt") << "1 0 0 0 0 1 0 0 0 0 1 0\n"
+                                          "1 0 0 1 0 1 0 0 0 0 1 3\n";
+    // Each scan: a wall point straight ahead labeled 50 (building), one labeled 300 (an id
+    // outside the configured set), one unlabeled (0).
+    for (int scan = 0; scan < 2; ++scan) {
+      writeBinary<float>(
+          dir_ + "/velodyne/00000" + std::to_string(scan) + ".bin",
+          {10.05f, 0.05f, 0.05f, 0.5f, 5.05f, 4.05f, 0.05f, 0.5f, 6.05f, -3.05f, 0.05f, 0.5f});
+      writeBinary<std::uint32_t>(dir_ + "/labels/00000" + std::to_string(scan) + ".label",
+                                 {50u | (7u << 16), 300u, 0u});
+    }
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  OfflineMappingOptions options() const {
+    OfflineMappingOptions o;
+    o.scans_dir = dir_ + "/velodyne";
+    o.labels_dir = dir_ + "/labels";
+    o.poses_path = dir_ + "/poses.txt";
+    o.calib_path = dir_ + "/calib.txt";
+    o.resolution_m = 0.1;
+    o.max_range_m = 30;
+    return o;
+  }
+  std::string dir_;
+};
+
+TEST_F(OfflineMappingTest, ScansLandWhereThePoseChainPutsThem) {
+  auto tree = buildSemanticMapFromSequence(options(), nullptr);
+  // Scan 0 is the map frame: its points stay where they are.
+  const SemanticOcTreeNode* first = tree->search(10.05, 0.05, 0.05);
+  ASSERT_NE(first, nullptr);
+  EXPECT_TRUE(tree->isNodeOccupied(first));
+  EXPECT_EQ(tree->mostLikelyLabel(*first, 0), 50u);  // instance bits ignored
+  // Scan 1: cam0 moved 3 m along cam z (= velo x) and 1 m along cam x (= velo -y).
+  const SemanticOcTreeNode* second = tree->search(13.05, -0.95, 0.05);
+  ASSERT_NE(second, nullptr);
+  EXPECT_TRUE(tree->isNodeOccupied(second));
+  EXPECT_EQ(tree->mostLikelyLabel(*second, 0), 50u);
+  // The unknown id got its own class; unlabeled points give occupancy without evidence.
+  const SemanticOcTreeNode* other = tree->search(5.05, 4.05, 0.05);
+  ASSERT_NE(other, nullptr);
+  EXPECT_EQ(tree->mostLikelyLabel(*other, 0), 300u);
+  const SemanticOcTreeNode* unlabeled = tree->search(6.05, -3.05, 0.05);
+  ASSERT_NE(unlabeled, nullptr);
+  EXPECT_TRUE(tree->isNodeOccupied(unlabeled));
+  EXPECT_FALSE(unlabeled->hasSemantics());
+  EXPECT_NE(tree->classSet().indexOf(300), kNoClass);
+
+  // PLY labels are in the input id space.
+  const std::string ply = dir_ + "/map.ply";
+  EXPECT_EQ(saveMap(*tree, ply, MapFormat::kPly), 6u);
+  std::ifstream in(ply);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find(" 300 "), std::string::npos);
+  EXPECT_NE(text.find(" 50 "), std::string::npos);
+
+  OfflineMappingOptions one = options();
+  one.max_scans = 1;
+  auto single = buildSemanticMapFromSequence(one, nullptr);
+  EXPECT_EQ(single->search(13.05, -0.95, 0.05), nullptr);
+}
+
+TEST_F(OfflineMappingTest, BadInputsNameTheFile) {
+  writeBinary<std::uint32_t>(dir_ + "/labels/000001.label", {50u, 50u});  // 2 labels, 3 points
+  try {
+    buildSemanticMapFromSequence(options(), nullptr);
+    FAIL() << "expected an error";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("000001.label"), std::string::npos) << e.what();
+  }
+  std::ofstream(dir_ + "/poses.txt") << "1 0 0 0 0 1 0 0 0 0 1\n";
+  try {
+    readOdometryPoses(dir_ + "/poses.txt");
+    FAIL() << "expected an error";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("poses.txt:1"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
