@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/drive_timeline.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
@@ -397,6 +398,53 @@ TEST(KittiRawDrive, VelodyneCountMismatchNamesTheSensorFolder) {
   }
   writeFile(dir + "/velodyne_points/data/0000000001.bin", std::string(16, '\0'));
   expectFormatError([&] { RawDrive drive(dir); }, {dir + "/velodyne_points", "2 files"});
+  fs::remove_all(fs::path(dir).parent_path());
+}
+
+// ---------------------------------------------------------------------------- timeline
+TEST(KittiDriveTimeline, MergesSensorsInTimeOrderWithinTheWindow) {
+  const std::string dir = makeTempDir("kitti_timeline") + "/2011_09_26_drive_0002_sync";
+  // OXTS at 0.0, 0.1, 0.2, 0.3 s; velodyne at 0.05, 0.1 (tie with OXTS), 0.25 s.
+  std::string oxts_stamps;
+  for (int i = 0; i < 4; ++i) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/oxts/data/%010d.txt", i);
+    writeFile(dir + name, std::string(kLine0001Frame0) + "\n");
+    oxts_stamps += "2011-09-26 13:02:25." + std::to_string(i) + "00000000\n";
+  }
+  writeFile(dir + "/oxts/timestamps.txt", oxts_stamps);
+  for (int i = 0; i < 3; ++i) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/velodyne_points/data/%010d.bin", i);
+    writeFile(dir + name, std::string(16, '\0'));
+  }
+  writeFile(dir + "/velodyne_points/timestamps.txt",
+            "2011-09-26 13:02:25.05\n2011-09-26 13:02:25.1\n2011-09-26 13:02:25.25\n");
+  const RawDrive drive(dir);
+  EXPECT_FALSE(drive.hasCalibration());
+  auto events = buildDriveTimeline(drive, TimelineOptions());
+  ASSERT_EQ(events.size(), 7u);
+  const std::vector<std::pair<DriveSensor, std::size_t>> expected = {
+      {DriveSensor::kOxts, 0},     {DriveSensor::kVelodyne, 0}, {DriveSensor::kOxts, 1},
+      {DriveSensor::kVelodyne, 1}, {DriveSensor::kOxts, 2},     {DriveSensor::kVelodyne, 2},
+      {DriveSensor::kOxts, 3}};
+  for (std::size_t i = 0; i < events.size(); ++i) {
+    EXPECT_EQ(events[i].sensor, expected[i].first) << i;
+    EXPECT_EQ(events[i].frame, expected[i].second) << i;
+  }
+  // Window [0.1, 0.25): OXTS 1, 2 and velodyne 1.
+  TimelineOptions window;
+  window.start_offset_s = 0.1;
+  window.duration_s = 0.15;
+  events = buildDriveTimeline(drive, window);
+  ASSERT_EQ(events.size(), 3u);
+  EXPECT_EQ(events[0].frame, 1u);
+  EXPECT_EQ(events[1].sensor, DriveSensor::kVelodyne);
+  EXPECT_EQ(events[2].frame, 2u);
+  window.velodyne = false;
+  EXPECT_EQ(buildDriveTimeline(drive, window).size(), 2u);
+  window.start_offset_s = -1;
+  EXPECT_THROW(buildDriveTimeline(drive, window), std::invalid_argument);
   fs::remove_all(fs::path(dir).parent_path());
 }
 
