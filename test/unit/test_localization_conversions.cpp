@@ -1,0 +1,164 @@
+// inekf_node's message conversions (src/ros/localization_conversions.cpp).
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <limits>
+
+#include "inekf_semantic_mapping/ros/localization_conversions.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+Eigen::Matrix3d yawRotation(double yaw) {
+  return Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+}
+
+Eigen::Matrix<double, 6, 6> asMatrix(const std::array<double, 36>& values) {
+  return Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(values.data());
+}
+
+TEST(RosPoseCovariance, RotationBlockIsExpressedAboutTheMapAxes) {
+  // Heading north (yaw 90 deg): the body x axis is the map y axis, body y is map -x.
+  estimation::PoseCovariance body = estimation::PoseCovariance::Zero();
+  body.topLeftCorner<3, 3>() = Eigen::Vector3d(1.0, 2.0, 3.0).asDiagonal();
+  body.bottomRightCorner<3, 3>() = Eigen::Vector3d(0.01, 0.04, 0.09).asDiagonal();
+  body(0, 3) = body(3, 0) = 0.05;  // position x with the body-x rotation (roll)
+  const Eigen::Matrix<double, 6, 6> ros = asMatrix(rosPoseCovariance(yawRotation(M_PI / 2), body));
+
+  const Eigen::Matrix3d position_block = ros.topLeftCorner<3, 3>();
+  EXPECT_TRUE(position_block.isApprox(body.topLeftCorner(3, 3)));
+  EXPECT_NEAR(ros(3, 3), 0.04, 1e-12);  // about map x = about body -y
+  EXPECT_NEAR(ros(4, 4), 0.01, 1e-12);  // about map y = about body x
+  EXPECT_NEAR(ros(5, 5), 0.09, 1e-12);
+  EXPECT_NEAR(ros(0, 4), 0.05, 1e-12);  // the roll correlation moved to the map-y rotation
+  EXPECT_NEAR(ros(0, 3), 0.0, 1e-12);
+  EXPECT_TRUE(ros.isApprox(ros.transpose()));
+}
+
+TEST(RosPoseCovariance, MatchesTheFirstOrderMapErrorOfSampledBodyErrors) {
+  // R Exp(delta) = Exp(R delta) R: a body error delta is the map error R delta.
+  const Eigen::Matrix3d rotation =
+      (Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized())).toRotationMatrix();
+  estimation::PoseCovariance body = estimation::PoseCovariance::Identity() * 1e-4;
+  body(3, 4) = body(4, 3) = 5e-5;
+  const Eigen::Matrix<double, 6, 6> ros = asMatrix(rosPoseCovariance(rotation, body));
+  const Eigen::Vector3d delta(1e-3, -2e-3, 0.5e-3);
+  const Eigen::Matrix3d perturbed =
+      rotation * Eigen::AngleAxisd(delta.norm(), delta.normalized()).toRotationMatrix();
+  const Eigen::AngleAxisd map_error(perturbed * rotation.transpose());
+  EXPECT_TRUE((map_error.angle() * map_error.axis()).isApprox(rotation * delta, 1e-6));
+  const Eigen::Matrix3d rotation_block = ros.bottomRightCorner(3, 3);
+  const Eigen::Matrix3d expected = rotation * body.bottomRightCorner(3, 3) * rotation.transpose();
+  EXPECT_TRUE(rotation_block.isApprox(expected));
+}
+
+TEST(FixCovariance, FloorsSmallSigmasAndKeepsLargerOnes) {
+  sensor_msgs::NavSatFix fix;
+  fix.position_covariance = {0.01, 0.002, 0, 0.002, 4.0, 0, 0, 0, 9.0};
+  fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_KNOWN;
+  const Eigen::Matrix3d covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
+  EXPECT_NEAR(covariance(0, 0), 0.09, 1e-12);
+  EXPECT_NEAR(covariance(1, 1), 4.0, 1e-12);
+  EXPECT_NEAR(covariance(2, 2), 9.0, 1e-12);
+  EXPECT_NEAR(covariance(0, 1), 0.002, 1e-12);
+}
+
+TEST(FixCovariance, UnknownOrNonFiniteCovarianceUsesTheDefaults) {
+  sensor_msgs::NavSatFix fix;
+  fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN;
+  fix.position_covariance = {4, 0, 0, 0, 4, 0, 0, 0, 4};
+  Eigen::Matrix3d covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
+  EXPECT_TRUE(covariance.isApprox(Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal().toDenseMatrix()));
+  fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_DIAGONAL_KNOWN;
+  fix.position_covariance[4] = kNaN;
+  covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
+  EXPECT_TRUE(covariance.allFinite());
+  EXPECT_NEAR(covariance(1, 1), 2.25, 1e-12);
+}
+
+TEST(UsableFix, RejectsNoFixAndNaN) {
+  sensor_msgs::NavSatFix fix;
+  fix.latitude = 49.0;
+  fix.longitude = 8.4;
+  fix.altitude = 110.0;
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_FIX;
+  EXPECT_TRUE(isUsableFix(fix));
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_NO_FIX;
+  EXPECT_FALSE(isUsableFix(fix));
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_GBAS_FIX;
+  fix.longitude = kNaN;
+  EXPECT_FALSE(isUsableFix(fix));
+}
+
+TEST(Velocity, MapFrameIsTakenAsIsAndBodyFrameIsRotated) {
+  geometry_msgs::TwistStamped velocity;
+  velocity.twist.linear.x = 10.0;
+  velocity.header.frame_id = "map";
+  EXPECT_TRUE(velocityInMap(velocity, std::nullopt)->isApprox(Eigen::Vector3d(10, 0, 0)));
+  velocity.header.frame_id = "imu_link";
+  EXPECT_FALSE(velocityInMap(velocity, std::nullopt).has_value());
+  const auto rotated = velocityInMap(velocity, yawRotation(M_PI / 2));
+  ASSERT_TRUE(rotated.has_value());
+  EXPECT_TRUE(rotated->isApprox(Eigen::Vector3d(0, 10, 0)));
+  velocity.twist.linear.y = kNaN;
+  EXPECT_FALSE(velocityInMap(velocity, yawRotation(0.0)).has_value());
+}
+
+TEST(Imu, SampleAndOrientation) {
+  sensor_msgs::Imu message;
+  message.header.stamp = ros::Time(1317386425, 663884440);
+  message.angular_velocity.z = 0.1;
+  message.linear_acceleration.z = 9.8;
+  message.orientation.w = std::cos(0.25);
+  message.orientation.z = std::sin(0.25);  // yaw 0.5 rad
+  const auto sample = imuSampleFromMessage(message);
+  ASSERT_TRUE(sample.has_value());
+  EXPECT_NEAR(sample->stamp_s, 1317386425.663884440, 1e-6);
+  EXPECT_DOUBLE_EQ(sample->angular_velocity.z(), 0.1);
+  EXPECT_DOUBLE_EQ(sample->specific_force.z(), 9.8);
+  const auto orientation = imuOrientation(message);
+  ASSERT_TRUE(orientation.has_value());
+  EXPECT_TRUE(orientation->isApprox(yawRotation(0.5), 1e-12));
+
+  message.orientation_covariance[0] = -1.0;  // sensor_msgs/Imu: "no orientation"
+  EXPECT_FALSE(imuOrientation(message).has_value());
+  message.orientation_covariance[0] = 0.0;
+  message.orientation.w = message.orientation.z = 0.0;
+  EXPECT_FALSE(imuOrientation(message).has_value());
+  message.linear_acceleration.x = kNaN;
+  EXPECT_FALSE(imuSampleFromMessage(message).has_value());
+}
+
+TEST(Odometry, TwistIsInTheBodyFrameAndBiasCorrected) {
+  estimation::NavState state;
+  state.rotation = yawRotation(M_PI / 2);
+  state.velocity_map = Eigen::Vector3d(0.0, 5.0, 0.0);  // driving north, forward
+  state.position_map = Eigen::Vector3d(1.0, 2.0, 3.0);
+  state.gyro_bias = Eigen::Vector3d(0.0, 0.0, 0.01);
+  nav_msgs::Odometry odometry;
+  fillOdometry(state, estimation::PoseCovariance::Identity(), Eigen::Vector3d(0, 0, 0.11),
+               &odometry);
+  EXPECT_NEAR(odometry.twist.twist.linear.x, 5.0, 1e-12);
+  EXPECT_NEAR(odometry.twist.twist.linear.y, 0.0, 1e-12);
+  EXPECT_NEAR(odometry.twist.twist.angular.z, 0.10, 1e-12);
+  EXPECT_DOUBLE_EQ(odometry.pose.pose.position.z, 3.0);
+  EXPECT_NEAR(odometry.pose.pose.orientation.z, std::sin(M_PI / 4), 1e-12);
+  EXPECT_NEAR(odometry.pose.covariance[0], 1.0, 1e-12);
+
+  EXPECT_TRUE(isFinite(state, estimation::PoseCovariance::Identity()));
+  state.position_map.x() = kNaN;
+  EXPECT_FALSE(isFinite(state, estimation::PoseCovariance::Identity()));
+}
+
+}  // namespace
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
