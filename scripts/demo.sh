@@ -50,6 +50,10 @@ else
   generate_s=0
 fi
 
+# The map frame is the devkit Mercator frame at the drive's first fix (as the ground truth's):
+# inekf_node gets that origin instead of its first noisy fix, so the two trajectories compare.
+read -r origin_lat origin_lon origin_alt _ <"$(ls "$drive"/oxts/data/*.txt | head -n 1)"
+
 log "converting $drive into a bag (kitti2bag, GPS: 1.5 m / 3 m noise, every 10th fix)"
 t0=$(date +%s)
 "$ISM_BIN/kitti2bag" --drive "$drive" --calib-dir "$(dirname "$drive")" --output "$out/drive.bag" \
@@ -76,7 +80,7 @@ export DISPLAY=$display LIBGL_ALWAYS_SOFTWARE=1
 
 log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port)"
 roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" \
-  rviz:=false play_delay:=5 gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
+  rviz:=false play_delay:=5 origin_lat:="$origin_lat" origin_lon:="$origin_lon" origin_alt:="$origin_alt" gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
 pids+=($!)
 until rosnode list 2>/dev/null | grep -q /semantic_octomap_node; do sleep 0.5; done
 "$ISM_ROOT/scripts/pipeline_monitor.py" _output_dir:="$out" >"$out/monitor.log" 2>&1 &
