@@ -45,15 +45,11 @@ RawDrive::RawDrive(const std::string& drive_dir, const std::string& calib_dir) {
                            "image_0N/ each with data/ and timestamps.txt)");
   }
 
-  const std::string calibration_candidate =
+  // Missing calibration is not an error (IMU/GPS-only drives); missingParts() names the folder
+  // that was searched so that a mistyped --calib-dir shows up in the warning.
+  calibration_search_dir_ =
       calib_dir.empty() ? fs::absolute(path).parent_path().string() : calib_dir;
-  if (hasRawCalibration(calibration_candidate)) {
-    calibration_dir_ = calibration_candidate;
-  } else if (!calib_dir.empty()) {
-    throw KittiFormatError(calib_dir,
-                           "calibration folder lacks calib_cam_to_cam.txt / calib_imu_to_velo.txt "
-                           "/ calib_velo_to_cam.txt");
-  }
+  if (hasRawCalibration(calibration_search_dir_)) calibration_dir_ = calibration_search_dir_;
 }
 
 SensorStream RawDrive::openSensor(const std::string& name) const {
@@ -137,7 +133,9 @@ std::vector<std::string> RawDrive::missingParts() const {
   for (const auto& camera : cameras_) {
     if (!camera.present) missing.push_back(camera.name);
   }
-  if (!hasCalibration()) missing.push_back("calibration");
+  if (!hasCalibration()) {
+    missing.push_back("calibration (no calib_*.txt in " + calibration_search_dir_ + ")");
+  }
   return missing;
 }
 

@@ -33,7 +33,8 @@ class RawDrive {
 
   // Opens the drive: finds the sensors, reads their timestamps and checks that each sensor has
   // as many data files as timestamps (KittiFormatError naming the folder otherwise). calib_dir
-  // empty: the drive's parent folder (the date folder). Missing calibration is allowed.
+  // empty: the drive's parent folder (the date folder). Missing calibration is allowed (also in
+  // an explicit calib_dir): hasCalibration() is then false and missingParts() says so.
   explicit RawDrive(const std::string& drive_dir, const std::string& calib_dir = "");
 
   const std::string& driveDir() const { return drive_dir_; }
@@ -55,7 +56,8 @@ class RawDrive {
   bool hasCalibration() const { return !calibration_dir_.empty(); }
   RawCalibration readCalibration() const;  // throws when !hasCalibration()
 
-  // Human-readable names of what is absent ("velodyne_points", "image_02", "calibration"),
+  // Human-readable names of what is absent ("velodyne_points", "image_02",
+  // "calibration (no calib_*.txt in DIR)"),
   // for one warning that tells the user what will not be published.
   std::vector<std::string> missingParts() const;
 
@@ -70,6 +72,7 @@ class RawDrive {
   SensorStream oxts_, velodyne_;
   SensorStream cameras_[kNumCameras];
   std::string calibration_dir_;
+  std::string calibration_search_dir_;
 };
 
 }  // namespace kitti
