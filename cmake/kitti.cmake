@@ -39,3 +39,9 @@ if(TARGET test_kitti_conversions)
     KITTI2BAG_PATH="$<TARGET_FILE:kitti2bag>")
   add_dependencies(test_kitti_conversions kitti2bag)
 endif()
+
+if(benchmark_FOUND)
+  ism_add_tool(bench_kitti SOURCES bench/bench_kitti.cpp
+    LINK ${PROJECT_NAME}_kitti_ros benchmark::benchmark)
+  target_compile_definitions(bench_kitti PRIVATE ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
+endif()

@@ -36,12 +36,12 @@ OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_er
                                  ") is not a number: '" + tokens[i] + "'");
     }
   }
-  // The pose must be finite; the remaining doubles may legitimately be NaN in broken logs and
-  // are left for consumers to reject.
-  for (int i = 0; i < 6; ++i) {
+  // strtod accepts "nan" and "inf": reject them here so that no NaN reaches a filter.
+  for (int i = 0; i < kOxtsFieldCount; ++i) {
     if (!std::isfinite(values[i])) {
-      throw KittiFormatError(file_for_errors, line_number,
-                             std::string("field ") + kFieldNames[i] + " is not finite");
+      throw KittiFormatError(
+          file_for_errors, line_number,
+          std::string("field ") + kFieldNames[i] + " is not finite: '" + tokens[i] + "'");
     }
   }
   int flags[5];

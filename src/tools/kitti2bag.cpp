@@ -9,6 +9,7 @@
 #include <tf2_msgs/TFMessage.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -87,11 +88,24 @@ Arguments parseArguments(int argc, char** argv) {
     } else if (flag == "--gps-sigma-v") {
       args.gps.sigma_vertical_m = parseNumber(flag, value());
     } else if (flag == "--gps-every") {
-      args.gps.every_n_frames = static_cast<int>(parseNumber(flag, value()));
+      const double every = parseNumber(flag, value());
+      if (every != std::floor(every) || every < 1 || every > 1e6) {
+        throw std::invalid_argument(flag + " must be an integer >= 1");
+      }
+      args.gps.every_n_frames = static_cast<int>(every);
     } else if (flag == "--gps-outage") {
       args.gps.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(value()));
     } else if (flag == "--seed") {
-      args.gps.seed = static_cast<std::uint64_t>(parseNumber(flag, value()));
+      const std::string text = value();
+      std::size_t used = 0;
+      try {
+        args.gps.seed = std::stoull(text, &used);
+      } catch (const std::logic_error&) {
+        used = 0;
+      }
+      if (used == 0 || used != text.size()) {
+        throw std::invalid_argument(flag + ": '" + text + "' is not a non-negative integer");
+      }
     } else if (flag == "--no-velodyne") {
       args.timeline.velodyne = false;
     } else if (flag == "--no-camera") {

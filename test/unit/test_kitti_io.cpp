@@ -153,6 +153,9 @@ TEST(KittiOxts, BadLinesNameFileLineAndField) {
   std::string nan_lat = line;
   nan_lat.replace(0, 15, "nan");
   expectFormatError([&] { parseOxtsLine(nan_lat, "d.txt", 1); }, {"d.txt", "lat"});
+  std::string inf_wz = line;
+  inf_wz.replace(inf_wz.find("-0.017909034508194"), 18, "inf");
+  expectFormatError([&] { parseOxtsLine(inf_wz, "e.txt", 2); }, {"e.txt:2", "wz", "not finite"});
   expectFormatError([&] { readOxtsFile("/nonexistent/0000000000.txt"); },
                     {"/nonexistent/0000000000.txt"});
 }

@@ -33,7 +33,7 @@ constexpr int kOxtsFieldCount = 30;
 // Parses one line of 30 whitespace-separated numbers. The integer flags are accepted as
 // "4" or "4.00000000000000" (2011_10_03 files) but not as "4.5". Throws KittiFormatError
 // naming file_for_errors:line_number and the field on a short line, an extra value or a
-// non-numeric/non-finite value (lat/lon/alt/roll/pitch/yaw must be finite).
+// non-numeric or non-finite (nan, inf) value.
 OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_errors,
                          int line_number);
 
