@@ -103,7 +103,7 @@ Arguments parseArguments(int argc, char** argv) {
       } catch (const std::logic_error&) {
         used = 0;
       }
-      if (used == 0 || used != text.size()) {
+      if (used == 0 || used != text.size() || text[0] == '-') {
         throw std::invalid_argument(flag + ": '" + text + "' is not a non-negative integer");
       }
     } else if (flag == "--no-velodyne") {
