@@ -68,14 +68,15 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a
 }
 
 Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
-                           const ImuNoise& noise, double noise_scale, double dt) {
+                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
+                           double dt) {
   Eigen::Matrix<double, 15, 1> diagonal;
-  const double s2 = noise_scale * noise_scale;
-  diagonal << Eigen::Vector3d::Constant(s2 * noise.gyro_noise_density * noise.gyro_noise_density),
-      Eigen::Vector3d::Constant(s2 * noise.accel_noise_density * noise.accel_noise_density),
-      Eigen::Vector3d::Zero(),
-      Eigen::Vector3d::Constant(s2 * noise.gyro_bias_random_walk * noise.gyro_bias_random_walk),
-      Eigen::Vector3d::Constant(s2 * noise.accel_bias_random_walk * noise.accel_bias_random_walk);
+  const double gyro_sigma = gyro_noise_scale * noise.gyro_noise_density;
+  const double accel_sigma = accel_noise_scale * noise.accel_noise_density;
+  diagonal << Eigen::Vector3d::Constant(gyro_sigma * gyro_sigma),
+      Eigen::Vector3d::Constant(accel_sigma * accel_sigma), Eigen::Vector3d::Zero(),
+      Eigen::Vector3d::Constant(noise.gyro_bias_random_walk * noise.gyro_bias_random_walk),
+      Eigen::Vector3d::Constant(noise.accel_bias_random_walk * noise.accel_bias_random_walk);
   // Noise injected at time s reaches dt through Phi(dt - s): Simpson over s.
   const Matrix15d phi_full = leftErrorTransition(w, a, dt);
   const Matrix15d phi_half = leftErrorTransition(w, a, 0.5 * dt);

@@ -63,7 +63,7 @@ void ImuFilterBase::propagate(const ImuSample& sample, double dt) {
   const NavState next =
       integrateImu(state_, sample.angular_velocity, sample.specific_force, noise_.gravity_mps2, dt);
   const Matrix15d phi = leftErrorTransition(w, a, dt);
-  const Matrix15d q = leftProcessNoise(w, a, noise_, noise_scale_, dt);
+  const Matrix15d q = leftProcessNoise(w, a, noise_, gyro_noise_scale_, accel_noise_scale_, dt);
   ErrorCovariance next_covariance;
   if (type() == FilterType::kLeftInvariant) {
     next_covariance = phi * covariance_ * phi.transpose() + q;

@@ -26,7 +26,7 @@ class YamlReader {
 
   void number(const std::string& section, const std::string& key, double* out, bool positive) {
     const YAML::Node node = lookup(section, key);
-    if (!node) return;
+    if (!node.IsDefined()) return;
     double value;
     try {
       value = node.as<double>();
@@ -41,7 +41,7 @@ class YamlReader {
 
   void boolean(const std::string& section, const std::string& key, bool* out) {
     const YAML::Node node = lookup(section, key);
-    if (!node) return;
+    if (!node.IsDefined()) return;
     try {
       *out = node.as<bool>();
     } catch (const YAML::Exception&) {
@@ -51,7 +51,7 @@ class YamlReader {
 
   void filterType(const std::string& key, FilterType* out) {
     const YAML::Node node = lookup("", key);
-    if (!node) return;
+    if (!node.IsDefined()) return;
     try {
       *out = filterTypeFromString(node.as<std::string>());
     } catch (const std::exception& e) {
@@ -76,13 +76,20 @@ class YamlReader {
   }
 
  private:
+  // Read through a const node: operator[] on a non-const node would insert the key.
   YAML::Node lookup(const std::string& section, const std::string& key) {
     used_.insert(section.empty() ? key : section + "." + key);
-    if (section.empty()) return root_[key];
-    const YAML::Node parent = root_[section];
-    if (!parent) return YAML::Node();
+    const YAML::Node& root = root_;
+    if (section.empty()) return defined(root[key]);
+    const YAML::Node parent = root[section];
+    if (!parent.IsDefined() || parent.IsNull()) return YAML::Node(YAML::NodeType::Undefined);
     if (!parent.IsMap()) fail("", section, "must be a mapping");
-    return parent[key];
+    const YAML::Node& const_parent = parent;
+    return defined(const_parent[key]);
+  }
+
+  static YAML::Node defined(const YAML::Node& node) {
+    return node.IsDefined() && !node.IsNull() ? node : YAML::Node(YAML::NodeType::Undefined);
   }
 
   [[noreturn]] void fail(const std::string& section, const std::string& key,
@@ -127,7 +134,10 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("gps", "max_fix_age_s", &config.max_fix_age_s, false);
   reader.number("imu", "max_gap_s", &config.max_imu_gap_s, true);
   reader.number("imu", "gap_noise_scale", &config.gap_noise_scale, true);
-  reader.number("imu", "interpolated_noise_scale", &config.interpolated_noise_scale, true);
+  reader.number("imu", "interpolated_gyro_noise_scale_per_s",
+                &config.interpolated_gyro_noise_scale_per_s, false);
+  reader.number("imu", "interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale,
+                true);
   reader.boolean("", "init_orientation_from_reference", &config.init_orientation_from_reference);
   reader.rejectUnknown({"node"});
   return config;
@@ -153,7 +163,7 @@ void Localizer::initialize(const NavState& initial) {
 
 void Localizer::initialize(const NavState& initial, const ErrorCovariance& world_covariance) {
   filter_->initialize(initial, filter_->fromWorldCovariance(initial, world_covariance));
-  filter_->setProcessNoiseScale(1.0);
+  filter_->setProcessNoiseScale(1.0, 1.0);
   initialized_ = true;
 }
 
@@ -184,12 +194,23 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
     return ImuStatus::kDroppedOutOfOrder;
   }
   const bool gap = dt > config_.max_imu_gap_s;
-  double scale = 1.0;
-  if (gap) scale = std::max(scale, config_.gap_noise_scale);
-  if (sample.interpolated) scale = std::max(scale, config_.interpolated_noise_scale);
-  filter_->setProcessNoiseScale(scale);
+  double gyro_scale = 1.0, accel_scale = 1.0;
+  if (gap) {
+    gyro_scale = std::max(gyro_scale, config_.gap_noise_scale);
+    accel_scale = std::max(accel_scale, config_.gap_noise_scale);
+  }
+  if (sample.interpolated) {
+    // The run began at the last real sample, the start of this sample's interval.
+    if (interpolated_run_start_s_ < 0.0) interpolated_run_start_s_ = filter_->state().stamp_s;
+    const double run_s = sample.stamp_s - interpolated_run_start_s_;
+    gyro_scale = std::max(gyro_scale, config_.interpolated_gyro_noise_scale_per_s * run_s);
+    accel_scale = std::max(accel_scale, config_.interpolated_accel_noise_scale);
+  } else {
+    interpolated_run_start_s_ = -1.0;
+  }
+  filter_->setProcessNoiseScale(gyro_scale, accel_scale);
   filter_->propagate(sample, dt);
-  filter_->setProcessNoiseScale(1.0);
+  filter_->setProcessNoiseScale(1.0, 1.0);
   last_imu_ = sample;
   ++statistics_.imu_used;
   if (gap) {
@@ -266,6 +287,7 @@ void Localizer::reset() {
   last_imu_.reset();
   reference_rotation_.reset();
   reference_velocity_.setZero();
+  interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
 }
 

@@ -31,9 +31,10 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& angular_velocity,
 // Discrete process noise of the left-invariant error over dt, Simpson's rule of
 // int_0^dt Phi(s) L Phi(s)^T ds with L = diag(sg^2, sa^2, 0, sbg^2, sba^2) (densities squared);
 // exact for the dt^3/3 position term that the usual Phi L Phi^T dt overstates threefold.
+// The scales multiply the white-noise densities only (not the bias random walks).
 Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
                            const Eigen::Vector3d& specific_force, const ImuNoise& noise,
-                           double noise_scale, double dt);
+                           double gyro_noise_scale, double accel_noise_scale, double dt);
 
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

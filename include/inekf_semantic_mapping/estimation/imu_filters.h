@@ -17,7 +17,10 @@ class ImuFilterBase : public NavigationFilter {
 
   void initialize(const NavState& state, const ErrorCovariance& covariance) override;
   void propagate(const ImuSample& sample, double dt) override;
-  void setProcessNoiseScale(double scale) override { noise_scale_ = scale; }
+  void setProcessNoiseScale(double gyro_scale, double accel_scale) override {
+    gyro_noise_scale_ = gyro_scale;
+    accel_noise_scale_ = accel_scale;
+  }
   const NavState& state() const override { return state_; }
   ErrorCovariance covariance() const override { return covariance_; }
   PoseCovariance poseCovariance() const override;
@@ -41,7 +44,8 @@ class ImuFilterBase : public NavigationFilter {
   static bool finiteFix(const PositionFix& fix);
 
   ImuNoise noise_;
-  double noise_scale_ = 1.0;
+  double gyro_noise_scale_ = 1.0;
+  double accel_noise_scale_ = 1.0;
   NavState state_;
   ErrorCovariance covariance_ = ErrorCovariance::Identity();
 };

@@ -9,7 +9,8 @@
 //    counted. A gap longer than max_imu_gap_s is bridged by propagating over it with the process
 //    noise inflated by gap_noise_scale (the covariance grows honestly); the status says kGap.
 //    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the node calls reset().
-//  - A sample flagged `interpolated` propagates with noise inflated by interpolated_noise_scale.
+//  - A sample flagged `interpolated` propagates with the gyro/accel white noise inflated (see
+//    interpolated_gyro_noise_scale_per_s / interpolated_accel_noise_scale).
 //  - A fix whose stamp differs from the state's by at most max_fix_age_s is applied at the
 //    state's time with its covariance inflated by (speed * age)^2 per axis; older or newer ones
 //    are rejected ("stale fix"). Fix sigmas below min_gps_sigma_m are raised to it.
@@ -42,8 +43,13 @@ struct LocalizerConfig {
   double gps_gate_mahalanobis_squared = 30.0;  // 3 dof
   double min_gps_sigma_m = 0.3;
   double max_imu_gap_s = 0.5;
-  double gap_noise_scale = 10.0;           // multiplies the noise densities over a gap
-  double interpolated_noise_scale = 10.0;  // ... over a sample flagged `interpolated`
+  double gap_noise_scale = 10.0;  // multiplies the noise densities over a gap
+  // Over a sample flagged `interpolated`: KITTI's linear interpolation of the gyro across a
+  // dropout integrates to the wrong heading change (up to ~12 deg over a 1.4 s run, nothing
+  // over one or two frames), so the gyro noise scale grows with the time spent inside the run:
+  // scale = max(1, interpolated_gyro_noise_scale_per_s * seconds since the run began).
+  double interpolated_gyro_noise_scale_per_s = 100.0;
+  double interpolated_accel_noise_scale = 10.0;
   double max_fix_age_s = 0.5;
 
   // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
@@ -106,6 +112,7 @@ class Localizer {
   std::optional<Eigen::Matrix3d> reference_rotation_;
   Eigen::Vector3d reference_velocity_ = Eigen::Vector3d::Zero();
   Statistics statistics_;
+  double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
 };
 
 }  // namespace estimation

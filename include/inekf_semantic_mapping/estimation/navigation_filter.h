@@ -31,9 +31,10 @@ class NavigationFilter {
   // The state's stamp advances by dt. Non-finite input or dt <= 0 is ignored (state kept).
   virtual void propagate(const ImuSample& sample, double dt) = 0;
 
-  // Multiplies the noise densities (white and random walk) used by propagate() from now on;
-  // the Localizer raises it over gaps and interpolated samples. 1 = nominal.
-  virtual void setProcessNoiseScale(double scale) = 0;
+  // Multiplies the white gyro/accel noise densities used by propagate() from now on (the bias
+  // random walks stay: a gap says nothing about the biases); the Localizer raises it over gaps
+  // and interpolated samples. 1 = nominal.
+  virtual void setProcessNoiseScale(double gyro_scale, double accel_scale) = 0;
 
   // GPS position fix of the IMU in the map frame. Rejected (state unchanged) when the squared
   // Mahalanobis distance of the innovation exceeds gate_mahalanobis_squared, when the input is
