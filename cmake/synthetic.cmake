@@ -1,1 +1,20 @@
-# Component: synthetic (targets are added by the component's owner)
+# Component: synthetic — KITTI-format drive generator with full ground truth (world, route,
+# sensors), the generate_synthetic_drive tool, unit tests and a benchmark.
+find_package(Threads REQUIRED)
+ism_add_core_library(${PROJECT_NAME}_synthetic
+  SOURCES
+    src/synthetic/world.cpp
+    src/synthetic/route.cpp
+    src/synthetic/sensors.cpp
+    src/synthetic/drive_generator.cpp
+  LINK ${PROJECT_NAME}_kitti opencv_core opencv_imgcodecs Threads::Threads
+  SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
+
+ism_add_tool(generate_synthetic_drive
+  SOURCES src/tools/generate_synthetic_drive.cpp
+  LINK ${PROJECT_NAME}_synthetic)
+
+ism_add_gtest(test_synthetic_world SOURCES test/unit/test_synthetic_world.cpp
+  LINK ${PROJECT_NAME}_synthetic)
+ism_add_gtest(test_synthetic_drive SOURCES test/unit/test_synthetic_drive.cpp
+  LINK ${PROJECT_NAME}_synthetic ${PROJECT_NAME}_kitti opencv_imgcodecs)

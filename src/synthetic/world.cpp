@@ -1,0 +1,942 @@
+#include "inekf_semantic_mapping/synthetic/world.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/synthetic/route.h"
+
+namespace inekf_semantic_mapping {
+namespace synthetic {
+namespace cs = cityscapes;
+
+// ---------------------------------------------------------------------------------------------
+// Ground
+// ---------------------------------------------------------------------------------------------
+double GroundSurface::height(double x, double y) const {
+  return offset + amplitude_x * std::sin(wavenumber_x * x + phase_x) +
+         amplitude_y * std::sin(wavenumber_y * y + phase_y);
+}
+
+Eigen::Vector2d GroundSurface::gradient(double x, double y) const {
+  return {amplitude_x * wavenumber_x * std::cos(wavenumber_x * x + phase_x),
+          amplitude_y * wavenumber_y * std::cos(wavenumber_y * y + phase_y)};
+}
+
+Eigen::Matrix2d GroundSurface::hessian(double x, double y) const {
+  Eigen::Matrix2d h = Eigen::Matrix2d::Zero();
+  h(0, 0) = -amplitude_x * wavenumber_x * wavenumber_x * std::sin(wavenumber_x * x + phase_x);
+  h(1, 1) = -amplitude_y * wavenumber_y * wavenumber_y * std::sin(wavenumber_y * y + phase_y);
+  return h;
+}
+
+double GroundSurface::maxSlope() const {
+  return std::hypot(amplitude_x * wavenumber_x, amplitude_y * wavenumber_y);
+}
+
+double GroundSurface::maxCurvature() const {
+  return std::max(std::abs(amplitude_x) * wavenumber_x * wavenumber_x,
+                  std::abs(amplitude_y) * wavenumber_y * wavenumber_y);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Streets
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+// Signed offset of v from the nearest centre line (large when there is none).
+double nearestOffset(const std::vector<double>& centres, double v) {
+  double best = std::numeric_limits<double>::infinity();
+  for (double c : centres) {
+    if (std::abs(v - c) < std::abs(best)) best = v - c;
+  }
+  return best;
+}
+
+}  // namespace
+
+double StreetGrid::distanceToNearestStreet(double x, double y) const {
+  return std::min(std::abs(nearestOffset(vertical_x, x)), std::abs(nearestOffset(horizontal_y, y)));
+}
+
+std::uint8_t StreetGrid::groundLabel(double x, double y) const {
+  const double d = distanceToNearestStreet(x, y);
+  if (d < road_half_width) return cs::kRoad;
+  if (d < road_half_width + sidewalk_width) return cs::kSidewalk;
+  return cs::kTerrain;
+}
+
+bool StreetGrid::isLaneMarking(double x, double y) const {
+  constexpr double kHalfLineWidth = 0.075;
+  constexpr double kDashPeriod = 6.0, kDashLength = 3.0;
+  const double dx = std::abs(nearestOffset(vertical_x, x));
+  const double dy = std::abs(nearestOffset(horizontal_y, y));
+  auto marked = [&](double across, double along, double other_across) {
+    if (other_across < road_half_width) return false;  // no paint inside intersections
+    if (std::abs(across - lane_half_width) < kHalfLineWidth) return true;
+    const double phase = along - kDashPeriod * std::floor(along / kDashPeriod);
+    return across < kHalfLineWidth && phase < kDashLength;
+  };
+  return (dx < road_half_width && marked(dx, y, dy)) || (dy < road_half_width && marked(dy, x, dx));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Primitives
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+inline Eigen::Vector3d rotateZ(const Eigen::Vector3d& v, double c, double s) {
+  return {c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z()};
+}
+
+}  // namespace
+
+namespace {
+
+// The intersection proper, with the box's cos/sin(yaw) precomputed (the world caches them: the
+// trigonometry was 15% of a camera frame).
+bool intersectPrimitive(const Primitive& primitive, double c, double s,
+                        const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double t_min,
+                        double t_max, double* t_hit, Eigen::Vector3d* normal) {
+  const Eigen::Vector3d& half_size = primitive.half_size;
+  const Eigen::Vector3d o = origin - primitive.center;
+  switch (primitive.type) {
+    case PrimitiveType::kBox: {
+      const Eigen::Vector3d lo = rotateZ(o, c, -s);
+      const Eigen::Vector3d ld = rotateZ(dir, c, -s);
+      double t_near = -std::numeric_limits<double>::infinity();
+      double t_far = std::numeric_limits<double>::infinity();
+      int axis = -1;
+      for (int i = 0; i < 3; ++i) {
+        if (std::abs(ld[i]) < 1e-12) {
+          if (std::abs(lo[i]) > half_size[i]) return false;
+          continue;
+        }
+        double t1 = (-half_size[i] - lo[i]) / ld[i];
+        double t2 = (half_size[i] - lo[i]) / ld[i];
+        if (t1 > t2) std::swap(t1, t2);
+        if (t1 > t_near) {
+          t_near = t1;
+          axis = i;
+        }
+        t_far = std::min(t_far, t2);
+        if (t_near > t_far) return false;
+      }
+      // Rays starting inside a box (never the case for sensors) see nothing of it.
+      if (axis < 0 || t_near <= t_min || t_near >= t_max) return false;
+      *t_hit = t_near;
+      Eigen::Vector3d n_local = Eigen::Vector3d::Zero();
+      n_local[axis] = ld[axis] > 0 ? -1.0 : 1.0;
+      *normal = rotateZ(n_local, c, s);
+      return true;
+    }
+    case PrimitiveType::kCylinder: {
+      const double r = half_size.x(), hz = half_size.z();
+      double best = t_max;
+      bool found = false;
+      const double a = dir.x() * dir.x() + dir.y() * dir.y();
+      if (a > 1e-12) {
+        const double b = o.x() * dir.x() + o.y() * dir.y();
+        const double cc = o.x() * o.x() + o.y() * o.y() - r * r;
+        const double disc = b * b - a * cc;
+        if (disc >= 0) {
+          const double t = (-b - std::sqrt(disc)) / a;
+          if (t > t_min && t < best && std::abs(o.z() + t * dir.z()) <= hz) {
+            best = t;
+            found = true;
+            *normal = Eigen::Vector3d(o.x() + t * dir.x(), o.y() + t * dir.y(), 0) / r;
+          }
+        }
+      }
+      if (std::abs(dir.z()) > 1e-12) {
+        const double cap_z = dir.z() > 0 ? -hz : hz;  // the cap facing the ray
+        const double t = (cap_z - o.z()) / dir.z();
+        const double px = o.x() + t * dir.x(), py = o.y() + t * dir.y();
+        if (t > t_min && t < best && px * px + py * py <= r * r) {
+          best = t;
+          found = true;
+          *normal = Eigen::Vector3d(0, 0, cap_z > 0 ? 1.0 : -1.0);
+        }
+      }
+      if (found) *t_hit = best;
+      return found;
+    }
+    case PrimitiveType::kEllipsoid: {
+      const Eigen::Vector3d os = o.cwiseQuotient(half_size);
+      const Eigen::Vector3d ds = dir.cwiseQuotient(half_size);
+      const double a = ds.squaredNorm();
+      const double b = os.dot(ds);
+      const double cc = os.squaredNorm() - 1;
+      const double disc = b * b - a * cc;
+      if (disc < 0) return false;
+      const double t = (-b - std::sqrt(disc)) / a;
+      if (t <= t_min || t >= t_max) return false;
+      *t_hit = t;
+      const Eigen::Vector3d p = o + t * dir;
+      *normal = p.cwiseQuotient(half_size.cwiseProduct(half_size)).normalized();
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+bool Primitive::intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double t_min,
+                          double t_max, double* t_hit, Eigen::Vector3d* normal) const {
+  return intersectPrimitive(*this, std::cos(yaw), std::sin(yaw), origin, dir, t_min, t_max, t_hit,
+                            normal);
+}
+
+double Primitive::surfaceDistance(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d o = p - center;
+  switch (type) {
+    case PrimitiveType::kBox: {
+      const Eigen::Vector3d q = rotateZ(o, std::cos(yaw), -std::sin(yaw)).cwiseAbs() - half_size;
+      const double outside = q.cwiseMax(0.0).norm();
+      const double inside = std::min(q.maxCoeff(), 0.0);
+      return std::abs(outside + inside);
+    }
+    case PrimitiveType::kCylinder: {
+      const Eigen::Vector2d q(std::hypot(o.x(), o.y()) - half_size.x(),
+                              std::abs(o.z()) - half_size.z());
+      const double outside = q.cwiseMax(0.0).norm();
+      const double inside = std::min(q.maxCoeff(), 0.0);
+      return std::abs(outside + inside);
+    }
+    case PrimitiveType::kEllipsoid: {
+      // Quilez's first-order distance estimate; exact for spheres.
+      const double k0 = o.cwiseQuotient(half_size).norm();
+      const double k1 = o.cwiseQuotient(half_size.cwiseProduct(half_size)).norm();
+      if (k1 < 1e-12) return half_size.minCoeff();
+      return std::abs(k0 * (k0 - 1.0) / k1);
+    }
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+Eigen::Vector4d Primitive::footprint() const {
+  double ex = half_size.x(), ey = half_size.y();
+  if (type == PrimitiveType::kBox) {
+    const double c = std::abs(std::cos(yaw)), s = std::abs(std::sin(yaw));
+    ex = c * half_size.x() + s * half_size.y();
+    ey = s * half_size.x() + c * half_size.y();
+  }
+  return {center.x() - ex, center.y() - ey, center.x() + ex, center.y() + ey};
+}
+
+double Primitive::topZ() const { return center.z() + half_size.z(); }
+
+// ---------------------------------------------------------------------------------------------
+// Spatial index and queries
+// ---------------------------------------------------------------------------------------------
+void SyntheticWorld::buildIndex(double cell_size_m) {
+  cell_size_ = cell_size_m;
+  cell_begin_.clear();
+  cell_items_.clear();
+  cell_top_z_.clear();
+  yaw_cos_sin_.clear();
+  for (const Primitive& p : primitives_) {
+    yaw_cos_sin_.emplace_back(std::cos(p.yaw), std::sin(p.yaw));
+  }
+  grid_nx_ = grid_ny_ = 0;
+  max_top_z_ = -std::numeric_limits<double>::infinity();
+  if (primitives_.empty()) return;
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector2d hi = -lo;
+  for (const Primitive& p : primitives_) {
+    const Eigen::Vector4d f = p.footprint();
+    lo = lo.cwiseMin(f.head<2>());
+    hi = hi.cwiseMax(f.tail<2>());
+    max_top_z_ = std::max(max_top_z_, p.topZ());
+  }
+  grid_min_ = lo - Eigen::Vector2d::Constant(1e-6);
+  grid_nx_ = std::max(1, static_cast<int>(std::ceil((hi.x() - grid_min_.x()) / cell_size_)) + 1);
+  grid_ny_ = std::max(1, static_cast<int>(std::ceil((hi.y() - grid_min_.y()) / cell_size_)) + 1);
+  const std::size_t cells = static_cast<std::size_t>(grid_nx_) * grid_ny_;
+  std::vector<std::uint32_t> counts(cells + 1, 0);
+  auto for_each_cell = [&](const Primitive& p, auto&& fn) {
+    const Eigen::Vector4d f = p.footprint();
+    const int x0 =
+        std::clamp(static_cast<int>((f[0] - grid_min_.x()) / cell_size_), 0, grid_nx_ - 1);
+    const int y0 =
+        std::clamp(static_cast<int>((f[1] - grid_min_.y()) / cell_size_), 0, grid_ny_ - 1);
+    const int x1 =
+        std::clamp(static_cast<int>((f[2] - grid_min_.x()) / cell_size_), 0, grid_nx_ - 1);
+    const int y1 =
+        std::clamp(static_cast<int>((f[3] - grid_min_.y()) / cell_size_), 0, grid_ny_ - 1);
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) fn(static_cast<std::size_t>(y) * grid_nx_ + x);
+  };
+  for (const Primitive& p : primitives_) for_each_cell(p, [&](std::size_t c) { ++counts[c + 1]; });
+  for (std::size_t c = 0; c < cells; ++c) counts[c + 1] += counts[c];
+  cell_begin_ = counts;
+  cell_items_.resize(counts.back());
+  std::vector<std::uint32_t> fill(counts.begin(), counts.end() - 1);
+  cell_top_z_.assign(cells, -std::numeric_limits<double>::infinity());
+  for (std::uint32_t i = 0; i < primitives_.size(); ++i) {
+    for_each_cell(primitives_[i], [&](std::size_t c) {
+      cell_items_[fill[c]++] = i;
+      cell_top_z_[c] = std::max(cell_top_z_[c], primitives_[i].topZ());
+    });
+  }
+}
+
+bool SyntheticWorld::raycastGround(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max,
+                                   double* t_hit) const {
+  // f(t) = height of the ray above the ground. |f''| <= C |d_xy|^2, so from any t the parabola
+  // f + f' s - C' s^2 / 2 is a lower bound of f: stepping to its root can never jump over the
+  // first crossing, and near the root the step is Newton's (fast convergence).
+  const GroundSurface& g = ground_;
+  auto f_and_slope = [&](double t, double* slope) {
+    double sin_x, cos_x, sin_y, cos_y;  // one sincos per axis: the march's whole cost
+    ::sincos(g.wavenumber_x * (o.x() + t * d.x()) + g.phase_x, &sin_x, &cos_x);
+    ::sincos(g.wavenumber_y * (o.y() + t * d.y()) + g.phase_y, &sin_y, &cos_y);
+    *slope = d.z() - g.amplitude_x * g.wavenumber_x * cos_x * d.x() -
+             g.amplitude_y * g.wavenumber_y * cos_y * d.y();
+    return o.z() + t * d.z() - (g.offset + g.amplitude_x * sin_x + g.amplitude_y * sin_y);
+  };
+  const double curvature_bound =
+      ground_.maxCurvature() * (d.x() * d.x() + d.y() * d.y()) * 1.0001 + 1e-15;
+  double t = 0, slope;
+  double f = f_and_slope(0, &slope);
+  if (f <= 0) return false;  // the origin is under the ground
+  for (int iteration = 0; iteration < 200; ++iteration) {
+    if (f < 1e-6) {
+      *t_hit = t;
+      return true;
+    }
+    const double disc = slope * slope + 2 * curvature_bound * f;
+    const double step = 2 * f / (std::sqrt(disc) - slope);
+    t += step;
+    if (!(t <= t_max)) return false;
+    f = f_and_slope(t, &slope);
+    if (f < 0) {  // can only be round-off at the root
+      *t_hit = t;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool SyntheticWorld::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double max_range,
+                             RayHit* hit) const {
+  double best_t = max_range;
+  int best_index = -1;
+  Eigen::Vector3d best_normal = Eigen::Vector3d::UnitZ();
+  bool found = false;
+
+  if (grid_nx_ > 0) {
+    // Clip the ray's footprint to the grid rectangle, then walk the cells (Amanatides-Woo).
+    const Eigen::Vector2d grid_max = grid_min_ + cell_size_ * Eigen::Vector2d(grid_nx_, grid_ny_);
+    double t0 = 0, t1 = best_t;
+    bool inside = true;
+    for (int i = 0; i < 2 && inside; ++i) {
+      if (std::abs(d[i]) < 1e-12) {
+        inside = o[i] >= grid_min_[i] && o[i] <= grid_max[i];
+      } else {
+        double a = (grid_min_[i] - o[i]) / d[i], b = (grid_max[i] - o[i]) / d[i];
+        if (a > b) std::swap(a, b);
+        t0 = std::max(t0, a);
+        t1 = std::min(t1, b);
+        inside = t0 <= t1;
+      }
+    }
+    if (inside) {
+      const Eigen::Vector3d start = o + t0 * d;
+      int cx =
+          std::clamp(static_cast<int>((start.x() - grid_min_.x()) / cell_size_), 0, grid_nx_ - 1);
+      int cy =
+          std::clamp(static_cast<int>((start.y() - grid_min_.y()) / cell_size_), 0, grid_ny_ - 1);
+      const double inf = std::numeric_limits<double>::infinity();
+      const int step_x = d.x() > 0 ? 1 : -1, step_y = d.y() > 0 ? 1 : -1;
+      const double delta_x = std::abs(d.x()) > 1e-12 ? cell_size_ / std::abs(d.x()) : inf;
+      const double delta_y = std::abs(d.y()) > 1e-12 ? cell_size_ / std::abs(d.y()) : inf;
+      double next_x = std::abs(d.x()) > 1e-12
+                          ? (grid_min_.x() + (cx + (step_x > 0)) * cell_size_ - o.x()) / d.x()
+                          : inf;
+      double next_y = std::abs(d.y()) > 1e-12
+                          ? (grid_min_.y() + (cy + (step_y > 0)) * cell_size_ - o.y()) / d.y()
+                          : inf;
+      double t_entry = t0;
+      // Mailbox: a primitive spanning several cells is tested once per ray.
+      thread_local std::vector<std::uint32_t> tested_by_ray;
+      thread_local std::uint32_t ray_id = 0;
+      if (tested_by_ray.size() < primitives_.size()) tested_by_ray.assign(primitives_.size(), 0);
+      if (++ray_id == 0) {
+        std::fill(tested_by_ray.begin(), tested_by_ray.end(), 0);
+        ray_id = 1;
+      }
+      while (true) {
+        // Above every object and climbing: nothing more to hit but the sky.
+        if (d.z() >= 0 && o.z() + t_entry * d.z() > max_top_z_) break;
+        const std::size_t cell = static_cast<std::size_t>(cy) * grid_nx_ + cx;
+        const double t_exit = std::min(next_x, next_y);
+        // Skip the cell when the ray passes above everything in it.
+        const double z_low = o.z() + (d.z() >= 0 ? t_entry : std::min(t_exit, best_t)) * d.z();
+        if (z_low <= cell_top_z_[cell]) {
+          for (std::uint32_t k = cell_begin_[cell]; k < cell_begin_[cell + 1]; ++k) {
+            const std::uint32_t index = cell_items_[k];
+            if (tested_by_ray[index] == ray_id) continue;
+            tested_by_ray[index] = ray_id;
+            double t;
+            Eigen::Vector3d n;
+            if (intersectPrimitive(primitives_[index], yaw_cos_sin_[index].x(),
+                                   yaw_cos_sin_[index].y(), o, d, 1e-9, best_t, &t, &n)) {
+              best_t = t;
+              best_index = static_cast<int>(index);
+              best_normal = n;
+              found = true;
+            }
+          }
+        }
+        if (best_t <= t_exit || t_exit >= t1) break;
+        t_entry = t_exit;
+        if (next_x < next_y) {
+          cx += step_x;
+          next_x += delta_x;
+          if (cx < 0 || cx >= grid_nx_) break;
+        } else {
+          cy += step_y;
+          next_y += delta_y;
+          if (cy < 0 || cy >= grid_ny_) break;
+        }
+      }
+    }
+  }
+
+  double t_ground;
+  if (raycastGround(o, d, best_t, &t_ground) && t_ground < best_t) {
+    best_t = t_ground;
+    best_index = -1;
+    const Eigen::Vector3d p = o + t_ground * d;
+    const Eigen::Vector2d g = ground_.gradient(p.x(), p.y());
+    best_normal = Eigen::Vector3d(-g.x(), -g.y(), 1.0).normalized();
+    found = true;
+  }
+  if (!found) return false;
+  hit->distance = best_t;
+  hit->point = o + best_t * d;
+  hit->primitive_index = best_index;
+  hit->normal = best_normal.dot(d) > 0 ? Eigen::Vector3d(-best_normal) : best_normal;
+  hit->label_id = best_index >= 0 ? primitives_[best_index].label_id
+                                  : streets_.groundLabel(hit->point.x(), hit->point.y());
+  return true;
+}
+
+std::uint8_t SyntheticWorld::labelAt(const Eigen::Vector3d& p, double tolerance) const {
+  const Eigen::Vector2d g = ground_.gradient(p.x(), p.y());
+  double best = std::abs(p.z() - ground_.height(p.x(), p.y())) / std::sqrt(1 + g.squaredNorm());
+  std::uint8_t label = streets_.groundLabel(p.x(), p.y());
+  if (grid_nx_ > 0) {
+    const int x0 = static_cast<int>(std::floor((p.x() - tolerance - grid_min_.x()) / cell_size_));
+    const int x1 = static_cast<int>(std::floor((p.x() + tolerance - grid_min_.x()) / cell_size_));
+    const int y0 = static_cast<int>(std::floor((p.y() - tolerance - grid_min_.y()) / cell_size_));
+    const int y1 = static_cast<int>(std::floor((p.y() + tolerance - grid_min_.y()) / cell_size_));
+    for (int cy = std::max(0, y0); cy <= std::min(grid_ny_ - 1, y1); ++cy) {
+      for (int cx = std::max(0, x0); cx <= std::min(grid_nx_ - 1, x1); ++cx) {
+        const std::size_t cell = static_cast<std::size_t>(cy) * grid_nx_ + cx;
+        for (std::uint32_t k = cell_begin_[cell]; k < cell_begin_[cell + 1]; ++k) {
+          const Primitive& primitive = primitives_[cell_items_[k]];
+          const double distance = primitive.surfaceDistance(p);
+          if (distance < best) {
+            best = distance;
+            label = primitive.label_id;
+          }
+        }
+      }
+    }
+  }
+  return best <= tolerance ? label : static_cast<std::uint8_t>(cs::kUnlabeled);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Appearance
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+// Deterministic lattice hash -> [0, 1).
+inline float hash3(std::int64_t x, std::int64_t y, std::int64_t z) {
+  std::uint64_t h = static_cast<std::uint64_t>(x) * 0x9E3779B97F4A7C15ull ^
+                    static_cast<std::uint64_t>(y) * 0xC2B2AE3D27D4EB4Full ^
+                    static_cast<std::uint64_t>(z) * 0x165667B19E3779F9ull;
+  h ^= h >> 29;
+  h *= 0xBF58476D1CE4E5B9ull;
+  h ^= h >> 32;
+  return static_cast<float>(h >> 40) * (1.0f / 16777216.0f);
+}
+
+// Blocky multi-scale noise in [-1, 1]: cheap, and tied to the world so it moves with the scene.
+inline float textureNoise(const Eigen::Vector3d& p) {
+  const Eigen::Vector3d fine = p * 12.0, coarse = p * 1.5;
+  const float n_fine = hash3(static_cast<std::int64_t>(std::floor(fine.x())),
+                             static_cast<std::int64_t>(std::floor(fine.y())),
+                             static_cast<std::int64_t>(std::floor(fine.z())));
+  const float n_coarse = hash3(static_cast<std::int64_t>(std::floor(coarse.x())) + 7919,
+                               static_cast<std::int64_t>(std::floor(coarse.y())),
+                               static_cast<std::int64_t>(std::floor(coarse.z())));
+  return 2.0f * (0.6f * n_fine + 0.4f * n_coarse) - 1.0f;
+}
+
+}  // namespace
+
+Eigen::Vector3f SyntheticWorld::surfaceColor(const RayHit& hit) const {
+  Eigen::Vector3f base;
+  float texture_strength = 0.12f;
+  if (hit.primitive_index >= 0) {
+    base = primitives_[hit.primitive_index].albedo;
+    if (hit.label_id == cs::kVegetation) texture_strength = 0.35f;
+    if (hit.label_id == cs::kBuilding) texture_strength = 0.15f;
+  } else if (streets_.isLaneMarking(hit.point.x(), hit.point.y())) {
+    base = {0.85f, 0.85f, 0.82f};
+    texture_strength = 0.05f;
+  } else {
+    switch (hit.label_id) {
+      case cs::kRoad:
+        base = {0.27f, 0.27f, 0.29f};
+        break;
+      case cs::kSidewalk:
+        base = {0.58f, 0.54f, 0.52f};
+        break;
+      default:
+        base = {0.42f, 0.50f, 0.24f};
+        texture_strength = 0.3f;
+    }
+  }
+  return (base * (1.0f + texture_strength * textureNoise(hit.point))).cwiseMax(0.0f).cwiseMin(1.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Procedural town
+// ---------------------------------------------------------------------------------------------
+namespace {
+
+class TownBuilder {
+ public:
+  TownBuilder(SyntheticWorld* world, std::uint64_t seed) : world_(world), rng_(seed) {}
+
+  double uniform(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng_); }
+  bool chance(double p) { return uniform(0, 1) < p; }
+
+  Eigen::Vector3f jitterColor(const Eigen::Vector3f& c, double amount) {
+    Eigen::Vector3f out;
+    const double common = uniform(-amount, amount);
+    for (int i = 0; i < 3; ++i)
+      out[i] = static_cast<float>(c[i] + common + uniform(-amount, amount) * 0.3);
+    return out.cwiseMax(0.02f).cwiseMin(0.98f);
+  }
+
+  // Lowest ground under a rectangle, so that objects never float on the hills.
+  double groundMin(double cx, double cy, double hx, double hy) {
+    const GroundSurface& g = world_->ground();
+    double z = std::numeric_limits<double>::infinity();
+    for (double sx : {-1.0, 0.0, 1.0})
+      for (double sy : {-1.0, 0.0, 1.0}) z = std::min(z, g.height(cx + sx * hx, cy + sy * hy));
+    return z;
+  }
+
+  void box(std::uint8_t label, double cx, double cy, double hx, double hy, double z_bottom,
+           double z_top, double yaw, const Eigen::Vector3f& albedo) {
+    Primitive p;
+    p.type = PrimitiveType::kBox;
+    p.label_id = label;
+    p.center = {cx, cy, 0.5 * (z_bottom + z_top)};
+    p.half_size = {hx, hy, 0.5 * (z_top - z_bottom)};
+    p.yaw = yaw;
+    p.albedo = albedo;
+    world_->addPrimitive(p);
+  }
+  // A box standing on the ground (base buried a little so that no gap shows on slopes).
+  void standingBox(std::uint8_t label, double cx, double cy, double hx, double hy, double z0,
+                   double height, double yaw, const Eigen::Vector3f& albedo) {
+    const double ground = world_->ground().height(cx, cy);
+    const double extent = std::max(hx, hy);
+    box(label, cx, cy, hx, hy, groundMin(cx, cy, extent, extent) - 0.3, ground + z0 + height, yaw,
+        albedo);
+  }
+  void cylinder(std::uint8_t label, double cx, double cy, double radius, double height,
+                const Eigen::Vector3f& albedo) {
+    Primitive p;
+    p.type = PrimitiveType::kCylinder;
+    p.label_id = label;
+    const double ground = world_->ground().height(cx, cy);
+    const double bottom = ground - 0.3, top = ground + height;
+    p.center = {cx, cy, 0.5 * (bottom + top)};
+    p.half_size = {radius, radius, 0.5 * (top - bottom)};
+    p.albedo = albedo;
+    world_->addPrimitive(p);
+  }
+  void ellipsoid(std::uint8_t label, const Eigen::Vector3d& center, const Eigen::Vector3d& radii,
+                 const Eigen::Vector3f& albedo) {
+    Primitive p;
+    p.type = PrimitiveType::kEllipsoid;
+    p.label_id = label;
+    p.center = center;
+    p.half_size = radii;
+    p.albedo = albedo;
+    world_->addPrimitive(p);
+  }
+
+  void tree(double x, double y) {
+    const double trunk_height = uniform(2.0, 3.2);
+    const Eigen::Vector3f bark = jitterColor({0.33f, 0.25f, 0.17f}, 0.05);
+    cylinder(cs::kVegetation, x, y, uniform(0.15, 0.25), trunk_height + 0.5, bark);
+    const double r = uniform(1.6, 2.8);
+    const double ground = world_->ground().height(x, y);
+    ellipsoid(cs::kVegetation, {x, y, ground + trunk_height + 0.8 * r},
+              {r, r * uniform(0.85, 1.15), r * uniform(0.8, 1.1)},
+              jitterColor({0.20f, 0.38f, 0.12f}, 0.06));
+  }
+
+  void streetLamp(double x, double y) {
+    cylinder(cs::kPole, x, y, 0.1, uniform(6.5, 8.0), jitterColor({0.45f, 0.46f, 0.48f}, 0.04));
+  }
+
+  // A sign: a thin pole and a plate facing the traffic (plate normal along facing_yaw).
+  void trafficSign(double x, double y, double facing_yaw) {
+    cylinder(cs::kPole, x, y, 0.04, 2.9, {0.55f, 0.55f, 0.57f});
+    const double ground = world_->ground().height(x, y);
+    const double bottom = ground + 2.2;
+    const Eigen::Vector3f plate =
+        chance(0.5) ? Eigen::Vector3f(0.85f, 0.75f, 0.1f) : Eigen::Vector3f(0.15f, 0.3f, 0.75f);
+    // Local x = plate normal: place the plate just in front of the pole.
+    const double nx = std::cos(facing_yaw), ny = std::sin(facing_yaw);
+    box(cs::kTrafficSign, x + 0.07 * nx, y + 0.07 * ny, 0.025, 0.33, bottom, bottom + 0.65,
+        facing_yaw, plate);
+  }
+
+  // A parked car: body and cabin boxes, axis along yaw.
+  void parkedCar(double x, double y, double yaw) {
+    static const Eigen::Vector3f kPaints[] = {{0.75f, 0.1f, 0.1f},   {0.1f, 0.2f, 0.6f},
+                                              {0.85f, 0.85f, 0.85f}, {0.12f, 0.12f, 0.13f},
+                                              {0.5f, 0.52f, 0.55f},  {0.2f, 0.45f, 0.3f}};
+    const Eigen::Vector3f paint = jitterColor(kPaints[rng_() % 6], 0.04);
+    const double length = uniform(4.0, 4.8), width = uniform(1.7, 1.9);
+    const double ground = world_->ground().height(x, y);
+    const double c = std::cos(yaw), s = std::sin(yaw);
+    box(cs::kCar, x, y, length / 2, width / 2, ground + 0.25, ground + 1.0, yaw, paint);
+    const double cabin_shift = uniform(-0.3, 0.1);
+    box(cs::kCar, x + cabin_shift * c, y + cabin_shift * s, length * 0.28, width / 2 - 0.08,
+        ground + 1.0, ground + uniform(1.4, 1.55), yaw, paint * 0.8f);
+  }
+
+  // Buildings and front yards along one block edge. The edge runs along `axis` (0: x, 1: y) from
+  // a to b at coordinate `front` (the sidewalk's outer edge); `inward` (+1/-1) points into the
+  // block; `depth_limit` caps the building depth.
+  void blockEdge(int axis, double a, double b, double front, double inward, double depth_limit) {
+    auto at = [&](double along, double across) {
+      return axis == 0 ? Eigen::Vector2d(along, across) : Eigen::Vector2d(across, along);
+    };
+    static const Eigen::Vector3f kFacades[] = {{0.72f, 0.66f, 0.55f},
+                                               {0.55f, 0.55f, 0.56f},
+                                               {0.62f, 0.32f, 0.25f},
+                                               {0.85f, 0.83f, 0.78f},
+                                               {0.45f, 0.42f, 0.38f}};
+    double cursor = a + uniform(0.0, 3.0);
+    while (cursor < b - 6.0) {
+      const double width = std::min(uniform(8.0, 18.0), b - cursor);
+      const double setback = uniform(2.0, 4.5);
+      const double depth = std::min(uniform(8.0, 14.0), depth_limit - setback);
+      if (depth > 3.0) {
+        const Eigen::Vector2d c = at(cursor + width / 2, front + inward * (setback + depth / 2));
+        const double hx = axis == 0 ? width / 2 : depth / 2;
+        const double hy = axis == 0 ? depth / 2 : width / 2;
+        standingBox(cs::kBuilding, c.x(), c.y(), hx, hy, 0.0, uniform(6.0, 22.0), 0.0,
+                    jitterColor(kFacades[rng_() % 5], 0.06));
+      }
+      // Front yard: trees, hedges, fences between the sidewalk and the facade.
+      const double yard_mid = front + inward * setback * 0.5;
+      if (setback > 2.5 && chance(0.6)) {
+        const Eigen::Vector2d t = at(cursor + uniform(1.5, width - 1.5), yard_mid);
+        tree(t.x(), t.y());
+      } else if (chance(0.35)) {
+        const double len = width * uniform(0.4, 0.9);
+        const Eigen::Vector2d f = at(cursor + width / 2, front + inward * 0.3);
+        standingBox(cs::kFence, f.x(), f.y(), axis == 0 ? len / 2 : 0.04,
+                    axis == 0 ? 0.04 : len / 2, 0.0, uniform(1.1, 1.8), 0.0,
+                    jitterColor({0.45f, 0.36f, 0.26f}, 0.06));
+      } else if (chance(0.4)) {
+        const double len = width * uniform(0.3, 0.8);
+        const Eigen::Vector2d h = at(cursor + width / 2, front + inward * 0.8);
+        standingBox(cs::kVegetation, h.x(), h.y(), axis == 0 ? len / 2 : 0.4,
+                    axis == 0 ? 0.4 : len / 2, 0.0, uniform(0.8, 1.4), 0.0,
+                    jitterColor({0.18f, 0.34f, 0.12f}, 0.05));
+      }
+      cursor += width + (chance(0.35) ? 0.0 : uniform(1.5, 6.0));
+    }
+  }
+
+  void park(double x0, double y0, double x1, double y1) {
+    const int trees = static_cast<int>((x1 - x0) * (y1 - y0) / 60.0);
+    for (int i = 0; i < trees; ++i) tree(uniform(x0 + 2, x1 - 2), uniform(y0 + 2, y1 - 2));
+    // A low fence along the longer side.
+    if (chance(0.6)) {
+      standingBox(cs::kFence, 0.5 * (x0 + x1), y0 + 0.3, 0.5 * (x1 - x0) - 1.0, 0.04, 0.0, 1.0, 0.0,
+                  jitterColor({0.4f, 0.4f, 0.38f}, 0.05));
+    }
+  }
+
+  // Lamps, signs and parked cars along a street segment between two crossings. The street runs
+  // along `axis` at centre line `centre`, between crossing centre lines a and b.
+  void streetFurniture(int axis, double centre, double a, double b, const StreetGrid& grid) {
+    auto at = [&](double along, double across) {
+      return axis == 0 ? Eigen::Vector2d(along, across) : Eigen::Vector2d(across, along);
+    };
+    const double clear = grid.road_half_width + grid.sidewalk_width + 4.0;
+    const double street_yaw = axis == 0 ? 0.0 : M_PI / 2;
+    for (double side : {-1.0, 1.0}) {
+      // Street lamps on the sidewalk near the curb.
+      for (double s = a + clear + uniform(0, 6); s < b - clear; s += uniform(18, 28)) {
+        const Eigen::Vector2d p = at(s, centre + side * (grid.road_half_width + 0.6));
+        streetLamp(p.x(), p.y());
+      }
+      // A sign near the end of the segment, facing oncoming traffic on that side.
+      if (chance(0.7)) {
+        const double s = side > 0 ? a + clear - 1.0 : b - clear + 1.0;
+        const Eigen::Vector2d p = at(s, centre + side * (grid.road_half_width + 1.0));
+        trafficSign(p.x(), p.y(), street_yaw + (side > 0 ? M_PI : 0.0));
+      }
+      // Parked cars in the parking strip.
+      const double lateral = centre + side * (grid.road_half_width - 1.2);
+      for (double s = a + clear + uniform(0, 5); s < b - clear - 2.5; s += uniform(5.5, 9.0)) {
+        if (!chance(0.55)) continue;
+        const Eigen::Vector2d p = at(s, lateral);
+        parkedCar(p.x(), p.y(), street_yaw + uniform(-0.03, 0.03));
+      }
+    }
+  }
+
+ private:
+  SyntheticWorld* world_;
+  std::mt19937_64 rng_;
+};
+
+}  // namespace
+
+SyntheticWorld SyntheticWorld::generateTown(std::uint64_t seed) {
+  SyntheticWorld world;
+  world.seed_ = seed;
+  const RouteLayout layout;
+
+  // Gentle hills; the offset puts the route's start (the map origin) at IMU height above them.
+  GroundSurface ground;
+  ground.amplitude_x = 1.5;
+  ground.wavenumber_x = 2 * M_PI / 140.0;
+  ground.phase_x = 0.3;
+  ground.amplitude_y = 0.8;
+  ground.wavenumber_y = 2 * M_PI / 90.0;
+  ground.phase_y = 1.1;
+  ground.offset = 0;
+  ground.offset = -layout.imu_height_m - ground.height(0, 0);
+  world.ground_ = ground;
+
+  // A street grid with the loop's block in the middle.
+  const SyntheticRoute::LoopStreets loop = SyntheticRoute::loopStreets(layout);
+  const double pitch_x = loop.right_x - loop.left_x;
+  const double pitch_y = loop.top_y - loop.bottom_y;
+  StreetGrid streets;
+  for (int k = -2; k <= 3; ++k) {
+    streets.vertical_x.push_back(loop.left_x + k * pitch_x);
+    streets.horizontal_y.push_back(loop.bottom_y + k * pitch_y);
+  }
+  world.streets_ = streets;
+
+  TownBuilder builder(&world, seed);
+  const double margin = streets.road_half_width + streets.sidewalk_width;
+  for (std::size_t i = 0; i + 1 < streets.vertical_x.size(); ++i) {
+    for (std::size_t j = 0; j + 1 < streets.horizontal_y.size(); ++j) {
+      const double x0 = streets.vertical_x[i] + margin, x1 = streets.vertical_x[i + 1] - margin;
+      const double y0 = streets.horizontal_y[j] + margin;
+      const double y1 = streets.horizontal_y[j + 1] - margin;
+      const bool loop_block = i == 2 && j == 2;
+      if (!loop_block && builder.chance(0.2)) {
+        builder.park(x0, y0, x1, y1);
+        continue;
+      }
+      const double half_y = 0.5 * (y1 - y0), half_x = 0.5 * (x1 - x0);
+      builder.blockEdge(0, x0, x1, y0, +1, half_y);
+      builder.blockEdge(0, x0, x1, y1, -1, half_y);
+      // Side edges only between the corner buildings of the long edges.
+      const double corner = std::min(half_y, 14.0);
+      builder.blockEdge(1, y0 + corner, y1 - corner, x0, +1, half_x);
+      builder.blockEdge(1, y0 + corner, y1 - corner, x1, -1, half_x);
+    }
+  }
+  for (std::size_t i = 0; i < streets.vertical_x.size(); ++i) {
+    for (std::size_t j = 0; j + 1 < streets.horizontal_y.size(); ++j) {
+      builder.streetFurniture(1, streets.vertical_x[i], streets.horizontal_y[j],
+                              streets.horizontal_y[j + 1], streets);
+    }
+  }
+  for (std::size_t j = 0; j < streets.horizontal_y.size(); ++j) {
+    for (std::size_t i = 0; i + 1 < streets.vertical_x.size(); ++i) {
+      builder.streetFurniture(0, streets.horizontal_y[j], streets.vertical_x[i],
+                              streets.vertical_x[i + 1], streets);
+    }
+  }
+  world.buildIndex();
+  return world;
+}
+
+// ---------------------------------------------------------------------------------------------
+// world.txt
+// ---------------------------------------------------------------------------------------------
+// One record per line, '#' comments:
+//   seed S
+//   ground OFFSET AMPLITUDE_X WAVENUMBER_X PHASE_X AMPLITUDE_Y WAVENUMBER_Y PHASE_Y
+//   streets ROAD_HALF_WIDTH SIDEWALK_WIDTH LANE_HALF_WIDTH
+//   street_x X          (a north-south street centre line)
+//   street_y Y          (an east-west street centre line)
+//   box LABEL CX CY CZ HALF_X HALF_Y HALF_Z YAW R G B
+//   cylinder LABEL CX CY CZ RADIUS HALF_HEIGHT R G B
+//   ellipsoid LABEL CX CY CZ RX RY RZ R G B
+void SyntheticWorld::save(const std::string& path) const {
+  const std::string tmp = path + ".tmp";
+  {
+    std::FILE* file = std::fopen(tmp.c_str(), "w");
+    if (!file) throw std::runtime_error(tmp + ": cannot open for writing");
+    std::fprintf(file,
+                 "# inekf_semantic_mapping synthetic world v1: map frame (x east, y north, z up), "
+                 "metres, labels = Cityscapes labelIds, colours RGB 0..1\n");
+    std::fprintf(file, "seed %llu\n", static_cast<unsigned long long>(seed_));
+    std::fprintf(file, "ground %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", ground_.offset,
+                 ground_.amplitude_x, ground_.wavenumber_x, ground_.phase_x, ground_.amplitude_y,
+                 ground_.wavenumber_y, ground_.phase_y);
+    std::fprintf(file, "streets %.17g %.17g %.17g\n", streets_.road_half_width,
+                 streets_.sidewalk_width, streets_.lane_half_width);
+    for (double x : streets_.vertical_x) std::fprintf(file, "street_x %.17g\n", x);
+    for (double y : streets_.horizontal_y) std::fprintf(file, "street_y %.17g\n", y);
+    for (const Primitive& p : primitives_) {
+      const Eigen::Vector3d& c = p.center;
+      const Eigen::Vector3d& h = p.half_size;
+      const Eigen::Vector3f& a = p.albedo;
+      switch (p.type) {
+        case PrimitiveType::kBox:
+          std::fprintf(file, "box %d %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.9g %.9g %.9g\n",
+                       p.label_id, c.x(), c.y(), c.z(), h.x(), h.y(), h.z(), p.yaw, a.x(), a.y(),
+                       a.z());
+          break;
+        case PrimitiveType::kCylinder:
+          std::fprintf(file, "cylinder %d %.17g %.17g %.17g %.17g %.17g %.9g %.9g %.9g\n",
+                       p.label_id, c.x(), c.y(), c.z(), h.x(), h.z(), a.x(), a.y(), a.z());
+          break;
+        case PrimitiveType::kEllipsoid:
+          std::fprintf(file, "ellipsoid %d %.17g %.17g %.17g %.17g %.17g %.17g %.9g %.9g %.9g\n",
+                       p.label_id, c.x(), c.y(), c.z(), h.x(), h.y(), h.z(), a.x(), a.y(), a.z());
+          break;
+      }
+    }
+    const bool ok = std::fflush(file) == 0 && !std::ferror(file);
+    std::fclose(file);
+    if (!ok) throw std::runtime_error(tmp + ": write failed");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+SyntheticWorld SyntheticWorld::load(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open the world file");
+  SyntheticWorld world;
+  bool has_ground = false;
+  std::string line;
+  int line_number = 0;
+  while (std::getline(in, line)) {
+    ++line_number;
+    const std::size_t start = line.find_first_not_of(" \t\r");
+    if (start == std::string::npos || line[start] == '#') continue;
+    std::istringstream fields(line);
+    std::string kind;
+    fields >> kind;
+    auto fail = [&](const std::string& what) {
+      throw std::runtime_error(path + ":" + std::to_string(line_number) + ": " + what + " in '" +
+                               line + "'");
+    };
+    auto read = [&](const char* field_name) {
+      double v;
+      if (!(fields >> v) || !std::isfinite(v)) fail(std::string("bad or missing ") + field_name);
+      return v;
+    };
+    auto read_label = [&]() {
+      const double v = read("label");
+      if (v < 0 || v >= cs::kNumLabelIds || v != std::floor(v))
+        fail("label must be a labelId 0..33");
+      return static_cast<std::uint8_t>(v);
+    };
+    auto read_albedo = [&]() {
+      Eigen::Vector3f a;
+      a.x() = static_cast<float>(read("red"));
+      a.y() = static_cast<float>(read("green"));
+      a.z() = static_cast<float>(read("blue"));
+      return a;
+    };
+    auto read_positive = [&](const char* field_name) {
+      const double v = read(field_name);
+      if (v <= 0) fail(std::string(field_name) + " must be > 0");
+      return v;
+    };
+    if (kind == "seed") {
+      unsigned long long seed;
+      if (!(fields >> seed)) fail("bad seed");
+      world.seed_ = seed;
+    } else if (kind == "ground") {
+      GroundSurface& g = world.ground_;
+      g.offset = read("offset");
+      g.amplitude_x = read("amplitude_x");
+      g.wavenumber_x = read("wavenumber_x");
+      g.phase_x = read("phase_x");
+      g.amplitude_y = read("amplitude_y");
+      g.wavenumber_y = read("wavenumber_y");
+      g.phase_y = read("phase_y");
+      has_ground = true;
+    } else if (kind == "streets") {
+      world.streets_.road_half_width = read_positive("road_half_width");
+      world.streets_.sidewalk_width = read_positive("sidewalk_width");
+      world.streets_.lane_half_width = read_positive("lane_half_width");
+    } else if (kind == "street_x") {
+      world.streets_.vertical_x.push_back(read("x"));
+    } else if (kind == "street_y") {
+      world.streets_.horizontal_y.push_back(read("y"));
+    } else if (kind == "box" || kind == "cylinder" || kind == "ellipsoid") {
+      Primitive p;
+      p.label_id = read_label();
+      p.center.x() = read("center_x");
+      p.center.y() = read("center_y");
+      p.center.z() = read("center_z");
+      if (kind == "box") {
+        p.type = PrimitiveType::kBox;
+        p.half_size.x() = read_positive("half_x");
+        p.half_size.y() = read_positive("half_y");
+        p.half_size.z() = read_positive("half_z");
+        p.yaw = read("yaw");
+      } else if (kind == "cylinder") {
+        p.type = PrimitiveType::kCylinder;
+        p.half_size.x() = p.half_size.y() = read_positive("radius");
+        p.half_size.z() = read_positive("half_height");
+      } else {
+        p.type = PrimitiveType::kEllipsoid;
+        p.half_size.x() = read_positive("radius_x");
+        p.half_size.y() = read_positive("radius_y");
+        p.half_size.z() = read_positive("radius_z");
+      }
+      p.albedo = read_albedo();
+      world.primitives_.push_back(p);
+    } else {
+      fail("unknown record '" + kind + "'");
+    }
+    std::string extra;
+    if (fields >> extra) fail("unexpected extra value '" + extra + "'");
+  }
+  if (!has_ground) throw std::runtime_error(path + ": no 'ground' record");
+  world.buildIndex();
+  return world;
+}
+
+}  // namespace synthetic
+}  // namespace inekf_semantic_mapping
