@@ -3,13 +3,14 @@
 ism_add_core_library(${PROJECT_NAME}_projection
   SOURCES src/perception/projection.cpp)
 
+find_package(Threads REQUIRED)
 ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
     src/mapping/semantic_classes.cpp
     src/mapping/semantic_octree.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
-  LINK ${PROJECT_NAME}_kitti ${OCTOMAP_LIBRARIES}
+  LINK ${PROJECT_NAME}_kitti ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
 
 ism_add_gtest(test_projection
@@ -29,3 +30,11 @@ ism_add_tool(semantic_map_offline
 ism_add_gtest(test_semantic_octree_offline
   SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)
+
+if(benchmark_FOUND)
+  ism_add_tool(bench_semantic_octree
+    SOURCES bench/bench_semantic_octree.cpp
+    LINK ${PROJECT_NAME}_mapping benchmark::benchmark)
+  target_compile_definitions(bench_semantic_octree PRIVATE
+    ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
+endif()

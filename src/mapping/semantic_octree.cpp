@@ -7,10 +7,89 @@
 #include <istream>
 #include <ostream>
 #include <stdexcept>
+#include <thread>
 #include <unordered_map>
 
 namespace inekf_semantic_mapping {
 namespace mapping {
+
+namespace {
+
+std::uint64_t packKey(const octomap::OcTreeKey& key) {
+  return (static_cast<std::uint64_t>(key[0]) << 32) | (static_cast<std::uint64_t>(key[1]) << 16) |
+         key[2];
+}
+octomap::OcTreeKey unpackKey(std::uint64_t packed) {
+  return octomap::OcTreeKey(static_cast<octomap::key_type>(packed >> 32),
+                            static_cast<octomap::key_type>(packed >> 16),
+                            static_cast<octomap::key_type>(packed));
+}
+
+// Interleaves the 3 x 16 key bits (x lowest): keys close in space are close in the order.
+std::uint64_t spreadBits(std::uint64_t v) {
+  v &= 0xFFFF;
+  v = (v | (v << 16)) & 0x0000FF0000FFULL;
+  v = (v | (v << 8)) & 0x00F00F00F00FULL;
+  v = (v | (v << 4)) & 0x0C30C30C30C3ULL;
+  v = (v | (v << 2)) & 0x249249249249ULL;
+  return v;
+}
+std::uint64_t mortonCode(const octomap::OcTreeKey& key) {
+  return spreadBits(key[0]) | (spreadBits(key[1]) << 1) | (spreadBits(key[2]) << 2);
+}
+// Open-addressing hash set of packed keys (48 bits, stored +1 so that 0 marks an empty slot).
+class FlatKeySet {
+ public:
+  void reserve(std::size_t expected) {
+    std::size_t capacity = 1024;
+    while (capacity < 2 * expected) capacity *= 2;
+    if (capacity > slots_.size()) rehash(capacity);
+  }
+  void insert(std::uint64_t packed) {
+    if (2 * (size_ + 1) > slots_.size()) rehash(std::max<std::size_t>(1024, 2 * slots_.size()));
+    const std::uint64_t stored = packed + 1;
+    std::size_t i = slotOf(stored);
+    while (slots_[i] != 0) {
+      if (slots_[i] == stored) return;
+      i = (i + 1) & mask_;
+    }
+    slots_[i] = stored;
+    ++size_;
+  }
+  void insertAll(const FlatKeySet& other) {
+    other.forEach([this](std::uint64_t packed) { insert(packed); });
+  }
+  template <typename F>
+  void forEach(F&& f) const {
+    for (std::uint64_t stored : slots_) {
+      if (stored != 0) f(stored - 1);
+    }
+  }
+  std::size_t size() const { return size_; }
+
+ private:
+  std::size_t slotOf(std::uint64_t stored) const {
+    return static_cast<std::size_t>((stored * 0x9E3779B97F4A7C15ULL) >> shift_);
+  }
+  void rehash(std::size_t capacity) {
+    std::vector<std::uint64_t> old;
+    old.swap(slots_);
+    slots_.assign(capacity, 0);
+    mask_ = capacity - 1;
+    shift_ = 64;
+    for (std::size_t c = capacity; c > 1; c >>= 1) --shift_;
+    size_ = 0;
+    for (std::uint64_t stored : old) {
+      if (stored != 0) insert(stored - 1);
+    }
+  }
+  std::vector<std::uint64_t> slots_;
+  std::size_t mask_ = 0;
+  int shift_ = 64;
+  std::size_t size_ = 0;
+};
+
+}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // SemanticOcTreeNode
@@ -188,21 +267,92 @@ std::size_t SemanticOcTree::insertLabeledScan(const LabeledScan& scan, double ma
     }
   }
 
-  // 2. Free voxels: one ray per endpoint voxel and per clipped ray end, collected into a set.
-  octomap::KeySet free_keys;
-  octomap::KeyRay& ray = keyrays.at(0);
-  auto cast = [&](const octomap::point3d& end) {
-    if (computeRayKeys(origin, end, ray)) free_keys.insert(ray.begin(), ray.end());
+  // 2. Free voxels: one ray per endpoint voxel and per clipped ray end. Rays near the sensor
+  //    cross the same voxels over and over, so the keys go through a flat open-addressing set
+  //    (far cheaper than octomap's node-allocating KeySet); one set per thread, merged after.
+  std::vector<octomap::point3d> ray_ends;
+  ray_ends.reserve(endpoints.size() + clipped_ends.size());
+  for (const auto& [key, voxel] : endpoints) ray_ends.push_back(voxel.ray_end);
+  ray_ends.insert(ray_ends.end(), clipped_ends.begin(), clipped_ends.end());
+  const int threads = ray_ends.size() < 4000 ? 1 : std::max(1, ray_casting_threads_);
+  std::vector<FlatKeySet> free_keys(static_cast<std::size_t>(threads));
+  auto cast_range = [&](int t) {
+    octomap::KeyRay ray;
+    FlatKeySet& keys = free_keys[static_cast<std::size_t>(t)];
+    keys.reserve(ray_ends.size() * 4 / static_cast<std::size_t>(threads));
+    for (std::size_t i = static_cast<std::size_t>(t); i < ray_ends.size();
+         i += static_cast<std::size_t>(threads)) {
+      if (computeRayKeys(origin, ray_ends[i], ray)) {
+        for (const octomap::OcTreeKey& key : ray) keys.insert(packKey(key));
+      }
+    }
   };
-  for (const auto& [key, voxel] : endpoints) cast(voxel.ray_end);
-  for (const octomap::point3d& end : clipped_ends) cast(end);
-
-  // 3. Each voxel updated once: misses first (except where something was hit), then hits.
-  for (const octomap::OcTreeKey& key : free_keys) {
-    if (endpoints.find(key) == endpoints.end()) updateNode(key, prob_miss_log, false);
+  {
+    std::vector<std::thread> workers;
+    for (int t = 1; t < threads; ++t) workers.emplace_back(cast_range, t);
+    cast_range(0);
+    for (std::thread& worker : workers) worker.join();
   }
-  for (const auto& [key, voxel] : endpoints) updateOccupiedWithEvidence(key, voxel.evidence);
+  for (std::size_t t = 1; t < free_keys.size(); ++t) free_keys[0].insertAll(free_keys[t]);
+
+  // 3. Each voxel updated once, in one pass over the tree: the updates sorted in Morton order
+  //    are grouped by child at every level, so every touched inner node is visited once (its
+  //    occupancy and pruning refreshed once) instead of once per voxel below it.
+  std::vector<VoxelUpdate> updates;
+  updates.reserve(free_keys[0].size() + endpoints.size());
+  free_keys[0].forEach([&](std::uint64_t packed) {
+    const octomap::OcTreeKey key = unpackKey(packed);
+    if (!endpoints.count(key)) updates.push_back({mortonCode(key), nullptr});
+  });
+  for (const auto& [key, voxel] : endpoints) updates.push_back({mortonCode(key), &voxel.evidence});
+  std::sort(updates.begin(), updates.end(),
+            [](const VoxelUpdate& a, const VoxelUpdate& b) { return a.morton < b.morton; });
+  if (!updates.empty()) {
+    bool created_root = false;
+    if (root == nullptr) {
+      root = new SemanticOcTreeNode();
+      ++tree_size;
+      created_root = true;
+    }
+    updateBatchRecurs(root, created_root, 0, updates.data(), updates.data() + updates.size());
+  }
   return labeled_points;
+}
+
+void SemanticOcTree::updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created,
+                                       unsigned int depth, const VoxelUpdate* begin,
+                                       const VoxelUpdate* end) {
+  if (depth == tree_depth) {  // a leaf: exactly one update (keys are unique)
+    if (begin->evidence) {
+      updateNodeLogOdds(node, prob_hit_log);
+      node->mergeClassEvidence(*begin->evidence);
+    } else {
+      updateNodeLogOdds(node, prob_miss_log);
+    }
+    return;
+  }
+  if (!node_just_created && !nodeHasChildren(node) && node->getLogOdds() <= clamping_thres_min &&
+      std::all_of(begin, end, [](const VoxelUpdate& u) { return u.evidence == nullptr; })) {
+    return;  // misses on a pruned block that is already clamped free change nothing (octomap)
+  }
+  const unsigned int shift = 3 * (tree_depth - 1 - depth);
+  for (const VoxelUpdate* run = begin; run != end;) {
+    const unsigned int pos = static_cast<unsigned int>((run->morton >> shift) & 7);
+    const VoxelUpdate* run_end = run + 1;
+    while (run_end != end && ((run_end->morton >> shift) & 7) == pos) ++run_end;
+    bool created_node = false;
+    if (!nodeChildExists(node, pos)) {
+      if (!nodeHasChildren(node) && !node_just_created) {
+        expandNode(node);  // a pruned leaf: its children inherit its data
+      } else {
+        createNodeChild(node, pos);
+        created_node = true;
+      }
+    }
+    updateBatchRecurs(getNodeChild(node, pos), created_node, depth + 1, run, run_end);
+    run = run_end;
+  }
+  if (!pruneNode(node)) node->updateOccupancyChildren();
 }
 
 SemanticOcTreeNode* SemanticOcTree::updateOccupiedVoxel(const octomap::OcTreeKey& key,

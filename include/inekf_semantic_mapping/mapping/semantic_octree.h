@@ -107,6 +107,10 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   // updateInnerOccupancy(). Returns the number of points with a label in the class set.
   std::size_t insertLabeledScan(const LabeledScan& scan, double max_range_m);
 
+  // Threads for the ray casting of insertLabeledScan (1: none started). Results do not depend
+  // on it: every free voxel is still updated once.
+  void setRayCastingThreads(int threads) { ray_casting_threads_ = threads < 1 ? 1 : threads; }
+
   // Adds one hit with class evidence at a leaf (max depth), expanding pruned nodes.
   SemanticOcTreeNode* updateOccupiedVoxel(const octomap::OcTreeKey& key, ClassIndex index,
                                           std::uint32_t class_count);
@@ -126,6 +130,14 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
 
  protected:
   void updateInnerOccupancyRecurs(SemanticOcTreeNode* node, unsigned int depth);
+  // One voxel update of a batch: Morton code of its key; class evidence for a hit, null for a
+  // miss.
+  struct VoxelUpdate {
+    std::uint64_t morton;
+    const SemanticOcTreeNode* evidence;
+  };
+  void updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
+                         const VoxelUpdate* begin, const VoxelUpdate* end);
   SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
                                                  const SemanticOcTreeNode& evidence);
   SemanticOcTreeNode* updateOccupiedRecurs(SemanticOcTreeNode* node, bool node_just_created,
@@ -134,6 +146,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
 
   ClassSet classes_;
   FusionModel fusion_;
+  int ray_casting_threads_ = 1;
 
   // Registers the tree type with octomap's factory once (ColorOcTree's idiom).
   class StaticMemberInitializer {
