@@ -17,6 +17,8 @@ Only numpy and matplotlib (Debian packages) are used.
 """
 
 import argparse
+import calendar
+import datetime
 import json
 import math
 import os
@@ -198,11 +200,12 @@ def read_timestamps(path):
 
 
 def _kitti_datetime_seconds(text, path, line_number):
-    """Seconds of the day of a KITTI raw timestamp (only differences matter here)."""
+    """UNIX seconds (UTC, as inekf_offline's stamps) of a KITTI raw timestamp."""
     try:
-        _, clock = text.split()
-        hours, minutes, seconds = clock.split(":")
-        return int(hours) * 3600.0 + int(minutes) * 60.0 + float(seconds)
+        day, clock = text.split()
+        whole, _, fraction = clock.partition(".")
+        moment = datetime.datetime.strptime(day + " " + whole, "%Y-%m-%d %H:%M:%S")
+        return calendar.timegm(moment.timetuple()) + float("0." + (fraction or "0"))
     except ValueError:
         raise TrajectoryFormatError("%s:%d: not a KITTI timestamp: %r" % (path, line_number, text))
 

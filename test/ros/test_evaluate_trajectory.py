@@ -297,6 +297,19 @@ class FilesAndErrorsTest(unittest.TestCase):
         self.assertEqual(et.main(["--estimate", self.path("estimate.txt"),
                                   "--truth", self.path("truth.txt")]), 2)
 
+    def test_kitti_raw_timestamps_give_seconds(self):
+        with open(self.path("timestamps.txt"), "w") as stream:
+            stream.write("2011-09-30 12:40:25.563828560\n2011-09-30 12:40:25.663884440\n"
+                         "2011-09-30 12:41:00.000000000\n")
+        stamps = et.read_timestamps(self.path("timestamps.txt"))
+        self.assertAlmostEqual(stamps[0], 1317386425.563828560, places=5)  # UTC, as the OXTS runs
+        self.assertAlmostEqual(stamps[1] - stamps[0], 0.10005588, places=6)
+        self.assertAlmostEqual(stamps[2] - stamps[0], 34.43617144, places=6)
+        with open(self.path("times.txt"), "w") as stream:
+            stream.write("12.5\nnot-a-time\n")
+        with self.assertRaisesRegex(et.TrajectoryFormatError, r"times\.txt:2: not a timestamp"):
+            et.read_timestamps(self.path("times.txt"))
+
     def test_states_header_and_rows_are_checked(self):
         with open(self.path("states.csv"), "w") as stream:
             stream.write("stamp,px,py,pz\n1,2,3,4\n")
