@@ -16,3 +16,7 @@ ism_add_core_library(${PROJECT_NAME}_estimation_oxts
   LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti)
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
+ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
+  LINK ${PROJECT_NAME}_estimation)
+ism_add_gtest(test_inekf_real_drives SOURCES test/unit/test_inekf_real_drives.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts)

@@ -28,17 +28,18 @@
 namespace inekf_semantic_mapping {
 namespace estimation {
 
+// Defaults = config/inekf.yaml (tuned on KITTI, see the comments there).
 struct LocalizerConfig {
   FilterType filter_type = FilterType::kLeftInvariant;
   ImuNoise imu_noise;
 
   // Initial 1-sigma uncertainties.
-  double initial_rotation_sigma_deg = 2.0;  // roll and pitch (about the map x and y axes)
-  double initial_yaw_sigma_deg = 5.0;       // about the map z axis
+  double initial_rotation_sigma_deg = 0.5;  // roll and pitch (about the map x and y axes)
+  double initial_yaw_sigma_deg = 1.0;       // about the map z axis
   double initial_velocity_sigma_mps = 0.5;
   double initial_position_sigma_m = 2.0;
-  double initial_gyro_bias_sigma_radps = 0.005;
-  double initial_accel_bias_sigma_mps2 = 0.1;
+  double initial_gyro_bias_sigma_radps = 1e-4;
+  double initial_accel_bias_sigma_mps2 = 0.03;
 
   double gps_gate_mahalanobis_squared = 30.0;  // 3 dof
   double min_gps_sigma_m = 0.3;
@@ -49,7 +50,7 @@ struct LocalizerConfig {
   // over one or two frames), so the gyro noise scale grows with the time spent inside the run:
   // scale = max(1, interpolated_gyro_noise_scale_per_s * seconds since the run began).
   double interpolated_gyro_noise_scale_per_s = 100.0;
-  double interpolated_accel_noise_scale = 10.0;
+  double interpolated_accel_noise_scale = 3.0;
   double max_fix_age_s = 0.5;
 
   // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the

@@ -36,8 +36,8 @@ struct NavState {
 
 // Continuous-time IMU noise densities (white noise and bias random walks).
 struct ImuNoise {
-  double gyro_noise_density = 1e-3;      // rad/s/sqrt(Hz)
-  double accel_noise_density = 1e-2;     // m/s^2/sqrt(Hz)
+  double gyro_noise_density = 7e-4;      // rad/s/sqrt(Hz)
+  double accel_noise_density = 0.02;     // m/s^2/sqrt(Hz)
   double gyro_bias_random_walk = 1e-5;   // rad/s^2/sqrt(Hz)
   double accel_bias_random_walk = 1e-4;  // m/s^3/sqrt(Hz)
   double gravity_mps2 = 9.81;            // magnitude; the map frame's gravity is (0, 0, -g)

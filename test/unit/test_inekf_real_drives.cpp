@@ -1,0 +1,132 @@
+// The filters on real KITTI OXTS drives from ../shared (skipped loudly without it), under the
+// evaluation protocol: GPS = OXTS lat/lon/alt + N(0, 1.5 m) h / N(0, 3 m) v, once a second,
+// seed 1, config/inekf.yaml. Thresholds are the targets for a careful left-InEKF.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "inekf_semantic_mapping/estimation/oxts_run.h"
+#include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/lie/so3.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+std::string oxtsDir(const std::string& drive) {
+  return "data/kitti_raw/" + drive.substr(0, 10) + "/" + drive + "_sync/oxts";
+}
+
+OxtsRunOptions protocol(FilterType type) {
+  OxtsRunOptions options;
+  options.config = LocalizerConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
+  options.config.filter_type = type;
+  options.gps.sigma_horizontal_m = 1.5;
+  options.gps.sigma_vertical_m = 3.0;
+  options.gps.every_n_frames = 10;
+  options.gps.seed = 1;
+  return options;
+}
+
+struct Target {
+  const char* drive;
+  double ate_m, rotation_rmse_deg;
+};
+
+TEST(RealDrives, GyroSampleFitsTheIntervalBeforeIt) {
+  ISM_REQUIRE_SHARED(oxtsDir("2011_09_30_drive_0027"));
+  const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));
+  double backward = 0.0, forward = 0.0;
+  int count = 0;
+  for (std::size_t k = 1; k < frames.size(); ++k) {
+    const auto& a = frames[k - 1].record;
+    const auto& b = frames[k].record;
+    if (a.posmode <= 0 || b.posmode <= 0) continue;
+    const double dt = frames[k].stampSeconds() - frames[k - 1].stampSeconds();
+    const Eigen::Matrix3d relative =
+        kitti::rotationFromRollPitchYaw(a.roll, a.pitch, a.yaw).transpose() *
+        kitti::rotationFromRollPitchYaw(b.roll, b.pitch, b.yaw);
+    const Eigen::Vector3d wa(a.wx, a.wy, a.wz), wb(b.wx, b.wy, b.wz);
+    backward += lie::logSO3(lie::expSO3(wb * dt).transpose() * relative).squaredNorm();
+    forward += lie::logSO3(lie::expSO3(wa * dt).transpose() * relative).squaredNorm();
+    ++count;
+  }
+  backward = std::sqrt(backward / count) * 180.0 / M_PI;
+  forward = std::sqrt(forward / count) * 180.0 / M_PI;
+  std::printf(
+      "[ MEASURED ] 0027 rotation residual per step: sample k over (k-1,k] %.4f deg, "
+      "over (k,k+1] %.4f deg\n",
+      backward, forward);
+  EXPECT_LT(backward, 0.3 * forward);
+}
+
+TEST(RealDrives, LeftInvariantEkfMeetsTheTargets) {
+  const Target targets[] = {{"2011_09_30_drive_0027", 2.1, 0.85},
+                            {"2011_09_26_drive_0036", 2.3, 0.85},
+                            {"2011_09_30_drive_0018", 2.1, 1.7}};
+  int ran = 0;
+  for (const Target& target : targets) {
+    const std::string dir = test::sharedPath(oxtsDir(target.drive));
+    if (!std::filesystem::exists(dir)) {
+      std::fprintf(stderr, "*** SKIPPED drive %s: %s not found\n", target.drive, dir.c_str());
+      continue;
+    }
+    const OxtsRunResult run =
+        runLocalizerOnOxts(kitti::readOxtsFolder(dir), protocol(FilterType::kLeftInvariant));
+    const TrajectoryErrors errors = compareWithTruth(run);
+    std::printf("[ ACCURACY ] %s left: ATE %.2f m (target %.2f), rotation RMSE %.2f deg (%.2f)\n",
+                target.drive, errors.ate_m, target.ate_m, errors.rotation_rmse_deg,
+                target.rotation_rmse_deg);
+    EXPECT_LT(errors.ate_m, target.ate_m) << target.drive;
+    EXPECT_LT(errors.rotation_rmse_deg, target.rotation_rmse_deg) << target.drive;
+    EXPECT_EQ(run.statistics.gps_rejected, 0) << target.drive;
+    EXPECT_EQ(run.states.size(), run.truth.size());
+    ++ran;
+  }
+  if (ran < 2) GTEST_SKIP() << "fewer than two real drives available in " << test::sharedDir();
+}
+
+TEST(RealDrives, LeftInvariantEkfRecoversFromA90DegreeYawErrorFasterThanTheEskf) {
+  ISM_REQUIRE_SHARED(oxtsDir("2011_09_30_drive_0027"));
+  const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));
+  const double t0 = frames.front().stampSeconds();
+  auto worstYawAfter = [&](const OxtsRunResult& run, double after_s) {
+    double worst = 0.0;
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      if (frames[k].stampSeconds() - t0 >= after_s) {
+        worst = std::max(worst, std::abs(yawErrorDeg(run, static_cast<int>(k))));
+      }
+    }
+    return worst;
+  };
+  double worst_after_20s[3], worst_after_60s[3];
+  int i = 0;
+  for (FilterType type :
+       {FilterType::kLeftInvariant, FilterType::kQuaternionEskf, FilterType::kRightInvariant}) {
+    OxtsRunOptions options = protocol(type);
+    options.init_yaw_error_deg = 90.0;
+    options.config.initial_yaw_sigma_deg = 180.0;
+    const OxtsRunResult run = runLocalizerOnOxts(frames, options);
+    EXPECT_NEAR(std::abs(yawErrorDeg(run, 0)), 90.0, 1e-6);
+    worst_after_20s[i] = worstYawAfter(run, 20.0);
+    worst_after_60s[i] = worstYawAfter(run, 60.0);
+    std::printf("[ YAW 90   ] %s: max |yaw error| after 20 s %.2f deg, after 60 s %.2f deg\n",
+                toString(type).c_str(), worst_after_20s[i], worst_after_60s[i]);
+    ++i;
+  }
+  EXPECT_LT(worst_after_60s[0], 1.5);
+  EXPECT_LT(worst_after_20s[0], worst_after_20s[1]);  // left converges faster than the ESKF
+  EXPECT_LE(worst_after_60s[0], worst_after_60s[1]);
+}
+
+}  // namespace
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
