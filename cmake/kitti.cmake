@@ -16,8 +16,9 @@ ism_add_gtest(test_kitti_gps_degradation
 
 # KITTI -> ROS message conversions shared by kitti_player and kitti2bag (ROS-facing, not core).
 add_library(${PROJECT_NAME}_kitti_ros src/ros/kitti_conversions.cpp)
-target_include_directories(${PROJECT_NAME}_kitti_ros PUBLIC ${ISM_ROS_INCLUDE_DIRS})
-target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PUBLIC ${OpenCV_INCLUDE_DIRS})
+# Include paths PRIVATE (catkin_lint: no exported external paths); users add ISM_ROS_INCLUDE_DIRS.
+target_include_directories(${PROJECT_NAME}_kitti_ros PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
 target_link_libraries(${PROJECT_NAME}_kitti_ros PUBLIC
   ${PROJECT_NAME}_kitti ${catkin_LIBRARIES} opencv_core opencv_imgcodecs)
 add_dependencies(${PROJECT_NAME}_kitti_ros ${catkin_EXPORTED_TARGETS})
@@ -26,7 +27,8 @@ ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp
   LINK ${PROJECT_NAME}_kitti_ros)
 
 if(CATKIN_ENABLE_TESTING)
-  add_rostest(test/ros/kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR})
+  add_rostest(test/ros/kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR}
+    DEPENDENCIES kitti_player)
 endif()
 
 ism_add_ros_executable(kitti2bag SOURCES src/tools/kitti2bag.cpp LINK ${PROJECT_NAME}_kitti_ros)
@@ -35,6 +37,9 @@ ism_add_ros_executable(kitti2bag SOURCES src/tools/kitti2bag.cpp LINK ${PROJECT_
 ism_add_gtest(test_kitti_conversions SOURCES test/unit/test_kitti_conversions.cpp
   LINK ${PROJECT_NAME}_kitti_ros)
 if(TARGET test_kitti_conversions)
+  target_include_directories(test_kitti_conversions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+  target_include_directories(test_kitti_conversions SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
+  target_link_libraries(test_kitti_conversions opencv_imgcodecs)
   target_compile_definitions(test_kitti_conversions PRIVATE
     KITTI2BAG_PATH="$<TARGET_FILE:kitti2bag>")
   add_dependencies(test_kitti_conversions kitti2bag)
@@ -43,5 +48,6 @@ endif()
 if(benchmark_FOUND)
   ism_add_tool(bench_kitti SOURCES bench/bench_kitti.cpp
     LINK ${PROJECT_NAME}_kitti_ros benchmark::benchmark)
+  target_include_directories(bench_kitti PRIVATE ${ISM_ROS_INCLUDE_DIRS})
   target_compile_definitions(bench_kitti PRIVATE ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
 endif()
