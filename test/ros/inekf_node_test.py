@@ -173,7 +173,8 @@ class InekfNodeTest(unittest.TestCase):
 
     def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False):
         """Publishes the drive's frames at `rate` times real time. With faults: a duplicate of
-        frame 100's IMU message, and at frame 150 the IMU message of frame 145 (out of order)."""
+        frame 100's IMU message, at frame 120 an IMU message and a fix with a NaN, and at frame
+        150 the IMU message of frame 145 (out of order)."""
         count = len(drive.records) if frames is None else min(frames, len(drive.records))
         for index in range(count):
             if rospy.is_shutdown():
@@ -186,6 +187,13 @@ class InekfNodeTest(unittest.TestCase):
                 self.imu_publisher.publish(imu)  # duplicate stamp
             if faults and index == 150:
                 self.imu_publisher.publish(self.imu_message(drive.records[145], drive.stamps[145]))
+            if faults and index == 120:
+                broken = self.imu_message(record, stamp + rospy.Duration(0.01))
+                broken.linear_acceleration.y = float("nan")  # must be ignored, never integrated
+                self.imu_publisher.publish(broken)
+                broken_fix = self.fix_message(record, stamp, [0, 0, 0], sigma_h, sigma_v)
+                broken_fix.latitude = float("nan")
+                self.fix_publisher.publish(broken_fix)
             if index % gps_every == 0:
                 noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
                 self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
@@ -312,8 +320,9 @@ class InekfNodeTest(unittest.TestCase):
         for bias in (status.gyro_bias, status.accel_bias):
             self.assertTrue(all(math.isfinite(v) for v in (bias.x, bias.y, bias.z)))
         if inject_faults:
-            self.assertGreaterEqual(status.imu_samples_dropped, 2,
-                                    "the duplicate and the out-of-order IMU messages were not counted")
+            self.assertGreaterEqual(status.imu_samples_dropped, 3,
+                                    "the duplicate, NaN and out-of-order IMU messages were not counted")
+            self.assertGreaterEqual(status.gps_fixes_rejected, 1, "the NaN fix was not counted")
         self.assertTrue(self.paths and len(self.paths[-1].poses) > 0, "no path on /inekf/path")
 
         if loop_frames > 0:
