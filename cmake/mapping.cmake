@@ -38,3 +38,10 @@ if(benchmark_FOUND)
   target_compile_definitions(bench_semantic_octree PRIVATE
     ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
 endif()
+
+ism_add_ros_executable(semantic_octomap_node
+  SOURCES src/nodes/semantic_octomap_node.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_projection)
+if(CATKIN_ENABLE_TESTING)
+  add_rostest(test/ros/semantic_octomap_node.test)
+endif()

@@ -1,0 +1,241 @@
+#!/usr/bin/python3
+"""rostest for semantic_octomap_node: a wall 10 m ahead of the lidar, its left half labeled
+building and its right half car in the label image, seen in three synchronized scans. Checks
+that per-class markers and the labeled cloud appear, that ~save_map writes a SemanticOcTree .ot
+and a PLY whose labels sit on the right side of the map, that an unwritable path returns
+success=False with the node still serving, and that ~reset empties the map."""
+import json
+import os
+import shutil
+import tempfile
+import threading
+import unittest
+
+import rospy
+import rostest
+import tf2_ros
+from geometry_msgs.msg import TransformStamped
+from sensor_msgs import point_cloud2
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from std_msgs.msg import String
+from std_srvs.srv import Empty
+from visualization_msgs.msg import MarkerArray
+
+from inekf_semantic_mapping.srv import SaveMap
+
+PKG = "inekf_semantic_mapping"
+NODE = "/semantic_octomap_node"
+WIDTH, HEIGHT = 200, 100
+BUILDING, CAR = 11, 26  # Cityscapes labelIds
+MAP_Y_OFFSET = 2.0  # map -> velo_link translation along y
+
+
+def transform(parent, child, translation, quaternion_xyzw):
+    t = TransformStamped()
+    t.header.stamp = rospy.Time.now()
+    t.header.frame_id = parent
+    t.child_frame_id = child
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = translation
+    (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+     t.transform.rotation.w) = quaternion_xyzw
+    return t
+
+
+def wall_cloud(stamp):
+    """A wall at x = 10 m (y -4..4, z -1..1.5) in velo_link, 5 cm spacing."""
+    points = []
+    for iy in range(161):
+        for iz in range(51):
+            points.append((10.0, -4.0 + 0.05 * iy, -1.0 + 0.05 * iz, 0.5))
+    header = rospy.Header(stamp=stamp, frame_id="velo_link")
+    fields = [PointField(name, 4 * i, PointField.FLOAT32, 1) for i, name in enumerate("xyz")]
+    fields.append(PointField("intensity", 12, PointField.FLOAT32, 1))
+    return point_cloud2.create_cloud(header, fields, points)
+
+
+def label_image(stamp):
+    """Left half of the image (u < 100, velo y > 0) building, right half car."""
+    row = bytes([BUILDING] * (WIDTH // 2) + [CAR] * (WIDTH - WIDTH // 2))
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = "camera_color_left"
+    msg.height, msg.width = HEIGHT, WIDTH
+    msg.encoding = "mono8"
+    msg.step = WIDTH
+    msg.data = row * HEIGHT
+    return msg
+
+
+def camera_info():
+    msg = CameraInfo()
+    msg.header.frame_id = "camera_color_left"
+    msg.width, msg.height = WIDTH, HEIGHT
+    msg.K = [100.0, 0, 100.0, 0, 100.0, 50.0, 0, 0, 1]
+    msg.P = [100.0, 0, 100.0, 0, 0, 100.0, 50.0, 0, 0, 0, 1, 0]
+    msg.R = [1.0, 0, 0, 0, 1, 0, 0, 0, 1]
+    return msg
+
+
+def read_ply(path):
+    with open(path) as f:
+        lines = f.read().splitlines()
+    end = lines.index("end_header")
+    assert "property uint label" in lines[:end], lines[:end]
+    vertices = [line.split() for line in lines[end + 1:] if line.strip()]
+    return [(float(v[0]), float(v[1]), float(v[2]), int(v[3])) for v in vertices]
+
+
+class SemanticOctomapNodeTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("semantic_octomap_node_test")
+        cls.lock = threading.Lock()
+        cls.markers = None
+        cls.info = None
+        cls.labeled_clouds = []
+        rospy.Subscriber("/semantic_map/markers", MarkerArray, cls.on_markers)
+        rospy.Subscriber("/semantic_map/info", String, cls.on_info)
+        rospy.Subscriber("/semantic_map/labeled_cloud", PointCloud2, cls.on_cloud)
+        cls.static_tf = tf2_ros.StaticTransformBroadcaster()
+        # velo_link -> camera_color_left: camera z = velo x, camera x = -velo y, camera y = -velo z.
+        cls.static_tf.sendTransform([
+            transform("map", "velo_link", (0.0, MAP_Y_OFFSET, 0.0), (0, 0, 0, 1)),
+            transform("velo_link", "camera_color_left", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)),
+        ])
+        cls.info_pub = rospy.Publisher("/kitti/camera_color_left/camera_info", CameraInfo,
+                                       queue_size=1, latch=True)
+        cls.cloud_pub = rospy.Publisher("/kitti/velo/pointcloud", PointCloud2, queue_size=5)
+        cls.labels_pub = rospy.Publisher("/segmentation/labels", Image, queue_size=5)
+        rospy.wait_for_service(NODE + "/save_map", timeout=30)
+        deadline = rospy.Time.now() + rospy.Duration(20)
+        while (cls.cloud_pub.get_num_connections() == 0 or cls.labels_pub.get_num_connections() == 0) \
+                and rospy.Time.now() < deadline:
+            rospy.sleep(0.1)
+        cls.info_pub.publish(camera_info())
+        rospy.sleep(0.5)
+        for i in range(3):
+            stamp = rospy.Time.now()
+            cls.cloud_pub.publish(wall_cloud(stamp))
+            cls.labels_pub.publish(label_image(stamp))
+            rospy.sleep(0.5)
+        cls.save = rospy.ServiceProxy(NODE + "/save_map", SaveMap)
+        cls.reset = rospy.ServiceProxy(NODE + "/reset", Empty)
+        cls.out_dir = tempfile.mkdtemp(prefix="ism_semantic_octomap_node_")
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.out_dir, ignore_errors=True)
+
+    @classmethod
+    def on_markers(cls, msg):
+        with cls.lock:
+            cls.markers = msg
+
+    @classmethod
+    def on_info(cls, msg):
+        with cls.lock:
+            cls.info = json.loads(msg.data)
+
+    @classmethod
+    def on_cloud(cls, msg):
+        with cls.lock:
+            cls.labeled_clouds.append(msg)
+
+    def wait_for(self, predicate, timeout=10.0):
+        deadline = rospy.Time.now() + rospy.Duration(timeout)
+        while rospy.Time.now() < deadline:
+            with self.lock:
+                if predicate():
+                    return True
+            rospy.sleep(0.1)
+        return False
+
+    def test_1_markers_per_class_on_the_right_side(self):
+        def has_both():
+            names = {m.ns for m in self.markers.markers} if self.markers else set()
+            return {"building", "car"} <= names
+        self.assertTrue(self.wait_for(has_both), "no building/car markers: %s" % (
+            [m.ns for m in self.markers.markers] if self.markers else None))
+        with self.lock:
+            by_ns = {m.ns: m for m in self.markers.markers if m.ns}
+        for ns, sign in (("building", 1.0), ("car", -1.0)):
+            marker = by_ns[ns]
+            self.assertEqual(marker.type, marker.CUBE_LIST)
+            self.assertEqual(marker.header.frame_id, "map")
+            self.assertGreater(len(marker.points), 50)
+            on_its_side = [p for p in marker.points if sign * (p.y - MAP_Y_OFFSET) > 0]
+            self.assertGreater(len(on_its_side), 0.9 * len(marker.points), ns)
+            for p in marker.points:
+                self.assertAlmostEqual(p.x, 10.0, delta=0.3)
+
+    def test_2_labeled_cloud_and_info(self):
+        self.assertTrue(self.wait_for(lambda: len(self.labeled_clouds) >= 3), "no labeled clouds")
+        with self.lock:
+            cloud = self.labeled_clouds[-1]
+        self.assertEqual(cloud.header.frame_id, "map")
+        self.assertEqual([f.name for f in cloud.fields], ["x", "y", "z", "rgb", "label"])
+        points = list(point_cloud2.read_points(cloud, field_names=("x", "y", "label")))
+        self.assertEqual(len(points), 161 * 51)
+        for x, y, label in points:
+            self.assertAlmostEqual(x, 10.0, delta=1e-3)
+            if abs(y - MAP_Y_OFFSET) > 0.3:  # away from the image's centre column
+                self.assertEqual(label, BUILDING if y > MAP_Y_OFFSET else CAR, (x, y, label))
+        self.assertTrue(self.wait_for(lambda: self.info is not None and self.info["scans"] >= 3),
+                        "info: %s" % self.info)
+        with self.lock:
+            info = dict(self.info)
+        self.assertGreater(info["occupied_voxels"], 100, info)
+        self.assertIn("building", info["classes"])
+        self.assertIn("car", info["classes"])
+
+    def test_3_scan_without_pose_is_skipped(self):
+        with self.lock:
+            scans_before = self.info["scans"]
+        stamp = rospy.Time.now()
+        cloud = wall_cloud(stamp)
+        cloud.header.frame_id = "frame_without_tf"
+        self.cloud_pub.publish(cloud)
+        self.labels_pub.publish(label_image(stamp))
+        rospy.sleep(1.5)
+        with self.lock:
+            self.assertEqual(self.info["scans"], scans_before, "a scan without a pose was inserted")
+
+    def test_4_save_map_ot_and_ply(self):
+        ot_path = os.path.join(self.out_dir, "map.ot")
+        response = self.save(ot_path, "ot")
+        self.assertTrue(response.success, response.message)
+        self.assertGreater(response.voxel_count, 100)
+        with open(ot_path, "rb") as f:
+            header = f.read(200)
+        self.assertTrue(header.startswith(b"# Octomap OcTree file"), header)
+        self.assertIn(b"id SemanticOcTree", header)
+        ply_path = os.path.join(self.out_dir, "map.ply")
+        response = self.save(ply_path, "")  # format from the extension
+        self.assertTrue(response.success, response.message)
+        vertices = read_ply(ply_path)
+        self.assertEqual(len(vertices), response.voxel_count)
+        labels = {v[3] for v in vertices}
+        self.assertTrue({BUILDING, CAR} <= labels, labels)
+        building_y = [v[1] for v in vertices if v[3] == BUILDING]
+        car_y = [v[1] for v in vertices if v[3] == CAR]
+        self.assertGreater(sum(y > MAP_Y_OFFSET for y in building_y), 0.9 * len(building_y))
+        self.assertGreater(sum(y < MAP_Y_OFFSET for y in car_y), 0.9 * len(car_y))
+        self.assertEqual([f for f in os.listdir(self.out_dir) if ".tmp" in f], [])
+
+    def test_5_unwritable_path_fails_cleanly(self):
+        bad = "/nonexistent_ism_dir/map.ot"
+        response = self.save(bad, "ot")
+        self.assertFalse(response.success)
+        self.assertIn(bad, response.message)
+        response = self.save(os.path.join(self.out_dir, "again.ot"), "ot")
+        self.assertTrue(response.success, "node did not survive the failed save: " + response.message)
+
+    def test_6_reset_empties_the_map(self):
+        self.reset()
+        response = self.save(os.path.join(self.out_dir, "empty.ply"), "ply")
+        self.assertTrue(response.success, response.message)
+        self.assertEqual(response.voxel_count, 0)
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "semantic_octomap_node_test", SemanticOctomapNodeTest)
