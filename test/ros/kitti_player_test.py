@@ -2,16 +2,23 @@
 """Checks kitti_player against the raw OXTS text files it plays (see kitti_player.test)."""
 import calendar
 import os
+import shutil
+import struct
+import subprocess
 import sys
+import tempfile
 import time
 import unittest
+import zlib
 
 import rospy
 import rostest
 import tf2_ros
+import roslib.packages
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from sensor_msgs.msg import CameraInfo, Image, Imu, NavSatFix, NavSatStatus, PointCloud2
+from tf2_msgs.msg import TFMessage
 from std_srvs.srv import SetBool, Trigger
 
 PKG = 'inekf_semantic_mapping'
@@ -24,6 +31,56 @@ def stamp_ns(text):
     y, mo, d = (int(v) for v in date.split('-'))
     h, mi, s = (int(v) for v in seconds.split(':'))
     return calendar.timegm((y, mo, d, h, mi, s, 0, 0, 0)) * 10**9 + int(fraction.ljust(9, '0'))
+
+
+def write_png(path, width, height, rgb):
+    """A solid-colour 8-bit RGB png (no OpenCV needed in the test)."""
+    def chunk(kind, data):
+        return (struct.pack('>I', len(data)) + kind + data +
+                struct.pack('>I', zlib.crc32(kind + data) & 0xffffffff))
+    rows = b''.join(b'\x00' + bytes(rgb) * width for _ in range(height))
+    with open(path, 'wb') as f:
+        f.write(b'\x89PNG\r\n\x1a\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', width, height, 8, 2, 0, 0, 0)) +
+                chunk(b'IDAT', zlib.compress(rows)) + chunk(b'IEND', b''))
+
+
+def write_synthetic_drive(root, frames=3):
+    """<root>/2011_01_01/2011_01_01_drive_0001_sync: oxts, a 3-ring velodyne, image_02, calib."""
+    import math
+    date_dir = os.path.join(root, '2011_01_01')
+    drive = os.path.join(date_dir, '2011_01_01_drive_0001_sync')
+    stamps = ''.join('2011-01-01 10:00:00.%09d\n' % (100000000 * i) for i in range(frames))
+    for sensor in ('oxts', 'velodyne_points', 'image_02'):
+        os.makedirs(os.path.join(drive, sensor, 'data'))
+        with open(os.path.join(drive, sensor, 'timestamps.txt'), 'w') as f:
+            f.write(stamps)
+    for i in range(frames):
+        values = [49.0 + 1e-5 * i, 8.4, 100.0, 0.01, -0.02, 0.5, 1, 2, 0, 0, 0.1, 0.3 + i, -0.2,
+                  9.8, -7, 0, 0, 0.01, 0.02, 0.03 * i, -5, 0, 0, 0.05, 0.01, 4, 8, 5, 5, 5]
+        with open(os.path.join(drive, 'oxts', 'data', '%010d.txt' % i), 'w') as f:
+            f.write(' '.join(repr(float(v)) if k < 25 else str(v) for k, v in enumerate(values)))
+        points = b''
+        for ring in range(3):
+            for k in range(36):
+                azimuth = math.radians(10 * k + 1)
+                elevation = math.radians(2 - 2 * ring)
+                points += struct.pack('<4f', 10 * math.cos(azimuth), 10 * math.sin(azimuth),
+                                      10 * math.tan(elevation), 0.25 * ring)
+        with open(os.path.join(drive, 'velodyne_points', 'data', '%010d.bin' % i), 'wb') as f:
+            f.write(points)
+        write_png(os.path.join(drive, 'image_02', 'data', '%010d.png' % i), 40, 30, (30, 20, 10))
+    with open(os.path.join(date_dir, 'calib_imu_to_velo.txt'), 'w') as f:
+        f.write('calib_time: x\nR: 1 0 0 0 1 0 0 0 1\nT: -0.8 0.3 -0.8\n')
+    with open(os.path.join(date_dir, 'calib_velo_to_cam.txt'), 'w') as f:
+        f.write('calib_time: x\nR: 0 -1 0 0 0 -1 1 0 0\nT: 0 -0.08 -0.27\n')
+    with open(os.path.join(date_dir, 'calib_cam_to_cam.txt'), 'w') as f:
+        for c in range(4):
+            s = '_0%d: ' % c
+            f.write('S%s40 30\nK%s400 0 20 0 400 15 0 0 1\nD%s0 0 0 0 0\n' % (s, s, s))
+            f.write('R%s1 0 0 0 1 0 0 0 1\nT%s0 0 0\nS_rect%s40 30\n' % (s, s, s))
+            f.write('R_rect%s1 0 0 0 1 0 0 0 1\n' % s)
+            f.write('P_rect%s400 0 20 %d 0 400 15 0 0 0 1 0\n' % (s, 40 if c == 2 else 0))
+    return drive
 
 
 class KittiPlayerTest(unittest.TestCase):
@@ -41,6 +98,58 @@ class KittiPlayerTest(unittest.TestCase):
                 return True
             time.sleep(0.05)
         return condition()
+
+    def test_synthetic_drive_with_lidar_and_camera(self):
+        """Needs no ../shared: a second player on a drive the test writes, topics remapped."""
+        root = tempfile.mkdtemp(prefix='ism_kitti_player_')
+        drive = write_synthetic_drive(root)
+        got = {'cloud': [], 'image': [], 'info': [], 'tf': [], 'imu': []}
+        rospy.Subscriber('/synth/velo', PointCloud2, lambda m: got['cloud'].append(m))
+        rospy.Subscriber('/synth/image', Image, lambda m: got['image'].append(m))
+        rospy.Subscriber('/synth/info', CameraInfo, lambda m: got['info'].append(m))
+        rospy.Subscriber('/synth/tf_static', TFMessage, lambda m: got['tf'].append(m))
+        rospy.Subscriber('/synth/imu', Imu, lambda m: got['imu'].append(m))
+        remaps = {'/kitti/velo/pointcloud': '/synth/velo',
+                  '/kitti/camera_color_left/image_raw': '/synth/image',
+                  '/kitti/camera_color_left/camera_info': '/synth/info',
+                  '/kitti/oxts/imu': '/synth/imu', '/kitti/oxts/gps/fix': '/synth/fix',
+                  '/kitti/oxts/gps/vel': '/synth/vel', '/kitti/oxts/ground_truth': '/synth/gt',
+                  '/tf_static': '/synth/tf_static'}
+        player = subprocess.Popen(
+            [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=kitti_player_synth',
+             '_drive_dir:=' + drive, '_rate:=2.0', '_paused:=true', '_exit_when_done:=true'] +
+            ['%s:=%s' % item for item in remaps.items()])
+        try:
+            rospy.wait_for_service('/kitti_player_synth/pause', timeout=30)
+            time.sleep(1.0)
+            rospy.ServiceProxy('/kitti_player_synth/pause', SetBool)(False)
+            self.assertTrue(self.wait_for(lambda: all(len(got[k]) >= 3 for k in
+                                                      ('cloud', 'image', 'info', 'imu')), 30.0),
+                            {k: len(v) for k, v in got.items()})
+            self.assertEqual(player.wait(timeout=30), 0)
+        finally:
+            if player.poll() is None:
+                player.terminate()
+                player.wait()
+            shutil.rmtree(root)
+        for k in ('cloud', 'image', 'info', 'imu'):
+            self.assertEqual([m.header.stamp.to_nsec() for m in got[k]],
+                             [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in range(3)])
+        cloud = got['cloud'][0]
+        self.assertEqual(cloud.header.frame_id, 'velo_link')
+        self.assertEqual([f.name for f in cloud.fields], ['x', 'y', 'z', 'intensity', 'ring'])
+        self.assertEqual(cloud.width, 108)
+        ring_offset = cloud.fields[4].offset
+        rings = [struct.unpack_from('<H', cloud.data, i * cloud.point_step + ring_offset)[0]
+                 for i in range(cloud.width)]
+        self.assertEqual(rings, [i // 36 for i in range(108)])
+        image = got['image'][0]
+        self.assertEqual((image.encoding, image.width, image.height), ('bgr8', 40, 30))
+        self.assertEqual(bytes(image.data[:3]), bytes((10, 20, 30)))  # RGB (30,20,10) as BGR
+        self.assertEqual(image.header.frame_id, 'camera_color_left')
+        info = got['info'][0]
+        self.assertEqual((info.width, info.height, info.P[0], info.P[3]), (40, 30, 400.0, 0.0))
+        self.assertEqual(got['tf'][0].transforms[-2].child_frame_id, 'camera_color_left')
 
     def test_plays_the_drive(self):
         oxts_dir = os.path.join(self.drive_dir, 'oxts')
