@@ -44,4 +44,5 @@ ism_add_ros_executable(semantic_octomap_node
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_projection)
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test)
+  add_rostest(test/ros/semantic_octomap_lidar_only.test)
 endif()
