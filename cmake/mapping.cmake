@@ -13,9 +13,6 @@ ism_add_core_library(${PROJECT_NAME}_mapping
   LINK ${PROJECT_NAME}_kitti ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
 
-ism_add_gtest(test_projection
-  SOURCES test/unit/test_projection.cpp
-  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
   LINK ${PROJECT_NAME}_mapping)
@@ -27,9 +24,24 @@ target_include_directories(project_cloud SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
 ism_add_tool(semantic_map_offline
   SOURCES src/tools/semantic_map_offline.cpp
   LINK ${PROJECT_NAME}_mapping)
+
+# Unit tests (the CLI tests run the tools, so they depend on them).
+ism_add_gtest(test_projection
+  SOURCES test/unit/test_projection.cpp
+  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
+if(TARGET test_projection)
+  target_compile_definitions(test_projection PRIVATE
+    PROJECT_CLOUD_PATH="$<TARGET_FILE:project_cloud>")
+  add_dependencies(test_projection project_cloud)
+endif()
 ism_add_gtest(test_semantic_octree_offline
   SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)
+if(TARGET test_semantic_octree_offline)
+  target_compile_definitions(test_semantic_octree_offline PRIVATE
+    SEMANTIC_MAP_OFFLINE_PATH="$<TARGET_FILE:semantic_map_offline>")
+  add_dependencies(test_semantic_octree_offline semantic_map_offline)
+endif()
 
 if(benchmark_FOUND)
   ism_add_tool(bench_semantic_octree
@@ -43,6 +55,6 @@ ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_projection)
 if(CATKIN_ENABLE_TESTING)
-  add_rostest(test/ros/semantic_octomap_node.test)
-  add_rostest(test/ros/semantic_octomap_lidar_only.test)
+  add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
 endif()
