@@ -57,6 +57,15 @@ def run_logged(command, log_path, timeout):
         raise RuntimeError("%s exited %d:\n%s" % (" ".join(command), result.returncode, tail))
 
 
+def _file_digest(path):
+    """Content hash of a binary: a relink that changes nothing keeps the cached data."""
+    digest = hashlib.sha1()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def _cache_key(*parts):
     digest = hashlib.sha1()
     for part in parts:
@@ -69,7 +78,7 @@ def synthetic_drive(duration_s, seed=7, generator_args=()):
     generator = find_executable("generate_synthetic_drive")
     if generator is None:
         raise RuntimeError("generate_synthetic_drive is not built")
-    key = _cache_key("drive", duration_s, seed, tuple(generator_args), os.path.getmtime(generator))
+    key = _cache_key("drive", duration_s, seed, tuple(generator_args), _file_digest(generator))
     out_dir = os.path.join(CACHE_ROOT, "drive_" + key)
     done = os.path.join(out_dir, ".complete")
     if not os.path.exists(done):
@@ -101,7 +110,7 @@ def kitti2bag(drive_dir, bag_args=()):
     converter = find_executable("kitti2bag")
     if converter is None:
         raise RuntimeError("kitti2bag is not built")
-    key = _cache_key("bag", os.path.realpath(drive_dir), tuple(bag_args), os.path.getmtime(converter),
+    key = _cache_key("bag", os.path.realpath(drive_dir), tuple(bag_args), _file_digest(converter),
                      os.path.getmtime(drive_dir))
     os.makedirs(CACHE_ROOT, exist_ok=True)
     bag = os.path.join(CACHE_ROOT, "bag_%s.bag" % key)
