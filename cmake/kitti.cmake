@@ -22,6 +22,9 @@ target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PRIVATE ${OpenCV_INC
 target_link_libraries(${PROJECT_NAME}_kitti_ros PUBLIC
   ${PROJECT_NAME}_kitti ${catkin_LIBRARIES} opencv_core opencv_imgcodecs)
 add_dependencies(${PROJECT_NAME}_kitti_ros ${catkin_EXPORTED_TARGETS})
+install(TARGETS ${PROJECT_NAME}_kitti_ros
+  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
 
 ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp
   LINK ${PROJECT_NAME}_kitti_ros)
