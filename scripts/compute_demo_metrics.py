@@ -258,15 +258,21 @@ def _majority_label(keys, labels):
     return run_keys[first], run_labels[first]
 
 
-def ground_truth_voxels(ground_truth_dir, resolution, scan_step=2, max_range_m=None):
+def ground_truth_voxels(ground_truth_dir, resolution, scan_step=2, max_range_m=None, poses=None):
     """Voxel keys and majority labelIds of the generator's labeled lidar points in the map frame
-    (velodyne_points + ground_truth/velodyne_labels + poses_imu_map + calib_imu_to_velo)."""
+    (velodyne_points + ground_truth/velodyne_labels + poses_imu_map + calib_imu_to_velo).
+
+    poses: T_map_imu per OXTS frame to place the scans with instead of the true ones (None
+    entries: frame skipped), e.g. the estimate the map was built with."""
     drive_dir = os.path.dirname(os.path.abspath(ground_truth_dir))
-    poses = read_kitti_poses(os.path.join(ground_truth_dir, "poses_imu_map.txt"))
+    if poses is None:
+        poses = read_kitti_poses(os.path.join(ground_truth_dir, "poses_imu_map.txt"))
     velo_from_imu = read_calib_rigid(os.path.join(os.path.dirname(drive_dir), "calib_imu_to_velo.txt"))
     imu_from_velo = np.linalg.inv(velo_from_imu)
     all_keys, all_labels = [], []
     for frame in range(0, len(poses), scan_step):
+        if poses[frame] is None:
+            continue
         scan_path = os.path.join(drive_dir, "velodyne_points", "data", "%010d.bin" % frame)
         label_path = os.path.join(ground_truth_dir, "velodyne_labels", "%010d.label" % frame)
         if not (os.path.exists(scan_path) and os.path.exists(label_path)):
@@ -288,7 +294,8 @@ def ground_truth_voxels(ground_truth_dir, resolution, scan_step=2, max_range_m=N
     return _majority_label(np.concatenate(all_keys), np.concatenate(all_labels))
 
 
-def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_step=2, max_range_m=None):
+def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_step=2, max_range_m=None,
+             poses=None):
     """Semantic accuracy of the map's occupied voxels: on the voxels that are both occupied in the
     map and hit by labeled ground-truth lidar points, the IoU of each class between the map's
     label and the ground-truth majority label; mIoU over the classes present in the ground
@@ -297,7 +304,7 @@ def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_st
         resolution = ply_resolution(ply_path)
     if not resolution:
         raise ValueError("map resolution unknown (no 'resolution' comment in the PLY)")
-    gt_keys, gt_labels = ground_truth_voxels(ground_truth_dir, resolution, scan_step, max_range_m)
+    gt_keys, gt_labels = ground_truth_voxels(ground_truth_dir, resolution, scan_step, max_range_m, poses)
     points = np.stack([vertices["x"], vertices["y"], vertices["z"]], axis=1).astype(float)
     map_keys = _voxel_keys(points, resolution)
     map_labels = vertices["label"].astype(np.int64)
@@ -322,6 +329,25 @@ def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_st
         "coverage": float(len(truth)) / max(1, len(gt_keys)),
         "resolution_m": resolution,
     }
+
+
+def estimated_frame_poses(estimate, truth, max_dt=0.02):
+    """T_map_imu of the estimate at each ground-truth (= OXTS frame) stamp, in frame order; None
+    where the filter had no pose (before its first fix). Uses the last pass of a looped bag."""
+    est, gt = associate(estimate, truth, max_dt)
+    truth_last = associate(truth, truth, 0.0)[0]
+    by_stamp = {round(g[0], 6): e for e, g in zip(est, gt)}
+    poses = []
+    for row in truth_last[np.argsort(truth_last[:, 0])]:
+        e = by_stamp.get(round(row[0], 6))
+        if e is None:
+            poses.append(None)
+            continue
+        pose = np.eye(4)
+        pose[:3, :3] = quaternion_to_matrix(e[4:8])
+        pose[:3, 3] = e[1:4]
+        poses.append(pose)
+    return poses
 
 
 def map_class_histogram(vertices):
@@ -365,6 +391,8 @@ def main():
     parser.add_argument("--bag", help="the input bag (for message counts)")
     parser.add_argument("--map-ply", help="the saved semantic map PLY")
     parser.add_argument("--ground-truth", help="synthetic drive ground_truth/ folder (map mIoU)")
+    parser.add_argument("--map-poses", choices=("estimate", "truth"), default="estimate",
+                        help="the poses the map was built with (use_ground_truth_pose: truth)")
     parser.add_argument("--output", required=True)
     parser.add_argument("--plot", help="trajectory PNG")
     parser.add_argument("--evaluate-trajectory",
@@ -386,7 +414,10 @@ def main():
         metrics["map"] = {"occupied_voxels": int(len(vertices)), "classes": map_class_histogram(vertices)}
         if args.ground_truth:
             try:
-                metrics["map"]["semantic"] = map_miou(vertices, args.ground_truth, ply_path=args.map_ply)
+                poses = (estimated_frame_poses(estimate, truth) if args.map_poses == "estimate" else None)
+                metrics["map"]["semantic"] = map_miou(vertices, args.ground_truth, ply_path=args.map_ply,
+                                                      poses=poses)
+                metrics["map"]["semantic"]["scans_placed_with"] = args.map_poses
             except (OSError, ValueError) as error:
                 metrics["map"]["semantic"] = {"error": str(error)}
     for item in args.extra:

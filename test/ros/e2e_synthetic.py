@@ -70,7 +70,10 @@ class EndToEndSynthetic(unittest.TestCase):
             vertices = e2e.metrics.read_ply_vertices(ply)
             results["map_classes"] = e2e.metrics.map_class_histogram(vertices)
             gt_dir = e2e.ground_truth_dir(drive)
-            results["map_miou"] = (e2e.metrics.map_miou(vertices, gt_dir, ply_path=ply) if gt_dir else None)
+            # Ground-truth points placed with the poses the map was built with (the estimate).
+            poses = e2e.metrics.estimated_frame_poses(estimate, truth)
+            results["map_miou"] = (e2e.metrics.map_miou(vertices, gt_dir, ply_path=ply, poses=poses)
+                                   if gt_dir else None)
         with open(os.path.join(out_dir, "results.json"), "w") as f:
             json.dump(results, f, indent=2, default=str)
         rospy.loginfo("%s results: %s", NAME, json.dumps({k: results.get(k) for k in
