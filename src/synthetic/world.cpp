@@ -187,6 +187,37 @@ bool intersectPrimitive(const Primitive& primitive, double c, double s,
   return false;
 }
 
+// Slab test for a box whose faces are aligned with the map axes (buildings, most fences):
+// multiplications by the precomputed inverse direction instead of a rotation and divisions.
+inline bool intersectAlignedBox(const Eigen::Vector3d& center, const Eigen::Vector3d& half,
+                                const Eigen::Vector3d& o, const Eigen::Vector3d& inverse_d,
+                                double t_min, double t_max, double* t_hit,
+                                Eigen::Vector3d* normal) {
+  double t_near = -std::numeric_limits<double>::infinity();
+  double t_far = std::numeric_limits<double>::infinity();
+  int axis = -1;
+  for (int i = 0; i < 3; ++i) {
+    const double lo = center[i] - half[i] - o[i], hi = center[i] + half[i] - o[i];
+    if (std::isinf(inverse_d[i])) {  // parallel to the slab
+      if (lo > 0 || hi < 0) return false;
+      continue;
+    }
+    double t1 = lo * inverse_d[i], t2 = hi * inverse_d[i];
+    if (t1 > t2) std::swap(t1, t2);
+    if (t1 > t_near) {
+      t_near = t1;
+      axis = i;
+    }
+    t_far = std::min(t_far, t2);
+    if (t_near > t_far) return false;
+  }
+  if (axis < 0 || t_near <= t_min || t_near >= t_max) return false;
+  *t_hit = t_near;
+  *normal = Eigen::Vector3d::Zero();
+  (*normal)[axis] = inverse_d[axis] > 0 ? -1.0 : 1.0;
+  return true;
+}
+
 }  // namespace
 
 bool Primitive::intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double t_min,
@@ -243,8 +274,18 @@ void SyntheticWorld::buildIndex(double cell_size_m) {
   cell_items_.clear();
   cell_top_z_.clear();
   yaw_cos_sin_.clear();
+  aligned_half_size_.clear();
   for (const Primitive& p : primitives_) {
-    yaw_cos_sin_.emplace_back(std::cos(p.yaw), std::sin(p.yaw));
+    const double c = std::cos(p.yaw), s = std::sin(p.yaw);
+    yaw_cos_sin_.emplace_back(c, s);
+    // Boxes turned by a multiple of 90 degrees take the fast axis-aligned test.
+    Eigen::Vector3d aligned = Eigen::Vector3d::Zero();
+    if (p.type == PrimitiveType::kBox && std::min(std::abs(c), std::abs(s)) < 1e-12) {
+      aligned = std::abs(c) > 0.5
+                    ? p.half_size
+                    : Eigen::Vector3d(p.half_size.y(), p.half_size.x(), p.half_size.z());
+    }
+    aligned_half_size_.push_back(aligned);
   }
   grid_nx_ = grid_ny_ = 0;
   max_top_z_ = -std::numeric_limits<double>::infinity();
@@ -305,6 +346,10 @@ bool SyntheticWorld::raycastGround(const Eigen::Vector3d& o, const Eigen::Vector
   };
   const double curvature_bound =
       ground_.maxCurvature() * (d.x() * d.x() + d.y() * d.y()) * 1.0001 + 1e-15;
+  // Cheap outs before any trigonometry: the ray stays above the highest possible ground up to
+  // t_max (rays that hit a wall or a car first, sky rays).
+  const double highest_ground = g.offset + std::abs(g.amplitude_x) + std::abs(g.amplitude_y);
+  if (o.z() + std::min(0.0, d.z()) * t_max > highest_ground) return false;
   double t = 0, slope;
   double f = f_and_slope(0, &slope);
   if (f <= 0) return false;  // the origin is under the ground
@@ -366,6 +411,9 @@ bool SyntheticWorld::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
                           ? (grid_min_.y() + (cy + (step_y > 0)) * cell_size_ - o.y()) / d.y()
                           : inf;
       double t_entry = t0;
+      // Inverse direction for the axis-aligned slab test (zero components: +-inf, and the
+      // slab test below handles them by comparing the origin with the slab).
+      const Eigen::Vector3d inverse_d = d.cwiseInverse();
       // Mailbox: a primitive spanning several cells is tested once per ray.
       thread_local std::vector<std::uint32_t> tested_by_ray;
       thread_local std::uint32_t ray_id = 0;
@@ -388,8 +436,13 @@ bool SyntheticWorld::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
             tested_by_ray[index] = ray_id;
             double t;
             Eigen::Vector3d n;
-            if (intersectPrimitive(primitives_[index], yaw_cos_sin_[index].x(),
-                                   yaw_cos_sin_[index].y(), o, d, 1e-9, best_t, &t, &n)) {
+            const bool hit_it =
+                aligned_half_size_[index].x() > 0
+                    ? intersectAlignedBox(primitives_[index].center, aligned_half_size_[index], o,
+                                          inverse_d, 1e-9, best_t, &t, &n)
+                    : intersectPrimitive(primitives_[index], yaw_cos_sin_[index].x(),
+                                         yaw_cos_sin_[index].y(), o, d, 1e-9, best_t, &t, &n);
+            if (hit_it) {
               best_t = t;
               best_index = static_cast<int>(index);
               best_normal = n;

@@ -133,8 +133,9 @@ class SyntheticWorld {
   int grid_nx_ = 0, grid_ny_ = 0;
   std::vector<std::uint32_t> cell_begin_;
   std::vector<std::uint32_t> cell_items_;
-  std::vector<double> cell_top_z_;            // highest primitive top per cell
-  std::vector<Eigen::Vector2d> yaw_cos_sin_;  // per primitive
+  std::vector<double> cell_top_z_;                  // highest primitive top per cell
+  std::vector<Eigen::Vector2d> yaw_cos_sin_;        // per primitive
+  std::vector<Eigen::Vector3d> aligned_half_size_;  // map-axis half sizes; x = 0: not aligned
   double max_top_z_ = 0;
 };
 
