@@ -66,6 +66,8 @@ std::unique_ptr<SemanticOcTree> buildSemanticMapFromSequence(const OfflineMappin
 
   auto tree =
       std::make_unique<SemanticOcTree>(options.resolution_m, options.classes, options.fusion);
+  tree->setProbHit(options.prob_hit);
+  tree->setProbMiss(options.prob_miss);
   LabeledScan scan;
   scan.unknown_label_id = options.ignored_label_id;
   std::size_t total_points = 0;

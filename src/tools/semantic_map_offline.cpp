@@ -4,7 +4,7 @@
 //   semantic_map_offline --scans DIR --labels DIR --poses POSES.txt --calib CALIB.txt
 //       --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M] [--confusion P]
 //       [--fusion bayes|dirichlet] [--max-scans N] [--classes semantickitti|cityscapes]
-//       [--color-ot MAP_COLOR.ot]
+//       [--color-ot MAP_COLOR.ot] [--prob-hit P] [--prob-miss P]
 #include <cstdlib>
 #include <iostream>
 #include <map>
@@ -22,7 +22,8 @@ constexpr char kUsage[] =
     "usage: semantic_map_offline --scans DIR --labels DIR --poses POSES.txt --calib CALIB.txt\n"
     "         --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M]\n"
     "         [--confusion P] [--fusion bayes|dirichlet] [--max-scans N]\n"
-    "         [--classes semantickitti|cityscapes] [--color-ot MAP_COLOR.ot]\n";
+    "         [--classes semantickitti|cityscapes] [--color-ot MAP_COLOR.ot]\n"
+    "         [--prob-hit P] [--prob-miss P]\n";
 
 double parseNumber(const std::string& flag, const std::string& text) {
   try {
@@ -59,7 +60,7 @@ int main(int argc, char** argv) {
     static const std::set<std::string> kKnown = {
         "--scans",     "--labels",     "--poses",     "--calib",     "--resolution",
         "--output",    "--export-ply", "--max-range", "--confusion", "--fusion",
-        "--max-scans", "--classes",    "--color-ot"};
+        "--max-scans", "--classes",    "--color-ot",  "--prob-hit",  "--prob-miss"};
     for (const auto& [flag, value] : args) {
       if (!kKnown.count(flag)) throw std::invalid_argument("unknown option " + flag);
     }
@@ -78,6 +79,14 @@ int main(int argc, char** argv) {
       if (!(options.fusion.correct_probability > 0 && options.fusion.correct_probability < 1)) {
         throw std::invalid_argument("--confusion must be in (0, 1)");
       }
+    }
+    if (args.count("--prob-hit")) options.prob_hit = parseNumber("--prob-hit", args["--prob-hit"]);
+    if (args.count("--prob-miss")) {
+      options.prob_miss = parseNumber("--prob-miss", args["--prob-miss"]);
+    }
+    if (!(options.prob_hit > 0.5 && options.prob_hit < 1 && options.prob_miss > 0 &&
+          options.prob_miss < 0.5)) {
+      throw std::invalid_argument("--prob-hit must be in (0.5, 1) and --prob-miss in (0, 0.5)");
     }
     if (args.count("--fusion")) options.fusion.rule = mapping::parseFusionRule(args["--fusion"]);
     if (args.count("--max-scans")) {

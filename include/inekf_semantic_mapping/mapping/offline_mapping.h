@@ -28,6 +28,8 @@ struct OfflineMappingOptions {
   std::string calib_path;
   double resolution_m = 0.2;
   double max_range_m = 50.0;
+  double prob_hit = 0.7;  // occupancy sensor model (octomap's defaults)
+  double prob_miss = 0.4;
   FusionModel fusion;
   int max_scans = -1;  // < 0: all
   // Known classes (palette, names); ids outside it are added as they appear (grey).
