@@ -20,3 +20,8 @@ ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_inekf_real_drives SOURCES test/unit/test_inekf_real_drives.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
+
+if(benchmark_FOUND)
+  ism_add_tool(bench_inekf SOURCES bench/bench_inekf.cpp
+    LINK ${PROJECT_NAME}_estimation_oxts benchmark::benchmark)
+endif()

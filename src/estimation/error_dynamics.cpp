@@ -70,6 +70,13 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a
 Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
                            const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
                            double dt) {
+  return leftProcessNoise(w, a, noise, gyro_noise_scale, accel_noise_scale, dt,
+                          leftErrorTransition(w, a, dt));
+}
+
+Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
+                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
+                           double dt, const Matrix15d& phi_full) {
   Eigen::Matrix<double, 15, 1> diagonal;
   const double gyro_sigma = gyro_noise_scale * noise.gyro_noise_density;
   const double accel_sigma = accel_noise_scale * noise.accel_noise_density;
@@ -77,13 +84,30 @@ Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
       Eigen::Vector3d::Constant(accel_sigma * accel_sigma), Eigen::Vector3d::Zero(),
       Eigen::Vector3d::Constant(noise.gyro_bias_random_walk * noise.gyro_bias_random_walk),
       Eigen::Vector3d::Constant(noise.accel_bias_random_walk * noise.accel_bias_random_walk);
-  // Noise injected at time s reaches dt through Phi(dt - s): Simpson over s.
-  const Matrix15d phi_full = leftErrorTransition(w, a, dt);
-  const Matrix15d phi_half = leftErrorTransition(w, a, 0.5 * dt);
-  const auto l = diagonal.asDiagonal();
-  Matrix15d q = (dt / 6.0) * (Matrix15d(phi_full * l * phi_full.transpose()) +
-                              4.0 * Matrix15d(phi_half * l * phi_half.transpose()) + Matrix15d(l));
+  // Noise injected at time s reaches dt through Phi(dt - s): Simpson over s. With L diagonal,
+  // Phi L Phi^T = (Phi sqrt(L)) (Phi sqrt(L))^T: one product each.
+  const Eigen::Matrix<double, 15, 1> sqrt_l = diagonal.cwiseSqrt();
+  const Matrix15d full = phi_full * sqrt_l.asDiagonal();
+  const Matrix15d half = leftErrorTransition(w, a, 0.5 * dt) * sqrt_l.asDiagonal();
+  Matrix15d q = full.lazyProduct(full.transpose()) + 4.0 * half.lazyProduct(half.transpose());
+  q.diagonal() += diagonal;
+  q *= dt / 6.0;
   return 0.5 * (q + q.transpose());
+}
+
+Matrix15d propagateLeftCovariance(const Matrix15d& phi, const Matrix15d& p) {
+  // phi = [A B; 0 I] (navigation 9, biases 6): skip the products with the known blocks.
+  const Eigen::Matrix<double, 9, 9> a = phi.topLeftCorner<9, 9>();
+  const Eigen::Matrix<double, 9, 6> b = phi.topRightCorner<9, 6>();
+  const Eigen::Matrix<double, 9, 15> top =
+      a.lazyProduct(p.topRows<9>()) + b.lazyProduct(p.bottomRows<6>());
+  Matrix15d out;
+  out.topLeftCorner<9, 9>() =
+      top.leftCols<9>().lazyProduct(a.transpose()) + top.rightCols<6>().lazyProduct(b.transpose());
+  out.topRightCorner<9, 6>() = top.rightCols<6>();
+  out.bottomLeftCorner<6, 9>() = top.rightCols<6>().transpose();
+  out.bottomRightCorner<6, 6>() = p.bottomRightCorner<6, 6>();
+  return out;
 }
 
 }  // namespace estimation

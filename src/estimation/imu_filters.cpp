@@ -63,16 +63,17 @@ void ImuFilterBase::propagate(const ImuSample& sample, double dt) {
   const NavState next =
       integrateImu(state_, sample.angular_velocity, sample.specific_force, noise_.gravity_mps2, dt);
   const Matrix15d phi = leftErrorTransition(w, a, dt);
-  const Matrix15d q = leftProcessNoise(w, a, noise_, gyro_noise_scale_, accel_noise_scale_, dt);
+  const Matrix15d q =
+      leftProcessNoise(w, a, noise_, gyro_noise_scale_, accel_noise_scale_, dt, phi);
   ErrorCovariance next_covariance;
   if (type() == FilterType::kLeftInvariant) {
-    next_covariance = phi * covariance_ * phi.transpose() + q;
+    next_covariance = propagateLeftCovariance(phi, covariance_) + q;
   } else {
     const Matrix15d to_left = leftFromError(state_);
     const Matrix15d from_left = errorFromLeft(next);
-    const Matrix15d transition = from_left * phi * to_left;
-    next_covariance =
-        transition * covariance_ * transition.transpose() + from_left * q * from_left.transpose();
+    const Matrix15d left = to_left.lazyProduct(covariance_).lazyProduct(to_left.transpose());
+    const Matrix15d left_next = propagateLeftCovariance(phi, left) + q;
+    next_covariance = from_left.lazyProduct(left_next).lazyProduct(from_left.transpose());
   }
   commit(next, symmetrized(next_covariance));
 }
@@ -127,8 +128,11 @@ CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Vector3d& innovation,
   }
   const Eigen::Matrix<double, 15, 3> gain = llt.solve(pht.transpose()).transpose();
   *correction = gain * innovation;
-  const Matrix15d i_kh = Matrix15d::Identity() - gain * h;
-  *updated = symmetrized(i_kh * covariance_ * i_kh.transpose() + gain * noise * gain.transpose());
+  // Joseph form (I - KH) P (I - KH)^T + K N K^T, expanded so that it costs O(15^2 3) instead of
+  // two 15x15 products: P - K (PH^T)^T - (PH^T) K^T + K S K^T. Same algebra for any gain.
+  const Eigen::Matrix<double, 15, 3> k_s = gain * s;
+  *updated = symmetrized(covariance_ - gain * pht.transpose() - pht * gain.transpose() +
+                         k_s * gain.transpose());
   result.accepted = true;
   return result;
 }

@@ -35,6 +35,14 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& angular_velocity,
 Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
                            const Eigen::Vector3d& specific_force, const ImuNoise& noise,
                            double gyro_noise_scale, double accel_noise_scale, double dt);
+// Same, reusing Phi(dt) = leftErrorTransition(angular_velocity, specific_force, dt).
+Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
+                           const Eigen::Vector3d& specific_force, const ImuNoise& noise,
+                           double gyro_noise_scale, double accel_noise_scale, double dt,
+                           const Matrix15d& transition);
+
+// phi p phi^T for a left transition (bias rows [0 I]), using that structure.
+Matrix15d propagateLeftCovariance(const Matrix15d& phi, const Matrix15d& p);
 
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

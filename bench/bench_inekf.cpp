@@ -1,0 +1,94 @@
+// Speed of the navigation filters: one propagate and one position correction per filter, and a
+// whole KITTI drive through the Localizer (2011_09_30_drive_0028, 5177 frames, when ../shared is
+// there; else a 4500-step synthetic drive).
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "inekf_semantic_mapping/estimation/oxts_run.h"
+
+namespace estimation = inekf_semantic_mapping::estimation;
+namespace kitti = inekf_semantic_mapping::kitti;
+
+namespace {
+
+estimation::FilterType filterOf(const benchmark::State& state) {
+  return static_cast<estimation::FilterType>(state.range(0));
+}
+
+std::unique_ptr<estimation::NavigationFilter> readyFilter(estimation::FilterType type) {
+  auto filter = estimation::makeFilter(type, estimation::ImuNoise());
+  estimation::NavState s;
+  s.velocity_map = Eigen::Vector3d(8, 1, 0);
+  s.position_map = Eigen::Vector3d(300, -120, 4);
+  filter->initialize(s, estimation::ErrorCovariance::Identity() * 0.01);
+  return filter;
+}
+
+void BM_Propagate(benchmark::State& state) {
+  auto filter = readyFilter(filterOf(state));
+  estimation::ImuSample sample;
+  sample.angular_velocity = Eigen::Vector3d(0.01, -0.02, 0.2);
+  sample.specific_force = Eigen::Vector3d(0.5, 0.3, 9.8);
+  for (auto _ : state) {
+    filter->propagate(sample, 0.1);
+    benchmark::DoNotOptimize(filter->state());
+  }
+  state.SetLabel(estimation::toString(filterOf(state)));
+}
+BENCHMARK(BM_Propagate)->Arg(0)->Arg(1)->Arg(2);
+
+void BM_CorrectPosition(benchmark::State& state) {
+  auto filter = readyFilter(filterOf(state));
+  estimation::PositionFix fix;
+  fix.position_map = filter->state().position_map + Eigen::Vector3d(0.3, -0.2, 0.1);
+  fix.covariance_map = Eigen::Matrix3d::Identity();
+  // Repeated fixes: the state converges on the fix, the work per update stays the same.
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(filter->correctPosition(fix, 1e9));
+  }
+  state.SetLabel(estimation::toString(filterOf(state)));
+}
+BENCHMARK(BM_CorrectPosition)->Arg(0)->Arg(1)->Arg(2);
+
+std::vector<kitti::OxtsFrame> benchmarkDrive() {
+  const char* shared = std::getenv("ISM_SHARED_DIR");
+  const std::string dir = std::string(shared && *shared ? shared : "../shared") +
+                          "/data/kitti_raw/2011_09_30/2011_09_30_drive_0028_sync/oxts";
+  if (std::filesystem::exists(dir)) return kitti::readOxtsFolder(dir);
+  // Synthetic stand-in: a steady curve at 10 m/s, 4500 frames.
+  std::vector<kitti::OxtsFrame> frames(4500);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    frames[k].stamp_ns = static_cast<std::int64_t>(k) * 100000000;
+    kitti::OxtsRecord& r = frames[k].record;
+    r.lat = 49.0 + 1e-6 * k;
+    r.lon = 8.4 + 1e-6 * k;
+    r.alt = 110.0;
+    r.yaw = 0.01 * k;
+    r.az = 9.81;
+    r.wz = 0.1;
+    r.posmode = 5;
+  }
+  return frames;
+}
+
+void BM_WholeDriveThroughLocalizer(benchmark::State& state) {
+  static const std::vector<kitti::OxtsFrame> frames = benchmarkDrive();
+  estimation::OxtsRunOptions options;
+  options.config.filter_type = filterOf(state);
+  options.gps.every_n_frames = 10;
+  options.gps.sigma_horizontal_m = 1.5;
+  options.gps.sigma_vertical_m = 3.0;
+  options.gps.seed = 1;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(estimation::runLocalizerOnOxts(frames, options));
+  }
+  state.SetLabel(estimation::toString(filterOf(state)) + ", " + std::to_string(frames.size()) +
+                 " frames");
+}
+BENCHMARK(BM_WholeDriveThroughLocalizer)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
