@@ -5,17 +5,22 @@
 # fragment configures (and the suite stays green) while components are still landing; a missing
 # one is reported at configure time.
 
-# ism_add_system_rostest(FILE NEEDS target...)
+# ism_add_system_rostest(FILE NEEDS target... [NEEDS_FILES repo-relative-path...])
 function(ism_add_system_rostest file)
-  cmake_parse_arguments(ARG "" "" "NEEDS" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "NEEDS;NEEDS_FILES" ${ARGN})
   set(missing "")
   foreach(target ${ARG_NEEDS})
     if(NOT TARGET ${target})
       list(APPEND missing ${target})
     endif()
   endforeach()
+  foreach(needed_file ${ARG_NEEDS_FILES})
+    if(NOT EXISTS ${PROJECT_SOURCE_DIR}/${needed_file})
+      list(APPEND missing ${needed_file})
+    endif()
+  endforeach()
   if(missing)
-    message(STATUS "system: ${file} not registered, missing targets: ${missing}")
+    message(STATUS "system: ${file} not registered, missing: ${missing}")
     return()
   endif()
   add_rostest(${file} DEPENDENCIES ${ARG_NEEDS})
@@ -24,10 +29,15 @@ endfunction()
 if(CATKIN_ENABLE_TESTING)
   set(ISM_PIPELINE_TARGETS
     generate_synthetic_drive kitti2bag inekf_node segmentation_node semantic_octomap_node)
-  ism_add_system_rostest(test/ros/e2e_synthetic.test NEEDS ${ISM_PIPELINE_TARGETS})
+  # The pipeline runs the default segmentation model (models/unet_synthetic.onnx).
+  set(ISM_PIPELINE_FILES models/unet_synthetic.onnx)
+  ism_add_system_rostest(test/ros/e2e_synthetic.test
+    NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
   ism_add_system_rostest(test/ros/e2e_real_oxts.test NEEDS kitti2bag inekf_node)
   ism_add_system_rostest(test/ros/robustness_gps_outage.test
     NEEDS generate_synthetic_drive kitti2bag inekf_node)
-  ism_add_system_rostest(test/ros/robustness_bag_loop.test NEEDS ${ISM_PIPELINE_TARGETS})
-  ism_add_system_rostest(test/ros/robustness_node_restart.test NEEDS ${ISM_PIPELINE_TARGETS})
+  ism_add_system_rostest(test/ros/robustness_bag_loop.test
+    NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
+  ism_add_system_rostest(test/ros/robustness_node_restart.test
+    NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
 endif()
