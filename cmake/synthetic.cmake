@@ -19,3 +19,8 @@ ism_add_gtest(test_synthetic_world SOURCES test/unit/test_synthetic_world.cpp
   LINK ${PROJECT_NAME}_synthetic)
 ism_add_gtest(test_synthetic_drive SOURCES test/unit/test_synthetic_drive.cpp
   LINK ${PROJECT_NAME}_synthetic ${PROJECT_NAME}_kitti opencv_imgcodecs)
+
+if(benchmark_FOUND)
+  ism_add_tool(bench_synthetic SOURCES bench/bench_synthetic.cpp
+    LINK ${PROJECT_NAME}_synthetic benchmark::benchmark)
+endif()
