@@ -95,6 +95,9 @@ class FlatKeySet {
 // SemanticOcTreeNode
 // ---------------------------------------------------------------------------------------------
 
+// The memory budget the header promises (plain OcTreeNode: 16 bytes).
+static_assert(sizeof(SemanticOcTreeNode) <= 24, "SemanticOcTreeNode grew past 24 bytes");
+
 void SemanticOcTreeNode::addClassEvidence(ClassIndex index, std::uint32_t count) {
   if (index == kNoClass || count == 0) return;
   int slot = -1;
