@@ -132,6 +132,9 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("gps", "gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared, true);
   reader.number("gps", "min_sigma_m", &config.min_gps_sigma_m, false);
   reader.number("gps", "max_fix_age_s", &config.max_fix_age_s, false);
+  double max_rejected = config.max_consecutive_rejected_fixes;
+  reader.number("gps", "max_consecutive_rejected_fixes", &max_rejected, false);
+  config.max_consecutive_rejected_fixes = static_cast<int>(max_rejected);
   reader.number("imu", "max_gap_s", &config.max_imu_gap_s, true);
   reader.number("imu", "gap_noise_scale", &config.gap_noise_scale, true);
   reader.number("imu", "interpolated_gyro_noise_scale_per_s",
@@ -165,6 +168,8 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   filter_->initialize(initial, filter_->fromWorldCovariance(initial, world_covariance));
   filter_->setProcessNoiseScale(1.0, 1.0);
   initialized_ = true;
+  consecutive_rejected_fixes_ = 0;
+  last_accepted_fix_s_ = initial.stamp_s;
 }
 
 void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
@@ -273,7 +278,27 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
   used.stamp_s = filter_->state().stamp_s;
 
   result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
+  const bool gated_out =
+      !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
+  if (gated_out && config_.max_consecutive_rejected_fixes > 0 &&
+      ++consecutive_rejected_fixes_ >= config_.max_consecutive_rejected_fixes) {
+    const NavState& state = filter_->state();
+    const Eigen::Vector3d innovation = used.position_map - state.position_map;
+    const double since_last_fix_s = std::max(1.0, state.stamp_s - last_accepted_fix_s_);
+    ErrorCovariance inflation = ErrorCovariance::Zero();
+    inflation.block<3, 3>(3, 3).diagonal().setConstant(
+        std::pow(innovation.norm() / since_last_fix_s, 2));
+    inflation.block<3, 3>(6, 6).diagonal().setConstant(innovation.squaredNorm());
+    filter_->initialize(state,
+                        filter_->covariance() + filter_->fromWorldCovariance(state, inflation));
+    result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
+    if (result.accepted) ++statistics_.gps_reacquisitions;
+  }
   statistics_.last_mahalanobis_squared = result.mahalanobis_squared;
+  if (result.accepted) {
+    consecutive_rejected_fixes_ = 0;
+    last_accepted_fix_s_ = filter_->state().stamp_s;
+  }
   if (result.accepted) {
     ++statistics_.gps_used;
   } else {

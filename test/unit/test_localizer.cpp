@@ -107,6 +107,29 @@ TEST(Localizer, GateRejectsAJumpingFix) {
   EXPECT_LT(localizer.state().position_map.norm(), 1e-9);
 }
 
+TEST(Localizer, ReacquiresAfterConsecutiveRejectedFixes) {
+  LocalizerConfig config;
+  config.max_consecutive_rejected_fixes = 3;
+  Localizer localizer(config);
+  localizer.initialize(startState(0.0));
+  const Eigen::Vector3d far(60.0, 0.0, 0.0);  // the filter, not the receiver, is wrong
+  for (int k = 1; k <= 3; ++k) {
+    for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(k - 1 + 0.1 * i));
+    const CorrectionResult result = localizer.addPositionFix(fixAt(k, far));
+    EXPECT_EQ(result.accepted, k == 3) << "fix " << k << ": " << result.reason;
+  }
+  EXPECT_EQ(localizer.statistics().gps_reacquisitions, 1);
+  EXPECT_EQ(localizer.statistics().gps_rejected, 2);
+  EXPECT_LT((localizer.state().position_map - far).norm(), 5.0);
+  // Consistent fixes shrink the inflated covariance again; then gating works as before.
+  for (int k = 4; k <= 12; ++k) {
+    for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(k - 1 + 0.1 * i));
+    EXPECT_TRUE(localizer.addPositionFix(fixAt(k, far)).accepted) << "fix " << k;
+  }
+  for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(12.0 + 0.1 * i));
+  EXPECT_FALSE(localizer.addPositionFix(fixAt(13.0, far + Eigen::Vector3d(0, 30, 0))).accepted);
+}
+
 TEST(Localizer, LazyInitializationLevelsFromGravityOrUsesTheReference) {
   LocalizerConfig config;
   config.init_orientation_from_reference = false;
@@ -158,6 +181,7 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.gps_gate_mahalanobis_squared, defaults.gps_gate_mahalanobis_squared);
   EXPECT_DOUBLE_EQ(loaded.min_gps_sigma_m, defaults.min_gps_sigma_m);
   EXPECT_DOUBLE_EQ(loaded.max_fix_age_s, defaults.max_fix_age_s);
+  EXPECT_EQ(loaded.max_consecutive_rejected_fixes, defaults.max_consecutive_rejected_fixes);
   EXPECT_DOUBLE_EQ(loaded.max_imu_gap_s, defaults.max_imu_gap_s);
   EXPECT_DOUBLE_EQ(loaded.gap_noise_scale, defaults.gap_noise_scale);
   EXPECT_DOUBLE_EQ(loaded.interpolated_gyro_noise_scale_per_s,

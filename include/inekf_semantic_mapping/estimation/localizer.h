@@ -15,6 +15,11 @@
 //    state's time with its covariance inflated by (speed * age)^2 per axis; older or newer ones
 //    are rejected ("stale fix"). Fix sigmas below min_gps_sigma_m are raised to it.
 //  - Any update that would produce a non-finite value is rejected; the last good state is kept.
+//  - Re-acquisition: after max_consecutive_rejected_fixes fixes in a row fail the gate, the
+//    filter's own position/velocity covariance is what is wrong (e.g. after a long outage or a
+//    jump in the receiver's solution): the position and velocity covariance are inflated by the
+//    innovation (in the map frame) and the fix is applied. Without this a diverged filter would
+//    reject every later fix forever (KITTI 0028 frames 860..1080).
 #pragma once
 
 #include <cstdint>
@@ -52,6 +57,7 @@ struct LocalizerConfig {
   double interpolated_gyro_noise_scale_per_s = 100.0;
   double interpolated_accel_noise_scale = 3.0;
   double max_fix_age_s = 0.5;
+  int max_consecutive_rejected_fixes = 5;  // then re-acquire (see above); <= 0: never
 
   // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
   // OXTS orientation of the first Imu message) instead of levelling with yaw 0 and zero speed.
@@ -72,6 +78,7 @@ class Localizer {
     std::int64_t imu_gaps = 0;
     std::int64_t gps_used = 0;
     std::int64_t gps_rejected = 0;
+    std::int64_t gps_reacquisitions = 0;
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -113,7 +120,9 @@ class Localizer {
   std::optional<Eigen::Matrix3d> reference_rotation_;
   Eigen::Vector3d reference_velocity_ = Eigen::Vector3d::Zero();
   Statistics statistics_;
-  double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
+  double interpolated_run_start_s_ = -1.0;
+  int consecutive_rejected_fixes_ = 0;
+  double last_accepted_fix_s_ = 0.0;  // < 0: not inside a run of interpolated samples
 };
 
 }  // namespace estimation
