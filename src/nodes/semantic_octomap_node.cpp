@@ -57,6 +57,7 @@ struct NodeParameters {
   double sync_tolerance_s = 0.05;
   double tf_timeout_s = 0.2;
   bool use_labels_without_image = false;
+  bool insert_points_outside_image = false;
   double labels_timeout_s = 2.0;
   double marker_rate_hz = 1.0;
   int marker_depth = 15;
@@ -85,6 +86,8 @@ NodeParameters readParameters(const ros::NodeHandle& pnh) {
   pnh.param("tf_timeout", p.tf_timeout_s, p.tf_timeout_s);
   pnh.param("use_labels_without_image", p.use_labels_without_image, p.use_labels_without_image);
   pnh.param("labels_timeout", p.labels_timeout_s, p.labels_timeout_s);
+  pnh.param("insert_points_outside_image", p.insert_points_outside_image,
+            p.insert_points_outside_image);
   pnh.param("marker_rate", p.marker_rate_hz, p.marker_rate_hz);
   pnh.param("marker_depth", p.marker_depth, p.marker_depth);
   pnh.param("calib_dir", p.calib_dir, p.calib_dir);
@@ -267,6 +270,19 @@ class SemanticOctomapNode {
         projector->project(points_sensor, &projected);
         perception::labelPointsFromImage(projected, labels->data.data(), labels->width,
                                          labels->height, labels->step, kNoLabel, &scan.label_ids);
+      }
+      if (!params_.insert_points_outside_image) {
+        // Only what the camera saw: ~5x less ray casting, and no unlabeled voxels around the
+        // car that would never get a class.
+        Eigen::Index kept = 0;
+        for (Eigen::Index i = 0; i < points_sensor.cols(); ++i) {
+          if (scan.label_ids[i] == kNoLabel) continue;
+          points_sensor.col(kept) = points_sensor.col(i);
+          scan.label_ids[kept] = scan.label_ids[i];
+          ++kept;
+        }
+        points_sensor.conservativeResize(3, kept);
+        scan.label_ids.resize(static_cast<std::size_t>(kept));
       }
       insert(std::move(points_sensor), std::move(scan), *pose, cloud->header);
     } catch (const std::exception& e) {

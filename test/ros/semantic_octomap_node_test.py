@@ -41,12 +41,15 @@ def transform(parent, child, translation, quaternion_xyzw):
     return t
 
 
-def wall_cloud(stamp):
-    """A wall at x = 10 m (y -4..4, z -1..1.5) in velo_link, 5 cm spacing."""
+def wall_cloud(stamp, behind=False):
+    """A wall at x = 10 m (y -4..4, z -1..1.5) in velo_link, 5 cm spacing; with `behind`, also
+    a wall at x = -10 m that the camera cannot see."""
     points = []
     for iy in range(161):
         for iz in range(51):
             points.append((10.0, -4.0 + 0.05 * iy, -1.0 + 0.05 * iz, 0.5))
+            if behind:
+                points.append((-10.0, -4.0 + 0.05 * iy, -1.0 + 0.05 * iz, 0.5))
     header = rospy.Header(stamp=stamp, frame_id="velo_link")
     fields = [PointField(name, 4 * i, PointField.FLOAT32, 1) for i, name in enumerate("xyz")]
     fields.append(PointField("intensity", 12, PointField.FLOAT32, 1))
@@ -115,7 +118,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         rospy.sleep(0.5)
         for i in range(3):
             stamp = rospy.Time.now()
-            cls.cloud_pub.publish(wall_cloud(stamp))
+            cls.cloud_pub.publish(wall_cloud(stamp, behind=True))
             cls.labels_pub.publish(label_image(stamp))
             rospy.sleep(0.5)
         cls.save = rospy.ServiceProxy(NODE + "/save_map", SaveMap)
@@ -220,6 +223,8 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         car_y = [v[1] for v in vertices if v[3] == CAR]
         self.assertGreater(sum(y > MAP_Y_OFFSET for y in building_y), 0.9 * len(building_y))
         self.assertGreater(sum(y < MAP_Y_OFFSET for y in car_y), 0.9 * len(car_y))
+        # insert_points_outside_image is false: the wall behind the camera is not in the map.
+        self.assertEqual([v for v in vertices if v[0] < 0], [])
         self.assertEqual([f for f in os.listdir(self.out_dir) if ".tmp" in f], [])
 
     def test_5_unwritable_path_fails_cleanly(self):
