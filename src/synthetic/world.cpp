@@ -377,6 +377,20 @@ bool SyntheticWorld::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
   int best_index = -1;
   Eigen::Vector3d best_normal = Eigen::Vector3d::UnitZ();
   bool found = false;
+  auto take_ground_hit = [&](double t_ground) {
+    best_t = t_ground;
+    best_index = -1;
+    const Eigen::Vector3d p = o + t_ground * d;
+    const Eigen::Vector2d g = ground_.gradient(p.x(), p.y());
+    best_normal = Eigen::Vector3d(-g.x(), -g.y(), 1.0).normalized();
+    found = true;
+  };
+  // A descending ray meets the ground soon: find that first, so that the grid walk stops there
+  // instead of crossing the whole town under the ground. A climbing ray rarely hits the ground:
+  // walk the grid first, whose hit then lets the ground test stop without trigonometry.
+  const bool ground_first = d.z() < 0;
+  double t_ground;
+  if (ground_first && raycastGround(o, d, best_t, &t_ground)) take_ground_hit(t_ground);
 
   if (grid_nx_ > 0) {
     // Clip the ray's footprint to the grid rectangle, then walk the cells (Amanatides-Woo).
@@ -465,14 +479,8 @@ bool SyntheticWorld::raycast(const Eigen::Vector3d& o, const Eigen::Vector3d& d,
     }
   }
 
-  double t_ground;
-  if (raycastGround(o, d, best_t, &t_ground) && t_ground < best_t) {
-    best_t = t_ground;
-    best_index = -1;
-    const Eigen::Vector3d p = o + t_ground * d;
-    const Eigen::Vector2d g = ground_.gradient(p.x(), p.y());
-    best_normal = Eigen::Vector3d(-g.x(), -g.y(), 1.0).normalized();
-    found = true;
+  if (!ground_first && raycastGround(o, d, best_t, &t_ground) && t_ground < best_t) {
+    take_ground_hit(t_ground);
   }
   if (!found) return false;
   hit->distance = best_t;
