@@ -36,6 +36,33 @@ void setExtendedPose(const ExtendedPose& x, NavState* s) {
   s->position_map = x.position;
 }
 
+// t p t^T for the block-sparse coordinate maps (3x3 blocks; most are zero): skips the zero
+// blocks, about a tenth of the work of two dense 15x15 products.
+Matrix15d sandwich(const Matrix15d& t, const Matrix15d& p) {
+  bool nonzero[5][5];
+  for (int i = 0; i < 5; ++i) {
+    for (int k = 0; k < 5; ++k) nonzero[i][k] = !t.block<3, 3>(3 * i, 3 * k).isZero(0.0);
+  }
+  Matrix15d tp = Matrix15d::Zero();
+  for (int i = 0; i < 5; ++i) {
+    for (int k = 0; k < 5; ++k) {
+      if (nonzero[i][k]) {
+        tp.middleRows<3>(3 * i).noalias() += t.block<3, 3>(3 * i, 3 * k) * p.middleRows<3>(3 * k);
+      }
+    }
+  }
+  Matrix15d out = Matrix15d::Zero();
+  for (int j = 0; j < 5; ++j) {
+    for (int k = 0; k < 5; ++k) {
+      if (nonzero[j][k]) {
+        out.middleCols<3>(3 * j).noalias() +=
+            tp.middleCols<3>(3 * k) * t.block<3, 3>(3 * j, 3 * k).transpose();
+      }
+    }
+  }
+  return out;
+}
+
 Eigen::Matrix<double, 3, 15> positionJacobian() {
   Eigen::Matrix<double, 3, 15> h = Eigen::Matrix<double, 3, 15>::Zero();
   h.block<3, 3>(0, 6).setIdentity();
@@ -71,9 +98,8 @@ void ImuFilterBase::propagate(const ImuSample& sample, double dt) {
   } else {
     const Matrix15d to_left = leftFromError(state_);
     const Matrix15d from_left = errorFromLeft(next);
-    const Matrix15d left = to_left.lazyProduct(covariance_).lazyProduct(to_left.transpose());
-    const Matrix15d left_next = propagateLeftCovariance(phi, left) + q;
-    next_covariance = from_left.lazyProduct(left_next).lazyProduct(from_left.transpose());
+    const Matrix15d left_next = propagateLeftCovariance(phi, sandwich(to_left, covariance_)) + q;
+    next_covariance = sandwich(from_left, left_next);
   }
   commit(next, symmetrized(next_covariance));
 }
@@ -88,7 +114,7 @@ bool ImuFilterBase::commit(const NavState& state, const ErrorCovariance& covaria
 
 PoseCovariance ImuFilterBase::poseCovariance() const {
   const Matrix15d to_left = leftFromError(state_);
-  const ErrorCovariance left = to_left * covariance_ * to_left.transpose();
+  const ErrorCovariance left = sandwich(to_left, covariance_);
   Eigen::Matrix<double, 6, 15> j = Eigen::Matrix<double, 6, 15>::Zero();
   j.block<3, 3>(0, 6) = state_.rotation;  // dp_map = R xi_p
   j.block<3, 3>(3, 0).setIdentity();      // body small angle = xi_R

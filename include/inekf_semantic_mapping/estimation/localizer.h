@@ -63,7 +63,8 @@ struct LocalizerConfig {
   // OXTS orientation of the first Imu message) instead of levelling with yaw 0 and zero speed.
   bool init_orientation_from_reference = true;
 
-  // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above).
+  // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above; a
+  // top-level `node:` section is left to the node).
   // Throws std::runtime_error naming the file and the key on a bad value or an unknown key.
   static LocalizerConfig fromYamlFile(const std::string& path);
 };
