@@ -8,7 +8,10 @@
 # ~save_map, and writes output/demo/: trajectory.png, metrics.json, semantic_map.ot,
 # semantic_map.ply, rviz.png (+ logs).
 # Environment: ISM_DEMO_DURATION (synthetic drive seconds, 30), ISM_DEMO_SEED (42),
-# ISM_DEMO_RATE (playback rate, 1.0), ISM_DEMO_SKIP_BUILD=1, ISM_DEMO_PORT (ROS master port).
+# ISM_DEMO_GENERATOR_ARGS (default: a 32-beam lidar and 621x188 images, so that generation and
+# segmentation fit a few minutes on 2 cores; "" for the full HDL-64 / 1242x375 rig),
+# ISM_DEMO_MODEL (segmentation model, default models/unet_synthetic.onnx), ISM_DEMO_RATE
+# (playback rate, 1.0), ISM_DEMO_SKIP_BUILD=1, ISM_DEMO_PORT (ROS master port).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 start=$(date +%s)
@@ -16,6 +19,8 @@ drive=${1:-}
 duration=${ISM_DEMO_DURATION:-30}
 seed=${ISM_DEMO_SEED:-42}
 rate=${ISM_DEMO_RATE:-1.0}
+generator_args=${ISM_DEMO_GENERATOR_ARGS---lidar-beams 32 --azimuth-step-deg 0.4 --image-size 621x188}
+model=${ISM_DEMO_MODEL:-$ISM_ROOT/models/unet_synthetic.onnx}
 out=$ISM_ROOT/output/demo
 log() { echo "[demo $(($(date +%s) - start))s] $*"; }
 
@@ -31,6 +36,7 @@ ism_source_workspace
 for exe in kitti2bag inekf_node segmentation_node semantic_octomap_node; do
   [[ -x $ISM_BIN/$exe ]] || { echo "[demo] $ISM_BIN/$exe missing: build failed?"; exit 1; }
 done
+[[ -f $model ]] || { echo "[demo] segmentation model $model missing (set ISM_DEMO_MODEL)"; exit 1; }
 
 rm -rf "$out"
 mkdir -p "$out"
@@ -38,8 +44,9 @@ ground_truth=""
 if [[ -z $drive ]]; then
   log "generating a ${duration} s synthetic drive (seed $seed)"
   t0=$(date +%s)
+  # shellcheck disable=SC2086  # generator_args is a list of flags
   "$ISM_BIN/generate_synthetic_drive" --output "$out/synthetic" --seed "$seed" --duration "$duration" \
-    >"$out/generate.log" 2>&1 || { tail -n 20 "$out/generate.log"; exit 1; }
+    $generator_args >"$out/generate.log" 2>&1 || { tail -n 20 "$out/generate.log"; exit 1; }
   generate_s=$(($(date +%s) - t0))
   drive=$(ls -d "$out"/synthetic/*/*_drive_*_sync | head -n 1)
   for candidate in "$drive/ground_truth" "$(dirname "$drive")/ground_truth" "$out/synthetic/ground_truth"; do
@@ -79,7 +86,7 @@ pids+=($!)
 export DISPLAY=$display LIBGL_ALWAYS_SOFTWARE=1
 
 log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port)"
-roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" \
+roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" model:="$model" \
   rviz:=false play_delay:=5 origin_lat:="$origin_lat" origin_lon:="$origin_lon" origin_alt:="$origin_alt" gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
 pids+=($!)
 until rosnode list 2>/dev/null | grep -q /semantic_octomap_node; do sleep 0.5; done
@@ -88,6 +95,11 @@ monitor_pid=$!
 pids+=($monitor_pid)
 until rosnode list 2>/dev/null | grep -q /rosbag_play; do sleep 0.5; done
 play_start=$(date +%s)
+sleep 2
+for node in /inekf_node /segmentation_node /semantic_octomap_node; do
+  rosnode list 2>/dev/null | grep -qx "$node" ||
+    { echo "[demo] $node is not running; its error from $out/launch.log:"; grep -E "FATAL|ERROR|died" "$out/launch.log" | head -n 5; exit 1; }
+done
 # rviz joins for the last part of the drive only: software GL on 2 cores would otherwise take
 # CPU from the pipeline for the whole run (the path, map and markers are complete at the end).
 rviz_started=0
