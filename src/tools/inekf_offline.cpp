@@ -98,7 +98,10 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (std::find(known.begin(), known.end(), arg) == known.end() || i + 1 >= argc) {
-      std::cerr << "inekf_offline: " << (i + 1 >= argc ? "missing value for " : "unknown option ")
+      std::cerr << "inekf_offline: "
+                << (std::find(known.begin(), known.end(), arg) == known.end()
+                        ? "unknown option "
+                        : "missing value for ")
                 << arg << "\n"
                 << kUsage;
       return 2;
