@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -168,6 +169,7 @@ TEST_F(SyntheticDrive, MercatorOfTheWrittenFixesGivesTheTruePositions) {
         std::max(max_rotation_error, (T.linear() - truth[k].linear()).cwiseAbs().maxCoeff());
     travelled = std::max(travelled, truth[k].translation().norm());
   }
+  std::printf("[ figure ] Mercator round trip: max position error %.2e m\n", max_position_error);
   EXPECT_LT(max_position_error, 1e-3);
   EXPECT_LT(max_rotation_error, 1e-9);
   EXPECT_LT(truth.front().translation().norm(), 1e-9);  // the map origin is the first fix
@@ -203,6 +205,9 @@ TEST_F(SyntheticDrive, IntegratingTheNoiseFreeExtractImuReproducesTheTrajectory)
     v += 0.5 * (a0 + a1) * dt;
     R = R_next;
   }
+  std::printf("[ figure ] integrated extract IMU over %.1f s: position error %.2e m\n",
+              kitti::secondsBetween(frames.front().stamp_ns, frames.back().stamp_ns),
+              (p - truth.back().translation()).norm());
   EXPECT_LT((p - truth.back().translation()).norm(), 0.03);
   EXPECT_LT(Eigen::AngleAxisd(R.transpose() * truth.back().linear()).angle(), 1e-3);
   // The OXTS velocity (vn ve vu) agrees with the integrated one.
@@ -232,6 +237,8 @@ TEST_F(SyntheticDrive, LidarPointsLieOnSurfacesOfTheirLabel) {
       if (world.labelAt(p_map, 0.1) == kitti::semanticClass(labels[i])) ++agree;
     }
   }
+  std::printf("[ figure ] lidar label = labelAt(point): %.4f of %zu points\n",
+              static_cast<double>(agree) / points, points);
   EXPECT_GT(static_cast<double>(agree) / points, 0.99) << agree << " / " << points;
 }
 
@@ -291,6 +298,8 @@ TEST_F(SyntheticDrive, ProjectedLidarLabelsAgreeWithTheLabelImages) {
   }
   ASSERT_GT(visible, 5000u);
   EXPECT_GT(static_cast<double>(visible) / all_in_image, 0.7);  // edges are a minority
+  std::printf("[ figure ] lidar/label-image agreement %.4f of %zu visible non-edge points\n",
+              static_cast<double>(agree) / visible, visible);
   EXPECT_GT(static_cast<double>(agree) / visible, 0.99) << agree << " / " << visible;
   EXPECT_GT(visible_per_class[cityscapes::kRoad], 500);
   EXPECT_GT(visible_per_class[cityscapes::kBuilding], 100);

@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <random>
@@ -333,6 +334,8 @@ TEST(SyntheticRoute, IntegratingThePerfectImuReproducesTheTrajectory) {
     R = R_next;
   }
   truth = route.stateAt(t0 + 8.0);
+  std::printf("[ figure ] perfect IMU integrated over 8 s: position error %.2e m\n",
+              (p - truth.position).norm());
   EXPECT_LT((p - truth.position).norm(), 0.03);
   EXPECT_LT((v - truth.velocity).norm(), 0.01);
   const Eigen::AngleAxisd rotation_error(R.transpose() * truth.rotation);
