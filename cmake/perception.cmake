@@ -28,3 +28,7 @@ if(benchmark_FOUND)
   target_compile_definitions(bench_segmentation PRIVATE
     ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}" ISM_REPO_ROOT="${ISM_REPO_ROOT}")
 endif()
+
+if(CATKIN_ENABLE_TESTING)
+  add_rostest(test/ros/segmentation_node.test)
+endif()

@@ -324,12 +324,17 @@ def main():
     parser.add_argument("--depth", type=int, default=4)
     parser.add_argument("--crop", default="192x320", help="HxW training crop (after resizing)")
     parser.add_argument("--batch", type=int, default=4)
+    parser.add_argument("--class-weighting", action="store_true",
+                        help="weight the loss by (median class frequency / frequency)^0.5: small "
+                             "classes (poles, signs) are learned sooner")
     parser.add_argument("--lr", type=float, default=2e-3)
     parser.add_argument("--steps", type=int, default=100000)
     parser.add_argument("--minutes", type=float, default=25.0, help="wall-clock training budget")
     parser.add_argument("--eval-interval", type=int, default=200)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--init-from", help="a .pt state dict (saved beside every export) to "
+                        "continue training from; classes/base/depth must match")
     parser.add_argument("--output", required=True, help="ONNX path; the card goes to <name>.yaml")
     args = parser.parse_args()
 
@@ -366,8 +371,23 @@ def main():
     model = UNet(len(class_label_ids), args.base, args.depth).to(device)
     print(f"U-Net base {args.base} depth {args.depth}: "
           f"{sum(p.numel() for p in model.parameters())} parameters; crops {crop_h}x{crop_w}")
+    if args.init_from:
+        model.load_state_dict(torch.load(args.init_from, map_location=device))
+        print(f"continuing from {args.init_from}")
     optimizer = torch.optim.Adam(model.parameters(), lr=args.lr)
-    loss_function = nn.CrossEntropyLoss(ignore_index=IGNORE_INDEX)
+    weights = None
+    if args.class_weighting:
+        counts = np.zeros(len(class_label_ids), dtype=np.float64)
+        for _, label in train_frames:
+            counts += np.bincount(label[label != IGNORE_INDEX], minlength=len(class_label_ids))
+        frequency = counts / counts.sum()
+        present = frequency > 0
+        weights = np.ones_like(frequency)
+        weights[present] = np.clip((np.median(frequency[present]) / frequency[present]) ** 0.5,
+                                   0.2, 10.0)
+        print("class weights: " + ", ".join(f"{i}:{w:.2f}" for i, w in zip(class_label_ids, weights)))
+        weights = torch.tensor(weights, dtype=torch.float32, device=device)
+    loss_function = nn.CrossEntropyLoss(weight=weights, ignore_index=IGNORE_INDEX)
     budget_s = args.minutes * 60.0
     # Cosine decay over the time budget (or the step budget, whichever is shorter).
     start = time.time()
@@ -392,6 +412,8 @@ def main():
     ious, miou, pixel_accuracy = evaluate(model, val_frames, class_label_ids, multiple, device)
     print_report(f"final validation on {len(val_frames)} held-out frames", ious, miou,
                  pixel_accuracy)
+    # The torch weights, to continue training later (--init-from); not committed with the model.
+    torch.save(model.state_dict(), os.path.splitext(args.output)[0] + ".pt")
     export_onnx(model, args.output, val_frames[0][0], multiple, args.threads)
     card_path = os.path.splitext(args.output)[0] + ".yaml"
     note = (f"Held-out validation ({len(val_frames)} frames of {', '.join(args.val)}): "
