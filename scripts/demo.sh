@@ -67,7 +67,7 @@ t0=$(date +%s)
   --gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1 >"$out/kitti2bag.log" 2>&1 ||
   { tail -n 20 "$out/kitti2bag.log"; exit 1; }
 convert_s=$(($(date +%s) - t0))
-bag_duration=$(/usr/bin/python3 -c "import rosbag,sys; b=rosbag.Bag(sys.argv[1]); print(int(b.get_end_time()-b.get_start_time()+1))" "$out/drive.bag")
+read -r bag_duration bag_end < <(/usr/bin/python3 -c "import rosbag,sys; b=rosbag.Bag(sys.argv[1]); print(int(b.get_end_time()-b.get_start_time()+1), '%.6f' % b.get_end_time())" "$out/drive.bag")
 
 # A private ROS master and X display, so the demo never disturbs another running system.
 port=${ISM_DEMO_PORT:-$((11400 + RANDOM % 500))}
@@ -115,10 +115,16 @@ while rosnode list 2>/dev/null | grep -q /rosbag_play; do
 done
 play_wall_s=$(($(date +%s) - play_start))
 log "bag finished after ${play_wall_s} s; saving the map"
+# Time goes on after the bag (see scripts/clock_after_bag.py: a tf wait under a stopped sim clock
+# would block the map node's service).
+"$ISM_ROOT/scripts/clock_after_bag.py" _start:="$bag_end" >"$out/clock.log" 2>&1 &
+pids+=($!)
 sleep 3
 ((rviz_started)) || { rosrun rviz rviz -d "$ISM_ROOT/rviz/kitti.rviz" >"$out/rviz.log" 2>&1 & pids+=($!); sleep 15; }
-rosservice call /semantic_octomap_node/save_map "{path: '$out/semantic_map.ot', format: ot}" | tee "$out/save_map.log"
-rosservice call /semantic_octomap_node/save_map "{path: '$out/semantic_map.ply', format: ply}" | tee -a "$out/save_map.log"
+for format in ot ply; do
+  timeout 120 rosservice call /semantic_octomap_node/save_map "{path: '$out/semantic_map.$format', format: $format}" |
+    tee -a "$out/save_map.log" || log "save_map ($format) failed or timed out"
+done
 sleep 2
 import -display "$display" -window root "$out/rviz.png" || log "screenshot failed"
 kill -INT "$monitor_pid"

@@ -128,6 +128,41 @@ def play_bag(bag, rate=1.0, extra_args=(), timeout=300):
     subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, timeout=timeout, check=True)
 
 
+class ClockAfterBag:
+    """Publishes /clock onward from the bag's end at wall rate while active (context manager).
+
+    With use_sim_time, a node waiting for tf with a timeout waits on ROS time; once the bag has
+    ended /clock stops and such a wait never returns (blocking that node's services). A live
+    system's time goes on: this gives a replayed one the same property (scripts/clock_after_bag.py
+    does it for the demo)."""
+
+    def __init__(self, bag):
+        import rosbag
+        with rosbag.Bag(bag) as b:
+            self.start = b.get_end_time()
+        self.stop = None
+
+    def __enter__(self):
+        import threading
+        from rosgraph_msgs.msg import Clock
+        publisher = rospy.Publisher("/clock", Clock, queue_size=1)
+        self.stop = threading.Event()
+        wall_start = time.time()
+
+        def run():
+            while not self.stop.is_set():
+                publisher.publish(Clock(clock=rospy.Time.from_sec(self.start + time.time() - wall_start)))
+                time.sleep(0.02)
+        self.thread = threading.Thread(target=run, daemon=True)
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.thread.join(timeout=2)
+        return False
+
+
 def start_bag(bag, rate=1.0, extra_args=()):
     command = ["rosbag", "play", "--clock", "--quiet", "--rate=%g" % rate] + list(extra_args) + [bag]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)

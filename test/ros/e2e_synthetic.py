@@ -50,14 +50,15 @@ class EndToEndSynthetic(unittest.TestCase):
         started = time.time()
         e2e.play_bag(bag, rate=p("rate", 1.0), timeout=10 * duration + 60)
         play_wall_s = time.time() - started
-        time.sleep(p("settle_s", 3.0))  # let the last scans reach the map
-        results = {"drive": drive, "bag": bag, "out_dir": out_dir, "play_wall_s": play_wall_s}
-        results["saves"] = {}
-        for fmt in ("ot", "ply"):
-            path = os.path.join(out_dir, "semantic_map." + fmt)
-            response = e2e.save_map(path, fmt)
-            results["saves"][fmt] = {"path": path, "success": response.success,
-                                     "message": response.message, "voxel_count": response.voxel_count}
+        results = {"drive": drive, "bag": bag, "out_dir": out_dir, "play_wall_s": play_wall_s,
+                   "saves": {}}
+        with e2e.ClockAfterBag(bag):
+            time.sleep(p("settle_s", 3.0))  # let the last scans reach the map
+            for fmt in ("ot", "ply"):
+                path = os.path.join(out_dir, "semantic_map." + fmt)
+                response = e2e.save_map(path, fmt)
+                results["saves"][fmt] = {"path": path, "success": response.success,
+                                         "message": response.message, "voxel_count": response.voxel_count}
         summary = monitor.write(out_dir)
         results["monitor"] = summary
         estimate = e2e.metrics.read_tum(os.path.join(out_dir, "estimate_tum.txt"))

@@ -28,11 +28,14 @@ class BagLoop(unittest.TestCase):
         self.assertTrue(e2e.wait_for_subscribers(["/kitti/oxts/imu", "/kitti/velo/pointcloud"], 60),
                         "nodes did not subscribe")
         e2e.play_bag(bag, rate=p("rate", 1.0), timeout=10 * duration + 60)
-        time.sleep(1.0)
+        with e2e.ClockAfterBag(bag):
+            time.sleep(1.0)
         first = monitor.summary()
         clouds_after_first = first["topics"]["/semantic_map/labeled_cloud"]["messages"]
         odometry_after_first = first["topics"]["/inekf/odometry"]["messages"]
         e2e.play_bag(bag, rate=p("rate", 1.0), timeout=10 * duration + 60)
+        clock = e2e.ClockAfterBag(bag).__enter__()
+        self.addCleanup(clock.__exit__)
         time.sleep(2.0)
         out_dir = tempfile.mkdtemp(prefix="ism_%s_" % NAME)
         summary = monitor.write(out_dir)

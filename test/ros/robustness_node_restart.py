@@ -74,6 +74,8 @@ class NodeRestart(unittest.TestCase):
             e2e.kill_node("/semantic_octomap_node")
             e2e.kill_node("/inekf_node")
             player.wait(timeout=10 * duration + 60)
+            clock = e2e.ClockAfterBag(bag).__enter__()
+            self.addCleanup(clock.__exit__)
             time.sleep(2.0)
         finally:
             stop.set()
