@@ -69,6 +69,14 @@ t0=$(date +%s)
 convert_s=$(($(date +%s) - t0))
 read -r bag_duration bag_end < <(/usr/bin/python3 -c "import rosbag,sys; b=rosbag.Bag(sys.argv[1]); print(int(b.get_end_time()-b.get_start_time()+1), '%.6f' % b.get_end_time())" "$out/drive.bag")
 
+# True while rosbag_play is registered; a failed listing (busy master) counts as still running.
+bag_running() {
+  local nodes
+  nodes=$(rosnode list 2>/dev/null) || return 0
+  [[ $nodes == */rosout* ]] || return 0
+  grep -q /rosbag_play <<<"$nodes"
+}
+
 # A private ROS master and X display, so the demo never disturbs another running system.
 port=${ISM_DEMO_PORT:-$((11400 + RANDOM % 500))}
 export ROS_MASTER_URI=http://localhost:$port ROS_HOSTNAME=localhost
@@ -97,13 +105,17 @@ until rosnode list 2>/dev/null | grep -q /rosbag_play; do sleep 0.5; done
 play_start=$(date +%s)
 sleep 2
 for node in /inekf_node /segmentation_node /semantic_octomap_node; do
-  rosnode list 2>/dev/null | grep -qx "$node" ||
+  for ((try = 0; try < 30; try++)); do
+    rosnode list 2>/dev/null | grep -qx "$node" && break
+    sleep 1
+  done
+  ((try < 30)) ||
     { echo "[demo] $node is not running; its error from $out/launch.log:"; grep -E "FATAL|ERROR|died" "$out/launch.log" | head -n 5; exit 1; }
 done
 # rviz joins for the last part of the drive only: software GL on 2 cores would otherwise take
 # CPU from the pipeline for the whole run (the path, map and markers are complete at the end).
 rviz_started=0
-while rosnode list 2>/dev/null | grep -q /rosbag_play; do
+while bag_running; do
   elapsed=$(($(date +%s) - play_start))
   remaining=$(/usr/bin/python3 -c "print(int(($bag_duration + 5) / $rate - $elapsed))")
   if ((rviz_started == 0 && remaining <= 15)); then
