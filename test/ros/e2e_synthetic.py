@@ -131,7 +131,10 @@ class EndToEndSynthetic(unittest.TestCase):
         miou = self.results.get("map_miou")
         if miou is None:
             self.skipTest("no synthetic ground truth to compute map mIoU")
-        self.assertGreater(miou["miou"], rospy.get_param("~min_miou", 0.5), miou)
+        self.assertGreater(miou["miou"], rospy.get_param("~min_miou", 0.35), miou)
+        self.assertGreater(miou["voxel_accuracy"], rospy.get_param("~min_voxel_accuracy", 0.75), miou)
+        self.assertGreater(miou["matched_voxels"], 0.5 * miou["map_voxels"],
+                           "most map voxels should sit where labeled ground-truth points are: %s" % miou)
 
 
 if __name__ == "__main__":
