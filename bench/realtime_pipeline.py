@@ -25,6 +25,7 @@ import pipeline_monitor  # noqa: E402
 
 NODES = ["/inekf_node", "/segmentation_node", "/semantic_octomap_node", "/rosbag_play"]
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+PLAY_DELAY_S = 5.0  # rosbag play waits this long after advertising, so that all subscribe
 PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2 ** 20
 
 
@@ -102,7 +103,7 @@ def main():
     launch_log = open(os.path.join(args.output_dir, "launch.log"), "w")
     launch = subprocess.Popen(["roslaunch", "-p", port, "inekf_semantic_mapping", "kitti_bag.launch",
                                "bag:=" + os.path.abspath(args.bag), "rate:=%g" % args.rate, "rviz:=false",
-                               "play_delay:=5"] + args.launch_args.split(),
+                               "play_delay:=%g" % PLAY_DELAY_S] + args.launch_args.split(),
                               stdout=launch_log, stderr=subprocess.STDOUT)
     try:
         import rosgraph
@@ -125,7 +126,7 @@ def main():
         play_start = time.time()
         while node_pid(master, "/rosbag_play") is not None:
             time.sleep(0.5)
-        play_wall = time.time() - play_start
+        play_wall = time.time() - play_start - PLAY_DELAY_S
         time.sleep(3.0)  # the last scans reach the map
         sampler.stop.set()
         summary = monitor.write(args.output_dir)
