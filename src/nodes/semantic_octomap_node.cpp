@@ -221,9 +221,16 @@ class SemanticOctomapNode {
       tf_buffer_.clear();
     }
     last_scan_stamp_ = header.stamp;
+    // Wait in wall time: under a paused or stopped /clock a sim-time timeout never expires and
+    // would block this callback (and the services queued behind it) forever.
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(params_.tf_timeout_s);
+    while (ros::ok() && ros::WallTime::now() < deadline &&
+           !tf_buffer_.canTransform(params_.map_frame, header.frame_id, header.stamp)) {
+      ros::WallDuration(0.005).sleep();
+    }
     try {
-      return tf2::transformToEigen(tf_buffer_.lookupTransform(
-          params_.map_frame, header.frame_id, header.stamp, ros::Duration(params_.tf_timeout_s)));
+      return tf2::transformToEigen(
+          tf_buffer_.lookupTransform(params_.map_frame, header.frame_id, header.stamp));
     } catch (const tf2::TransformException& e) {
       ROS_WARN_THROTTLE(5, "semantic_octomap_node: no pose %s -> %s at %.3f: %s; scan skipped",
                         params_.map_frame.c_str(), header.frame_id.c_str(), header.stamp.toSec(),
