@@ -55,6 +55,7 @@ struct NodeParameters {
   std::string class_set = "cityscapes";
   mapping::FusionModel fusion;
   double sync_tolerance_s = 0.05;
+  int sync_queue_size = 30;
   double tf_timeout_s = 0.2;
   bool use_labels_without_image = false;
   bool insert_points_outside_image = false;
@@ -83,6 +84,8 @@ NodeParameters readParameters(const ros::NodeHandle& pnh) {
   pnh.param("confusion_probability", p.fusion.correct_probability, p.fusion.correct_probability);
   pnh.param("dirichlet_prior", p.fusion.dirichlet_prior, p.fusion.dirichlet_prior);
   pnh.param("sync_tolerance", p.sync_tolerance_s, p.sync_tolerance_s);
+  pnh.param("sync_queue_size", p.sync_queue_size, p.sync_queue_size);
+  p.sync_queue_size = std::max(p.sync_queue_size, 1);
   pnh.param("tf_timeout", p.tf_timeout_s, p.tf_timeout_s);
   pnh.param("use_labels_without_image", p.use_labels_without_image, p.use_labels_without_image);
   pnh.param("labels_timeout", p.labels_timeout_s, p.labels_timeout_s);
@@ -123,9 +126,12 @@ class SemanticOctomapNode {
     info_pub_ = nh_.advertise<std_msgs::String>(topics::kMapInfo, 1, true);
     camera_info_sub_ =
         nh_.subscribe(topics::kCameraColorLeftInfo, 1, &SemanticOctomapNode::onCameraInfo, this);
-    cloud_sync_sub_.subscribe(nh_, topics::kVelodyne, 5);
-    labels_sync_sub_.subscribe(nh_, topics::kSegmentationLabels, 5);
-    sync_ = std::make_unique<Synchronizer>(SyncPolicy(10), cloud_sync_sub_, labels_sync_sub_);
+    // Labels arrive one segmentation latency after their scan: the synchronizer must hold
+    // scans that long (sync_queue_size scans, 3 s at 10 Hz by default) or they never pair.
+    cloud_sync_sub_.subscribe(nh_, topics::kVelodyne, 10);
+    labels_sync_sub_.subscribe(nh_, topics::kSegmentationLabels, 10);
+    sync_ = std::make_unique<Synchronizer>(SyncPolicy(params_.sync_queue_size), cloud_sync_sub_,
+                                           labels_sync_sub_);
     sync_->setMaxIntervalDuration(ros::Duration(params_.sync_tolerance_s));
     sync_->registerCallback(&SemanticOctomapNode::onLabeledScan, this);
     labels_sub_ =
@@ -215,12 +221,15 @@ class SemanticOctomapNode {
 
   // Pose of the cloud's frame in the map at the scan time; nullopt (and a warning) if unknown.
   std::optional<Eigen::Isometry3d> poseAt(const std_msgs::Header& header) {
-    if (!last_scan_stamp_.isZero() && header.stamp + ros::Duration(1.0) < last_scan_stamp_) {
-      ROS_WARN_STREAM("semantic_octomap_node: time jumped back ("
-                      << last_scan_stamp_ << " -> " << header.stamp << "): clearing the tf buffer");
+    // A bag loop shows as the clock jumping back. Scan stamps are no guide: a labeled pair can
+    // legitimately be older than the last lidar-only scan when segmentation lags.
+    const ros::Time now = ros::Time::now();
+    if (!last_clock_.isZero() && now + ros::Duration(1.0) < last_clock_) {
+      ROS_WARN_STREAM("semantic_octomap_node: clock jumped back (" << last_clock_ << " -> " << now
+                                                                   << "): clearing the tf buffer");
       tf_buffer_.clear();
     }
-    last_scan_stamp_ = header.stamp;
+    last_clock_ = now;
     // Wait in wall time: under a paused or stopped /clock a sim-time timeout never expires and
     // would block this callback (and the services queued behind it) forever.
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(params_.tf_timeout_s);
@@ -488,7 +497,7 @@ class SemanticOctomapNode {
   ros::Publisher markers_pub_, cloud_pub_, info_pub_;
   ros::ServiceServer save_srv_, reset_srv_;
   ros::WallTimer marker_timer_, log_timer_;
-  ros::Time last_labels_seen_, last_scan_stamp_;
+  ros::Time last_labels_seen_, last_clock_;
   std::size_t scans_inserted_ = 0;
   bool map_changed_ = true;
 };
