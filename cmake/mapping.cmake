@@ -3,7 +3,6 @@
 ism_add_core_library(${PROJECT_NAME}_projection
   SOURCES src/perception/projection.cpp)
 
-find_package(Threads REQUIRED)
 ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
     src/mapping/semantic_classes.cpp

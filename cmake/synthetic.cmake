@@ -1,6 +1,5 @@
 # Component: synthetic — KITTI-format drive generator with full ground truth (world, route,
 # sensors), the generate_synthetic_drive tool, unit tests and a benchmark.
-find_package(Threads REQUIRED)
 ism_add_core_library(${PROJECT_NAME}_synthetic
   SOURCES
     src/synthetic/world.cpp
