@@ -375,8 +375,3 @@ TEST(Filters, PoseNeesIsWithinTheChiSquareBand) {
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

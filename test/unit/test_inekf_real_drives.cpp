@@ -125,8 +125,3 @@ TEST(RealDrives, LeftInvariantEkfRecoversFromA90DegreeYawErrorFasterThanTheEskf)
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

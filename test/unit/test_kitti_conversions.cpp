@@ -316,8 +316,3 @@ TEST(KittiConversions, CameraFrameAndInfoReproduceTheDevkitProjection) {
 }  // namespace
 }  // namespace ros_conversions
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -126,8 +126,3 @@ TEST(GpsDegradation, DeterministicForASeed) {
 }  // namespace
 }  // namespace kitti
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -460,8 +460,3 @@ TEST(KittiDriveTimeline, MergesSensorsInTimeOrderWithinTheWindow) {
 }  // namespace
 }  // namespace kitti
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -144,8 +144,3 @@ TEST(Se23, AdjointConjugatesTheExponential) {
 }  // namespace
 }  // namespace lie
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -224,8 +224,3 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -231,8 +231,3 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -243,8 +243,3 @@ TEST(Palette, ColorsAndTrainIdsFollowCityscapesTable) {
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

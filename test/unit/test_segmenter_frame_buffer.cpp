@@ -60,8 +60,3 @@ TEST(LatestFrameBuffer, SlowConsumerSeesIncreasingFramesAndEveryFrameIsTakenOrDr
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

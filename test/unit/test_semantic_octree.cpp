@@ -559,8 +559,3 @@ TEST(SemanticOcTreeFusion, NoisyLabelsFuseToHighVoxelMiou) {
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

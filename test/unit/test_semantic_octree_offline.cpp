@@ -151,8 +151,3 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

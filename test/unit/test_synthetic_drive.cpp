@@ -403,8 +403,3 @@ TEST(SyntheticTimestamps, FormatsLikeKittiAndParsesBack) {
 }  // namespace
 }  // namespace synthetic
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}

@@ -347,8 +347,3 @@ TEST(SyntheticRoute, IntegratingThePerfectImuReproducesTheTrajectory) {
 }  // namespace
 }  // namespace synthetic
 }  // namespace inekf_semantic_mapping
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}
