@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 
 #include <cctype>
+#include <cstdio>
 #include <string>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
@@ -18,6 +19,21 @@ std::int64_t daysFromCivil(std::int64_t year, unsigned month, unsigned day) {
   const unsigned day_of_year = (153 * (month + (month > 2 ? -3 : 9)) + 2) / 5 + day - 1;
   const unsigned day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
   return era * 146097 + static_cast<std::int64_t>(day_of_era) - 719468;
+}
+
+// Its inverse: the proleptic Gregorian date of a day count since 1970-01-01.
+void civilFromDays(std::int64_t z, std::int64_t* year, unsigned* month, unsigned* day) {
+  z += 719468;
+  const std::int64_t era = (z >= 0 ? z : z - 146096) / 146097;
+  const unsigned day_of_era = static_cast<unsigned>(z - era * 146097);
+  const unsigned year_of_era =
+      (day_of_era - day_of_era / 1460 + day_of_era / 36524 - day_of_era / 146096) / 365;
+  const unsigned day_of_year =
+      day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+  const unsigned mp = (5 * day_of_year + 2) / 153;
+  *day = day_of_year - (153 * mp + 2) / 5 + 1;
+  *month = mp < 10 ? mp + 3 : mp - 9;
+  *year = static_cast<std::int64_t>(year_of_era) + era * 400 + (*month <= 2);
 }
 
 // Reads exactly `digits` decimal digits at text[*pos].
@@ -91,6 +107,26 @@ std::vector<std::int64_t> readTimestampsFile(const std::string& path) {
     }
   }
   return stamps;
+}
+
+std::string formatKittiTimestamp(std::int64_t stamp_ns) {
+  constexpr std::int64_t kNsPerDay = 86400LL * 1000000000LL;
+  std::int64_t days = stamp_ns / kNsPerDay;
+  std::int64_t rest = stamp_ns % kNsPerDay;
+  if (rest < 0) {
+    rest += kNsPerDay;
+    --days;
+  }
+  std::int64_t year;
+  unsigned month, day;
+  civilFromDays(days, &year, &month, &day);
+  const std::int64_t seconds = rest / 1000000000LL;
+  char text[64];
+  std::snprintf(text, sizeof(text), "%04lld-%02u-%02u %02lld:%02lld:%02lld.%09lld",
+                static_cast<long long>(year), month, day, static_cast<long long>(seconds / 3600),
+                static_cast<long long>(seconds / 60 % 60), static_cast<long long>(seconds % 60),
+                static_cast<long long>(rest % 1000000000LL));
+  return text;
 }
 
 }  // namespace kitti

@@ -18,6 +18,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/synthetic/route.h"
 #include "inekf_semantic_mapping/synthetic/world.h"
 
@@ -28,28 +29,6 @@ using internal::writeFileAtomic;
 
 namespace {
 
-// Howard Hinnant's civil-calendar algorithms (proleptic Gregorian, UTC).
-std::int64_t daysFromCivil(std::int64_t y, unsigned m, unsigned d) {
-  y -= m <= 2;
-  const std::int64_t era = (y >= 0 ? y : y - 399) / 400;
-  const unsigned yoe = static_cast<unsigned>(y - era * 400);
-  const unsigned doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
-  const unsigned doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-  return era * 146097 + static_cast<std::int64_t>(doe) - 719468;
-}
-
-void civilFromDays(std::int64_t z, std::int64_t* y, unsigned* m, unsigned* d) {
-  z += 719468;
-  const std::int64_t era = (z >= 0 ? z : z - 146096) / 146097;
-  const unsigned doe = static_cast<unsigned>(z - era * 146097);
-  const unsigned yoe = (doe - doe / 1460 + doe / 36524 - doe / 146096) / 365;
-  const unsigned doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-  const unsigned mp = (5 * doy + 2) / 153;
-  *d = doy - (153 * mp + 2) / 5 + 1;
-  *m = mp < 10 ? mp + 3 : mp - 9;
-  *y = static_cast<std::int64_t>(yoe) + era * 400 + (*m <= 2);
-}
-
 std::int64_t parseDateDays(const std::string& date) {
   int y, m, d;
   char tail;
@@ -57,7 +36,9 @@ std::int64_t parseDateDays(const std::string& date) {
       m < 1 || m > 12 || d < 1 || d > 31) {
     throw std::invalid_argument("--date must be YYYY_MM_DD (e.g. 2011_09_26), got '" + date + "'");
   }
-  return daysFromCivil(y, static_cast<unsigned>(m), static_cast<unsigned>(d));
+  char iso[32];
+  std::snprintf(iso, sizeof(iso), "%04d-%02d-%02d 00:00:00", y, m, d);
+  return kitti::parseKittiTimestampNs(iso) / (86400LL * 1000000000LL);
 }
 
 const char kDataFormat[] =
@@ -109,7 +90,7 @@ std::string poseLine(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
 
 std::string timestampsText(const std::vector<std::int64_t>& stamps) {
   std::string text;
-  for (std::int64_t s : stamps) text += formatKittiTimestamp(s) + "\n";
+  for (std::int64_t s : stamps) text += kitti::formatKittiTimestamp(s) + "\n";
   return text;
 }
 
@@ -141,26 +122,6 @@ Eigen::Isometry3d isometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
 }
 
 }  // namespace
-
-std::string formatKittiTimestamp(std::int64_t stamp_ns) {
-  const std::int64_t ns_per_day = 86400LL * 1000000000LL;
-  std::int64_t days = stamp_ns / ns_per_day;
-  std::int64_t rest = stamp_ns % ns_per_day;
-  if (rest < 0) {
-    rest += ns_per_day;
-    --days;
-  }
-  std::int64_t y;
-  unsigned m, d;
-  civilFromDays(days, &y, &m, &d);
-  const std::int64_t seconds = rest / 1000000000LL;
-  char text[64];
-  std::snprintf(text, sizeof(text), "%04lld-%02u-%02u %02lld:%02lld:%02lld.%09lld",
-                static_cast<long long>(y), m, d, static_cast<long long>(seconds / 3600),
-                static_cast<long long>(seconds / 60 % 60), static_cast<long long>(seconds % 60),
-                static_cast<long long>(rest % 1000000000LL));
-  return text;
-}
 
 DriveSummary generateSyntheticDrive(const DriveOptions& options) {
   const auto wall_start = std::chrono::steady_clock::now();

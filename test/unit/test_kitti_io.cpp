@@ -457,6 +457,14 @@ TEST(KittiDriveTimeline, MergesSensorsInTimeOrderWithinTheWindow) {
   fs::remove_all(fs::path(dir).parent_path());
 }
 
+TEST(KittiTimestamps, FormatIsTheInverseOfParse) {
+  const std::int64_t stamp = parseKittiTimestampNs("2011-09-26 13:02:25.964389445");
+  EXPECT_EQ(formatKittiTimestamp(stamp), "2011-09-26 13:02:25.964389445");
+  const std::int64_t leap = parseKittiTimestampNs("2012-02-29 23:59:59.999999999");
+  EXPECT_EQ(formatKittiTimestamp(leap), "2012-02-29 23:59:59.999999999");
+  EXPECT_EQ(formatKittiTimestamp(leap + 1), "2012-03-01 00:00:00.000000000");
+  EXPECT_EQ(formatKittiTimestamp(-1), "1969-12-31 23:59:59.999999999");
+}
 }  // namespace
 }  // namespace kitti
 }  // namespace inekf_semantic_mapping

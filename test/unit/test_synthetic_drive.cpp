@@ -392,14 +392,6 @@ TEST(SyntheticRig, MatchesTheRealKittiCalibrationOf2011_09_26) {
   }
 }
 
-TEST(SyntheticTimestamps, FormatsLikeKittiAndParsesBack) {
-  const std::int64_t stamp = kitti::parseKittiTimestampNs("2011-09-26 13:02:25.964389445");
-  EXPECT_EQ(formatKittiTimestamp(stamp), "2011-09-26 13:02:25.964389445");
-  const std::int64_t leap = kitti::parseKittiTimestampNs("2012-02-29 23:59:59.999999999");
-  EXPECT_EQ(formatKittiTimestamp(leap), "2012-02-29 23:59:59.999999999");
-  EXPECT_EQ(formatKittiTimestamp(leap + 1), "2012-03-01 00:00:00.000000000");
-}
-
 }  // namespace
 }  // namespace synthetic
 }  // namespace inekf_semantic_mapping

@@ -13,6 +13,9 @@ namespace kitti {
 // timezone. Throws KittiFormatError (file "<timestamp>") on malformed text.
 std::int64_t parseKittiTimestampNs(const std::string& text);
 
+// The inverse of parseKittiTimestampNs: "YYYY-MM-DD HH:MM:SS.nnnnnnnnn" (UTC), as KITTI writes it.
+std::string formatKittiTimestamp(std::int64_t stamp_ns);
+
 // One timestamp per non-empty line. Throws KittiFormatError naming path:line on a bad line
 // and path on a missing file.
 std::vector<std::int64_t> readTimestampsFile(const std::string& path);

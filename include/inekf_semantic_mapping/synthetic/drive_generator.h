@@ -66,8 +66,5 @@ struct DriveSummary {
 // Throws std::invalid_argument for bad options, std::runtime_error for I/O errors.
 DriveSummary generateSyntheticDrive(const DriveOptions& options);
 
-// "YYYY-MM-DD HH:MM:SS.nnnnnnnnn" (UTC) of nanoseconds since the Unix epoch.
-std::string formatKittiTimestamp(std::int64_t stamp_ns);
-
 }  // namespace synthetic
 }  // namespace inekf_semantic_mapping
