@@ -41,3 +41,9 @@ if(CATKIN_ENABLE_TESTING)
   ism_add_system_rostest(test/ros/robustness_node_restart.test
     NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
 endif()
+
+# Header-only helpers the tools share (include/inekf_semantic_mapping/common/).
+ism_add_gtest(test_atomic_file SOURCES test/unit/test_atomic_file.cpp)
+if(TARGET test_atomic_file)
+  target_include_directories(test_atomic_file PRIVATE ${ISM_CORE_INCLUDE_DIRS})
+endif()

@@ -2,7 +2,6 @@
 
 #include <octomap/AbstractOcTree.h>
 #include <octomap/ColorOcTree.h>
-#include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
@@ -11,6 +10,7 @@
 #include <fstream>
 #include <functional>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
@@ -21,26 +21,10 @@ namespace {
 void writeAtomically(const std::string& path,
                      const std::function<void(std::ostream&)>& write_body) {
   if (path.empty()) throw MapIoError("cannot save map: empty output path");
-  const std::string tmp_path = path + ".tmp." + std::to_string(static_cast<long>(::getpid()));
-  {
-    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      throw MapIoError("cannot write map to '" + path + "': cannot create '" + tmp_path +
-                       "': " + std::strerror(errno));
-    }
-    write_body(out);
-    out.flush();
-    if (!out) {
-      const std::string reason = std::strerror(errno);
-      out.close();
-      std::remove(tmp_path.c_str());
-      throw MapIoError("cannot write map to '" + path + "': write failed: " + reason);
-    }
-  }
-  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
-    const std::string reason = std::strerror(errno);
-    std::remove(tmp_path.c_str());
-    throw MapIoError("cannot write map to '" + path + "': rename failed: " + reason);
+  try {
+    common::writeStreamAtomically(path, write_body);
+  } catch (const common::AtomicWriteError& error) {
+    throw MapIoError("cannot write map to '" + path + "': " + error.reason());
   }
 }
 

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 
 namespace inekf_semantic_mapping {
@@ -144,14 +145,11 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
   for (std::uint8_t id : card.output_label_ids) out << static_cast<int>(id);
   out << YAML::EndSeq << YAML::EndMap;
 
-  const std::string tmp_path = yaml_path + ".tmp";
-  {
-    std::ofstream file(tmp_path);
-    if (!file) throw ModelCardError("model card " + yaml_path + ": cannot write " + tmp_path);
-    file << out.c_str() << "\n";
-    if (!file) throw ModelCardError("model card " + yaml_path + ": write failed");
+  try {
+    common::writeTextAtomically(yaml_path, std::string(out.c_str()) + "\n");
+  } catch (const common::AtomicWriteError& error) {
+    throw ModelCardError("model card " + yaml_path + ": " + error.reason());
   }
-  fs::rename(tmp_path, yaml_path);
 }
 
 ModelCard builtinEnetCityscapesCard() {

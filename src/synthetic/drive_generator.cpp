@@ -14,7 +14,7 @@
 #include <thread>
 #include <vector>
 
-#include "file_util.h"
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
@@ -25,7 +25,8 @@
 namespace inekf_semantic_mapping {
 namespace synthetic {
 namespace fs = std::filesystem;
-using internal::writeFileAtomic;
+using common::writeBytesAtomically;
+using common::writeTextAtomically;
 
 namespace {
 
@@ -111,7 +112,7 @@ void writePng(const std::string& path, const cv::Mat& image) {
                      cv::IMWRITE_PNG_STRATEGY_RLE})) {
     throw std::runtime_error(path + ": PNG encoding failed");
   }
-  writeFileAtomic(path, bytes.data(), bytes.size());
+  writeBytesAtomically(path, bytes.data(), bytes.size());
 }
 
 Eigen::Isometry3d isometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
@@ -260,13 +261,14 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
     std::vector<std::int64_t> stamps;
     std::string poses;
     for (int i = 0; i < samples; ++i) {
-      writeFileAtomic(summary.extract_dir + "/oxts/data/" + frameName(i, ".txt"), extract_lines[i]);
+      writeTextAtomically(summary.extract_dir + "/oxts/data/" + frameName(i, ".txt"),
+                          extract_lines[i]);
       stamps.push_back(stamp(extract_times[i]));
       poses += poseLine(extract_states[i].rotation, extract_states[i].position);
     }
-    writeFileAtomic(summary.extract_dir + "/oxts/timestamps.txt", timestampsText(stamps));
-    writeFileAtomic(summary.extract_dir + "/oxts/dataformat.txt", kDataFormat);
-    writeFileAtomic(summary.extract_dir + "/ground_truth/poses_imu_map.txt", poses);
+    writeTextAtomically(summary.extract_dir + "/oxts/timestamps.txt", timestampsText(stamps));
+    writeTextAtomically(summary.extract_dir + "/oxts/dataformat.txt", kDataFormat);
+    writeTextAtomically(summary.extract_dir + "/ground_truth/poses_imu_map.txt", poses);
     summary.extract_frames = samples;
   }
 
@@ -289,13 +291,14 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
                                                  std::abs(extract_times[j] - sweep_times[k])) {
         ++j;
       }
-      writeFileAtomic(summary.sync_dir + "/oxts/data/" + frameName(k, ".txt"), extract_lines[j]);
+      writeTextAtomically(summary.sync_dir + "/oxts/data/" + frameName(k, ".txt"),
+                          extract_lines[j]);
       stamps.push_back(stamp(extract_times[j]));
       poses += poseLine(extract_states[j].rotation, extract_states[j].position);
     }
-    writeFileAtomic(summary.sync_dir + "/oxts/timestamps.txt", timestampsText(stamps));
-    writeFileAtomic(summary.sync_dir + "/oxts/dataformat.txt", kDataFormat);
-    writeFileAtomic(gt_dir + "/poses_imu_map.txt", poses);
+    writeTextAtomically(summary.sync_dir + "/oxts/timestamps.txt", timestampsText(stamps));
+    writeTextAtomically(summary.sync_dir + "/oxts/dataformat.txt", kDataFormat);
+    writeTextAtomically(gt_dir + "/poses_imu_map.txt", poses);
     summary.oxts_frames = static_cast<int>(frames);
   }
   {
@@ -338,10 +341,10 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
             scan = simulateLidarScan(world, T_map_velo, options.lidar, mixSeed(options.seed, 3, k));
           }
           ScopedTimer timer("synthetic/lidar_write");
-          writeFileAtomic(summary.sync_dir + "/velodyne_points/data/" + frameName(k, ".bin"),
-                          scan.xyzi.data(), scan.xyzi.size() * sizeof(float));
-          writeFileAtomic(gt_dir + "/velodyne_labels/" + frameName(k, ".label"), scan.labels.data(),
-                          scan.labels.size() * sizeof(std::uint32_t));
+          writeBytesAtomically(summary.sync_dir + "/velodyne_points/data/" + frameName(k, ".bin"),
+                               scan.xyzi.data(), scan.xyzi.size() * sizeof(float));
+          writeBytesAtomically(gt_dir + "/velodyne_labels/" + frameName(k, ".label"),
+                               scan.labels.data(), scan.labels.size() * sizeof(std::uint32_t));
           lidar_points += scan.size();
         } else {
           const std::size_t i = task - lidar_tasks;
@@ -387,8 +390,8 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
           isometry(state.rotation, state.position) * T_imu_velo * T_velo_camera;
       camera_poses += poseLine(T.linear(), T.translation());
     }
-    if (options.write_lidar) writeFileAtomic(gt_dir + "/poses_velodyne_map.txt", velo_poses);
-    if (options.write_images) writeFileAtomic(gt_dir + "/poses_image_02_map.txt", camera_poses);
+    if (options.write_lidar) writeTextAtomically(gt_dir + "/poses_velodyne_map.txt", velo_poses);
+    if (options.write_images) writeTextAtomically(gt_dir + "/poses_image_02_map.txt", camera_poses);
   }
   if (options.write_lidar) {
     std::vector<std::int64_t> centre, start, end;
@@ -397,17 +400,19 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
       start.push_back(stamp(t - 0.0515));
       end.push_back(stamp(t + 0.0515));
     }
-    writeFileAtomic(summary.sync_dir + "/velodyne_points/timestamps.txt", timestampsText(centre));
-    writeFileAtomic(summary.sync_dir + "/velodyne_points/timestamps_start.txt",
-                    timestampsText(start));
-    writeFileAtomic(summary.sync_dir + "/velodyne_points/timestamps_end.txt", timestampsText(end));
+    writeTextAtomically(summary.sync_dir + "/velodyne_points/timestamps.txt",
+                        timestampsText(centre));
+    writeTextAtomically(summary.sync_dir + "/velodyne_points/timestamps_start.txt",
+                        timestampsText(start));
+    writeTextAtomically(summary.sync_dir + "/velodyne_points/timestamps_end.txt",
+                        timestampsText(end));
     summary.scans = static_cast<int>(frames);
     summary.lidar_points = lidar_points;
   }
   if (options.write_images) {
     std::vector<std::int64_t> stamps;
     for (double t : image_times) stamps.push_back(stamp(t));
-    writeFileAtomic(summary.sync_dir + "/image_02/timestamps.txt", timestampsText(stamps));
+    writeTextAtomically(summary.sync_dir + "/image_02/timestamps.txt", timestampsText(stamps));
     summary.images = static_cast<int>(image_times.size());
   }
   summary.wall_seconds =

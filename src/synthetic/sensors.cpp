@@ -8,7 +8,7 @@
 #include <string>
 #include <thread>
 
-#include "file_util.h"
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 
 namespace inekf_semantic_mapping {
@@ -164,15 +164,16 @@ void KittiRig::writeRawCalibration(const std::string& date_dir, int width, int h
     cam +=
         "P_rect" + std::string(suffix) + formatRowMajor(scaledProjection(i, width, height)) + "\n";
   }
-  internal::writeFileAtomic(date_dir + "/calib_cam_to_cam.txt", cam);
-  internal::writeFileAtomic(date_dir + "/calib_imu_to_velo.txt",
-                            "calib_time: 25-May-2012 16:47:16\nR: " + formatRowMajor(R_velo_imu) +
-                                "\nT: " + formatRowMajor(t_velo_imu.transpose()) + "\n");
-  internal::writeFileAtomic(date_dir + "/calib_velo_to_cam.txt",
-                            "calib_time: 15-Mar-2012 11:37:16\nR: " + formatRowMajor(R_cam0_velo) +
-                                "\nT: " + formatRowMajor(t_cam0_velo.transpose()) +
-                                "\ndelta_f: 0.000000e+00 0.000000e+00\n"
-                                "delta_c: 0.000000e+00 0.000000e+00\n");
+  common::writeTextAtomically(date_dir + "/calib_cam_to_cam.txt", cam);
+  common::writeTextAtomically(date_dir + "/calib_imu_to_velo.txt",
+                              "calib_time: 25-May-2012 16:47:16\nR: " + formatRowMajor(R_velo_imu) +
+                                  "\nT: " + formatRowMajor(t_velo_imu.transpose()) + "\n");
+  common::writeTextAtomically(
+      date_dir + "/calib_velo_to_cam.txt",
+      "calib_time: 15-Mar-2012 11:37:16\nR: " + formatRowMajor(R_cam0_velo) +
+          "\nT: " + formatRowMajor(t_cam0_velo.transpose()) +
+          "\ndelta_f: 0.000000e+00 0.000000e+00\n"
+          "delta_c: 0.000000e+00 0.000000e+00\n");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -1,15 +1,17 @@
 #include "inekf_semantic_mapping/synthetic/world.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <random>
 #include <sstream>
 #include <stdexcept>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/synthetic/route.h"
 
@@ -913,10 +915,11 @@ SyntheticWorld SyntheticWorld::generateTown(std::uint64_t seed) {
 //   cylinder LABEL CX CY CZ RADIUS HALF_HEIGHT R G B
 //   ellipsoid LABEL CX CY CZ RX RY RZ R G B
 void SyntheticWorld::save(const std::string& path) const {
-  const std::string tmp = path + ".tmp";
-  {
+  common::commitFileAtomically(path, [&](const std::string& tmp) {
     std::FILE* file = std::fopen(tmp.c_str(), "w");
-    if (!file) throw std::runtime_error(tmp + ": cannot open for writing");
+    if (!file) {
+      throw common::AtomicWriteError(path, "cannot create '" + tmp + "': " + std::strerror(errno));
+    }
     std::fprintf(file,
                  "# inekf_semantic_mapping synthetic world v1: map frame (x east, y north, z up), "
                  "metres, labels = Cityscapes labelIds, colours RGB 0..1\n");
@@ -949,10 +952,10 @@ void SyntheticWorld::save(const std::string& path) const {
       }
     }
     const bool ok = std::fflush(file) == 0 && !std::ferror(file);
-    std::fclose(file);
-    if (!ok) throw std::runtime_error(tmp + ": write failed");
-  }
-  std::filesystem::rename(tmp, path);
+    if (std::fclose(file) != 0 || !ok) {
+      throw common::AtomicWriteError(path, "write failed (disk full?)");
+    }
+  });
 }
 
 SyntheticWorld SyntheticWorld::load(const std::string& path) {

@@ -1,0 +1,117 @@
+// Atomic file writes: write a temporary file beside the target, then rename it over the target,
+// so that a reader sees either the old file or the complete new one, never half a file. On any
+// failure the temporary is removed and the target is left as it was.
+//
+//   common::writeTextAtomically("out/poses.txt", text);
+//   common::writeStreamAtomically("out/map.ot", [&](std::ostream& out) { tree.write(out); });
+//   common::commitFileAtomically("out/img.png", [&](const std::string& tmp) {
+//     if (!cv::imwrite(tmp, image)) throw std::runtime_error("cannot encode " + tmp);
+//   });
+//
+// Header-only, standard library only (usable from the ROS-free core libraries and the tools).
+#pragma once
+
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+namespace inekf_semantic_mapping {
+namespace common {
+
+// A write that could not be completed; the target is unchanged and no temporary is left.
+// what(): "cannot write '<path>': <reason>".
+class AtomicWriteError : public std::runtime_error {
+ public:
+  AtomicWriteError(const std::string& path, const std::string& reason)
+      : std::runtime_error("cannot write '" + path + "': " + reason),
+        path_(path),
+        reason_(reason) {}
+
+  const std::string& path() const { return path_; }
+  // E.g. "cannot create '<tmp>': No such file or directory", "write failed (disk full?)",
+  // "rename failed: ...".
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::string path_;
+  std::string reason_;
+};
+
+// A temporary path beside `path` (same directory, so the rename is atomic), unique per process
+// and per call: <dir>/.tmp.<pid>.<n>.<filename>. The file's extension stays at the end (tools
+// such as cv::imwrite pick the format from it).
+inline std::string temporaryPathFor(const std::string& path) {
+  static std::atomic<unsigned long> counter{0};
+  const std::filesystem::path target(path);
+  const std::string name = ".tmp." + std::to_string(static_cast<long>(::getpid())) + "." +
+                           std::to_string(counter.fetch_add(1)) + "." + target.filename().string();
+  return (target.parent_path() / name).string();
+}
+
+// Calls write(tmp_path), which must create and fully write tmp_path (throwing on failure), then
+// renames tmp_path over path. If write throws, the temporary is removed and the exception
+// propagates unchanged; if the rename fails, the temporary is removed and AtomicWriteError is
+// thrown. tmp_path must be in path's directory (temporaryPathFor gives one).
+inline void commitFileAtomically(const std::string& path, const std::string& tmp_path,
+                                 const std::function<void(const std::string& tmp_path)>& write) {
+  std::error_code ignored;
+  try {
+    write(tmp_path);
+  } catch (...) {
+    std::filesystem::remove(tmp_path, ignored);
+    throw;
+  }
+  std::error_code error;
+  std::filesystem::rename(tmp_path, path, error);
+  if (error) {
+    std::filesystem::remove(tmp_path, ignored);
+    throw AtomicWriteError(path, "rename failed: " + error.message());
+  }
+}
+
+// The same with tmp_path = temporaryPathFor(path).
+inline void commitFileAtomically(const std::string& path,
+                                 const std::function<void(const std::string& tmp_path)>& write) {
+  commitFileAtomically(path, temporaryPathFor(path), write);
+}
+
+// Writes path through a binary std::ofstream handed to body. Throws AtomicWriteError if the
+// temporary cannot be created or the stream has failed after body or after the flush; an
+// exception thrown by body propagates unchanged. Either way the target is unchanged.
+inline void writeStreamAtomically(const std::string& path,
+                                  const std::function<void(std::ostream&)>& body) {
+  if (path.empty()) throw AtomicWriteError(path, "empty output path");
+  commitFileAtomically(path, [&](const std::string& tmp_path) {
+    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      throw AtomicWriteError(path, "cannot create '" + tmp_path + "': " + std::strerror(errno));
+    }
+    body(out);
+    if (out) out.flush();
+    if (out) out.close();
+    if (!out) throw AtomicWriteError(path, "write failed (disk full?)");
+  });
+}
+
+// Writes size bytes from data to path atomically.
+inline void writeBytesAtomically(const std::string& path, const void* data, std::size_t size) {
+  writeStreamAtomically(path, [&](std::ostream& out) {
+    if (size > 0) out.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+  });
+}
+
+// Writes text to path atomically.
+inline void writeTextAtomically(const std::string& path, const std::string& text) {
+  writeBytesAtomically(path, text.data(), text.size());
+}
+
+}  // namespace common
+}  // namespace inekf_semantic_mapping

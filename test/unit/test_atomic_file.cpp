@@ -1,0 +1,128 @@
+// common/atomic_file.h: temporary beside the target, rename, no temporary left on any outcome.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "test_data.h"
+
+namespace fs = std::filesystem;
+using namespace inekf_semantic_mapping::common;  // NOLINT: test
+
+namespace {
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+std::vector<std::string> listDir(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+}  // namespace
+
+TEST(AtomicFile, TemporaryIsBesideTheTargetAndKeepsTheExtension) {
+  const std::string tmp = temporaryPathFor("/some/dir/overlay.png");
+  EXPECT_EQ(fs::path(tmp).parent_path(), fs::path("/some/dir"));
+  EXPECT_EQ(fs::path(tmp).extension(), ".png");
+  EXPECT_NE(fs::path(tmp).filename().string().find(std::to_string(::getpid())), std::string::npos);
+  EXPECT_EQ(fs::path(tmp).filename().string().rfind(".tmp.", 0), 0u);  // hidden
+  EXPECT_NE(tmp, temporaryPathFor("/some/dir/overlay.png"));           // unique per call
+  EXPECT_EQ(fs::path(temporaryPathFor("map.ot")).parent_path(), fs::path(""));
+  EXPECT_EQ(fs::path(temporaryPathFor("map.ot")).extension(), ".ot");
+}
+
+TEST(AtomicFile, WritesTheContentAndLeavesNoTemporary) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_write");
+  const std::string path = dir + "/out.txt";
+  writeTextAtomically(path, "first\n");
+  EXPECT_EQ(readFile(path), "first\n");
+  writeTextAtomically(path, "second, longer\n");  // replaces
+  EXPECT_EQ(readFile(path), "second, longer\n");
+  const std::string bytes("a\0b\xff", 4);
+  writeBytesAtomically(dir + "/out.bin", bytes.data(), bytes.size());
+  EXPECT_EQ(readFile(dir + "/out.bin"), bytes);
+  writeStreamAtomically(dir + "/out.csv", [](std::ostream& out) {
+    out << "x,y\n" << 1 << ',' << 2;
+  });
+  EXPECT_EQ(readFile(dir + "/out.csv"), "x,y\n1,2");
+  writeTextAtomically(dir + "/empty.txt", "");
+  EXPECT_TRUE(fs::exists(dir + "/empty.txt"));
+  EXPECT_EQ(fs::file_size(dir + "/empty.txt"), 0u);
+  commitFileAtomically(dir + "/img.png", [](const std::string& tmp) {
+    EXPECT_EQ(fs::path(tmp).extension(), ".png");
+    std::ofstream(tmp) << "png";
+  });
+  EXPECT_EQ(readFile(dir + "/img.png"), "png");
+  EXPECT_EQ(listDir(dir),
+            (std::vector<std::string>{"empty.txt", "img.png", "out.bin", "out.csv", "out.txt"}));
+  fs::remove_all(dir);
+}
+
+TEST(AtomicFile, ABodyThatThrowsLeavesThePreviousFileAndNoTemporary) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_throw");
+  const std::string path = dir + "/keep.txt";
+  writeTextAtomically(path, "previous\n");
+  // The body's own exception propagates unchanged.
+  EXPECT_THROW(writeStreamAtomically(path,
+                                     [](std::ostream& out) {
+                                       out << "half a file";
+                                       throw std::logic_error("encoder failed");
+                                     }),
+               std::logic_error);
+  EXPECT_THROW(commitFileAtomically(path,
+                                    [](const std::string& tmp) {
+                                      std::ofstream(tmp) << "half";
+                                      throw std::runtime_error("imwrite failed");
+                                    }),
+               std::runtime_error);
+  // A body that fails the stream without throwing is a write failure.
+  try {
+    writeStreamAtomically(path, [](std::ostream& out) { out.setstate(std::ios::badbit); });
+    ADD_FAILURE() << "no exception";
+  } catch (const AtomicWriteError& e) {
+    EXPECT_NE(std::string(e.what()).find("write failed (disk full?)"), std::string::npos)
+        << e.what();
+    EXPECT_EQ(e.path(), path);
+  }
+  // A write callback that never creates the temporary fails at the rename.
+  EXPECT_THROW(commitFileAtomically(path, [](const std::string&) {}), AtomicWriteError);
+  EXPECT_EQ(readFile(path), "previous\n");
+  EXPECT_EQ(listDir(dir), std::vector<std::string>{"keep.txt"});
+  fs::remove_all(dir);
+}
+
+TEST(AtomicFile, AMissingDirectoryThrowsNamingThePath) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_nodir");
+  const std::string path = dir + "/no/such/dir/out.txt";
+  try {
+    writeTextAtomically(path, "x");
+    ADD_FAILURE() << "no exception";
+  } catch (const AtomicWriteError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("'" + path + "'"), std::string::npos) << what;
+    EXPECT_NE(what.find("No such file or directory"), std::string::npos) << what;
+    EXPECT_EQ(e.path(), path);
+    EXPECT_EQ(what, "cannot write '" + path + "': " + e.reason());
+  }
+  EXPECT_THROW(writeTextAtomically("", "x"), AtomicWriteError);
+  // A target that is a directory: the rename fails, the temporary is removed.
+  fs::create_directories(dir + "/target_is_a_dir");
+  EXPECT_THROW(writeTextAtomically(dir + "/target_is_a_dir", "x"), AtomicWriteError);
+  EXPECT_EQ(listDir(dir), std::vector<std::string>{"target_is_a_dir"});
+  fs::remove_all(dir);
+}
