@@ -44,6 +44,9 @@ endif()
 
 # Header-only helpers the tools share (include/inekf_semantic_mapping/common/).
 ism_add_gtest(test_atomic_file SOURCES test/unit/test_atomic_file.cpp)
-if(TARGET test_atomic_file)
-  target_include_directories(test_atomic_file PRIVATE ${ISM_CORE_INCLUDE_DIRS})
-endif()
+ism_add_gtest(test_cli_args SOURCES test/unit/test_cli_args.cpp)
+foreach(common_test test_atomic_file test_cli_args)
+  if(TARGET ${common_test})
+    target_include_directories(${common_test} PRIVATE ${ISM_CORE_INCLUDE_DIRS})
+  endif()
+endforeach()

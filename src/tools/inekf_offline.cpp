@@ -12,6 +12,8 @@
 #include <map>
 #include <string>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/estimation/oxts_run.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
@@ -39,16 +41,10 @@ constexpr char kUsage[] =
 
 // Writes through a temporary file and a rename: a reader never sees half a file.
 void writeAtomically(const std::string& path, const std::function<void(std::ostream&)>& body) {
-  const std::filesystem::path target(path);
-  const std::filesystem::path tmp = target.parent_path() / (".tmp_" + target.filename().string());
-  {
-    std::ofstream out(tmp);
-    if (!out) throw std::runtime_error("cannot write " + tmp.string());
+  ism::common::writeStreamAtomically(path, [&](std::ostream& out) {
     out.precision(9);
     body(out);
-    if (!out) throw std::runtime_error("error while writing " + tmp.string());
-  }
-  std::filesystem::rename(tmp, target);
+  });
 }
 
 void writeKittiPose(std::ostream& out, const Eigen::Matrix3d& r, const Eigen::Vector3d& t) {
@@ -58,118 +54,68 @@ void writeKittiPose(std::ostream& out, const Eigen::Matrix3d& r, const Eigen::Ve
   }
 }
 
-double parseNumber(const std::string& flag, const std::string& text) {
-  std::size_t used = 0;
-  double value = 0.0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != text.size() || !std::isfinite(value)) {
-    throw std::invalid_argument(flag + ": '" + text + "' is not a number");
-  }
-  return value;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::map<std::string, std::string> args;
-  std::vector<std::string> outages;
-  const std::vector<std::string> known = {"--oxts",
-                                          "--output-kitti",
-                                          "--output-tum",
-                                          "--output-truth",
-                                          "--output-states",
-                                          "--gps-every",
-                                          "--filter",
-                                          "--config",
-                                          "--init-yaw-sigma-deg",
-                                          "--init-yaw-error-deg",
-                                          "--gps-sigma-h",
-                                          "--gps-sigma-v",
-                                          "--gps-outage",
-                                          "--seed"};
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "-h" || arg == "--help") {
-      std::cout << kUsage;
-      return 0;
+  using ism::common::UsageError;
+  return ism::common::runCli("inekf_offline", kUsage, [&] {
+    const ism::common::CommandLine cli(
+        argc, argv,
+        {"--oxts", "--output-kitti", "--output-tum", "--output-truth", "--output-states",
+         "--gps-every", "--filter", "--config", "--init-yaw-sigma-deg", "--init-yaw-error-deg",
+         "--gps-sigma-h", "--gps-sigma-v", "--seed"},
+        {}, {"--gps-outage"});
+    if (cli.helpRequested()) return ism::common::printUsage(kUsage);
+    if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
+      throw UsageError("--oxts and --output-kitti are required");
     }
-    if (std::find(known.begin(), known.end(), arg) == known.end() || i + 1 >= argc) {
-      std::cerr << "inekf_offline: "
-                << (std::find(known.begin(), known.end(), arg) == known.end()
-                        ? "unknown option "
-                        : "missing value for ")
-                << arg << "\n"
-                << kUsage;
-      return 2;
-    }
-    if (arg == "--gps-outage") {
-      outages.push_back(argv[++i]);
-    } else {
-      args[arg] = argv[++i];
-    }
-  }
-  if (!args.count("--oxts") || !args.count("--output-kitti")) {
-    std::cerr << "inekf_offline: --oxts and --output-kitti are required\n" << kUsage;
-    return 2;
-  }
 
-  estimation::OxtsRunOptions options;
-  try {
-    if (args.count("--config")) {
-      options.config = estimation::LocalizerConfig::fromYamlFile(args["--config"]);
-    }
-    if (args.count("--filter")) {
-      options.config.filter_type = estimation::filterTypeFromString(args["--filter"]);
-    }
-    if (args.count("--init-yaw-sigma-deg")) {
+    estimation::OxtsRunOptions options;
+    try {
+      if (cli.has("--config")) {
+        options.config = estimation::LocalizerConfig::fromYamlFile(cli.get("--config"));
+      }
+      if (cli.has("--filter")) {
+        options.config.filter_type = estimation::filterTypeFromString(cli.get("--filter"));
+      }
       options.config.initial_yaw_sigma_deg =
-          parseNumber("--init-yaw-sigma-deg", args["--init-yaw-sigma-deg"]);
-      if (!(options.config.initial_yaw_sigma_deg > 0)) {
-        throw std::invalid_argument("--init-yaw-sigma-deg must be positive");
+          cli.getDouble("--init-yaw-sigma-deg", options.config.initial_yaw_sigma_deg);
+      if (cli.has("--init-yaw-sigma-deg") && !(options.config.initial_yaw_sigma_deg > 0)) {
+        throw UsageError("--init-yaw-sigma-deg must be positive");
       }
-    }
-    if (args.count("--init-yaw-error-deg")) {
       options.init_yaw_error_deg =
-          parseNumber("--init-yaw-error-deg", args["--init-yaw-error-deg"]);
-    }
-    if (args.count("--gps-every")) {
-      const double every = parseNumber("--gps-every", args["--gps-every"]);
-      if (every < 1 || every != std::floor(every)) {
-        throw std::invalid_argument("--gps-every must be an integer >= 1");
+          cli.getDouble("--init-yaw-error-deg", options.init_yaw_error_deg);
+      if (cli.has("--gps-every")) {
+        const double every = cli.getDouble("--gps-every", 1);
+        if (every < 1 || every != std::floor(every)) {
+          throw UsageError("--gps-every must be an integer >= 1");
+        }
+        options.gps.every_n_frames = static_cast<int>(every);
       }
-      options.gps.every_n_frames = static_cast<int>(every);
-    }
-    if (args.count("--gps-sigma-h")) {
-      options.gps.sigma_horizontal_m = parseNumber("--gps-sigma-h", args["--gps-sigma-h"]);
-    }
-    if (args.count("--gps-sigma-v")) {
-      options.gps.sigma_vertical_m = parseNumber("--gps-sigma-v", args["--gps-sigma-v"]);
-    }
-    for (const std::string& outage : outages) {
-      options.gps.outages_s.push_back(ism::kitti::GpsDegradationOptions::parseOutage(outage));
-    }
-    if (args.count("--seed")) {
-      const double seed = parseNumber("--seed", args["--seed"]);
-      if (seed < 0 || seed != std::floor(seed)) {
-        throw std::invalid_argument("--seed must be a non-negative integer");
+      options.gps.sigma_horizontal_m =
+          cli.getDouble("--gps-sigma-h", options.gps.sigma_horizontal_m);
+      options.gps.sigma_vertical_m = cli.getDouble("--gps-sigma-v", options.gps.sigma_vertical_m);
+      for (const std::string& outage : cli.getAll("--gps-outage")) {
+        options.gps.outages_s.push_back(ism::kitti::GpsDegradationOptions::parseOutage(outage));
       }
-      options.gps.seed = static_cast<std::uint64_t>(seed);
+      if (cli.has("--seed")) {
+        const double seed = cli.getDouble("--seed", 0);
+        if (seed < 0 || seed != std::floor(seed)) {
+          throw UsageError("--seed must be a non-negative integer");
+        }
+        options.gps.seed = static_cast<std::uint64_t>(seed);
+      }
+      options.gps.validate();
+    } catch (const UsageError&) {
+      throw;
+    } catch (const std::exception& e) {
+      throw UsageError(e.what());  // a bad --config, --filter, --gps-outage or GPS option
     }
-    options.gps.validate();
-  } catch (const std::exception& e) {
-    std::cerr << "inekf_offline: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
 
-  try {
     std::vector<ism::kitti::OxtsFrame> frames;
     {
       ism::ScopedTimer timer("read_oxts");
-      frames = ism::kitti::readOxtsFolder(args["--oxts"]);
+      frames = ism::kitti::readOxtsFolder(cli.get("--oxts"));
     }
     estimation::OxtsRunResult run;
     {
@@ -177,16 +123,16 @@ int main(int argc, char** argv) {
       run = estimation::runLocalizerOnOxts(frames, options);
     }
     ism::ScopedTimer write_timer("write_outputs");
-    writeAtomically(args["--output-kitti"], [&](std::ostream& out) {
+    writeAtomically(cli.get("--output-kitti"), [&](std::ostream& out) {
       for (const auto& s : run.states) writeKittiPose(out, s.rotation, s.position_map);
     });
-    if (args.count("--output-truth")) {
-      writeAtomically(args["--output-truth"], [&](std::ostream& out) {
+    if (cli.has("--output-truth")) {
+      writeAtomically(cli.get("--output-truth"), [&](std::ostream& out) {
         for (const auto& t : run.truth) writeKittiPose(out, t.linear(), t.translation());
       });
     }
-    if (args.count("--output-tum")) {
-      writeAtomically(args["--output-tum"], [&](std::ostream& out) {
+    if (cli.has("--output-tum")) {
+      writeAtomically(cli.get("--output-tum"), [&](std::ostream& out) {
         out.precision(6);
         out << std::fixed;
         for (const auto& s : run.states) {
@@ -197,8 +143,8 @@ int main(int argc, char** argv) {
         }
       });
     }
-    if (args.count("--output-states")) {
-      writeAtomically(args["--output-states"], [&](std::ostream& out) {
+    if (cli.has("--output-states")) {
+      writeAtomically(cli.get("--output-states"), [&](std::ostream& out) {
         out << "stamp,px,py,pz,qx,qy,qz,qw,vx,vy,vz,bgx,bgy,bgz,bax,bay,baz";
         for (int r = 0; r < 6; ++r) {
           for (int c = 0; c < 6; ++c) out << ",c" << r << c;
@@ -233,9 +179,6 @@ int main(int argc, char** argv) {
         static_cast<long long>(run.statistics.gps_used),
         static_cast<long long>(run.statistics.gps_rejected), errors.ate_m, errors.rotation_rmse_deg,
         errors.yaw_rmse_deg);
-  } catch (const std::exception& e) {
-    std::cerr << "inekf_offline: " << e.what() << "\n";
-    return 1;
-  }
-  return 0;
+    return 0;
+  });
 }

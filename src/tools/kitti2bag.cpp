@@ -11,11 +11,11 @@
 
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <filesystem>
 #include <iostream>
 #include <string>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
@@ -48,76 +48,41 @@ struct Arguments {
   kitti::GpsDegradationOptions gps;
 };
 
-double parseNumber(const std::string& flag, const std::string& text) {
-  std::size_t used = 0;
-  double value = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::logic_error&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size()) {
-    throw std::invalid_argument(flag + ": '" + text + "' is not a number");
-  }
-  return value;
-}
-
-Arguments parseArguments(int argc, char** argv) {
+Arguments parseArguments(const common::CommandLine& cli) {
+  using common::UsageError;
   Arguments args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(flag + " needs a value");
-      return argv[++i];
-    };
-    if (flag == "--help" || flag == "-h") {
-      std::cout << kUsage;
-      std::exit(0);
-    } else if (flag == "--drive") {
-      args.drive_dir = value();
-    } else if (flag == "--calib-dir") {
-      args.calib_dir = value();
-    } else if (flag == "--output") {
-      args.output = value();
-    } else if (flag == "--start") {
-      args.timeline.start_offset_s = parseNumber(flag, value());
-    } else if (flag == "--duration") {
-      args.timeline.duration_s = parseNumber(flag, value());
-    } else if (flag == "--gps-sigma-h") {
-      args.gps.sigma_horizontal_m = parseNumber(flag, value());
-    } else if (flag == "--gps-sigma-v") {
-      args.gps.sigma_vertical_m = parseNumber(flag, value());
-    } else if (flag == "--gps-every") {
-      const double every = parseNumber(flag, value());
-      if (every != std::floor(every) || every < 1 || every > 1e6) {
-        throw std::invalid_argument(flag + " must be an integer >= 1");
-      }
-      args.gps.every_n_frames = static_cast<int>(every);
-    } else if (flag == "--gps-outage") {
-      args.gps.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(value()));
-    } else if (flag == "--seed") {
-      const std::string text = value();
-      std::size_t used = 0;
-      try {
-        args.gps.seed = std::stoull(text, &used);
-      } catch (const std::logic_error&) {
-        used = 0;
-      }
-      if (used == 0 || used != text.size() || text[0] == '-') {
-        throw std::invalid_argument(flag + ": '" + text + "' is not a non-negative integer");
-      }
-    } else if (flag == "--no-velodyne") {
-      args.timeline.velodyne = false;
-    } else if (flag == "--no-camera") {
-      args.timeline.cameras[2] = false;
-    } else {
-      throw std::invalid_argument("unknown argument '" + flag + "'");
+  args.drive_dir = cli.get("--drive");
+  args.calib_dir = cli.get("--calib-dir");
+  args.output = cli.get("--output");
+  args.timeline.start_offset_s = cli.getDouble("--start", args.timeline.start_offset_s);
+  args.timeline.duration_s = cli.getDouble("--duration", args.timeline.duration_s);
+  args.gps.sigma_horizontal_m = cli.getDouble("--gps-sigma-h", args.gps.sigma_horizontal_m);
+  args.gps.sigma_vertical_m = cli.getDouble("--gps-sigma-v", args.gps.sigma_vertical_m);
+  if (cli.has("--gps-every")) {
+    const double every = cli.getDouble("--gps-every", 1);
+    if (every != std::floor(every) || every < 1 || every > 1e6) {
+      throw UsageError("--gps-every must be an integer >= 1");
+    }
+    args.gps.every_n_frames = static_cast<int>(every);
+  }
+  for (const std::string& outage : cli.getAll("--gps-outage")) {
+    try {
+      args.gps.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(outage));
+    } catch (const std::exception& error) {
+      throw UsageError(error.what());
     }
   }
+  args.gps.seed = cli.getUint64("--seed", args.gps.seed);
+  if (cli.has("--no-velodyne")) args.timeline.velodyne = false;
+  if (cli.has("--no-camera")) args.timeline.cameras[2] = false;
   if (args.drive_dir.empty() || args.output.empty()) {
-    throw std::invalid_argument("--drive and --output are required");
+    throw UsageError("--drive and --output are required");
   }
-  args.gps.validate();
+  try {
+    args.gps.validate();
+  } catch (const std::exception& error) {
+    throw UsageError(error.what());
+  }
   return args;
 }
 
@@ -160,55 +125,56 @@ int run(const Arguments& args) {
       kitti::buildDriveTimeline(drive, timeline_options);
   if (timeline.empty()) throw std::invalid_argument("nothing to write in the chosen window");
 
-  const std::string partial = args.output + ".partial";
+  // Written as FILE.bag.partial (the name the usage documents), renamed when complete; on any
+  // error the partial bag is removed.
   std::size_t messages = 0;
-  {
-    rosbag::Bag bag(partial, rosbag::bagmode::Write);
-    const ros::Time first = conv::toRosTime(timeline.front().stamp_ns);
-    tf2_msgs::TFMessage tf_static;
-    tf_static.transforms = factory.staticTransformMessages(first);
-    bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
-    ++messages;
-    const bool interactive = isatty(STDERR_FILENO);
-    for (std::size_t i = 0; i < timeline.size(); ++i) {
-      const kitti::TimelineEvent& event = timeline[i];
-      const ros::Time stamp = conv::toRosTime(event.stamp_ns);
-      switch (event.sensor) {
-        case kitti::DriveSensor::kOxts: {
-          ScopedTimer timer("kitti2bag/oxts");
-          const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
-          bag.write(topics::kImu, stamp, oxts.imu);
-          if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
-          bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
-          bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
-          messages += oxts.gps_fix ? 4 : 3;
-          break;
+  common::commitFileAtomically(
+      args.output, args.output + ".partial", [&](const std::string& partial) {
+        rosbag::Bag bag(partial, rosbag::bagmode::Write);
+        const ros::Time first = conv::toRosTime(timeline.front().stamp_ns);
+        tf2_msgs::TFMessage tf_static;
+        tf_static.transforms = factory.staticTransformMessages(first);
+        bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
+        ++messages;
+        const bool interactive = isatty(STDERR_FILENO);
+        for (std::size_t i = 0; i < timeline.size(); ++i) {
+          const kitti::TimelineEvent& event = timeline[i];
+          const ros::Time stamp = conv::toRosTime(event.stamp_ns);
+          switch (event.sensor) {
+            case kitti::DriveSensor::kOxts: {
+              ScopedTimer timer("kitti2bag/oxts");
+              const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
+              bag.write(topics::kImu, stamp, oxts.imu);
+              if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
+              bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
+              bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
+              messages += oxts.gps_fix ? 4 : 3;
+              break;
+            }
+            case kitti::DriveSensor::kVelodyne: {
+              ScopedTimer timer("kitti2bag/velodyne");
+              bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
+              ++messages;
+              break;
+            }
+            case kitti::DriveSensor::kCamera2: {
+              ScopedTimer timer("kitti2bag/camera");
+              const auto [image, info] = factory.cameraMessages(2, event.frame);
+              bag.write(topics::kCameraColorLeftImage, stamp, image);
+              bag.write(topics::kCameraColorLeftInfo, stamp, info);
+              messages += 2;
+              break;
+            }
+            default:
+              break;
+          }
+          if (interactive ? (i % 20 == 0 || i + 1 == timeline.size())
+                          : (i % 1000 == 0 || i + 1 == timeline.size())) {
+            printProgress(i + 1, timeline.size());
+          }
         }
-        case kitti::DriveSensor::kVelodyne: {
-          ScopedTimer timer("kitti2bag/velodyne");
-          bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
-          ++messages;
-          break;
-        }
-        case kitti::DriveSensor::kCamera2: {
-          ScopedTimer timer("kitti2bag/camera");
-          const auto [image, info] = factory.cameraMessages(2, event.frame);
-          bag.write(topics::kCameraColorLeftImage, stamp, image);
-          bag.write(topics::kCameraColorLeftInfo, stamp, info);
-          messages += 2;
-          break;
-        }
-        default:
-          break;
-      }
-      if (interactive ? (i % 20 == 0 || i + 1 == timeline.size())
-                      : (i % 1000 == 0 || i + 1 == timeline.size())) {
-        printProgress(i + 1, timeline.size());
-      }
-    }
-    bag.close();
-  }
-  std::filesystem::rename(partial, args.output);
+        bag.close();
+      });
   std::cerr << "kitti2bag: wrote " << messages << " messages ("
             << kitti::secondsBetween(timeline.front().stamp_ns, timeline.back().stamp_ns)
             << " s) to " << args.output << "\n"
@@ -219,18 +185,12 @@ int run(const Arguments& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  Arguments args;
-  try {
-    args = parseArguments(argc, argv);
-  } catch (const std::exception& error) {
-    std::cerr << "kitti2bag: " << error.what() << "\n" << kUsage;
-    return 2;
-  }
-  try {
-    return run(args);
-  } catch (const std::exception& error) {
-    std::cerr << "kitti2bag: " << error.what() << "\n";
-    std::filesystem::remove(args.output + ".partial");
-    return 1;
-  }
+  return common::runCli("kitti2bag", kUsage, [&] {
+    const common::CommandLine cli(argc, argv,
+                                  {"--drive", "--calib-dir", "--output", "--start", "--duration",
+                                   "--gps-sigma-h", "--gps-sigma-v", "--gps-every", "--seed"},
+                                  {"--no-velodyne", "--no-camera"}, {"--gps-outage"});
+    if (cli.helpRequested()) return common::printUsage(kUsage);
+    return run(parseArguments(cli));
+  });
 }

@@ -5,17 +5,15 @@
 // CSV: header `index,u,v,depth`, one row per point inside the image with depth > 0 (index = the
 // point's row in the .bin, u/v in pixels, depth in metres). The image is read for its size and
 // as the overlay's background (points colored by depth).
-#include <unistd.h>
-
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
@@ -27,45 +25,9 @@ constexpr char kUsage[] =
     "usage: project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png "
     "--output POINTS.csv [--overlay OVERLAY.png]\n";
 
-// Writes to a temporary file beside `path`, then renames (no half-written outputs).
-std::string temporaryPathFor(const std::string& path) {
-  const std::filesystem::path p(path);
-  return (p.parent_path() / (".tmp." + std::to_string(::getpid()) + "." + p.filename().string()))
-      .string();
-}
-
-void commit(const std::string& tmp_path, const std::string& path) {
-  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
-    std::remove(tmp_path.c_str());
-    throw std::runtime_error("cannot write '" + path + "' (rename failed)");
-  }
-}
-
-}  // namespace
-
-int main(int argc, char** argv) {
+// The tool once the command line is read; its own errors print "project_cloud: error: ...".
+int run(std::map<std::string, std::string>& args) {
   using namespace inekf_semantic_mapping;
-  std::map<std::string, std::string> args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "-h" || flag == "--help") {
-      std::cout << kUsage;
-      return 0;
-    }
-    if ((flag != "--calib" && flag != "--velodyne" && flag != "--image" && flag != "--output" &&
-         flag != "--overlay") ||
-        i + 1 >= argc) {
-      std::cerr << "project_cloud: bad argument '" << flag << "'\n" << kUsage;
-      return 2;
-    }
-    args[flag] = argv[++i];
-  }
-  for (const char* required : {"--calib", "--velodyne", "--image", "--output"}) {
-    if (!args.count(required)) {
-      std::cerr << "project_cloud: missing " << required << "\n" << kUsage;
-      return 2;
-    }
-  }
   try {
     cv::Mat image;
     {
@@ -87,20 +49,16 @@ int main(int argc, char** argv) {
     }
     {
       ScopedTimer timer("project_cloud/write_csv");
-      const std::string tmp = temporaryPathFor(args["--output"]);
-      std::ofstream csv(tmp);
-      if (!csv) throw std::runtime_error("cannot write '" + args["--output"] + "'");
-      csv << "index,u,v,depth\n";
-      char line[96];
-      for (std::size_t i = 0; i < projected.size(); ++i) {
-        if (!projected.valid[i]) continue;
-        std::snprintf(line, sizeof(line), "%zu,%.3f,%.3f,%.4f\n", i, projected.u[i], projected.v[i],
-                      projected.depth[i]);
-        csv << line;
-      }
-      csv.close();
-      if (!csv) throw std::runtime_error("cannot write '" + args["--output"] + "'");
-      commit(tmp, args["--output"]);
+      common::writeStreamAtomically(args["--output"], [&](std::ostream& csv) {
+        csv << "index,u,v,depth\n";
+        char line[96];
+        for (std::size_t i = 0; i < projected.size(); ++i) {
+          if (!projected.valid[i]) continue;
+          std::snprintf(line, sizeof(line), "%zu,%.3f,%.3f,%.4f\n", i, projected.u[i],
+                        projected.v[i], projected.depth[i]);
+          csv << line;
+        }
+      });
     }
     std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
               << " points inside the " << image.cols << "x" << image.rows << " image -> "
@@ -121,9 +79,12 @@ int main(int argc, char** argv) {
                    cv::Scalar(jet.at<cv::Vec3b>(0, level)), cv::FILLED);
       }
       const std::string& path = args["--overlay"];
-      const std::string tmp = temporaryPathFor(path) + ".png";
-      if (!cv::imwrite(tmp, overlay)) throw std::runtime_error("cannot write '" + path + "'");
-      commit(tmp, path);
+      // imwrite picks the format from the temporary's extension: always PNG, as before.
+      common::commitFileAtomically(path, common::temporaryPathFor(path) + ".png",
+                                   [&](const std::string& tmp) {
+                                     if (!cv::imwrite(tmp, overlay))
+                                       throw std::runtime_error("cannot write '" + path + "'");
+                                   });
       std::cerr << "[project_cloud] overlay -> " << path << "\n";
     }
   } catch (const std::exception& e) {
@@ -132,4 +93,21 @@ int main(int argc, char** argv) {
   }
   std::cerr << TimingRegistry::instance().report();
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace inekf_semantic_mapping;
+  return common::runCli("project_cloud", kUsage, [&] {
+    const common::CommandLine cli(argc, argv,
+                                  {"--calib", "--velodyne", "--image", "--output", "--overlay"});
+    if (cli.helpRequested()) return common::printUsage(kUsage);
+    std::map<std::string, std::string> args;
+    for (const char* flag : {"--calib", "--velodyne", "--image", "--output"}) {
+      args[flag] = cli.require(flag);
+    }
+    if (cli.has("--overlay")) args["--overlay"] = cli.get("--overlay");
+    return run(args);
+  });
 }

@@ -6,14 +6,14 @@
 //                 [--overlay OVERLAY.png] [--ids labelid|trainid] [--confidence CONF.png]
 //                 [--alpha 0.5] [--repeat N] [--threads 2]
 #include <cstdio>
-#include <filesystem>
 #include <iostream>
-#include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
@@ -35,61 +35,41 @@ constexpr char kUsage[] =
 
 // Writes via a temporary file and a rename, so a reader never sees half an image.
 void writeImageAtomically(const std::string& path, const cv::Mat& image) {
-  const std::filesystem::path target(path);
-  const std::string tmp_path =
-      (target.parent_path() / (".tmp_" + target.filename().string())).string();
   // The temporary name keeps the extension: imwrite picks the format from it.
-  if (!cv::imwrite(tmp_path, image)) throw std::runtime_error("cannot write " + tmp_path);
-  std::filesystem::rename(tmp_path, path);
+  ism::common::commitFileAtomically(path, [&](const std::string& tmp_path) {
+    if (!cv::imwrite(tmp_path, image)) throw std::runtime_error("cannot write " + tmp_path);
+  });
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::map<std::string, std::string> options = {
-      {"--ids", "labelid"}, {"--alpha", "0.5"}, {"--repeat", "1"}, {"--threads", "2"}};
-  const std::map<std::string, bool> known = {
-      {"--model", true},   {"--model-card", true}, {"--input", true},      {"--output", true},
-      {"--overlay", true}, {"--ids", true},        {"--confidence", true}, {"--alpha", true},
-      {"--repeat", true},  {"--threads", true}};
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "-h" || arg == "--help") {
-      std::cout << kUsage;
-      return 0;
+  using ism::common::UsageError;
+  return ism::common::runCli("segment_image", kUsage, [&] {
+    const ism::common::CommandLine cli(
+        argc, argv,
+        {"--model", "--model-card", "--input", "--output", "--overlay", "--ids", "--confidence",
+         "--alpha", "--repeat", "--threads"});
+    if (cli.helpRequested()) return ism::common::printUsage(kUsage);
+    const std::string model = cli.require("--model");
+    const std::string input = cli.require("--input");
+    const std::string output = cli.require("--output");
+    const std::string ids = cli.get("--ids", "labelid");
+    if (ids != "labelid" && ids != "trainid") {
+      throw UsageError("--ids must be labelid or trainid, not '" + ids + "'");
     }
-    if (!known.count(arg) || i + 1 >= argc) {
-      std::cerr << "segment_image: "
-                << (known.count(arg) ? "missing value for " : "unknown option ") << arg << "\n"
-                << kUsage;
-      return 2;
-    }
-    options[arg] = argv[++i];
-  }
-  for (const char* required : {"--model", "--input", "--output"}) {
-    if (!options.count(required)) {
-      std::cerr << "segment_image: " << required << " is required\n" << kUsage;
-      return 2;
-    }
-  }
-  const std::string ids = options["--ids"];
-  if (ids != "labelid" && ids != "trainid") {
-    std::cerr << "segment_image: --ids must be labelid or trainid, not '" << ids << "'\n";
-    return 2;
-  }
+    const int repeat = cli.getInt("--repeat", 1);
+    const double alpha = cli.getDouble("--alpha", 0.5);
+    const int threads = cli.getInt("--threads", 2);
 
-  try {
-    const std::string model = options["--model"];
-    const perception::ModelCard card = options.count("--model-card")
-                                           ? perception::loadModelCard(options["--model-card"])
+    const perception::ModelCard card = cli.has("--model-card")
+                                           ? perception::loadModelCard(cli.get("--model-card"))
                                            : perception::defaultModelCardFor(model);
-    const int repeat = std::stoi(options["--repeat"]);
-    const double alpha = std::stod(options["--alpha"]);
 
-    const cv::Mat image = cv::imread(options["--input"], cv::IMREAD_COLOR);
-    if (image.empty()) throw std::runtime_error("cannot read image " + options["--input"]);
+    const cv::Mat image = cv::imread(input, cv::IMREAD_COLOR);
+    if (image.empty()) throw std::runtime_error("cannot read image " + input);
 
-    perception::Segmenter segmenter(model, card, std::stoi(options["--threads"]));
+    perception::Segmenter segmenter(model, card, threads);
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     perception::Segmentation result;
     for (int i = 0; i < std::max(1, repeat); ++i) {
@@ -97,27 +77,22 @@ int main(int argc, char** argv) {
       result = segmenter.segment(image);
     }
 
-    writeImageAtomically(options["--output"], ids == "trainid"
-                                                  ? perception::labelIdsToTrainIds(result.label_ids)
+    writeImageAtomically(output, ids == "trainid" ? perception::labelIdsToTrainIds(result.label_ids)
                                                   : result.label_ids);
-    if (options.count("--overlay")) {
+    if (cli.has("--overlay")) {
       cv::Mat overlay_bgr;
       cv::cvtColor(perception::overlayLabelIds(image, result.label_ids, alpha), overlay_bgr,
                    cv::COLOR_RGB2BGR);
-      writeImageAtomically(options["--overlay"], overlay_bgr);
+      writeImageAtomically(cli.get("--overlay"), overlay_bgr);
     }
-    if (options.count("--confidence")) {
+    if (cli.has("--confidence")) {
       cv::Mat confidence_8u;
       result.confidence.convertTo(confidence_8u, CV_8U, 255.0);
-      writeImageAtomically(options["--confidence"], confidence_8u);
+      writeImageAtomically(cli.get("--confidence"), confidence_8u);
     }
-    std::cout << "segment_image: " << options["--input"] << " (" << image.cols << "x" << image.rows
-              << ") with " << model << " [card " << card.source << "] -> " << options["--output"]
-              << "\n"
+    std::cout << "segment_image: " << input << " (" << image.cols << "x" << image.rows << ") with "
+              << model << " [card " << card.source << "] -> " << output << "\n"
               << ism::TimingRegistry::instance().report();
-  } catch (const std::exception& e) {
-    std::cerr << "segment_image: " << e.what() << "\n";
-    return 1;
-  }
-  return 0;
+    return 0;
+  });
 }
