@@ -311,16 +311,23 @@ class InekfNode {
 
     const double position_sigma = std::sqrt(pose_covariance.topLeftCorner<3, 3>().trace());
     const auto statistics = localizer_->statistics();
+    // Stage timings go out with the periodic status line (not only at shutdown), so a slow
+    // filter shows while it runs.
+    const auto timings = TimingRegistry::instance().snapshot();
+    const auto mean_ms = [&timings](const char* stage) {
+      const auto it = timings.find(stage);
+      return it == timings.end() ? 0.0 : 1e3 * it->second.meanSeconds();
+    };
     ROS_INFO_THROTTLE(
         10.0,
         "inekf_node: t=%.2f s position (%.1f, %.1f, %.1f) m, sigma %.2f m; IMU "
         "%ld used / %ld dropped / %ld gaps; GPS %ld used / %ld rejected / %ld "
-        "ignored; %d resets",
+        "ignored; %d resets; mean IMU callback %.3f ms, GPS callback %.3f ms",
         state.stamp_s, state.position_map.x(), state.position_map.y(), state.position_map.z(),
         position_sigma, static_cast<long>(statistics.imu_used),
         static_cast<long>(statistics.imu_dropped), static_cast<long>(statistics.imu_gaps),
         static_cast<long>(statistics.gps_used), static_cast<long>(statistics.gps_rejected),
-        fixes_ignored_, resets_);
+        fixes_ignored_, resets_, mean_ms("inekf_node/imu"), mean_ms("inekf_node/gps"));
   }
 
   void publishStatus(const ros::Time& stamp) {
