@@ -107,24 +107,29 @@ def wrap_angle(angle):
 # --------------------------------------------------------------------------------------------
 # Reading
 # --------------------------------------------------------------------------------------------
-def _numeric_rows(path):
-    """(line number, [floats]) for every non-empty, non-comment line of a file."""
+def _content_lines(path):
+    """(line number, stripped text) for every non-empty, non-comment line of a file."""
     if not os.path.isfile(path):
         raise TrajectoryFormatError("%s: no such file" % path)
-    rows = []
     with open(path) as stream:
         for line_number, line in enumerate(stream, start=1):
             text = line.strip()
-            if not text or text.startswith("#"):
-                continue
-            try:
-                values = [float(token) for token in text.replace(",", " ").split()]
-            except ValueError:
-                raise TrajectoryFormatError("%s:%d: not a list of numbers: %r" %
-                                            (path, line_number, text[:80]))
-            if not all(math.isfinite(v) for v in values):
-                raise TrajectoryFormatError("%s:%d: NaN or infinite value" % (path, line_number))
-            rows.append((line_number, values))
+            if text and not text.startswith("#"):
+                yield line_number, text
+
+
+def _numeric_rows(path):
+    """(line number, [floats]) for every non-empty, non-comment line of a file."""
+    rows = []
+    for line_number, text in _content_lines(path):
+        try:
+            values = [float(token) for token in text.replace(",", " ").split()]
+        except ValueError:
+            raise TrajectoryFormatError("%s:%d: not a list of numbers: %r" %
+                                        (path, line_number, text[:80]))
+        if not all(math.isfinite(v) for v in values):
+            raise TrajectoryFormatError("%s:%d: NaN or infinite value" % (path, line_number))
+        rows.append((line_number, values))
     if not rows:
         raise TrajectoryFormatError("%s: no poses" % path)
     return rows
@@ -178,22 +183,16 @@ def read_trajectory(path):
 
 def read_timestamps(path):
     """Stamps (s) from a one-column file, a TUM file (first column) or KITTI's timestamps.txt."""
-    if not os.path.isfile(path):
-        raise TrajectoryFormatError("%s: no such file" % path)
     stamps = []
-    with open(path) as stream:
-        for line_number, line in enumerate(stream, start=1):
-            text = line.strip()
-            if not text or text.startswith("#"):
-                continue
-            if "-" in text.split()[0] and ":" in text:  # KITTI raw "2011-09-26 13:02:25.964389445"
-                stamps.append(_kitti_datetime_seconds(text, path, line_number))
-                continue
-            try:
-                stamps.append(float(text.replace(",", " ").split()[0]))
-            except ValueError:
-                raise TrajectoryFormatError("%s:%d: not a timestamp: %r" %
-                                            (path, line_number, text[:80]))
+    for line_number, text in _content_lines(path):
+        if "-" in text.split()[0] and ":" in text:  # KITTI raw "2011-09-26 13:02:25.964389445"
+            stamps.append(_kitti_datetime_seconds(text, path, line_number))
+            continue
+        try:
+            stamps.append(float(text.replace(",", " ").split()[0]))
+        except ValueError:
+            raise TrajectoryFormatError("%s:%d: not a timestamp: %r" %
+                                        (path, line_number, text[:80]))
     if not stamps:
         raise TrajectoryFormatError("%s: no timestamps" % path)
     return np.array(stamps)
