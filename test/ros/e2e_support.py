@@ -95,6 +95,26 @@ def synthetic_drive(duration_s, seed=7, generator_args=()):
     return drives[0]
 
 
+# GPS as in the evaluation protocol: 1.5 m / 3 m noise at 1 Hz, fixed seed.
+PROTOCOL_BAG_ARGS = "--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1"
+
+
+def param(name, default):
+    """A private parameter of the test node (set by the .test file), else `default`."""
+    return rospy.get_param("~" + name, default)
+
+
+def synthetic_bag_from_params(default_duration=12.0, default_seed=7):
+    """The drive and bag a test asks for with ~duration, ~seed, ~generator_args and ~bag_args.
+
+    Returns (duration_s, drive_dir, bag_path)."""
+    duration = param("duration", default_duration)
+    drive = synthetic_drive(duration, seed=param("seed", default_seed),
+                            generator_args=param("generator_args", "").split())
+    bag = kitti2bag(drive, param("bag_args", PROTOCOL_BAG_ARGS).split())
+    return duration, drive, bag
+
+
 def ground_truth_dir(drive_dir):
     """The synthetic drive's ground_truth/ folder (beside or inside the drive), or None."""
     for candidate in (os.path.join(drive_dir, "ground_truth"),

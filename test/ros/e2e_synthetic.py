@@ -35,12 +35,8 @@ class EndToEndSynthetic(unittest.TestCase):
 
     @classmethod
     def run_pipeline(cls):
-        p = lambda name, default: rospy.get_param("~" + name, default)
-        duration = p("duration", 12.0)
-        generator_args = p("generator_args", "").split()
-        bag_args = p("bag_args", "--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1").split()
-        drive = e2e.synthetic_drive(duration, seed=p("seed", 7), generator_args=generator_args)
-        bag = e2e.kitti2bag(drive, bag_args)
+        p = e2e.param
+        duration, drive, bag = e2e.synthetic_bag_from_params()
         out_dir = tempfile.mkdtemp(prefix="ism_%s_" % NAME)
         monitor = e2e.pipeline_monitor.PipelineMonitor()
         needed = ["/kitti/oxts/imu", "/kitti/oxts/gps/fix", "/kitti/velo/pointcloud",

@@ -20,10 +20,8 @@ NAME = "robustness_bag_loop"
 class BagLoop(unittest.TestCase):
     def test_second_pass_after_time_jump(self):
         rospy.init_node("robustness_bag_loop_test")
-        p = lambda name, default: rospy.get_param("~" + name, default)
-        duration = p("duration", 12.0)
-        drive = e2e.synthetic_drive(duration, seed=p("seed", 7), generator_args=p("generator_args", "").split())
-        bag = e2e.kitti2bag(drive, p("bag_args", "--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1").split())
+        p = e2e.param
+        duration, _, bag = e2e.synthetic_bag_from_params()
         monitor = e2e.pipeline_monitor.PipelineMonitor()
         self.assertTrue(e2e.wait_for_subscribers(["/kitti/oxts/imu", "/kitti/velo/pointcloud"], 60),
                         "nodes did not subscribe")

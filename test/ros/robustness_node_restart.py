@@ -23,10 +23,8 @@ NAME = "robustness_node_restart"
 class NodeRestart(unittest.TestCase):
     def test_kill_and_respawn_never_corrupts_saved_map(self):
         rospy.init_node("robustness_node_restart_test")
-        p = lambda name, default: rospy.get_param("~" + name, default)
-        duration = p("duration", 12.0)
-        drive = e2e.synthetic_drive(duration, seed=p("seed", 7), generator_args=p("generator_args", "").split())
-        bag = e2e.kitti2bag(drive, p("bag_args", "--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1").split())
+        p = e2e.param
+        duration, _, bag = e2e.synthetic_bag_from_params()
         out_dir = tempfile.mkdtemp(prefix="ism_%s_" % NAME)
         paths = {"ot": os.path.join(out_dir, "map.ot"), "ply": os.path.join(out_dir, "map.ply")}
         monitor = e2e.pipeline_monitor.PipelineMonitor()
