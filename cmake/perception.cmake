@@ -9,6 +9,11 @@ ism_add_gtest(test_segmenter
   SOURCES test/unit/test_segmenter.cpp
   LINK ${PROJECT_NAME}_perception)
 
+# The default U-Net's mIoU target on held-out synthetic drives it renders itself.
+ism_add_gtest(test_unet_synthetic_accuracy
+  SOURCES test/unit/test_unet_synthetic_accuracy.cpp
+  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_synthetic)
+
 ism_add_tool(segment_image
   SOURCES src/tools/segment_image.cpp
   LINK ${PROJECT_NAME}_perception)
