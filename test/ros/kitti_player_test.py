@@ -104,11 +104,12 @@ class KittiPlayerTest(unittest.TestCase):
         root = tempfile.mkdtemp(prefix='ism_kitti_player_')
         drive = write_synthetic_drive(root)
         got = {'cloud': [], 'image': [], 'info': [], 'tf': [], 'imu': []}
-        rospy.Subscriber('/synth/velo', PointCloud2, lambda m: got['cloud'].append(m))
-        rospy.Subscriber('/synth/image', Image, lambda m: got['image'].append(m))
-        rospy.Subscriber('/synth/info', CameraInfo, lambda m: got['info'].append(m))
-        rospy.Subscriber('/synth/tf_static', TFMessage, lambda m: got['tf'].append(m))
-        rospy.Subscriber('/synth/imu', Imu, lambda m: got['imu'].append(m))
+        subscribers = [
+            rospy.Subscriber('/synth/velo', PointCloud2, lambda m: got['cloud'].append(m)),
+            rospy.Subscriber('/synth/image', Image, lambda m: got['image'].append(m)),
+            rospy.Subscriber('/synth/info', CameraInfo, lambda m: got['info'].append(m)),
+            rospy.Subscriber('/synth/tf_static', TFMessage, lambda m: got['tf'].append(m)),
+            rospy.Subscriber('/synth/imu', Imu, lambda m: got['imu'].append(m))]
         remaps = {'/kitti/velo/pointcloud': '/synth/velo',
                   '/kitti/camera_color_left/image_raw': '/synth/image',
                   '/kitti/camera_color_left/camera_info': '/synth/info',
@@ -121,7 +122,13 @@ class KittiPlayerTest(unittest.TestCase):
             ['%s:=%s' % item for item in remaps.items()])
         try:
             rospy.wait_for_service('/kitti_player_synth/pause', timeout=30)
-            time.sleep(1.0)
+            # The drive has 3 frames: unpausing before every subscriber is connected to the
+            # player (slow on a loaded machine) would lose the first frame.
+            self.assertTrue(self.wait_for(
+                lambda: all(sub.get_num_connections() > 0 for sub in subscribers), 30.0),
+                'the player did not connect to %s' %
+                [sub.name for sub in subscribers if sub.get_num_connections() == 0])
+            time.sleep(0.5)
             rospy.ServiceProxy('/kitti_player_synth/pause', SetBool)(False)
             self.assertTrue(self.wait_for(lambda: all(len(got[k]) >= 3 for k in
                                                       ('cloud', 'image', 'info', 'imu')), 30.0),
