@@ -61,6 +61,7 @@ struct NodeParameters {
   bool insert_points_outside_image = false;
   double labels_timeout_s = 2.0;
   double marker_rate_hz = 1.0;
+  double max_display_cpu_fraction = 0.1;
   int marker_depth = 15;
   std::string calib_dir;
   int camera_index = 2;
@@ -92,6 +93,7 @@ NodeParameters readParameters(const ros::NodeHandle& pnh) {
   pnh.param("insert_points_outside_image", p.insert_points_outside_image,
             p.insert_points_outside_image);
   pnh.param("marker_rate", p.marker_rate_hz, p.marker_rate_hz);
+  pnh.param("max_display_cpu_fraction", p.max_display_cpu_fraction, p.max_display_cpu_fraction);
   pnh.param("marker_depth", p.marker_depth, p.marker_depth);
   pnh.param("calib_dir", p.calib_dir, p.calib_dir);
   pnh.param("camera_index", p.camera_index, p.camera_index);
@@ -379,8 +381,26 @@ class SemanticOctomapNode {
 
   void publishMapDisplay(const ros::WallTimerEvent&) {
     if (!map_changed_) return;
+    // Nobody watching: build nothing. map_changed_ stays set, so a display that subscribes
+    // later gets the map at the next tick.
+    if (markers_pub_.getNumSubscribers() == 0 && info_pub_.getNumSubscribers() == 0) return;
+    // The display walks the whole map, so its cost grows with the drive (0.25 s after 30 s of
+    // an HDL-64) and it runs on the thread that inserts scans: stretch the period so that it
+    // takes at most max_display_cpu_fraction of the time.
+    const ros::WallTime start = ros::WallTime::now();
+    if (params_.max_display_cpu_fraction > 0 && !last_display_start_.isZero() &&
+        (start - last_display_start_).toSec() <
+            last_display_cost_s_ / params_.max_display_cpu_fraction) {
+      return;
+    }
     map_changed_ = false;
     ScopedTimer stage("semantic_map/markers");
+    publishMarkersAndInfo();
+    last_display_start_ = start;
+    last_display_cost_s_ = (ros::WallTime::now() - start).toSec();
+  }
+
+  void publishMarkersAndInfo() {
     tree_->updateInnerOccupancy();
     const unsigned int depth = static_cast<unsigned int>(std::clamp(params_.marker_depth, 1, 16));
     const double size = tree_->getNodeSize(depth);
@@ -497,6 +517,8 @@ class SemanticOctomapNode {
   ros::Publisher markers_pub_, cloud_pub_, info_pub_;
   ros::ServiceServer save_srv_, reset_srv_;
   ros::WallTimer marker_timer_, log_timer_;
+  ros::WallTime last_display_start_;
+  double last_display_cost_s_ = 0.0;
   ros::Time last_labels_seen_, last_clock_;
   std::size_t scans_inserted_ = 0;
   bool map_changed_ = true;
