@@ -7,7 +7,6 @@
 // as the overlay's background (points colored by depth).
 #include <cstdio>
 #include <iostream>
-#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
@@ -25,71 +24,66 @@ constexpr char kUsage[] =
     "usage: project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png "
     "--output POINTS.csv [--overlay OVERLAY.png]\n";
 
-// The tool once the command line is read; its own errors print "project_cloud: error: ...".
-int run(std::map<std::string, std::string>& args) {
+// The tool once the command line is read (errors propagate to runCli: exit 1).
+int run(const inekf_semantic_mapping::common::CommandLine& cli) {
   using namespace inekf_semantic_mapping;
-  try {
-    cv::Mat image;
-    {
-      ScopedTimer timer("project_cloud/read");
-      image = cv::imread(args["--image"], cv::IMREAD_COLOR);
-      if (image.empty()) throw std::runtime_error(args["--image"] + ": cannot read image");
-    }
-    const kitti::CameraProjection camera =
-        kitti::readObjectCalibration(args["--calib"]).projection(2, image.cols, image.rows);
-    const kitti::VelodyneScan scan = kitti::readVelodyneBin(args["--velodyne"]);
-    const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
-                                               image.cols, image.rows);
-    perception::ProjectedPoints projected;
-    {
-      ScopedTimer timer("project_cloud/project");
-      Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
-          scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
-      projector.project(buffer.topRows<3>(), &projected);
-    }
-    {
-      ScopedTimer timer("project_cloud/write_csv");
-      common::writeStreamAtomically(args["--output"], [&](std::ostream& csv) {
-        csv << "index,u,v,depth\n";
-        char line[96];
-        for (std::size_t i = 0; i < projected.size(); ++i) {
-          if (!projected.valid[i]) continue;
-          std::snprintf(line, sizeof(line), "%zu,%.3f,%.3f,%.4f\n", i, projected.u[i],
-                        projected.v[i], projected.depth[i]);
-          csv << line;
-        }
-      });
-    }
-    std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
-              << " points inside the " << image.cols << "x" << image.rows << " image -> "
-              << args["--output"] << "\n";
-    if (args.count("--overlay")) {
-      ScopedTimer timer("project_cloud/overlay");
-      cv::Mat overlay = image.clone();
-      // Near = red, far (>= 50 m) = blue: OpenCV's JET colormap, computed once as a table.
-      cv::Mat ramp(1, 256, CV_8UC1), jet;
-      for (int k = 0; k < 256; ++k) ramp.at<std::uint8_t>(0, k) = static_cast<std::uint8_t>(k);
-      cv::applyColorMap(ramp, jet, cv::COLORMAP_JET);
+  cv::Mat image;
+  {
+    ScopedTimer timer("project_cloud/read");
+    image = cv::imread(cli.get("--image"), cv::IMREAD_COLOR);
+    if (image.empty()) throw std::runtime_error(cli.get("--image") + ": cannot read image");
+  }
+  const kitti::CameraProjection camera =
+      kitti::readObjectCalibration(cli.get("--calib")).projection(2, image.cols, image.rows);
+  const kitti::VelodyneScan scan = kitti::readVelodyneBin(cli.get("--velodyne"));
+  const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
+                                             image.cols, image.rows);
+  perception::ProjectedPoints projected;
+  {
+    ScopedTimer timer("project_cloud/project");
+    Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+        scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
+    projector.project(buffer.topRows<3>(), &projected);
+  }
+  {
+    ScopedTimer timer("project_cloud/write_csv");
+    common::writeStreamAtomically(cli.get("--output"), [&](std::ostream& csv) {
+      csv << "index,u,v,depth\n";
+      char line[96];
       for (std::size_t i = 0; i < projected.size(); ++i) {
         if (!projected.valid[i]) continue;
-        const double scaled = std::min(1.0, projected.depth[i] / 50.0);
-        const int level = static_cast<int>(255 * (1.0 - scaled));
-        cv::circle(overlay,
-                   cv::Point(static_cast<int>(projected.u[i]), static_cast<int>(projected.v[i])), 1,
-                   cv::Scalar(jet.at<cv::Vec3b>(0, level)), cv::FILLED);
+        std::snprintf(line, sizeof(line), "%zu,%.3f,%.3f,%.4f\n", i, projected.u[i], projected.v[i],
+                      projected.depth[i]);
+        csv << line;
       }
-      const std::string& path = args["--overlay"];
-      // imwrite picks the format from the temporary's extension: always PNG, as before.
-      common::commitFileAtomically(path, common::temporaryPathFor(path) + ".png",
-                                   [&](const std::string& tmp) {
-                                     if (!cv::imwrite(tmp, overlay))
-                                       throw std::runtime_error("cannot write '" + path + "'");
-                                   });
-      std::cerr << "[project_cloud] overlay -> " << path << "\n";
+    });
+  }
+  std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
+            << " points inside the " << image.cols << "x" << image.rows << " image -> "
+            << cli.get("--output") << "\n";
+  if (cli.has("--overlay")) {
+    ScopedTimer timer("project_cloud/overlay");
+    cv::Mat overlay = image.clone();
+    // Near = red, far (>= 50 m) = blue: OpenCV's JET colormap, computed once as a table.
+    cv::Mat ramp(1, 256, CV_8UC1), jet;
+    for (int k = 0; k < 256; ++k) ramp.at<std::uint8_t>(0, k) = static_cast<std::uint8_t>(k);
+    cv::applyColorMap(ramp, jet, cv::COLORMAP_JET);
+    for (std::size_t i = 0; i < projected.size(); ++i) {
+      if (!projected.valid[i]) continue;
+      const double scaled = std::min(1.0, projected.depth[i] / 50.0);
+      const int level = static_cast<int>(255 * (1.0 - scaled));
+      cv::circle(overlay,
+                 cv::Point(static_cast<int>(projected.u[i]), static_cast<int>(projected.v[i])), 1,
+                 cv::Scalar(jet.at<cv::Vec3b>(0, level)), cv::FILLED);
     }
-  } catch (const std::exception& e) {
-    std::cerr << "project_cloud: error: " << e.what() << "\n";
-    return 1;
+    const std::string path = cli.get("--overlay");
+    // imwrite picks the format from the temporary's extension: always PNG, as before.
+    common::commitFileAtomically(path, common::temporaryPathFor(path) + ".png",
+                                 [&](const std::string& tmp) {
+                                   if (!cv::imwrite(tmp, overlay))
+                                     throw std::runtime_error("cannot write '" + path + "'");
+                                 });
+    std::cerr << "[project_cloud] overlay -> " << path << "\n";
   }
   std::cerr << TimingRegistry::instance().report();
   return 0;
@@ -103,11 +97,7 @@ int main(int argc, char** argv) {
     const common::CommandLine cli(argc, argv,
                                   {"--calib", "--velodyne", "--image", "--output", "--overlay"});
     if (cli.helpRequested()) return common::printUsage(kUsage);
-    std::map<std::string, std::string> args;
-    for (const char* flag : {"--calib", "--velodyne", "--image", "--output"}) {
-      args[flag] = cli.require(flag);
-    }
-    if (cli.has("--overlay")) args["--overlay"] = cli.get("--overlay");
-    return run(args);
+    for (const char* flag : {"--calib", "--velodyne", "--image", "--output"}) cli.require(flag);
+    return run(cli);
   });
 }

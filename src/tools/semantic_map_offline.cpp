@@ -23,33 +23,28 @@ constexpr char kUsage[] =
     "         [--classes semantickitti|cityscapes] [--color-ot MAP_COLOR.ot]\n"
     "         [--prob-hit P] [--prob-miss P]\n";
 
-// Builds and saves the map; its errors print "semantic_map_offline: error: ..." (exit 1).
+// Builds and saves the map (errors propagate to runCli: exit 1).
 int run(const inekf_semantic_mapping::mapping::OfflineMappingOptions& options,
         const std::string& output, const std::string& export_ply, const std::string& color_ot) {
   using namespace inekf_semantic_mapping;
-  try {
-    std::unique_ptr<mapping::SemanticOcTree> tree =
-        mapping::buildSemanticMapFromSequence(options, &std::cerr);
-    {
-      ScopedTimer timer("offline/save_ot");
-      const std::size_t occupied = mapping::saveMap(*tree, output, mapping::MapFormat::kSemanticOt);
-      std::cerr << "[semantic_map_offline] wrote " << output << " (" << tree->size() << " nodes, "
-                << occupied << " occupied leaves, " << tree->classSet().size() << " classes, "
-                << tree->memoryUsage() / 1e6 << " MB in memory)\n";
-    }
-    if (!export_ply.empty()) {
-      ScopedTimer timer("offline/save_ply");
-      const std::size_t vertices = mapping::saveMap(*tree, export_ply, mapping::MapFormat::kPly);
-      std::cerr << "[semantic_map_offline] wrote " << export_ply << " (" << vertices
-                << " occupied voxels)\n";
-    }
-    if (!color_ot.empty()) {
-      mapping::saveMap(*tree, color_ot, mapping::MapFormat::kColorOt);
-      std::cerr << "[semantic_map_offline] wrote " << color_ot << "\n";
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "semantic_map_offline: error: " << e.what() << "\n";
-    return 1;
+  std::unique_ptr<mapping::SemanticOcTree> tree =
+      mapping::buildSemanticMapFromSequence(options, &std::cerr);
+  {
+    ScopedTimer timer("offline/save_ot");
+    const std::size_t occupied = mapping::saveMap(*tree, output, mapping::MapFormat::kSemanticOt);
+    std::cerr << "[semantic_map_offline] wrote " << output << " (" << tree->size() << " nodes, "
+              << occupied << " occupied leaves, " << tree->classSet().size() << " classes, "
+              << tree->memoryUsage() / 1e6 << " MB in memory)\n";
+  }
+  if (!export_ply.empty()) {
+    ScopedTimer timer("offline/save_ply");
+    const std::size_t vertices = mapping::saveMap(*tree, export_ply, mapping::MapFormat::kPly);
+    std::cerr << "[semantic_map_offline] wrote " << export_ply << " (" << vertices
+              << " occupied voxels)\n";
+  }
+  if (!color_ot.empty()) {
+    mapping::saveMap(*tree, color_ot, mapping::MapFormat::kColorOt);
+    std::cerr << "[semantic_map_offline] wrote " << color_ot << "\n";
   }
   std::cerr << TimingRegistry::instance().report();
   return 0;
