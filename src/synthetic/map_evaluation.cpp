@@ -1,6 +1,5 @@
 #include "inekf_semantic_mapping/synthetic/map_evaluation.h"
 
-#include <array>
 #include <cstdio>
 #include <stdexcept>
 
@@ -8,6 +7,24 @@
 
 namespace inekf_semantic_mapping {
 namespace synthetic {
+
+std::vector<ClassIou> LabelIouCounter::classes() const {
+  std::vector<ClassIou> present;
+  for (int label = 0; label < 256; ++label) {
+    ClassIou c = per_label_[label];
+    if (c.true_positive + c.false_negative == 0) continue;  // not in the truth
+    c.label_id = static_cast<std::uint8_t>(label);
+    present.push_back(c);
+  }
+  return present;
+}
+
+double LabelIouCounter::meanIou() const {
+  const std::vector<ClassIou> present = classes();
+  double sum = 0;
+  for (const ClassIou& c : present) sum += c.iou();
+  return present.empty() ? 0.0 : sum / present.size();
+}
 
 SemanticMapIou semanticMapIou(const SyntheticWorld& world,
                               const std::vector<Eigen::Vector3d>& voxel_centers,
@@ -17,7 +34,7 @@ SemanticMapIou semanticMapIou(const SyntheticWorld& world,
                                 " voxel centres but " + std::to_string(labels.size()) + " labels");
   }
   if (!(resolution > 0)) throw std::invalid_argument("semanticMapIou: resolution must be > 0");
-  std::array<ClassIou, 256> per_label{};
+  LabelIouCounter counter;
   SemanticMapIou result;
   const double tolerance = resolution * 0.87;
   for (std::size_t i = 0; i < voxel_centers.size(); ++i) {
@@ -26,24 +43,12 @@ SemanticMapIou semanticMapIou(const SyntheticWorld& world,
       ++result.voxels_without_truth;
       continue;
     }
-    ++result.voxels;
-    if (labels[i] == truth) {
-      ++per_label[truth].true_positive;
-      ++result.correct;
-    } else {
-      ++per_label[labels[i]].false_positive;
-      ++per_label[truth].false_negative;
-    }
+    counter.add(truth, labels[i]);
   }
-  double sum = 0;
-  for (int label = 0; label < 256; ++label) {
-    ClassIou& c = per_label[label];
-    if (c.true_positive + c.false_negative == 0) continue;  // not in the truth
-    c.label_id = static_cast<std::uint8_t>(label);
-    result.classes.push_back(c);
-    sum += c.iou();
-  }
-  result.mean_iou = result.classes.empty() ? 0.0 : sum / result.classes.size();
+  result.classes = counter.classes();
+  result.mean_iou = counter.meanIou();
+  result.voxels = counter.pairs();
+  result.correct = counter.correct();
   return result;
 }
 

@@ -206,6 +206,25 @@ TEST(SyntheticLidar, EveryPointLiesOnASurfaceOfItsLabel) {
   EXPECT_GT(per_class[cs::kBuilding], 1000);
 }
 
+TEST(LabelIouCounter, CountsPerClassIouOverTheClassesInTheTruth) {
+  LabelIouCounter counter;
+  EXPECT_EQ(counter.meanIou(), 0.0);
+  // road (7): 3 right, 1 called car; car (26): 1 right; building (11) only predicted, never true.
+  for (int i = 0; i < 3; ++i) counter.add(7, 7);
+  counter.add(7, 26);
+  counter.add(26, 26);
+  counter.add(26, 11);
+  const std::vector<ClassIou> classes = counter.classes();
+  ASSERT_EQ(classes.size(), 2u);  // building is not in the truth
+  EXPECT_EQ(classes[0].label_id, 7);
+  EXPECT_DOUBLE_EQ(classes[0].iou(), 3.0 / 4.0);  // tp 3, fn 1, fp 0
+  EXPECT_EQ(classes[1].label_id, 26);
+  EXPECT_DOUBLE_EQ(classes[1].iou(), 1.0 / 3.0);  // tp 1, fn 1, fp 1
+  EXPECT_DOUBLE_EQ(counter.meanIou(), (3.0 / 4.0 + 1.0 / 3.0) / 2.0);
+  EXPECT_EQ(counter.pairs(), 6u);
+  EXPECT_EQ(counter.correct(), 4u);
+}
+
 TEST(SemanticMapIou, PerfectMapScoresOneAndConfusionsCountPerClass) {
   // A "map": the voxels a lidar scan hits (0.2 m), labelled with their true surfaces.
   const SyntheticWorld& world = town();

@@ -5,7 +5,6 @@
 // used), so the test needs nothing from ../shared.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/core.hpp>
@@ -15,6 +14,7 @@
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
+#include "inekf_semantic_mapping/synthetic/map_evaluation.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {
@@ -39,11 +39,10 @@ TEST(UnetSyntheticAccuracy, DefaultModelReachesTargetMiouOnHeldOutDrives) {
   const ModelCard card = defaultModelCardFor(model);
   Segmenter segmenter(model, card, 2);
 
-  const int num_classes = static_cast<int>(card.output_label_ids.size());
-  std::vector<int> class_of_label(256, -1);
-  for (int c = 0; c < num_classes; ++c) class_of_label[card.output_label_ids[c]] = c;
-  std::vector<long long> confusion(num_classes * num_classes, 0);  // [truth][predicted]
-  long long ignored_truth = 0;
+  std::vector<bool> in_card(256, false);
+  for (std::uint8_t id : card.output_label_ids) in_card[id] = true;
+  synthetic::LabelIouCounter counter;
+  long long ignored_truth = 0;  // pixels of classes the network does not have
 
   const std::string root = test::makeTempDir("unet_accuracy");
   int frames = 0;
@@ -70,46 +69,30 @@ TEST(UnetSyntheticAccuracy, DefaultModelReachesTargetMiouOnHeldOutDrives) {
         const auto* t = truth.ptr<std::uint8_t>(r);
         const auto* p = result.label_ids.ptr<std::uint8_t>(r);
         for (int c = 0; c < truth.cols; ++c) {
-          const int truth_class = class_of_label[t[c]];
-          if (truth_class < 0) {
+          ASSERT_TRUE(in_card[p[c]]) << "labelId " << int(p[c]) << " is not in the card";
+          if (in_card[t[c]]) {
+            counter.add(t[c], p[c]);
+          } else {
             ++ignored_truth;
-            continue;
           }
-          const int predicted_class = class_of_label[p[c]];
-          ASSERT_GE(predicted_class, 0) << "labelId " << int(p[c]) << " is not in the card";
-          ++confusion[truth_class * num_classes + predicted_class];
         }
       }
       ++frames;
     }
   }
 
-  double iou_sum = 0.0, correct = 0.0, total = 0.0;
-  int classes_present = 0;
-  for (int k = 0; k < num_classes; ++k) {
-    long long truth_k = 0, predicted_k = 0;
-    for (int j = 0; j < num_classes; ++j) {
-      truth_k += confusion[k * num_classes + j];
-      predicted_k += confusion[j * num_classes + k];
-    }
-    const double hit = static_cast<double>(confusion[k * num_classes + k]);
-    correct += hit;
-    total += static_cast<double>(truth_k);
-    if (truth_k == 0) continue;
-    const double iou =
-        hit / static_cast<double>(truth_k + predicted_k - confusion[k * num_classes + k]);
-    std::printf("  labelId %2d  IoU %.3f  (%lld truth pixels)\n", card.output_label_ids[k], iou,
-                truth_k);
-    iou_sum += iou;
-    ++classes_present;
+  const std::vector<synthetic::ClassIou> classes = counter.classes();
+  for (const synthetic::ClassIou& c : classes) {
+    std::printf("  labelId %2d  IoU %.3f  (%zu truth pixels)\n", c.label_id, c.iou(),
+                c.true_positive + c.false_negative);
   }
-  ASSERT_GE(classes_present, 8) << "the held-out drives should show most of the classes";
-  const double miou = iou_sum / classes_present;
-  const double pixel_accuracy = correct / total;
+  ASSERT_GE(classes.size(), 8u) << "the held-out drives should show most of the classes";
+  const double miou = counter.meanIou();
+  const double pixel_accuracy = static_cast<double>(counter.correct()) / counter.pairs();
   std::printf(
-      "%d held-out frames, full resolution: mIoU %.4f over %d classes, pixel accuracy %.4f"
-      " (%lld pixels of classes outside the card ignored)\n",
-      frames, miou, classes_present, pixel_accuracy, ignored_truth);
+      "%d held-out frames, full resolution: mIoU %.4f over %zu classes, pixel accuracy "
+      "%.4f (%lld pixels of classes outside the card ignored)\n",
+      frames, miou, classes.size(), pixel_accuracy, ignored_truth);
   EXPECT_GE(miou, kMinMiou);
   EXPECT_GE(pixel_accuracy, kMinPixelAccuracy);
 }

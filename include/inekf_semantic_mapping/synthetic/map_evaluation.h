@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -21,6 +22,30 @@ struct ClassIou {
     const std::size_t denominator = true_positive + false_positive + false_negative;
     return denominator ? static_cast<double>(true_positive) / denominator : 0.0;
   }
+};
+
+// Per-labelId IoU from (truth, predicted) labelId pairs: the counting behind the map evaluation
+// below and the image evaluation of the segmentation tests.
+class LabelIouCounter {
+ public:
+  void add(std::uint8_t truth, std::uint8_t predicted) {
+    ++pairs_;
+    if (predicted == truth) {
+      ++per_label_[truth].true_positive;
+      ++correct_;
+    } else {
+      ++per_label_[predicted].false_positive;
+      ++per_label_[truth].false_negative;
+    }
+  }
+  std::vector<ClassIou> classes() const;  // the labelIds present in the truth, ascending
+  double meanIou() const;                 // over classes(); 0 without any pair
+  std::size_t pairs() const { return pairs_; }
+  std::size_t correct() const { return correct_; }
+
+ private:
+  std::array<ClassIou, 256> per_label_{};
+  std::size_t pairs_ = 0, correct_ = 0;
 };
 
 struct SemanticMapIou {
