@@ -12,6 +12,7 @@
 #include <map>
 #include <string>
 
+#include "gps_degradation_flags.h"
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
@@ -61,10 +62,10 @@ int main(int argc, char** argv) {
   return ism::common::runCli("inekf_offline", kUsage, [&] {
     const ism::common::CommandLine cli(
         argc, argv,
-        {"--oxts", "--output-kitti", "--output-tum", "--output-truth", "--output-states",
-         "--gps-every", "--filter", "--config", "--init-yaw-sigma-deg", "--init-yaw-error-deg",
-         "--gps-sigma-h", "--gps-sigma-v", "--seed"},
-        {}, {"--gps-outage"});
+        ism::tools::withGpsValueFlags({"--oxts", "--output-kitti", "--output-tum", "--output-truth",
+                                       "--output-states", "--filter", "--config",
+                                       "--init-yaw-sigma-deg", "--init-yaw-error-deg"}),
+        {}, ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
@@ -85,27 +86,7 @@ int main(int argc, char** argv) {
       }
       options.init_yaw_error_deg =
           cli.getDouble("--init-yaw-error-deg", options.init_yaw_error_deg);
-      if (cli.has("--gps-every")) {
-        const double every = cli.getDouble("--gps-every", 1);
-        if (every < 1 || every != std::floor(every)) {
-          throw UsageError("--gps-every must be an integer >= 1");
-        }
-        options.gps.every_n_frames = static_cast<int>(every);
-      }
-      options.gps.sigma_horizontal_m =
-          cli.getDouble("--gps-sigma-h", options.gps.sigma_horizontal_m);
-      options.gps.sigma_vertical_m = cli.getDouble("--gps-sigma-v", options.gps.sigma_vertical_m);
-      for (const std::string& outage : cli.getAll("--gps-outage")) {
-        options.gps.outages_s.push_back(ism::kitti::GpsDegradationOptions::parseOutage(outage));
-      }
-      if (cli.has("--seed")) {
-        const double seed = cli.getDouble("--seed", 0);
-        if (seed < 0 || seed != std::floor(seed)) {
-          throw UsageError("--seed must be a non-negative integer");
-        }
-        options.gps.seed = static_cast<std::uint64_t>(seed);
-      }
-      options.gps.validate();
+      ism::tools::readGpsDegradationFlags(cli, &options.gps);
     } catch (const UsageError&) {
       throw;
     } catch (const std::exception& e) {

@@ -14,6 +14,7 @@
 #include <iostream>
 #include <string>
 
+#include "gps_degradation_flags.h"
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
@@ -56,32 +57,11 @@ Arguments parseArguments(const common::CommandLine& cli) {
   args.output = cli.get("--output");
   args.timeline.start_offset_s = cli.getDouble("--start", args.timeline.start_offset_s);
   args.timeline.duration_s = cli.getDouble("--duration", args.timeline.duration_s);
-  args.gps.sigma_horizontal_m = cli.getDouble("--gps-sigma-h", args.gps.sigma_horizontal_m);
-  args.gps.sigma_vertical_m = cli.getDouble("--gps-sigma-v", args.gps.sigma_vertical_m);
-  if (cli.has("--gps-every")) {
-    const double every = cli.getDouble("--gps-every", 1);
-    if (every != std::floor(every) || every < 1 || every > 1e6) {
-      throw UsageError("--gps-every must be an integer >= 1");
-    }
-    args.gps.every_n_frames = static_cast<int>(every);
-  }
-  for (const std::string& outage : cli.getAll("--gps-outage")) {
-    try {
-      args.gps.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(outage));
-    } catch (const std::exception& error) {
-      throw UsageError(error.what());
-    }
-  }
-  args.gps.seed = cli.getUint64("--seed", args.gps.seed);
+  tools::readGpsDegradationFlags(cli, &args.gps);
   if (cli.has("--no-velodyne")) args.timeline.velodyne = false;
   if (cli.has("--no-camera")) args.timeline.cameras[2] = false;
   if (args.drive_dir.empty() || args.output.empty()) {
     throw UsageError("--drive and --output are required");
-  }
-  try {
-    args.gps.validate();
-  } catch (const std::exception& error) {
-    throw UsageError(error.what());
   }
   return args;
 }
@@ -186,10 +166,10 @@ int run(const Arguments& args) {
 
 int main(int argc, char** argv) {
   return common::runCli("kitti2bag", kUsage, [&] {
-    const common::CommandLine cli(argc, argv,
-                                  {"--drive", "--calib-dir", "--output", "--start", "--duration",
-                                   "--gps-sigma-h", "--gps-sigma-v", "--gps-every", "--seed"},
-                                  {"--no-velodyne", "--no-camera"}, {"--gps-outage"});
+    const common::CommandLine cli(
+        argc, argv,
+        tools::withGpsValueFlags({"--drive", "--calib-dir", "--output", "--start", "--duration"}),
+        {"--no-velodyne", "--no-camera"}, tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return common::printUsage(kUsage);
     return run(parseArguments(cli));
   });
