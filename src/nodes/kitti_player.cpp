@@ -40,6 +40,9 @@ kitti::GpsDegradationOptions readGpsOptions(ros::NodeHandle& pnh) {
   return options;
 }
 
+// How long the player stays up after the last message when ~exit_when_done is set.
+constexpr double kExitFlushSeconds = 1.0;
+
 class KittiPlayer {
  public:
   KittiPlayer(ros::NodeHandle& nh, ros::NodeHandle& pnh) : pnh_(pnh) {
@@ -105,7 +108,13 @@ class KittiPlayer {
       if (loop_) ROS_INFO("kitti_player: end of drive, looping");
     } while (loop_ && ros::ok());
     ROS_INFO("kitti_player: finished (%zu events)", published_events_);
-    if (!exit_when_done_) ros::waitForShutdown();
+    if (!exit_when_done_) {
+      ros::waitForShutdown();
+      return;
+    }
+    // roscpp writes to subscribers from its own threads and has no flush: exiting right after
+    // the last publish lost the final frame's messages on a loaded machine. Linger briefly.
+    ros::WallDuration(kExitFlushSeconds).sleep();
   }
 
  private:
