@@ -126,6 +126,11 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("initial_sigma", "rotation_deg", &config.initial_rotation_sigma_deg, true);
   reader.number("initial_sigma", "yaw_deg", &config.initial_yaw_sigma_deg, true);
   reader.number("initial_sigma", "velocity_mps", &config.initial_velocity_sigma_mps, true);
+  reader.number("initial_sigma", "unknown_velocity_horizontal_mps",
+                &config.unknown_velocity_sigma_horizontal_mps, true);
+  reader.number("initial_sigma", "unknown_velocity_vertical_mps",
+                &config.unknown_velocity_sigma_vertical_mps, true);
+  reader.number("initial_sigma", "unknown_yaw_deg", &config.unknown_yaw_sigma_deg, true);
   reader.number("initial_sigma", "position_m", &config.initial_position_sigma_m, true);
   reader.number("initial_sigma", "gyro_bias_radps", &config.initial_gyro_bias_sigma_radps, true);
   reader.number("initial_sigma", "accel_bias_mps2", &config.initial_accel_bias_sigma_mps2, true);
@@ -173,10 +178,11 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
 }
 
 void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
-                                    const Eigen::Vector3d& velocity_map) {
-  if (!rotation.allFinite() || !velocity_map.allFinite()) return;
+                                    const std::optional<Eigen::Vector3d>& velocity_map) {
+  if (!rotation.allFinite()) return;
   reference_rotation_ = lie::normalizeRotation(rotation);
-  reference_velocity_ = velocity_map;
+  reference_velocity_.reset();
+  if (velocity_map && velocity_map->allFinite()) reference_velocity_ = *velocity_map;
 }
 
 Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
@@ -242,13 +248,25 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
                         eigen.eigenvectors().transpose();
 
   if (!initialized_) {
+    if (!last_imu_ && !(config_.init_orientation_from_reference && reference_rotation_)) {
+      // No attitude information at all yet (neither a reference nor gravity): starting now would
+      // claim yaw 0 to the configured sigma. In inekf_node the first fix and the first IMU
+      // message race on separate connections; the next fix starts the filter properly.
+      result.reason = "no IMU sample yet: the filter starts at a later fix";
+      ++statistics_.gps_before_start;
+      return result;
+    }
     NavState initial;
     initial.stamp_s = fix.stamp_s;
     initial.position_map = fix.position_map;
+    bool velocity_known = false;
     if (config_.init_orientation_from_reference && reference_rotation_) {
       initial.rotation = *reference_rotation_;
-      initial.velocity_map = reference_velocity_;
-    } else if (last_imu_ && last_imu_->specific_force.norm() > 1.0) {
+      if (reference_velocity_) {
+        initial.velocity_map = *reference_velocity_;
+        velocity_known = true;
+      }
+    } else if (last_imu_->specific_force.norm() > 1.0) {
       // Level from the specific force (gravity reaction), yaw 0.
       const Eigen::Vector3d f = last_imu_->specific_force.normalized();
       const double roll = std::atan2(f.y(), f.z());
@@ -259,6 +277,20 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
     }
     ErrorCovariance world = initialWorldCovariance();
     world.block<3, 3>(6, 6) = used.covariance_map;
+    const bool yaw_known = config_.init_orientation_from_reference && reference_rotation_;
+    if (!yaw_known) {
+      // Levelled from gravity: the yaw of 0 is a guess, not a measurement.
+      const double yaw_sigma = config_.unknown_yaw_sigma_deg * kDegToRad;
+      world(2, 2) = yaw_sigma * yaw_sigma;
+    }
+    if (!velocity_known) {
+      world.block<3, 3>(3, 3) = Eigen::Vector3d(config_.unknown_velocity_sigma_horizontal_mps,
+                                                config_.unknown_velocity_sigma_horizontal_mps,
+                                                config_.unknown_velocity_sigma_vertical_mps)
+                                    .cwiseAbs2()
+                                    .asDiagonal();
+      ++statistics_.starts_without_velocity;
+    }
     initialize(initial, world);
     result.accepted = true;
     result.reason = "initialized";
@@ -311,7 +343,7 @@ void Localizer::reset() {
   initialized_ = false;
   last_imu_.reset();
   reference_rotation_.reset();
-  reference_velocity_.setZero();
+  reference_velocity_.reset();
   interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
 }

@@ -30,6 +30,7 @@
 #include <iomanip>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -45,6 +46,9 @@ namespace {
 
 using estimation::Localizer;
 using estimation::LocalizerConfig;
+
+// A GPS velocity message further than this from the IMU sample is not used to start the filter.
+constexpr double kMaxReferenceVelocityAgeS = 0.2;
 
 std::string describeFilter(estimation::FilterType type) {
   switch (type) {
@@ -142,6 +146,7 @@ class InekfNode {
                                  << stamp.toSec() << " s, last " << last_stamp_.toSec()
                                  << " s): resetting the filter and the path (bag loop?)");
       localizer_->reset();
+      start_orientation_known_ = start_velocity_known_ = false;
       path_.poses.clear();
       path_publisher_.publish(path_);
       last_path_publish_ = ros::Time();
@@ -187,10 +192,18 @@ class InekfNode {
     latest_angular_velocity_ = sample->angular_velocity;
     if (!localizer_->initialized() && config_.init_orientation_from_reference) {
       if (const auto orientation = ros_conversions::imuOrientation(*message)) {
+        // The GPS velocity arrives on its own connection, so whether it is here before the first
+        // fix is a race: only a velocity from about this instant counts; without one the
+        // Localizer starts with an honest (large) velocity uncertainty instead of zero +- 0.5.
         std::optional<Eigen::Vector3d> velocity;
-        if (latest_velocity_)
+        if (latest_velocity_ &&
+            std::abs((latest_velocity_->header.stamp - message->header.stamp).toSec()) <=
+                kMaxReferenceVelocityAgeS) {
           velocity = ros_conversions::velocityInMap(*latest_velocity_, orientation);
-        localizer_->setInitialReference(*orientation, velocity.value_or(Eigen::Vector3d::Zero()));
+        }
+        localizer_->setInitialReference(*orientation, velocity);
+        start_orientation_known_ = true;
+        start_velocity_known_ = velocity.has_value();
       }
     }
 
@@ -247,14 +260,27 @@ class InekfNode {
     if (!was_initialized && localizer_->initialized()) {
       const estimation::NavState& state = localizer_->state();
       const double yaw_deg = std::atan2(state.rotation(1, 0), state.rotation(0, 0)) * 180.0 / M_PI;
+      std::ostringstream how;
+      how << std::fixed << std::setprecision(1);
+      if (start_orientation_known_) {
+        how << "orientation from the IMU message";
+      } else {
+        how << "levelled from gravity, yaw unknown (sigma " << config_.unknown_yaw_sigma_deg
+            << " deg)";
+      }
+      if (start_velocity_known_) {
+        how << ", velocity from the GPS velocity";
+      } else {
+        how << ", no GPS velocity yet: speed unknown (sigma "
+            << config_.unknown_velocity_sigma_horizontal_mps << " m/s)";
+      }
       ROS_INFO_STREAM(std::fixed << std::setprecision(3) << "inekf_node: initialized "
                                  << describeFilter(config_.filter_type) << " at t=" << state.stamp_s
                                  << " s, position " << state.position_map.transpose() << " m, yaw "
-                                 << yaw_deg << " deg ("
-                                 << (config_.init_orientation_from_reference
-                                         ? "orientation from the IMU message"
-                                         : "levelled, yaw from the config sigma")
-                                 << ")");
+                                 << yaw_deg << " deg (" << how.str() << ")");
+    } else if (!localizer_->initialized()) {
+      ROS_INFO_STREAM("inekf_node: GPS fix at " << std::fixed << std::setprecision(3) << fix.stamp_s
+                                                << " s not used: " << result.reason);
     } else if (was_initialized && !result.accepted) {
       ROS_WARN_THROTTLE(5.0, "inekf_node: GPS fix at %.3f s rejected: %s (d^2 = %.1f)", fix.stamp_s,
                         result.reason.c_str(), result.mahalanobis_squared);
@@ -270,6 +296,7 @@ class InekfNode {
       ROS_ERROR_THROTTLE(5.0, "inekf_node: non-finite state at %.3f s: resetting the filter",
                          state.stamp_s);
       localizer_->reset();
+      start_orientation_known_ = start_velocity_known_ = false;
       ++resets_;
       return;
     }
@@ -375,6 +402,9 @@ class InekfNode {
   double last_mahalanobis_squared_ = 0.0;
   ros::Time last_stamp_, last_clock_, last_path_publish_;
   nav_msgs::Path path_;
+  // What the lazy start had (for its log line): an IMU orientation, a GPS velocity.
+  bool start_orientation_known_ = false;
+  bool start_velocity_known_ = false;
   long imu_invalid_ = 0;
   long fixes_ignored_ = 0;
   int resets_ = 0;

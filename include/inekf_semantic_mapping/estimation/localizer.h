@@ -42,6 +42,14 @@ struct LocalizerConfig {
   double initial_rotation_sigma_deg = 0.5;  // roll and pitch (about the map x and y axes)
   double initial_yaw_sigma_deg = 1.0;       // about the map z axis
   double initial_velocity_sigma_mps = 0.5;
+  // When the lazy start has no velocity reference (no GPS velocity message yet, or levelling
+  // from the specific force) the state starts at zero velocity with this sigma, horizontal and
+  // vertical: a car may already be driving at motorway speed. A 0.5 m/s sigma there made the
+  // first fixes fail the gate and the yaw diverge (inekf_node, drive 0036: ATE 9.6 m, 42 deg).
+  double unknown_velocity_sigma_horizontal_mps = 15.0;
+  double unknown_velocity_sigma_vertical_mps = 2.0;
+  // Yaw sigma of a lazy start levelled from gravity (no orientation reference): yaw 0 is a guess.
+  double unknown_yaw_sigma_deg = 180.0;
   double initial_position_sigma_m = 2.0;
   double initial_gyro_bias_sigma_radps = 1e-4;
   double initial_accel_bias_sigma_mps2 = 0.03;
@@ -80,6 +88,8 @@ class Localizer {
     std::int64_t gps_used = 0;
     std::int64_t gps_rejected = 0;
     std::int64_t gps_reacquisitions = 0;
+    std::int64_t starts_without_velocity = 0;  // lazy starts with unknown_velocity_sigma_*
+    std::int64_t gps_before_start = 0;         // fixes before any IMU sample: the start waits
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -96,8 +106,13 @@ class Localizer {
   // Lazy initialization: while not initialized, IMU samples are only remembered (kNotInitialized)
   // and the first valid fix initializes the state at the fix (rotation and velocity from the
   // reference when one was given and init_orientation_from_reference, else roll/pitch levelled
-  // from the latest specific force, yaw 0, zero velocity).
-  void setInitialReference(const Eigen::Matrix3d& rotation, const Eigen::Vector3d& velocity_map);
+  // from the latest specific force, yaw 0 with unknown_yaw_sigma_deg). Without a reference
+  // velocity the state starts at zero velocity with the unknown_velocity_sigma_* uncertainty.
+  // A fix before any IMU sample and any reference does not start the filter (attitude unknown):
+  // it is counted in gps_before_start and the next fix starts it. A later call replaces the
+  // reference; velocity_map = nullopt means "not known".
+  void setInitialReference(const Eigen::Matrix3d& rotation,
+                           const std::optional<Eigen::Vector3d>& velocity_map);
 
   ImuStatus addImu(const ImuSample& sample);
   CorrectionResult addPositionFix(const PositionFix& fix);
@@ -119,7 +134,7 @@ class Localizer {
   bool initialized_ = false;
   std::optional<ImuSample> last_imu_;  // latest sample, also before initialization
   std::optional<Eigen::Matrix3d> reference_rotation_;
-  Eigen::Vector3d reference_velocity_ = Eigen::Vector3d::Zero();
+  std::optional<Eigen::Vector3d> reference_velocity_;
   Statistics statistics_;
   double interpolated_run_start_s_ = -1.0;
   int consecutive_rejected_fixes_ = 0;
