@@ -49,6 +49,8 @@ using estimation::LocalizerConfig;
 
 // A GPS velocity message further than this from the IMU sample is not used to start the filter.
 constexpr double kMaxReferenceVelocityAgeS = 0.2;
+// Fixes the start may skip while waiting for a GPS velocity (see prepareStart).
+constexpr int kMaxDeferredStarts = 2;
 
 std::string describeFilter(estimation::FilterType type) {
   switch (type) {
@@ -146,7 +148,7 @@ class InekfNode {
                                  << stamp.toSec() << " s, last " << last_stamp_.toSec()
                                  << " s): resetting the filter and the path (bag loop?)");
       localizer_->reset();
-      start_orientation_known_ = start_velocity_known_ = false;
+      resetStart();
       path_.poses.clear();
       path_publisher_.publish(path_);
       last_path_publish_ = ros::Time();
@@ -156,6 +158,12 @@ class InekfNode {
     }
     last_stamp_ = std::max(last_stamp_, stamp);
     if (clock_back || now > last_clock_) last_clock_ = now;
+  }
+
+  void resetStart() {
+    start_orientation_known_ = start_velocity_known_ = false;
+    latest_orientation_.reset();
+    deferred_starts_ = 0;
   }
 
   // Callbacks never let an exception out: log it with context and keep running.
@@ -190,23 +198,7 @@ class InekfNode {
       return;
     }
     latest_angular_velocity_ = sample->angular_velocity;
-    if (!localizer_->initialized() && config_.init_orientation_from_reference) {
-      if (const auto orientation = ros_conversions::imuOrientation(*message)) {
-        // The GPS velocity arrives on its own connection, so whether it is here before the first
-        // fix is a race: only a velocity from about this instant counts; without one the
-        // Localizer starts with an honest (large) velocity uncertainty instead of zero +- 0.5.
-        std::optional<Eigen::Vector3d> velocity;
-        if (latest_velocity_ &&
-            std::abs((latest_velocity_->header.stamp - message->header.stamp).toSec()) <=
-                kMaxReferenceVelocityAgeS) {
-          velocity = ros_conversions::velocityInMap(*latest_velocity_, orientation);
-        }
-        localizer_->setInitialReference(*orientation, velocity);
-        start_orientation_known_ = true;
-        start_velocity_known_ = velocity.has_value();
-      }
-    }
-
+    if (!localizer_->initialized()) latest_orientation_ = ros_conversions::imuOrientation(*message);
     const Localizer::ImuStatus status = localizer_->addImu(*sample);
     switch (status) {
       case Localizer::ImuStatus::kDroppedOutOfOrder:
@@ -255,6 +247,7 @@ class InekfNode {
         *message, min_fix_sigma_m_, default_fix_sigma_horizontal_m_, default_fix_sigma_vertical_m_);
 
     const bool was_initialized = localizer_->initialized();
+    if (!was_initialized && !prepareStart(*message)) return;
     const estimation::CorrectionResult result = localizer_->addPositionFix(fix);
     last_mahalanobis_squared_ = result.mahalanobis_squared;
     if (!was_initialized && localizer_->initialized()) {
@@ -288,6 +281,32 @@ class InekfNode {
     publishStatus(message->header.stamp);
   }
 
+  // Before the first fix is applied: hands the Localizer the orientation of the latest Imu
+  // message and the GPS velocity of the fix's instant. The IMU, fix and velocity topics arrive
+  // on separate connections, so at the first fix (and after a reset) the velocity may still be
+  // on its way: while a publisher exists the start waits for up to kMaxDeferredStarts fixes,
+  // then starts with the Localizer's unknown-velocity sigma. False: do not use this fix.
+  bool prepareStart(const sensor_msgs::NavSatFix& fix) {
+    std::optional<Eigen::Vector3d> velocity;
+    if (latest_velocity_ && std::abs((latest_velocity_->header.stamp - fix.header.stamp).toSec()) <=
+                                kMaxReferenceVelocityAgeS) {
+      velocity = ros_conversions::velocityInMap(*latest_velocity_, latest_orientation_);
+    }
+    if (!velocity && velocity_subscriber_.getNumPublishers() > 0 &&
+        deferred_starts_ < kMaxDeferredStarts) {
+      ++deferred_starts_;
+      ROS_INFO(
+          "inekf_node: GPS fix at %.3f s: no GPS velocity of that instant yet, the start "
+          "waits for the next fix (%d of at most %d)",
+          fix.header.stamp.toSec(), deferred_starts_, kMaxDeferredStarts);
+      return false;
+    }
+    start_orientation_known_ = config_.init_orientation_from_reference && latest_orientation_;
+    start_velocity_known_ = start_orientation_known_ && velocity;
+    if (start_orientation_known_) localizer_->setInitialReference(*latest_orientation_, velocity);
+    return true;
+  }
+
   void publishState(const ros::Time& stamp) {
     const estimation::NavState& state = localizer_->state();
     const estimation::PoseCovariance pose_covariance = localizer_->filter().poseCovariance();
@@ -296,7 +315,7 @@ class InekfNode {
       ROS_ERROR_THROTTLE(5.0, "inekf_node: non-finite state at %.3f s: resetting the filter",
                          state.stamp_s);
       localizer_->reset();
-      start_orientation_known_ = start_velocity_known_ = false;
+      resetStart();
       ++resets_;
       return;
     }
@@ -398,6 +417,8 @@ class InekfNode {
   std::unique_ptr<Localizer> localizer_;
   std::optional<kitti::MercatorProjection> projection_;
   std::optional<geometry_msgs::TwistStamped> latest_velocity_;
+  std::optional<Eigen::Matrix3d> latest_orientation_;  // of the latest Imu message, before start
+  int deferred_starts_ = 0;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
   ros::Time last_stamp_, last_clock_, last_path_publish_;

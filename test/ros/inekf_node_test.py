@@ -171,15 +171,23 @@ class InekfNodeTest(unittest.TestCase):
         message.twist.linear.x, message.twist.linear.y, message.twist.linear.z = record[8:11]
         return message
 
-    def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False):
+    def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False,
+             fix_before_imu=False):
         """Publishes the drive's frames at `rate` times real time. With faults: a duplicate of
         frame 100's IMU message, at frame 120 an IMU message and a fix with a NaN, and at frame
-        150 the IMU message of frame 145 (out of order)."""
+        150 the IMU message of frame 145 (out of order). With fix_before_imu: frame 0's fix
+        reaches the node well before frame 0's IMU and velocity messages (which of the
+        connections delivers first is otherwise a race)."""
         count = len(drive.records) if frames is None else min(frames, len(drive.records))
         for index in range(count):
             if rospy.is_shutdown():
                 return
             record, stamp = drive.records[index], drive.stamps[index]
+            first_fix_early = fix_before_imu and index == 0
+            if first_fix_early:
+                noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
+                self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
+                time.sleep(0.3)
             imu = self.imu_message(record, stamp)
             self.velocity_publisher.publish(self.velocity_message(record, stamp))
             self.imu_publisher.publish(imu)
@@ -194,7 +202,7 @@ class InekfNodeTest(unittest.TestCase):
                 broken_fix = self.fix_message(record, stamp, [0, 0, 0], sigma_h, sigma_v)
                 broken_fix.latitude = float("nan")
                 self.fix_publisher.publish(broken_fix)
-            if index % gps_every == 0:
+            if index % gps_every == 0 and not first_fix_early:
                 noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
                 self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
             if index + 1 < count:
@@ -210,6 +218,17 @@ class InekfNodeTest(unittest.TestCase):
             p = message.pose.pose.position
             errors.append(np.linalg.norm(np.array([p.x, p.y, p.z]) - truth))
         return np.array(errors)
+
+    def max_yaw_error_deg(self, drive, odometry):
+        """Largest |yaw error| against the OXTS yaw (KITTI: 0 = east, counterclockwise = map)."""
+        truth_yaw = {stamp.to_nsec(): record[5] for stamp, record in zip(drive.stamps, drive.records)}
+        worst = 0.0
+        for message in odometry:
+            q = message.pose.pose.orientation
+            yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
+            error = yaw - truth_yaw[message.header.stamp.to_nsec()]
+            worst = max(worst, abs(math.degrees(math.atan2(math.sin(error), math.cos(error)))))
+        return worst
 
     def check_odometry_messages(self, odometry):
         for message in odometry:
@@ -285,11 +304,14 @@ class InekfNodeTest(unittest.TestCase):
         max_rms_m = rospy.get_param("~max_rms_m", 5.0)
         inject_faults = rospy.get_param("~inject_faults", False)
         loop_frames = rospy.get_param("~loop_frames", 0)
+        fix_before_imu = rospy.get_param("~first_fix_before_imu", False)
+        max_yaw_error_deg = rospy.get_param("~max_yaw_error_deg", 5.0)
         rng = np.random.default_rng(rospy.get_param("~seed", 1))
         drive = OxtsDrive(self.oxts_dir, first_frame, frames)
         self.wait_for_node()
 
-        self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, faults=inject_faults)
+        self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, faults=inject_faults,
+                  fix_before_imu=fix_before_imu)
         first_pass = list(self.odometry)
         self.assertGreater(len(first_pass), 0.8 * len(drive.records),
                            "inekf_node published %d odometry messages for %d IMU frames" %
@@ -297,12 +319,15 @@ class InekfNodeTest(unittest.TestCase):
         self.check_odometry_messages(first_pass)
         errors = self.position_errors(drive, first_pass)
         rms = float(np.sqrt(np.mean(errors ** 2)))
+        yaw_error = self.max_yaw_error_deg(drive, first_pass)
         rospy.loginfo("inekf_node_test: %s frames %d..%d: %d odometry messages, position RMS "
-                      "%.2f m, max %.2f m", self.drive_name, first_frame, first_frame + frames - 1,
-                      len(first_pass), rms, errors.max())
-        sys.stderr.write("\n[inekf_node_test] %s: position RMS %.2f m (max %.2f m) over %d poses\n" %
-                         (self.drive_name, rms, errors.max(), len(errors)))
+                      "%.2f m, max %.2f m, max |yaw error| %.2f deg", self.drive_name, first_frame,
+                      first_frame + frames - 1, len(first_pass), rms, errors.max(), yaw_error)
+        sys.stderr.write("\n[inekf_node_test] %s: position RMS %.2f m (max %.2f m) over %d poses, "
+                         "max |yaw error| %.2f deg\n" %
+                         (self.drive_name, rms, errors.max(), len(errors), yaw_error))
         self.assertLess(rms, max_rms_m)
+        self.assertLess(yaw_error, max_yaw_error_deg)
         # The node kept publishing up to the end of the drive.
         self.assertEqual(first_pass[-1].header.stamp, drive.stamps[-1])
 
