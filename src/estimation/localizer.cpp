@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <set>
 #include <stdexcept>
 
@@ -137,6 +138,7 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("gps", "gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared, true);
   reader.number("gps", "min_sigma_m", &config.min_gps_sigma_m, false);
   reader.number("gps", "max_fix_age_s", &config.max_fix_age_s, false);
+  reader.number("gps", "fix_history_s", &config.fix_history_s, false);
   double max_rejected = config.max_consecutive_rejected_fixes;
   reader.number("gps", "max_consecutive_rejected_fixes", &max_rejected, false);
   config.max_consecutive_rejected_fixes = static_cast<int>(max_rejected);
@@ -175,6 +177,64 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   initialized_ = true;
   consecutive_rejected_fixes_ = 0;
   last_accepted_fix_s_ = initial.stamp_s;
+  history_.clear();
+  last_fix_stamp_s_ = -std::numeric_limits<double>::infinity();
+  recordStep(ImuSample(), 0.0, 1.0, 1.0);
+}
+
+void Localizer::recordStep(const ImuSample& sample, double dt, double gyro_scale,
+                           double accel_scale) {
+  if (!(config_.fix_history_s > 0.0)) return;
+  HistoryStep step;
+  step.sample = sample;
+  step.dt = dt;
+  step.gyro_noise_scale = gyro_scale;
+  step.accel_noise_scale = accel_scale;
+  step.state = filter_->state();
+  step.covariance = filter_->covariance();
+  history_.push_back(std::move(step));
+  const double oldest_kept_s = history_.back().state.stamp_s - config_.fix_history_s;
+  // Keep the newest step at or before the horizon: a fix exactly fix_history_s late rewinds to it.
+  while (history_.size() > 1 && history_[1].state.stamp_s <= oldest_kept_s) history_.pop_front();
+}
+
+int Localizer::lateFixStep(double stamp_s) const {
+  if (history_.size() < 2) return -1;
+  if (stamp_s >= history_.back().state.stamp_s - kDuplicateStampS) return -1;  // not late
+  // Replaying past an applied fix would drop it: a fix older than the last one is not rewound.
+  if (stamp_s < last_fix_stamp_s_ - kDuplicateStampS) return -1;
+  int step = static_cast<int>(history_.size()) - 1;
+  while (step >= 0 && history_[step].state.stamp_s > stamp_s + kDuplicateStampS) --step;
+  return step;  // -1: older than the history
+}
+
+CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, int step) {
+  filter_->initialize(history_[step].state, history_[step].covariance);
+  const double into_next = fix.stamp_s - history_[step].state.stamp_s;
+  if (into_next > kDuplicateStampS) {
+    // The fix falls inside the next step: split that step at the fix's time (its sample holds
+    // over the whole interval, so the two parts integrate to the same as the whole).
+    HistoryStep first_part = history_[step + 1];
+    first_part.dt = into_next;
+    filter_->setProcessNoiseScale(first_part.gyro_noise_scale, first_part.accel_noise_scale);
+    filter_->propagate(first_part.sample, first_part.dt);
+    filter_->setProcessNoiseScale(1.0, 1.0);
+    history_[step + 1].dt -= into_next;
+    history_.insert(history_.begin() + step + 1, std::move(first_part));
+    ++step;
+  }
+  const CorrectionResult result = applyFix(fix);
+  history_[step].state = filter_->state();
+  history_[step].covariance = filter_->covariance();
+  for (std::size_t k = static_cast<std::size_t>(step) + 1; k < history_.size(); ++k) {
+    HistoryStep& later = history_[k];
+    filter_->setProcessNoiseScale(later.gyro_noise_scale, later.accel_noise_scale);
+    filter_->propagate(later.sample, later.dt);
+    later.state = filter_->state();
+    later.covariance = filter_->covariance();
+  }
+  filter_->setProcessNoiseScale(1.0, 1.0);
+  return result;
 }
 
 void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
@@ -222,6 +282,7 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   filter_->setProcessNoiseScale(gyro_scale, accel_scale);
   filter_->propagate(sample, dt);
   filter_->setProcessNoiseScale(1.0, 1.0);
+  recordStep(sample, dt, gyro_scale, accel_scale);
   last_imu_ = sample;
   ++statistics_.imu_used;
   if (gap) {
@@ -298,12 +359,23 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
     return result;
   }
 
+  // A late fix (older than the state) goes to its own time when the history reaches back to it.
+  const int step = lateFixStep(used.stamp_s);
+  if (step < 0) return applyFix(used);
+  ++statistics_.gps_applied_late;
+  return applyFixInHistory(used, step);
+}
+
+CorrectionResult Localizer::applyFix(const PositionFix& fix) {
+  CorrectionResult result;
+  PositionFix used = fix;
   const double age = filter_->state().stamp_s - fix.stamp_s;
   if (std::abs(age) > config_.max_fix_age_s) {
     result.reason = "stale fix: " + std::to_string(age) + " s from the state's time";
     ++statistics_.gps_rejected;
     return result;
   }
+  last_fix_stamp_s_ = std::max(last_fix_stamp_s_, fix.stamp_s);
   // Applied at the state's time: the car moved by about speed * age meanwhile.
   const double moved = filter_->state().velocity_map.norm() * std::abs(age);
   used.covariance_map += Eigen::Matrix3d::Identity() * moved * moved;
@@ -346,6 +418,7 @@ void Localizer::reset() {
   reference_velocity_.reset();
   interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
+  history_.clear();
 }
 
 }  // namespace estimation

@@ -367,13 +367,14 @@ class InekfNode {
     ROS_INFO_THROTTLE(
         10.0,
         "inekf_node: t=%.2f s position (%.1f, %.1f, %.1f) m, sigma %.2f m; IMU "
-        "%ld used / %ld dropped / %ld gaps; GPS %ld used / %ld rejected / %ld "
+        "%ld used / %ld dropped / %ld gaps; GPS %ld used (%ld late) / %ld rejected / %ld "
         "ignored; %d resets; mean IMU callback %.3f ms, GPS callback %.3f ms",
         state.stamp_s, state.position_map.x(), state.position_map.y(), state.position_map.z(),
         position_sigma, static_cast<long>(statistics.imu_used),
         static_cast<long>(statistics.imu_dropped), static_cast<long>(statistics.imu_gaps),
-        static_cast<long>(statistics.gps_used), static_cast<long>(statistics.gps_rejected),
-        fixes_ignored_, resets_, mean_ms("inekf_node/imu"), mean_ms("inekf_node/gps"));
+        static_cast<long>(statistics.gps_used), static_cast<long>(statistics.gps_applied_late),
+        static_cast<long>(statistics.gps_rejected), fixes_ignored_, resets_,
+        mean_ms("inekf_node/imu"), mean_ms("inekf_node/gps"));
   }
 
   void publishStatus(const ros::Time& stamp) {

@@ -172,13 +172,16 @@ class InekfNodeTest(unittest.TestCase):
         return message
 
     def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False,
-             fix_before_imu=False):
+             fix_before_imu=False, fix_delay_frames=0):
         """Publishes the drive's frames at `rate` times real time. With faults: a duplicate of
         frame 100's IMU message, at frame 120 an IMU message and a fix with a NaN, and at frame
         150 the IMU message of frame 145 (out of order). With fix_before_imu: frame 0's fix
         reaches the node well before frame 0's IMU and velocity messages (which of the
-        connections delivers first is otherwise a race)."""
+        connections delivers first is otherwise a race). With fix_delay_frames: each fix after
+        the first is published that many frames after its own (a GPS receiver or link that is
+        slower than the IMU)."""
         count = len(drive.records) if frames is None else min(frames, len(drive.records))
+        delayed_fixes = []  # (frame index to publish at, message)
         for index in range(count):
             if rospy.is_shutdown():
                 return
@@ -204,7 +207,10 @@ class InekfNodeTest(unittest.TestCase):
                 self.fix_publisher.publish(broken_fix)
             if index % gps_every == 0 and not first_fix_early:
                 noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
-                self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
+                fix = self.fix_message(record, stamp, noise, sigma_h, sigma_v)
+                delayed_fixes.append((index + (fix_delay_frames if index > 0 else 0), fix))
+            while delayed_fixes and delayed_fixes[0][0] <= index:
+                self.fix_publisher.publish(delayed_fixes.pop(0)[1])
             if index + 1 < count:
                 time.sleep(max(0.0, (drive.stamps[index + 1] - stamp).to_sec() / rate))
         time.sleep(1.0)  # let the last messages through
@@ -305,13 +311,14 @@ class InekfNodeTest(unittest.TestCase):
         inject_faults = rospy.get_param("~inject_faults", False)
         loop_frames = rospy.get_param("~loop_frames", 0)
         fix_before_imu = rospy.get_param("~first_fix_before_imu", False)
+        fix_delay_frames = rospy.get_param("~fix_delay_frames", 0)
         max_yaw_error_deg = rospy.get_param("~max_yaw_error_deg", 5.0)
         rng = np.random.default_rng(rospy.get_param("~seed", 1))
         drive = OxtsDrive(self.oxts_dir, first_frame, frames)
         self.wait_for_node()
 
         self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, faults=inject_faults,
-                  fix_before_imu=fix_before_imu)
+                  fix_before_imu=fix_before_imu, fix_delay_frames=fix_delay_frames)
         first_pass = list(self.odometry)
         self.assertGreater(len(first_pass), 0.8 * len(drive.records),
                            "inekf_node published %d odometry messages for %d IMU frames" %
@@ -354,7 +361,8 @@ class InekfNodeTest(unittest.TestCase):
             # Time jumps back to the start of the drive: the node must reset and localize again.
             del self.odometry[:]
             del self.paths[:]
-            self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, frames=loop_frames)
+            self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, frames=loop_frames,
+                      fix_delay_frames=fix_delay_frames)
             second_pass = list(self.odometry)
             self.assertGreater(len(second_pass), 0.8 * loop_frames,
                                "inekf_node stopped publishing after the time jump back")

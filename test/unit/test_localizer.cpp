@@ -4,8 +4,10 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <optional>
+#include <vector>
 
 #include "inekf_semantic_mapping/estimation/localizer.h"
 #include "inekf_semantic_mapping/lie/so3.h"
@@ -80,6 +82,7 @@ TEST(Localizer, BridgesAGapWithInflatedNoise) {
 TEST(Localizer, RejectsStaleAndNonFiniteFixesAndInflatesSlightlyOldOnes) {
   LocalizerConfig config;
   config.max_fix_age_s = 0.5;
+  config.fix_history_s = 0.0;  // no rewinding: the fix at 10.8 s is applied at 11 s, inflated
   Localizer localizer(config);
   localizer.initialize(startState(10.0));
   localizer.addImu(restingSample(11.0));
@@ -261,6 +264,123 @@ TEST(Localizer, AFixBeforeAnyImuSampleDoesNotStartTheFilterBlind) {
   EXPECT_EQ(localizer.state().velocity_map, Eigen::Vector3d(7.0, 7.0, 0.0));
 }
 
+// The turning drive of lazyStartWhileDriving with noisy fixes once a second, stamped
+// fix_offset_s before an IMU sample, each handed to the Localizer `fix_delay_steps` IMU samples
+// after its stamp (it travelled on a slower connection). With imu_sample_at_fixes an extra IMU
+// sample (the same constant rates) is stamped at each fix, so that an in-order fix falls exactly
+// on a step: the reference for a late fix that the Localizer must place inside a step.
+struct DelayedFixRun {
+  NavState final_state;
+  Localizer::Statistics statistics;
+};
+
+DelayedFixRun driveWithDelayedFixes(const LocalizerConfig& config, int fix_delay_steps,
+                                    double fix_offset_s = 0.0, bool imu_sample_at_fixes = false) {
+  constexpr double kSpeed = 10.0, kTurnRate = 0.2, kDt = 0.01;
+  Localizer localizer(config);
+  NavState start;
+  start.rotation = lie::expSO3(Eigen::Vector3d(0.0, 0.0, 0.3));
+  start.velocity_map = start.rotation * Eigen::Vector3d(kSpeed, 0.0, 0.0);
+  localizer.initialize(start);
+  std::vector<PositionFix> pending;
+  std::uint32_t noise_state = 12345;
+  const auto noise = [&noise_state] {  // deterministic, roughly N(0, 1)
+    double sum = 0.0;
+    for (int i = 0; i < 12; ++i) {
+      noise_state = noise_state * 1664525u + 1013904223u;
+      sum += noise_state / 4294967296.0;
+    }
+    return sum - 6.0;
+  };
+  const auto imuAt = [&](double t) {
+    ImuSample sample;
+    sample.stamp_s = t;
+    sample.angular_velocity = Eigen::Vector3d(0.0, 0.0, kTurnRate);
+    sample.specific_force = Eigen::Vector3d(0.0, kSpeed * kTurnRate, 9.81);
+    localizer.addImu(sample);
+  };
+  const auto deliverDue = [&](double now) {
+    while (!pending.empty() && now >= pending.front().stamp_s + fix_delay_steps * kDt - 1e-9) {
+      localizer.addPositionFix(pending.front());
+      pending.erase(pending.begin());
+    }
+  };
+  for (int k = 1; k <= 1600; ++k) {  // fixes until 15 s, the last one arriving by 16 s
+    const double t = kDt * k;
+    const bool fix_now = k % 100 == 0 && k <= 1500;
+    const double fix_stamp = t - fix_offset_s;
+    if (fix_now) {
+      const double yaw = 0.3 + kTurnRate * fix_stamp;
+      const Eigen::Vector3d truth =
+          kSpeed / kTurnRate *
+          Eigen::Vector3d(std::sin(yaw) - std::sin(0.3), std::cos(0.3) - std::cos(yaw), 0.0);
+      pending.push_back(
+          fixAt(fix_stamp, truth + 1.5 * Eigen::Vector3d(noise(), noise(), noise()), 1.5));
+      if (imu_sample_at_fixes && fix_offset_s > 0.0) {
+        imuAt(fix_stamp);
+        deliverDue(fix_stamp);
+      }
+    }
+    imuAt(t);
+    deliverDue(t);
+  }
+  return {localizer.state(), localizer.statistics()};
+}
+
+void expectSameState(const NavState& a, const NavState& b) {
+  EXPECT_NEAR(a.stamp_s, b.stamp_s, 1e-9);
+  EXPECT_LT((a.position_map - b.position_map).norm(), 1e-6);
+  EXPECT_LT((a.velocity_map - b.velocity_map).norm(), 1e-6);
+  EXPECT_LT(lie::logSO3(a.rotation.transpose() * b.rotation).norm(), 1e-9);
+  EXPECT_LT((a.gyro_bias - b.gyro_bias).norm(), 1e-9);
+  EXPECT_LT((a.accel_bias - b.accel_bias).norm(), 1e-9);
+}
+
+TEST(Localizer, ALateFixIsAppliedAtItsOwnTimeAsIfItHadComeInOrder) {
+  const LocalizerConfig config;
+  const DelayedFixRun in_order = driveWithDelayedFixes(config, 0);
+  const DelayedFixRun late = driveWithDelayedFixes(config, 70);  // 0.7 s late
+  EXPECT_EQ(in_order.statistics.gps_applied_late, 0);
+  EXPECT_EQ(late.statistics.gps_applied_late, 15);
+  EXPECT_EQ(late.statistics.gps_used, 15);
+  expectSameState(in_order.final_state, late.final_state);
+
+  // A fix stamped between two IMU samples: the step is split at the fix. The reference has an
+  // IMU sample at each fix's stamp and its fixes in order.
+  const DelayedFixRun split_in_order = driveWithDelayedFixes(config, 0, 0.006, true);
+  const DelayedFixRun split_late = driveWithDelayedFixes(config, 70, 0.006);
+  EXPECT_EQ(split_in_order.statistics.gps_applied_late, 0);
+  EXPECT_EQ(split_late.statistics.gps_applied_late, 15);
+  expectSameState(split_in_order.final_state, split_late.final_state);
+
+  // Without the history the same late fixes are stale (0.7 s > max_fix_age_s) and all lost.
+  LocalizerConfig no_history = config;
+  no_history.fix_history_s = 0.0;
+  const DelayedFixRun lost = driveWithDelayedFixes(no_history, 70);
+  EXPECT_EQ(lost.statistics.gps_used, 0);
+  EXPECT_EQ(lost.statistics.gps_rejected, 15);
+
+  // Older than the history: rejected as stale, nothing rewound.
+  LocalizerConfig short_history = config;
+  short_history.fix_history_s = 0.5;
+  const DelayedFixRun too_old = driveWithDelayedFixes(short_history, 70);
+  EXPECT_EQ(too_old.statistics.gps_applied_late, 0);
+  EXPECT_EQ(too_old.statistics.gps_rejected, 15);
+}
+
+TEST(Localizer, AFixOlderThanOneAlreadyAppliedIsNotReplayedOverIt) {
+  Localizer localizer{LocalizerConfig()};
+  localizer.initialize(startState(0.0));
+  for (int k = 1; k <= 100; ++k) localizer.addImu(restingSample(0.01 * k));
+  EXPECT_TRUE(localizer.addPositionFix(fixAt(0.8, Eigen::Vector3d(0.3, 0, 0))).accepted);
+  const NavState after_newer = localizer.state();
+  // Rewinding to 0.5 s would replay over the 0.8 s fix and lose it: the Localizer applies the
+  // older fix at the state's time instead (0.5 s old: within max_fix_age_s).
+  localizer.addPositionFix(fixAt(0.5, Eigen::Vector3d(0.3, 0, 0)));
+  EXPECT_EQ(localizer.statistics().gps_applied_late, 1);  // only the first
+  EXPECT_GT(localizer.state().position_map.x(), 0.5 * after_newer.position_map.x());
+}
+
 TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   const LocalizerConfig loaded = LocalizerConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
   const LocalizerConfig defaults;
@@ -280,6 +400,8 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.unknown_velocity_sigma_vertical_mps,
                    defaults.unknown_velocity_sigma_vertical_mps);
   EXPECT_DOUBLE_EQ(loaded.unknown_yaw_sigma_deg, defaults.unknown_yaw_sigma_deg);
+  EXPECT_DOUBLE_EQ(loaded.max_fix_age_s, defaults.max_fix_age_s);
+  EXPECT_DOUBLE_EQ(loaded.fix_history_s, defaults.fix_history_s);
   EXPECT_DOUBLE_EQ(loaded.initial_position_sigma_m, defaults.initial_position_sigma_m);
   EXPECT_DOUBLE_EQ(loaded.initial_gyro_bias_sigma_radps, defaults.initial_gyro_bias_sigma_radps);
   EXPECT_DOUBLE_EQ(loaded.initial_accel_bias_sigma_mps2, defaults.initial_accel_bias_sigma_mps2);

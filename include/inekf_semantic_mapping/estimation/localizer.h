@@ -11,9 +11,16 @@
 //    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the node calls reset().
 //  - A sample flagged `interpolated` propagates with the gyro/accel white noise inflated (see
 //    interpolated_gyro_noise_scale_per_s / interpolated_accel_noise_scale).
-//  - A fix whose stamp differs from the state's by at most max_fix_age_s is applied at the
-//    state's time with its covariance inflated by (speed * age)^2 per axis; older or newer ones
-//    are rejected ("stale fix"). Fix sigmas below min_gps_sigma_m are raised to it.
+//  - A fix OLDER than the state (it travelled slower than the IMU samples, e.g. on another ROS
+//    connection) but within fix_history_s is applied at its own time: the filter is rewound to
+//    the last IMU step at or before the fix, propagated to the fix's stamp, corrected there, and
+//    the IMU samples since are propagated again (robot_localization's history idea); the result
+//    equals the in-order one. Fixes are assumed to arrive in order among themselves: one older
+//    than a fix already applied is not rewound (replaying would drop the newer one).
+//  - Otherwise a fix whose stamp differs from the state's by at most max_fix_age_s is applied at
+//    the state's (or rewound step's) time with its covariance inflated by (speed * age)^2 per
+//    axis; older or newer ones are rejected ("stale fix"). Fix sigmas below min_gps_sigma_m are
+//    raised to it.
 //  - Any update that would produce a non-finite value is rejected; the last good state is kept.
 //  - Re-acquisition: after max_consecutive_rejected_fixes fixes in a row fail the gate, the
 //    filter's own position/velocity covariance is what is wrong (e.g. after a long outage or a
@@ -23,6 +30,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
@@ -65,6 +73,7 @@ struct LocalizerConfig {
   double interpolated_gyro_noise_scale_per_s = 100.0;
   double interpolated_accel_noise_scale = 3.0;
   double max_fix_age_s = 0.5;
+  double fix_history_s = 2.0;  // how late a fix may arrive and still be applied at its own time
   int max_consecutive_rejected_fixes = 5;  // then re-acquire (see above); <= 0: never
 
   // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
@@ -90,6 +99,7 @@ class Localizer {
     std::int64_t gps_reacquisitions = 0;
     std::int64_t starts_without_velocity = 0;  // lazy starts with unknown_velocity_sigma_*
     std::int64_t gps_before_start = 0;         // fixes before any IMU sample: the start waits
+    std::int64_t gps_applied_late = 0;         // fixes applied by rewinding to their own time
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -129,6 +139,25 @@ class Localizer {
   ErrorCovariance initialWorldCovariance() const;
 
  private:
+  // One IMU step as propagated, and the filter after it: what a rewind restores and replays.
+  struct HistoryStep {
+    ImuSample sample;
+    double dt = 0.0;  // 0: the initial state (nothing to replay)
+    double gyro_noise_scale = 1.0, accel_noise_scale = 1.0;
+    NavState state;
+    ErrorCovariance covariance;
+  };
+
+  void recordStep(const ImuSample& sample, double dt, double gyro_scale, double accel_scale);
+  // The history step to rewind to for a fix stamped stamp_s (the last step at or before it), or
+  // -1: not late, older than the history, or older than a fix already applied.
+  int lateFixStep(double stamp_s) const;
+  // Rewinds to `step`, propagates to the fix's time (splitting the next step there), applies
+  // the fix, and propagates the later steps again, updating the history.
+  CorrectionResult applyFixInHistory(const PositionFix& fix, int step);
+  // Gate, stale check, re-acquisition and the correction, at the filter's current time.
+  CorrectionResult applyFix(const PositionFix& fix);
+
   LocalizerConfig config_;
   std::unique_ptr<NavigationFilter> filter_;
   bool initialized_ = false;
@@ -139,6 +168,8 @@ class Localizer {
   double interpolated_run_start_s_ = -1.0;
   int consecutive_rejected_fixes_ = 0;
   double last_accepted_fix_s_ = 0.0;  // < 0: not inside a run of interpolated samples
+  double last_fix_stamp_s_ = 0.0;     // newest fix that reached the correction
+  std::deque<HistoryStep> history_;   // the last fix_history_s of steps, oldest first
 };
 
 }  // namespace estimation
