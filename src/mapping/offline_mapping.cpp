@@ -68,6 +68,7 @@ std::unique_ptr<SemanticOcTree> buildSemanticMapFromSequence(const OfflineMappin
       std::make_unique<SemanticOcTree>(options.resolution_m, options.classes, options.fusion);
   tree->setProbHit(options.prob_hit);
   tree->setProbMiss(options.prob_miss);
+  tree->setGrazingRayTruncation(options.grazing_truncation_voxels);
   LabeledScan scan;
   scan.unknown_label_id = options.ignored_label_id;
   std::size_t total_points = 0;

@@ -15,6 +15,9 @@ namespace mapping {
 
 namespace {
 
+// Grazing-ray truncation never withholds more than this fraction of a ray from clearing.
+constexpr double kMaxGrazingCutFraction = 0.25;
+
 std::uint64_t packKey(const octomap::OcTreeKey& key) {
   return (static_cast<std::uint64_t>(key[0]) << 32) | (static_cast<std::uint64_t>(key[1]) << 16) |
          key[2];
@@ -275,7 +278,21 @@ std::size_t SemanticOcTree::insertLabeledScan(const LabeledScan& scan, double ma
   //    (far cheaper than octomap's node-allocating KeySet); one set per thread, merged after.
   std::vector<octomap::point3d> ray_ends;
   ray_ends.reserve(endpoints.size() + clipped_ends.size());
-  for (const auto& [key, voxel] : endpoints) ray_ends.push_back(voxel.ray_end);
+  const double truncation_m = grazing_truncation_voxels_ * resolution;
+  for (const auto& [key, voxel] : endpoints) {
+    const octomap::point3d ray = voxel.ray_end - origin;
+    const double length = ray.norm();
+    if (truncation_m > 0.0 && ray.z() < 0.0 && length > 0.0) {
+      // Only rays that go down can graze the road. For a hit on flat ground the cut is
+      // truncation_m / (sensor height) of the ray (12 % for 1 voxel of 0.2 m at 1.73 m); the cap
+      // keeps a nearly level ray to a wall or a car from losing more than a quarter.
+      const double sin_elevation = -ray.z() / length;
+      const double cut = std::min(kMaxGrazingCutFraction * length, truncation_m / sin_elevation);
+      ray_ends.push_back(origin + ray * static_cast<float>(1.0 - cut / length));
+    } else {
+      ray_ends.push_back(voxel.ray_end);
+    }
+  }
   ray_ends.insert(ray_ends.end(), clipped_ends.begin(), clipped_ends.end());
   const int threads = ray_ends.size() < 4000 ? 1 : std::max(1, ray_casting_threads_);
   std::vector<FlatKeySet> free_keys(static_cast<std::size_t>(threads));

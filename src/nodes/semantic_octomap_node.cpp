@@ -66,6 +66,7 @@ struct NodeParameters {
   std::string calib_dir;
   int camera_index = 2;
   int ray_casting_threads = 1;
+  double grazing_ray_truncation_voxels = 1.0;
   double log_period_s = 10.0;
 };
 
@@ -98,6 +99,11 @@ NodeParameters readParameters(const ros::NodeHandle& pnh) {
   pnh.param("calib_dir", p.calib_dir, p.calib_dir);
   pnh.param("camera_index", p.camera_index, p.camera_index);
   pnh.param("ray_casting_threads", p.ray_casting_threads, p.ray_casting_threads);
+  pnh.param("grazing_ray_truncation_voxels", p.grazing_ray_truncation_voxels,
+            p.grazing_ray_truncation_voxels);
+  if (!(p.grazing_ray_truncation_voxels >= 0.0)) {
+    throw std::invalid_argument("~grazing_ray_truncation_voxels must be >= 0");
+  }
   pnh.param("log_period", p.log_period_s, p.log_period_s);
   if (!(p.resolution_m > 0)) throw std::invalid_argument("~resolution must be > 0");
   if (!(p.fusion.correct_probability > 0 && p.fusion.correct_probability < 1)) {
@@ -170,6 +176,7 @@ class SemanticOctomapNode {
     tree_->setClampingThresMin(params_.clamping_min);
     tree_->setClampingThresMax(params_.clamping_max);
     tree_->setRayCastingThreads(params_.ray_casting_threads);
+    tree_->setGrazingRayTruncation(params_.grazing_ray_truncation_voxels);
     scans_inserted_ = 0;
     map_changed_ = true;
   }

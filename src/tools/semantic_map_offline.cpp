@@ -4,7 +4,7 @@
 //   semantic_map_offline --scans DIR --labels DIR --poses POSES.txt --calib CALIB.txt
 //       --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M] [--confusion P]
 //       [--fusion bayes|dirichlet] [--max-scans N] [--classes semantickitti|cityscapes]
-//       [--color-ot MAP_COLOR.ot] [--prob-hit P] [--prob-miss P]
+//       [--color-ot MAP_COLOR.ot] [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS]
 #include <iostream>
 #include <string>
 
@@ -21,7 +21,7 @@ constexpr char kUsage[] =
     "         --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M]\n"
     "         [--confusion P] [--fusion bayes|dirichlet] [--max-scans N]\n"
     "         [--classes semantickitti|cityscapes] [--color-ot MAP_COLOR.ot]\n"
-    "         [--prob-hit P] [--prob-miss P]\n";
+    "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n";
 
 // Builds and saves the map (errors propagate to runCli: exit 1).
 int run(const inekf_semantic_mapping::mapping::OfflineMappingOptions& options,
@@ -60,7 +60,7 @@ int main(int argc, char** argv) {
         argc, argv,
         {"--scans", "--labels", "--poses", "--calib", "--resolution", "--output", "--export-ply",
          "--max-range", "--confusion", "--fusion", "--max-scans", "--classes", "--color-ot",
-         "--prob-hit", "--prob-miss"});
+         "--prob-hit", "--prob-miss", "--grazing-truncation"});
     if (cli.helpRequested()) return common::printUsage(kUsage);
     mapping::OfflineMappingOptions options;
     options.scans_dir = cli.require("--scans");
@@ -79,6 +79,11 @@ int main(int argc, char** argv) {
     }
     options.prob_hit = cli.getDouble("--prob-hit", options.prob_hit);
     options.prob_miss = cli.getDouble("--prob-miss", options.prob_miss);
+    options.grazing_truncation_voxels =
+        cli.getDouble("--grazing-truncation", options.grazing_truncation_voxels);
+    if (!(options.grazing_truncation_voxels >= 0)) {
+      throw UsageError("--grazing-truncation must be >= 0 (voxels)");
+    }
     if (!(options.prob_hit > 0.5 && options.prob_hit < 1 && options.prob_miss > 0 &&
           options.prob_miss < 0.5)) {
       throw UsageError("--prob-hit must be in (0.5, 1) and --prob-miss in (0, 0.5)");

@@ -30,6 +30,7 @@ struct OfflineMappingOptions {
   double max_range_m = 50.0;
   double prob_hit = 0.7;  // occupancy sensor model (octomap's defaults)
   double prob_miss = 0.4;
+  double grazing_truncation_voxels = 1.0;  // SemanticOcTree::setGrazingRayTruncation
   FusionModel fusion;
   int max_scans = -1;  // < 0: all
   // Known classes (palette, names); ids outside it are added as they appear (grey).

@@ -111,6 +111,16 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   // on it: every free voxel is still updated once.
   void setRayCastingThreads(int threads) { ray_casting_threads_ = threads < 1 ? 1 : threads; }
 
+  // Grazing rays: a ray that meets a horizontal surface (the road) at elevation angle e runs
+  // within one voxel of it for the last resolution / sin(e) metres, and octomap's ray casting
+  // marks those surface voxels free (measured: 44 % of the true surface voxels of a synthetic
+  // drive were missing from the map). With voxels > 0 the free part of each downward ray that
+  // ends in a hit stops voxels * resolution / sin(e) before the hit (at most a quarter of the
+  // ray): what the ray cannot tell from the road is left as it is. The price: the last metres
+  // in front of low obstacles are cleared only by steeper rays (a moving car's trace lasts
+  // longer). 0: octomap's behaviour.
+  void setGrazingRayTruncation(double voxels) { grazing_truncation_voxels_ = voxels; }
+
   // Adds one hit with class evidence at a leaf (max depth), expanding pruned nodes.
   SemanticOcTreeNode* updateOccupiedVoxel(const octomap::OcTreeKey& key, ClassIndex index,
                                           std::uint32_t class_count);
@@ -147,6 +157,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   ClassSet classes_;
   FusionModel fusion_;
   int ray_casting_threads_ = 1;
+  double grazing_truncation_voxels_ = 0.0;
 
   // Registers the tree type with octomap's factory once (ColorOcTree's idiom).
   class StaticMemberInitializer {
