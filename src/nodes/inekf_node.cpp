@@ -292,8 +292,9 @@ class InekfNode {
                                 kMaxReferenceVelocityAgeS) {
       velocity = ros_conversions::velocityInMap(*latest_velocity_, latest_orientation_);
     }
-    if (!velocity && velocity_subscriber_.getNumPublishers() > 0 &&
-        deferred_starts_ < kMaxDeferredStarts) {
+    // (A levelled start, init_orientation_from_reference false, never uses the velocity.)
+    if (config_.init_orientation_from_reference && !velocity &&
+        velocity_subscriber_.getNumPublishers() > 0 && deferred_starts_ < kMaxDeferredStarts) {
       ++deferred_starts_;
       ROS_INFO(
           "inekf_node: GPS fix at %.3f s: no GPS velocity of that instant yet, the start "
