@@ -52,8 +52,8 @@ struct LocalizerConfig {
   double initial_velocity_sigma_mps = 0.5;
   // When the lazy start has no velocity reference (no GPS velocity message yet, or levelling
   // from the specific force) the state starts at zero velocity with this sigma, horizontal and
-  // vertical: a car may already be driving at motorway speed. A 0.5 m/s sigma there made the
-  // first fixes fail the gate and the yaw diverge (inekf_node, drive 0036: ATE 9.6 m, 42 deg).
+  // vertical: a car may already be driving at motorway speed. Zero +- 0.5 m/s there makes the
+  // first fixes of a moving car fail the gate (gtest LazyStartWithoutAVelocity...).
   double unknown_velocity_sigma_horizontal_mps = 15.0;
   double unknown_velocity_sigma_vertical_mps = 2.0;
   // Yaw sigma of a lazy start levelled from gravity (no orientation reference): yaw 0 is a guess.
@@ -165,11 +165,11 @@ class Localizer {
   std::optional<Eigen::Matrix3d> reference_rotation_;
   std::optional<Eigen::Vector3d> reference_velocity_;
   Statistics statistics_;
-  double interpolated_run_start_s_ = -1.0;
+  double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
   int consecutive_rejected_fixes_ = 0;
-  double last_accepted_fix_s_ = 0.0;  // < 0: not inside a run of interpolated samples
-  double last_fix_stamp_s_ = 0.0;     // newest fix that reached the correction
-  std::deque<HistoryStep> history_;   // the last fix_history_s of steps, oldest first
+  double last_accepted_fix_s_ = 0.0;
+  double last_fix_stamp_s_ = 0.0;    // newest fix that reached the correction
+  std::deque<HistoryStep> history_;  // the last fix_history_s of steps, oldest first
 };
 
 }  // namespace estimation
