@@ -49,8 +49,8 @@ using estimation::LocalizerConfig;
 
 // A GPS velocity message further than this from the IMU sample is not used to start the filter.
 constexpr double kMaxReferenceVelocityAgeS = 0.2;
-// Fixes the start may skip while waiting for a GPS velocity (see prepareStart).
-constexpr int kMaxDeferredStarts = 2;
+// How long (data time) the start may wait for the IMU and GPS velocity messages of its fix.
+constexpr double kMaxStartWaitS = 0.2;
 
 std::string describeFilter(estimation::FilterType type) {
   switch (type) {
@@ -163,7 +163,7 @@ class InekfNode {
   void resetStart() {
     start_orientation_known_ = start_velocity_known_ = false;
     latest_orientation_.reset();
-    deferred_starts_ = 0;
+    pending_start_.reset();
   }
 
   // Callbacks never let an exception out: log it with context and keep running.
@@ -200,6 +200,16 @@ class InekfNode {
     latest_angular_velocity_ = sample->angular_velocity;
     if (!localizer_->initialized()) latest_orientation_ = ros_conversions::imuOrientation(*message);
     const Localizer::ImuStatus status = localizer_->addImu(*sample);
+    if (status == Localizer::ImuStatus::kNotInitialized) {
+      tryStart(message->header.stamp);
+      if (!localizer_->initialized()) return;
+      // Started at the pending fix's stamp: a later sample carries the state on to its own.
+      if (sample->stamp_s > localizer_->state().stamp_s + 1e-6) localizer_->addImu(*sample);
+      if (std::abs(sample->stamp_s - localizer_->state().stamp_s) < 1e-6) {
+        publishState(message->header.stamp);
+      }
+      return;
+    }
     switch (status) {
       case Localizer::ImuStatus::kDroppedOutOfOrder:
       case Localizer::ImuStatus::kDroppedDuplicate:
@@ -225,6 +235,12 @@ class InekfNode {
 
   void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
     latest_velocity_ = *message;
+    try {
+      tryStart(message->header.stamp);
+    } catch (const std::exception& error) {
+      ROS_ERROR_STREAM_THROTTLE(5.0, "inekf_node: start at the GPS velocity at "
+                                         << message->header.stamp << " failed: " << error.what());
+    }
   }
 
   void handleFix(const sensor_msgs::NavSatFix& fix_message) {
@@ -246,66 +262,74 @@ class InekfNode {
     fix.covariance_map = ros_conversions::fixCovarianceMap(
         *message, min_fix_sigma_m_, default_fix_sigma_horizontal_m_, default_fix_sigma_vertical_m_);
 
-    const bool was_initialized = localizer_->initialized();
-    if (!was_initialized && !prepareStart(*message)) return;
+    if (!localizer_->initialized()) {
+      // The newest fix waits (briefly) for its instant's IMU orientation and GPS velocity.
+      pending_start_ = PendingStart{fix, message->header.stamp};
+      tryStart(message->header.stamp);
+      publishStatus(message->header.stamp);
+      return;
+    }
     const estimation::CorrectionResult result = localizer_->addPositionFix(fix);
     last_mahalanobis_squared_ = result.mahalanobis_squared;
-    if (!was_initialized && localizer_->initialized()) {
-      const estimation::NavState& state = localizer_->state();
-      const double yaw_deg = std::atan2(state.rotation(1, 0), state.rotation(0, 0)) * 180.0 / M_PI;
-      std::ostringstream how;
-      how << std::fixed << std::setprecision(1);
-      if (start_orientation_known_) {
-        how << "orientation from the IMU message";
-      } else {
-        how << "levelled from gravity, yaw unknown (sigma " << config_.unknown_yaw_sigma_deg
-            << " deg)";
-      }
-      if (start_velocity_known_) {
-        how << ", velocity from the GPS velocity";
-      } else {
-        how << ", no GPS velocity yet: speed unknown (sigma "
-            << config_.unknown_velocity_sigma_horizontal_mps << " m/s)";
-      }
-      ROS_INFO_STREAM(std::fixed << std::setprecision(3) << "inekf_node: initialized "
-                                 << describeFilter(config_.filter_type) << " at t=" << state.stamp_s
-                                 << " s, position " << state.position_map.transpose() << " m, yaw "
-                                 << yaw_deg << " deg (" << how.str() << ")");
-    } else if (!localizer_->initialized()) {
-      ROS_INFO_STREAM("inekf_node: GPS fix at " << std::fixed << std::setprecision(3) << fix.stamp_s
-                                                << " s not used: " << result.reason);
-    } else if (was_initialized && !result.accepted) {
+    if (!result.accepted) {
       ROS_WARN_THROTTLE(5.0, "inekf_node: GPS fix at %.3f s rejected: %s (d^2 = %.1f)", fix.stamp_s,
                         result.reason.c_str(), result.mahalanobis_squared);
     }
     publishStatus(message->header.stamp);
   }
 
-  // Before the first fix is applied: hands the Localizer the orientation of the latest Imu
-  // message and the GPS velocity of the fix's instant. The IMU, fix and velocity topics arrive
-  // on separate connections, so at the first fix (and after a reset) the velocity may still be
-  // on its way: while a publisher exists the start waits for up to kMaxDeferredStarts fixes,
-  // then starts with the Localizer's unknown-velocity sigma. False: do not use this fix.
-  bool prepareStart(const sensor_msgs::NavSatFix& fix) {
+  // Starts the filter at the pending fix with the orientation of the latest Imu message and the
+  // GPS velocity of the fix's instant. The IMU, fix and velocity topics arrive on separate
+  // connections, so at the first fix (and after a reset) either may still be on its way: the
+  // start waits for them until a message kMaxStartWaitS (data time) newer than the fix arrives,
+  // then starts with what it has (the Localizer's unknown-velocity / unknown-yaw sigmas).
+  // Called on every fix, IMU and velocity message while not started; `now` is that message's
+  // stamp.
+  void tryStart(const ros::Time& now) {
+    if (!pending_start_ || localizer_->initialized()) return;
+    const PendingStart pending = *pending_start_;
     std::optional<Eigen::Vector3d> velocity;
-    if (latest_velocity_ && std::abs((latest_velocity_->header.stamp - fix.header.stamp).toSec()) <=
+    if (latest_velocity_ && std::abs((latest_velocity_->header.stamp - pending.stamp).toSec()) <=
                                 kMaxReferenceVelocityAgeS) {
       velocity = ros_conversions::velocityInMap(*latest_velocity_, latest_orientation_);
     }
-    // (A levelled start, init_orientation_from_reference false, never uses the velocity.)
-    if (config_.init_orientation_from_reference && !velocity &&
-        velocity_subscriber_.getNumPublishers() > 0 && deferred_starts_ < kMaxDeferredStarts) {
-      ++deferred_starts_;
-      ROS_INFO(
-          "inekf_node: GPS fix at %.3f s: no GPS velocity of that instant yet, the start "
-          "waits for the next fix (%d of at most %d)",
-          fix.header.stamp.toSec(), deferred_starts_, kMaxDeferredStarts);
-      return false;
+    const bool use_reference = config_.init_orientation_from_reference;
+    if (use_reference && (now - pending.stamp).toSec() <= kMaxStartWaitS) {
+      if (!latest_orientation_) return;  // its Imu message is on its way
+      if (!velocity && velocity_subscriber_.getNumPublishers() > 0) return;  // its velocity
     }
-    start_orientation_known_ = config_.init_orientation_from_reference && latest_orientation_;
+    pending_start_.reset();
+    start_orientation_known_ = use_reference && latest_orientation_;
     start_velocity_known_ = start_orientation_known_ && velocity;
     if (start_orientation_known_) localizer_->setInitialReference(*latest_orientation_, velocity);
-    return true;
+    const estimation::CorrectionResult result = localizer_->addPositionFix(pending.fix);
+    last_mahalanobis_squared_ = result.mahalanobis_squared;
+    if (!localizer_->initialized()) {
+      ROS_INFO_STREAM("inekf_node: GPS fix at " << std::fixed << std::setprecision(3)
+                                                << pending.fix.stamp_s
+                                                << " s not used: " << result.reason);
+      return;
+    }
+    const estimation::NavState& state = localizer_->state();
+    const double yaw_deg = std::atan2(state.rotation(1, 0), state.rotation(0, 0)) * 180.0 / M_PI;
+    std::ostringstream how;
+    how << std::fixed << std::setprecision(1);
+    if (start_orientation_known_) {
+      how << "orientation from the IMU message";
+    } else {
+      how << "levelled from gravity, yaw unknown (sigma " << config_.unknown_yaw_sigma_deg
+          << " deg)";
+    }
+    if (start_velocity_known_) {
+      how << ", velocity from the GPS velocity";
+    } else {
+      how << ", no GPS velocity: speed unknown (sigma "
+          << config_.unknown_velocity_sigma_horizontal_mps << " m/s)";
+    }
+    ROS_INFO_STREAM(std::fixed << std::setprecision(3) << "inekf_node: initialized "
+                               << describeFilter(config_.filter_type) << " at t=" << state.stamp_s
+                               << " s, position " << state.position_map.transpose() << " m, yaw "
+                               << yaw_deg << " deg (" << how.str() << ")");
   }
 
   void publishState(const ros::Time& stamp) {
@@ -420,7 +444,12 @@ class InekfNode {
   std::optional<kitti::MercatorProjection> projection_;
   std::optional<geometry_msgs::TwistStamped> latest_velocity_;
   std::optional<Eigen::Matrix3d> latest_orientation_;  // of the latest Imu message, before start
-  int deferred_starts_ = 0;
+  // The fix the filter will start at, while it waits for that instant's IMU and velocity.
+  struct PendingStart {
+    estimation::PositionFix fix;
+    ros::Time stamp;
+  };
+  std::optional<PendingStart> pending_start_;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
   ros::Time last_stamp_, last_clock_, last_path_publish_;
