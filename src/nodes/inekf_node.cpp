@@ -47,7 +47,7 @@ namespace {
 using estimation::Localizer;
 using estimation::LocalizerConfig;
 
-// A GPS velocity message further than this from the IMU sample is not used to start the filter.
+// A GPS velocity message further than this from the first fix is not used to start the filter.
 constexpr double kMaxReferenceVelocityAgeS = 0.2;
 // How long (data time) the start may wait for the IMU and GPS velocity messages of its fix.
 constexpr double kMaxStartWaitS = 0.2;
