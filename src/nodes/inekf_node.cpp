@@ -36,6 +36,7 @@
 
 #include "inekf_semantic_mapping/FilterStatus.h"
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/estimation/lazy_start.h"
 #include "inekf_semantic_mapping/estimation/localizer.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
@@ -46,11 +47,6 @@ namespace {
 
 using estimation::Localizer;
 using estimation::LocalizerConfig;
-
-// A GPS velocity message further than this from the first fix is not used to start the filter.
-constexpr double kMaxReferenceVelocityAgeS = 0.2;
-// How long (data time) the start may wait for the IMU and GPS velocity messages of its fix.
-constexpr double kMaxStartWaitS = 0.2;
 
 std::string describeFilter(estimation::FilterType type) {
   switch (type) {
@@ -69,6 +65,9 @@ class InekfNode {
   InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh) {
     loadParameters(private_nh);
     localizer_ = std::make_unique<Localizer>(config_);
+    estimation::LazyStart::Config start_config;
+    start_config.use_reference = config_.init_orientation_from_reference;
+    lazy_start_ = std::make_unique<estimation::LazyStart>(start_config);
 
     odometry_publisher_ = nh.advertise<nav_msgs::Odometry>(topics::kOdometry, 50);
     path_publisher_ = nh.advertise<nav_msgs::Path>(topics::kPath, 1, /*latch=*/true);
@@ -153,18 +152,13 @@ class InekfNode {
       path_publisher_.publish(path_);
       last_path_publish_ = ros::Time();
       last_stamp_ = ros::Time();
-      latest_velocity_.reset();
       ++resets_;
     }
     last_stamp_ = std::max(last_stamp_, stamp);
     if (clock_back || now > last_clock_) last_clock_ = now;
   }
 
-  void resetStart() {
-    start_orientation_known_ = start_velocity_known_ = false;
-    latest_orientation_.reset();
-    pending_start_.reset();
-  }
+  void resetStart() { lazy_start_->reset(); }
 
   // Callbacks never let an exception out: log it with context and keep running.
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
@@ -198,7 +192,11 @@ class InekfNode {
       return;
     }
     latest_angular_velocity_ = sample->angular_velocity;
-    if (!localizer_->initialized()) latest_orientation_ = ros_conversions::imuOrientation(*message);
+    if (!localizer_->initialized()) {
+      if (const auto orientation = ros_conversions::imuOrientation(*message)) {
+        lazy_start_->offerOrientation(*orientation);
+      }
+    }
     const Localizer::ImuStatus status = localizer_->addImu(*sample);
     if (status == Localizer::ImuStatus::kNotInitialized) {
       tryStart(message->header.stamp);
@@ -234,7 +232,10 @@ class InekfNode {
   }
 
   void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
-    latest_velocity_ = *message;
+    if (localizer_->initialized()) return;  // only the start uses it
+    if (const auto velocity = ros_conversions::gpsVelocity(*message)) {
+      lazy_start_->offerVelocity(velocity->stamp_s, velocity->velocity, velocity->in_body_frame);
+    }
     try {
       tryStart(message->header.stamp);
     } catch (const std::exception& error) {
@@ -264,7 +265,7 @@ class InekfNode {
 
     if (!localizer_->initialized()) {
       // The newest fix waits (briefly) for its instant's IMU orientation and GPS velocity.
-      pending_start_ = PendingStart{fix, message->header.stamp};
+      lazy_start_->offerFix(fix);
       tryStart(message->header.stamp);
       publishStatus(message->header.stamp);
       return;
@@ -278,35 +279,21 @@ class InekfNode {
     publishStatus(message->header.stamp);
   }
 
-  // Starts the filter at the pending fix with the orientation of the latest Imu message and the
-  // GPS velocity of the fix's instant. The IMU, fix and velocity topics arrive on separate
-  // connections, so at the first fix (and after a reset) either may still be on its way: the
-  // start waits for them until a message kMaxStartWaitS (data time) newer than the fix arrives,
-  // then starts with what it has (the Localizer's unknown-velocity / unknown-yaw sigmas).
-  // Called on every fix, IMU and velocity message while not started; `now` is that message's
-  // stamp.
+  // Starts the filter when the LazyStart says so (see estimation/lazy_start.h). Called on every
+  // fix, IMU and velocity message while not started; `now` is that message's stamp.
   void tryStart(const ros::Time& now) {
-    if (!pending_start_ || localizer_->initialized()) return;
-    const PendingStart pending = *pending_start_;
-    std::optional<Eigen::Vector3d> velocity;
-    if (latest_velocity_ && std::abs((latest_velocity_->header.stamp - pending.stamp).toSec()) <=
-                                kMaxReferenceVelocityAgeS) {
-      velocity = ros_conversions::velocityInMap(*latest_velocity_, latest_orientation_);
+    if (localizer_->initialized()) return;
+    const std::optional<estimation::LazyStart::Start> start =
+        lazy_start_->poll(now.toSec(), velocity_subscriber_.getNumPublishers() > 0);
+    if (!start) return;
+    if (start->orientation) {
+      localizer_->setInitialReference(*start->orientation, start->velocity_map);
     }
-    const bool use_reference = config_.init_orientation_from_reference;
-    if (use_reference && (now - pending.stamp).toSec() <= kMaxStartWaitS) {
-      if (!latest_orientation_) return;  // its Imu message is on its way
-      if (!velocity && velocity_subscriber_.getNumPublishers() > 0) return;  // its velocity
-    }
-    pending_start_.reset();
-    start_orientation_known_ = use_reference && latest_orientation_;
-    start_velocity_known_ = start_orientation_known_ && velocity;
-    if (start_orientation_known_) localizer_->setInitialReference(*latest_orientation_, velocity);
-    const estimation::CorrectionResult result = localizer_->addPositionFix(pending.fix);
+    const estimation::PositionFix& fix = start->fix;
+    const estimation::CorrectionResult result = localizer_->addPositionFix(fix);
     last_mahalanobis_squared_ = result.mahalanobis_squared;
     if (!localizer_->initialized()) {
-      ROS_INFO_STREAM("inekf_node: GPS fix at " << std::fixed << std::setprecision(3)
-                                                << pending.fix.stamp_s
+      ROS_INFO_STREAM("inekf_node: GPS fix at " << std::fixed << std::setprecision(3) << fix.stamp_s
                                                 << " s not used: " << result.reason);
       return;
     }
@@ -314,13 +301,13 @@ class InekfNode {
     const double yaw_deg = std::atan2(state.rotation(1, 0), state.rotation(0, 0)) * 180.0 / M_PI;
     std::ostringstream how;
     how << std::fixed << std::setprecision(1);
-    if (start_orientation_known_) {
+    if (start->orientation) {
       how << "orientation from the IMU message";
     } else {
       how << "levelled from gravity, yaw unknown (sigma " << config_.unknown_yaw_sigma_deg
           << " deg)";
     }
-    if (start_velocity_known_) {
+    if (start->velocity_map) {
       how << ", velocity from the GPS velocity";
     } else {
       how << ", no GPS velocity: speed unknown (sigma "
@@ -442,21 +429,11 @@ class InekfNode {
   // State.
   std::unique_ptr<Localizer> localizer_;
   std::optional<kitti::MercatorProjection> projection_;
-  std::optional<geometry_msgs::TwistStamped> latest_velocity_;
-  std::optional<Eigen::Matrix3d> latest_orientation_;  // of the latest Imu message, before start
-  // The fix the filter will start at, while it waits for that instant's IMU and velocity.
-  struct PendingStart {
-    estimation::PositionFix fix;
-    ros::Time stamp;
-  };
-  std::optional<PendingStart> pending_start_;
+  std::unique_ptr<estimation::LazyStart> lazy_start_;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
   ros::Time last_stamp_, last_clock_, last_path_publish_;
   nav_msgs::Path path_;
-  // What the lazy start had (for its log line): an IMU orientation, a GPS velocity.
-  bool start_orientation_known_ = false;
-  bool start_velocity_known_ = false;
   long imu_invalid_ = 0;
   long fixes_ignored_ = 0;
   int resets_ = 0;

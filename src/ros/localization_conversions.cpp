@@ -64,13 +64,13 @@ Eigen::Matrix3d fixCovarianceMap(const sensor_msgs::NavSatFix& fix, double min_s
   return covariance;
 }
 
-std::optional<Eigen::Vector3d> velocityInMap(const geometry_msgs::TwistStamped& velocity,
-                                             const std::optional<Eigen::Matrix3d>& body_to_map) {
-  const Eigen::Vector3d linear = toEigen(velocity.twist.linear);
-  if (!linear.allFinite()) return std::nullopt;
-  if (velocity.header.frame_id == frames::kMap) return linear;
-  if (!body_to_map) return std::nullopt;
-  return *body_to_map * linear;
+std::optional<GpsVelocity> gpsVelocity(const geometry_msgs::TwistStamped& message) {
+  GpsVelocity velocity;
+  velocity.stamp_s = message.header.stamp.toSec();
+  velocity.velocity = toEigen(message.twist.linear);
+  velocity.in_body_frame = message.header.frame_id != frames::kMap;
+  if (!velocity.velocity.allFinite()) return std::nullopt;
+  return velocity;
 }
 
 std::array<double, 36> rosPoseCovariance(const Eigen::Matrix3d& body_to_map,

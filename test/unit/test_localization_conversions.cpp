@@ -94,18 +94,22 @@ TEST(UsableFix, RejectsNoFixAndNaN) {
   EXPECT_FALSE(isUsableFix(fix));
 }
 
-TEST(Velocity, MapFrameIsTakenAsIsAndBodyFrameIsRotated) {
-  geometry_msgs::TwistStamped velocity;
-  velocity.twist.linear.x = 10.0;
-  velocity.header.frame_id = "map";
-  EXPECT_TRUE(velocityInMap(velocity, std::nullopt)->isApprox(Eigen::Vector3d(10, 0, 0)));
-  velocity.header.frame_id = "imu_link";
-  EXPECT_FALSE(velocityInMap(velocity, std::nullopt).has_value());
-  const auto rotated = velocityInMap(velocity, yawRotation(M_PI / 2));
-  ASSERT_TRUE(rotated.has_value());
-  EXPECT_TRUE(rotated->isApprox(Eigen::Vector3d(0, 10, 0)));
-  velocity.twist.linear.y = kNaN;
-  EXPECT_FALSE(velocityInMap(velocity, yawRotation(0.0)).has_value());
+TEST(Velocity, MapFrameOrBodyFrameByFrameId) {
+  geometry_msgs::TwistStamped message;
+  message.header.stamp = ros::Time(12, 500000000);
+  message.twist.linear.x = 10.0;
+  message.header.frame_id = "map";
+  auto velocity = gpsVelocity(message);
+  ASSERT_TRUE(velocity.has_value());
+  EXPECT_EQ(velocity->velocity, Eigen::Vector3d(10, 0, 0));
+  EXPECT_FALSE(velocity->in_body_frame);
+  EXPECT_DOUBLE_EQ(velocity->stamp_s, 12.5);
+  message.header.frame_id = "imu_link";  // kitti2bag: vf, vl, vu
+  velocity = gpsVelocity(message);
+  ASSERT_TRUE(velocity.has_value());
+  EXPECT_TRUE(velocity->in_body_frame);
+  message.twist.linear.y = kNaN;
+  EXPECT_FALSE(gpsVelocity(message).has_value());
 }
 
 TEST(Imu, SampleAndOrientation) {

@@ -34,11 +34,15 @@ Eigen::Matrix3d fixCovarianceMap(const sensor_msgs::NavSatFix& fix, double min_s
                                  double default_sigma_horizontal_m,
                                  double default_sigma_vertical_m);
 
-// Velocity in the map frame of a gps/vel message: kitti2bag publishes the OXTS body-frame
-// velocity (vf, vl, vu) with frame_id imu_link/base_link; a message whose frame_id is the map
-// frame is taken as is. nullopt when not finite or when a body velocity has no rotation.
-std::optional<Eigen::Vector3d> velocityInMap(const geometry_msgs::TwistStamped& velocity,
-                                             const std::optional<Eigen::Matrix3d>& body_to_map);
+// The velocity of a gps/vel message: kitti2bag publishes the OXTS body-frame velocity (vf, vl,
+// vu) with frame_id imu_link/base_link; a message whose frame_id is the map frame is in the map
+// frame. nullopt when not finite.
+struct GpsVelocity {
+  double stamp_s = 0.0;
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  bool in_body_frame = true;
+};
+std::optional<GpsVelocity> gpsVelocity(const geometry_msgs::TwistStamped& message);
 
 // geometry_msgs/PoseWithCovariance covariance (row-major 6x6: x y z, then rotation about the
 // FIXED map axes x y z) from a filter's pose covariance (position in map, then body-frame

@@ -1,0 +1,53 @@
+#include "inekf_semantic_mapping/estimation/lazy_start.h"
+
+#include <cmath>
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+void LazyStart::offerOrientation(const Eigen::Matrix3d& body_to_map) {
+  if (body_to_map.allFinite()) orientation_ = body_to_map;
+}
+
+void LazyStart::offerVelocity(double stamp_s, const Eigen::Vector3d& velocity, bool in_body_frame) {
+  if (!std::isfinite(stamp_s) || !velocity.allFinite()) return;
+  velocity_stamp_s_ = stamp_s;
+  velocity_ = velocity;
+  velocity_in_body_frame_ = in_body_frame;
+}
+
+std::optional<Eigen::Vector3d> LazyStart::velocityForPendingFix() const {
+  if (!pending_fix_ || !velocity_stamp_s_ ||
+      std::abs(*velocity_stamp_s_ - pending_fix_->stamp_s) > config_.max_velocity_age_s) {
+    return std::nullopt;
+  }
+  if (!velocity_in_body_frame_) return velocity_;
+  if (!orientation_) return std::nullopt;
+  return Eigen::Vector3d(*orientation_ * velocity_);
+}
+
+std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_source_exists) {
+  if (!pending_fix_) return std::nullopt;
+  std::optional<Eigen::Vector3d> velocity = velocityForPendingFix();
+  if (config_.use_reference && now_s - pending_fix_->stamp_s <= config_.max_wait_s) {
+    if (!orientation_) return std::nullopt;                        // its IMU message
+    if (!velocity && velocity_source_exists) return std::nullopt;  // its velocity
+  }
+  Start start;
+  start.fix = *pending_fix_;
+  pending_fix_.reset();
+  if (config_.use_reference && orientation_) {
+    start.orientation = orientation_;
+    start.velocity_map = velocity;
+  }
+  return start;
+}
+
+void LazyStart::reset() {
+  pending_fix_.reset();
+  orientation_.reset();
+  velocity_stamp_s_.reset();
+}
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
