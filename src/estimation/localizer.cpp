@@ -177,63 +177,74 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   initialized_ = true;
   consecutive_rejected_fixes_ = 0;
   last_accepted_fix_s_ = initial.stamp_s;
-  history_.clear();
+  clearHistory();
   last_fix_stamp_s_ = -std::numeric_limits<double>::infinity();
-  recordStep(ImuSample(), 0.0, 1.0, 1.0);
+  recordStep(ImuStep());  // the initial state: dt 0, nothing to replay
 }
 
-void Localizer::recordStep(const ImuSample& sample, double dt, double gyro_scale,
-                           double accel_scale) {
+void Localizer::propagate(const ImuStep& step) {
+  filter_->setProcessNoiseScale(step.gyro_noise_scale, step.accel_noise_scale);
+  filter_->propagate(step.sample, step.dt);
+  filter_->setProcessNoiseScale(1.0, 1.0);
+}
+
+void Localizer::recordStep(const ImuStep& step) {
   if (!(config_.fix_history_s > 0.0)) return;
-  HistoryStep step;
-  step.sample = sample;
-  step.dt = dt;
-  step.gyro_noise_scale = gyro_scale;
-  step.accel_noise_scale = accel_scale;
-  step.state = filter_->state();
-  step.covariance = filter_->covariance();
-  history_.push_back(std::move(step));
+  history_.push_back({step, filter_->state(), filter_->covariance()});
   const double oldest_kept_s = history_.back().state.stamp_s - config_.fix_history_s;
   // Keep the newest step at or before the horizon: a fix exactly fix_history_s late rewinds to it.
-  while (history_.size() > 1 && history_[1].state.stamp_s <= oldest_kept_s) history_.pop_front();
+  while (history_.size() - history_begin_ > 1 &&
+         history_[history_begin_ + 1].state.stamp_s <= oldest_kept_s) {
+    ++history_begin_;
+  }
+  // Drop the expired steps in bulk (amortized O(1) per step): the vector's storage is reused,
+  // so recording allocates nothing per IMU sample once it has grown to the window.
+  if (history_begin_ > history_.size() / 2) {
+    history_.erase(history_.begin(),
+                   history_.begin() + static_cast<std::ptrdiff_t>(history_begin_));
+    history_begin_ = 0;
+  }
 }
 
-int Localizer::lateFixStep(double stamp_s) const {
-  if (history_.size() < 2) return -1;
+void Localizer::clearHistory() {
+  history_.clear();
+  history_begin_ = 0;
+}
+
+std::ptrdiff_t Localizer::lateFixStep(double stamp_s) const {
+  const auto begin = static_cast<std::ptrdiff_t>(history_begin_);
+  const auto newest = static_cast<std::ptrdiff_t>(history_.size()) - 1;
+  if (newest - begin < 1) return -1;
   if (stamp_s >= history_.back().state.stamp_s - kDuplicateStampS) return -1;  // not late
   // Replaying past an applied fix would drop it: a fix older than the last one is not rewound.
   if (stamp_s < last_fix_stamp_s_ - kDuplicateStampS) return -1;
-  int step = static_cast<int>(history_.size()) - 1;
-  while (step >= 0 && history_[step].state.stamp_s > stamp_s + kDuplicateStampS) --step;
-  return step;  // -1: older than the history
+  std::ptrdiff_t step = newest;
+  while (step >= begin && history_[step].state.stamp_s > stamp_s + kDuplicateStampS) --step;
+  return step >= begin ? step : -1;  // -1: older than the history
 }
 
-CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, int step) {
+CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdiff_t step) {
   filter_->initialize(history_[step].state, history_[step].covariance);
   const double into_next = fix.stamp_s - history_[step].state.stamp_s;
   if (into_next > kDuplicateStampS) {
     // The fix falls inside the next step: split that step at the fix's time (its sample holds
     // over the whole interval, so the two parts integrate to the same as the whole).
-    HistoryStep first_part = history_[step + 1];
+    ImuStep first_part = history_[step + 1].step;
     first_part.dt = into_next;
-    filter_->setProcessNoiseScale(first_part.gyro_noise_scale, first_part.accel_noise_scale);
-    filter_->propagate(first_part.sample, first_part.dt);
-    filter_->setProcessNoiseScale(1.0, 1.0);
-    history_[step + 1].dt -= into_next;
-    history_.insert(history_.begin() + step + 1, std::move(first_part));
+    propagate(first_part);
+    history_[step + 1].step.dt -= into_next;
+    history_.insert(history_.begin() + step + 1,
+                    {first_part, filter_->state(), filter_->covariance()});
     ++step;
   }
   const CorrectionResult result = applyFix(fix);
   history_[step].state = filter_->state();
   history_[step].covariance = filter_->covariance();
   for (std::size_t k = static_cast<std::size_t>(step) + 1; k < history_.size(); ++k) {
-    HistoryStep& later = history_[k];
-    filter_->setProcessNoiseScale(later.gyro_noise_scale, later.accel_noise_scale);
-    filter_->propagate(later.sample, later.dt);
-    later.state = filter_->state();
-    later.covariance = filter_->covariance();
+    propagate(history_[k].step);
+    history_[k].state = filter_->state();
+    history_[k].covariance = filter_->covariance();
   }
-  filter_->setProcessNoiseScale(1.0, 1.0);
   return result;
 }
 
@@ -279,10 +290,9 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   } else {
     interpolated_run_start_s_ = -1.0;
   }
-  filter_->setProcessNoiseScale(gyro_scale, accel_scale);
-  filter_->propagate(sample, dt);
-  filter_->setProcessNoiseScale(1.0, 1.0);
-  recordStep(sample, dt, gyro_scale, accel_scale);
+  const ImuStep step{sample, dt, gyro_scale, accel_scale};
+  propagate(step);
+  recordStep(step);
   last_imu_ = sample;
   ++statistics_.imu_used;
   if (gap) {
@@ -360,7 +370,7 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
   }
 
   // A late fix (older than the state) goes to its own time when the history reaches back to it.
-  const int step = lateFixStep(used.stamp_s);
+  const std::ptrdiff_t step = lateFixStep(used.stamp_s);
   if (step < 0) return applyFix(used);
   ++statistics_.gps_applied_late;
   return applyFixInHistory(used, step);
@@ -418,7 +428,7 @@ void Localizer::reset() {
   reference_velocity_.reset();
   interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
-  history_.clear();
+  clearHistory();
 }
 
 }  // namespace estimation

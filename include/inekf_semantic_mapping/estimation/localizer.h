@@ -29,11 +29,12 @@
 //    reject every later fix forever (KITTI 0028 frames 860..1080).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/estimation/navigation_filter.h"
 #include "inekf_semantic_mapping/estimation/types.h"
@@ -139,22 +140,29 @@ class Localizer {
   ErrorCovariance initialWorldCovariance() const;
 
  private:
-  // One IMU step as propagated, and the filter after it: what a rewind restores and replays.
-  struct HistoryStep {
+  // One IMU sample held over dt, with the process-noise scales it is propagated with.
+  struct ImuStep {
     ImuSample sample;
     double dt = 0.0;  // 0: the initial state (nothing to replay)
     double gyro_noise_scale = 1.0, accel_noise_scale = 1.0;
+  };
+  // A step and the filter after it: what a rewind restores and replays.
+  struct HistoryStep {
+    ImuStep step;
     NavState state;
     ErrorCovariance covariance;
   };
 
-  void recordStep(const ImuSample& sample, double dt, double gyro_scale, double accel_scale);
+  // The filter over one step (the same path for live and replayed samples).
+  void propagate(const ImuStep& step);
+  void recordStep(const ImuStep& step);
+  void clearHistory();
   // The history step to rewind to for a fix stamped stamp_s (the last step at or before it), or
   // -1: not late, older than the history, or older than a fix already applied.
-  int lateFixStep(double stamp_s) const;
+  std::ptrdiff_t lateFixStep(double stamp_s) const;
   // Rewinds to `step`, propagates to the fix's time (splitting the next step there), applies
   // the fix, and propagates the later steps again, updating the history.
-  CorrectionResult applyFixInHistory(const PositionFix& fix, int step);
+  CorrectionResult applyFixInHistory(const PositionFix& fix, std::ptrdiff_t step);
   // Gate, stale check, re-acquisition and the correction, at the filter's current time.
   CorrectionResult applyFix(const PositionFix& fix);
 
@@ -168,8 +176,11 @@ class Localizer {
   double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
   int consecutive_rejected_fixes_ = 0;
   double last_accepted_fix_s_ = 0.0;
-  double last_fix_stamp_s_ = 0.0;    // newest fix that reached the correction
-  std::deque<HistoryStep> history_;  // the last fix_history_s of steps, oldest first
+  double last_fix_stamp_s_ = 0.0;  // newest fix that reached the correction
+  // The steps of the last fix_history_s, oldest first, from history_[history_begin_] (the ones
+  // before it expired and are erased in bulk).
+  std::vector<HistoryStep> history_;
+  std::size_t history_begin_ = 0;
 };
 
 }  // namespace estimation
