@@ -281,11 +281,11 @@ std::size_t SemanticOcTree::insertLabeledScan(const LabeledScan& scan, double ma
   const double truncation_m = grazing_truncation_voxels_ * resolution;
   for (const auto& [key, voxel] : endpoints) {
     const octomap::point3d ray = voxel.ray_end - origin;
-    const double length = ray.norm();
-    if (truncation_m > 0.0 && ray.z() < 0.0 && length > 0.0) {
+    if (truncation_m > 0.0 && ray.z() < 0.0) {
       // Only rays that go down can graze the road. For a hit on flat ground the cut is
       // truncation_m / (sensor height) of the ray (12 % for 1 voxel of 0.2 m at 1.73 m); the cap
       // keeps a nearly level ray to a wall or a car from losing more than a quarter.
+      const double length = ray.norm();
       const double sin_elevation = -ray.z() / length;
       const double cut = std::min(kMaxGrazingCutFraction * length, truncation_m / sin_elevation);
       ray_ends.push_back(origin + ray * static_cast<float>(1.0 - cut / length));

@@ -147,7 +147,7 @@ class InekfNode {
                                  << stamp.toSec() << " s, last " << last_stamp_.toSec()
                                  << " s): resetting the filter and the path (bag loop?)");
       localizer_->reset();
-      resetStart();
+      lazy_start_->reset();
       path_.poses.clear();
       path_publisher_.publish(path_);
       last_path_publish_ = ros::Time();
@@ -157,8 +157,6 @@ class InekfNode {
     last_stamp_ = std::max(last_stamp_, stamp);
     if (clock_back || now > last_clock_) last_clock_ = now;
   }
-
-  void resetStart() { lazy_start_->reset(); }
 
   // Callbacks never let an exception out: log it with context and keep running.
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
@@ -327,7 +325,7 @@ class InekfNode {
       ROS_ERROR_THROTTLE(5.0, "inekf_node: non-finite state at %.3f s: resetting the filter",
                          state.stamp_s);
       localizer_->reset();
-      resetStart();
+      lazy_start_->reset();
       ++resets_;
       return;
     }

@@ -113,7 +113,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
 
   // Grazing rays: a ray that meets a horizontal surface (the road) at elevation angle e runs
   // within one voxel of it for the last resolution / sin(e) metres, and octomap's ray casting
-  // marks those surface voxels free (measured: 44 % of the true surface voxels of a synthetic
+  // marks those surface voxels free (measured: 48 % of the true surface voxels of a synthetic
   // drive were missing from the map). With voxels > 0 the free part of each downward ray that
   // ends in a hit stops voxels * resolution / sin(e) before the hit (at most a quarter of the
   // ray): what the ray cannot tell from the road is left as it is. The price: the last metres
