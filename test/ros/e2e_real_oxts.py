@@ -22,7 +22,7 @@ NAME = "e2e_real_oxts"
 class EndToEndRealOxts(unittest.TestCase):
     def test_inekf_on_real_oxts_drive(self):
         rospy.init_node("e2e_real_oxts_test")
-        p = lambda name, default: rospy.get_param("~" + name, default)
+        p = e2e.param
         drive = os.path.join(e2e.shared_dir(), "data", "kitti_raw", p("drive", "2011_09_26/2011_09_26_drive_0036_sync"))
         if not os.path.isdir(os.path.join(drive, "oxts")):
             message = "SKIPPED: %s not found (../shared absent): real-data e2e test not run" % drive
@@ -31,7 +31,7 @@ class EndToEndRealOxts(unittest.TestCase):
             self.skipTest(message)
         e2e.require_executables(self, "kitti2bag", "inekf_node")
         bag = e2e.kitti2bag(drive, ["--calib-dir", os.path.dirname(drive)] +
-                            p("bag_args", "--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1").split())
+                            p("bag_args", e2e.PROTOCOL_BAG_ARGS).split())
         monitor = e2e.pipeline_monitor.PipelineMonitor()
         self.assertTrue(e2e.wait_for_subscribers(["/kitti/oxts/imu", "/kitti/oxts/gps/fix"], 60),
                         "inekf_node did not subscribe")

@@ -22,12 +22,13 @@ NAME = "robustness_gps_outage"
 class GpsOutage(unittest.TestCase):
     def test_outage_is_survived_and_recovered(self):
         rospy.init_node("robustness_gps_outage_test")
-        p = lambda name, default: rospy.get_param("~" + name, default)
+        p = e2e.param
         duration = p("duration", 48.0)
         outage_start, outage_length = p("outage_start_s", 8.0), p("outage_length_s", 30.0)
         drive = e2e.synthetic_drive(duration, seed=p("seed", 11), generator_args=p("generator_args", "").split())
-        bag_args = ("--gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1 --gps-outage %g:%g"
-                    % (outage_start, outage_length)).split() + p("bag_args", "").split()
+        bag_args = (e2e.PROTOCOL_BAG_ARGS.split() +
+                    ["--gps-outage", "%g:%g" % (outage_start, outage_length)] +
+                    p("bag_args", "").split())
         bag = e2e.kitti2bag(drive, bag_args)
 
         estimate, truth = [], []  # (stamp, x, y, z, sigma_horizontal)
