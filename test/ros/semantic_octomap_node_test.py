@@ -4,7 +4,6 @@ building and its right half car in the label image, seen in three synchronized s
 that per-class markers and the labeled cloud appear, that ~save_map writes a SemanticOcTree .ot
 and a PLY whose labels sit on the right side of the map, that an unwritable path returns
 success=False with the node still serving, and that ~reset empties the map."""
-import json
 import os
 import shutil
 import tempfile
@@ -17,10 +16,10 @@ import tf2_ros
 from geometry_msgs.msg import TransformStamped
 from sensor_msgs import point_cloud2
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
-from std_msgs.msg import String
 from std_srvs.srv import Empty
 from visualization_msgs.msg import MarkerArray
 
+from inekf_semantic_mapping.msg import SemanticMapInfo
 from inekf_semantic_mapping.srv import SaveMap
 
 PKG = "inekf_semantic_mapping"
@@ -97,7 +96,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         cls.info = None
         cls.labeled_clouds = []
         rospy.Subscriber("/semantic_map/markers", MarkerArray, cls.on_markers)
-        rospy.Subscriber("/semantic_map/info", String, cls.on_info)
+        rospy.Subscriber("/semantic_map/info", SemanticMapInfo, cls.on_info)
         rospy.Subscriber("/semantic_map/labeled_cloud", PointCloud2, cls.on_cloud)
         cls.static_tf = tf2_ros.StaticTransformBroadcaster()
         # velo_link -> camera_color_left: camera z = velo x, camera x = -velo y, camera y = -velo z.
@@ -137,7 +136,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
     @classmethod
     def on_info(cls, msg):
         with cls.lock:
-            cls.info = json.loads(msg.data)
+            cls.info = msg
 
     @classmethod
     def on_cloud(cls, msg):
@@ -183,25 +182,30 @@ class SemanticOctomapNodeTest(unittest.TestCase):
             self.assertAlmostEqual(x, 10.0, delta=1e-3)
             if abs(y - MAP_Y_OFFSET) > 0.3:  # away from the image's centre column
                 self.assertEqual(label, BUILDING if y > MAP_Y_OFFSET else CAR, (x, y, label))
-        self.assertTrue(self.wait_for(lambda: self.info is not None and self.info["scans"] >= 3),
+        self.assertTrue(self.wait_for(lambda: self.info is not None and self.info.scans_inserted >= 3),
                         "info: %s" % self.info)
         with self.lock:
-            info = dict(self.info)
-        self.assertGreater(info["occupied_voxels"], 100, info)
-        self.assertIn("building", info["classes"])
-        self.assertIn("car", info["classes"])
+            info = self.info
+        self.assertGreater(info.occupied_voxels, 100, info)
+        self.assertEqual(info.scans_with_labels, 3, info)
+        self.assertEqual(info.label_images_used, 3, info)
+        self.assertIn("building", info.class_names)
+        self.assertIn("car", info.class_names)
 
     def test_3_scan_without_pose_is_skipped(self):
         with self.lock:
-            scans_before = self.info["scans"]
+            scans_before = self.info.scans_inserted
         stamp = rospy.Time.now()
         cloud = wall_cloud(stamp)
         cloud.header.frame_id = "frame_without_tf"
         self.cloud_pub.publish(cloud)
         self.labels_pub.publish(label_image(stamp))
-        rospy.sleep(1.5)
+        # Nothing blocks on the missing pose: the scan waits (label_wait + pose_wait), then it is
+        # dropped and counted.
+        self.assertTrue(self.wait_for(lambda: self.info.scans_without_pose >= 1, timeout=10),
+                        "info: %s" % self.info)
         with self.lock:
-            self.assertEqual(self.info["scans"], scans_before, "a scan without a pose was inserted")
+            self.assertEqual(self.info.scans_inserted, scans_before, "a scan without a pose was inserted")
 
     def test_4_save_map_ot_and_ply(self):
         ot_path = os.path.join(self.out_dir, "map.ot")

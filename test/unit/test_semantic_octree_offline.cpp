@@ -1,5 +1,6 @@
-// buildSemanticMapFromSequence (semantic_map_offline's core) on a small sequence written here:
-// the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input errors.
+// mapSequence (semantic_map_offline's core, through a SemanticMappingSession) on a small sequence
+// written here: the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input
+// errors.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -53,21 +54,29 @@ class OfflineMappingTest : public ::testing::Test {
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
 
-  OfflineMappingOptions options() const {
-    OfflineMappingOptions o;
+  OfflineSequence options() const {
+    OfflineSequence o;
     o.scans_dir = dir_ + "/velodyne";
     o.labels_dir = dir_ + "/labels";
     o.poses_path = dir_ + "/poses.txt";
     o.calib_path = dir_ + "/calib.txt";
-    o.resolution_m = 0.1;
-    o.max_range_m = 30;
     return o;
+  }
+  static std::unique_ptr<SemanticMappingSession> buildMap(const OfflineSequence& sequence) {
+    SemanticMappingConfig config;
+    config.resolution_m = 0.1;
+    config.max_range_m = 30;
+    config.class_set = "semantickitti";
+    auto session = std::make_unique<SemanticMappingSession>(config);
+    mapSequence(sequence, session.get(), nullptr, nullptr);
+    return session;
   }
   std::string dir_;
 };
 
 TEST_F(OfflineMappingTest, ScansLandWhereThePoseChainPutsThem) {
-  auto tree = buildSemanticMapFromSequence(options(), nullptr);
+  auto session = buildMap(options());
+  SemanticOcTree* tree = &session->tree();
   // Scan 0 is the map frame: its points stay where they are.
   const SemanticOcTreeNode* first = tree->search(10.05, 0.05, 0.05);
   ASSERT_NE(first, nullptr);
@@ -96,16 +105,16 @@ TEST_F(OfflineMappingTest, ScansLandWhereThePoseChainPutsThem) {
   EXPECT_NE(text.find(" 300 "), std::string::npos);
   EXPECT_NE(text.find(" 50 "), std::string::npos);
 
-  OfflineMappingOptions one = options();
+  OfflineSequence one = options();
   one.max_scans = 1;
-  auto single = buildSemanticMapFromSequence(one, nullptr);
-  EXPECT_EQ(single->search(13.05, -0.95, 0.05), nullptr);
+  auto single = buildMap(one);
+  EXPECT_EQ(single->tree().search(13.05, -0.95, 0.05), nullptr);
 }
 
 TEST_F(OfflineMappingTest, BadInputsNameTheFile) {
   writeBinary<std::uint32_t>(dir_ + "/labels/000001.label", {50u, 50u});  // 2 labels, 3 points
   try {
-    buildSemanticMapFromSequence(options(), nullptr);
+    buildMap(options());
     FAIL() << "expected an error";
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("000001.label"), std::string::npos) << e.what();
