@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
@@ -9,6 +10,8 @@
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 
 namespace inekf_semantic_mapping {
@@ -145,6 +148,67 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     *progress << "[semantic_map_offline] inserted " << total_points << " points from "
               << scan_paths.size() << " scans\n";
   }
+}
+
+void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress) {
+  const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
+  if (!raw.hasVelodyne()) throw std::runtime_error(drive.drive_dir + ": no velodyne_points/");
+  if (!raw.hasCalibration()) {
+    throw std::runtime_error(drive.drive_dir + ": no calibration (calib_*.txt) found");
+  }
+  const kitti::RawCalibration calibration = raw.readCalibration();
+  const Eigen::Isometry3d T_imu_velo = calibration.T_velo_imu.inverse();
+  std::vector<Eigen::Isometry3d> T_map_imu;
+  if (!drive.poses_path.empty()) {
+    T_map_imu = readOdometryPoses(drive.poses_path);
+  } else {
+    const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
+    if (oxts.empty()) throw std::runtime_error(drive.drive_dir + ": oxts/ has no frames");
+    const auto projection = kitti::MercatorProjection::atFirstFix(oxts.front().record);
+    for (const kitti::OxtsFrame& frame : oxts) {
+      T_map_imu.push_back(projection.poseInMap(frame.record));
+    }
+  }
+  std::size_t frames = raw.velodyne().size();
+  if (drive.max_scans >= 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  if (frames > T_map_imu.size()) {
+    throw std::runtime_error(
+        (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) + ": " +
+        std::to_string(T_map_imu.size()) + " poses for " + std::to_string(frames) +
+        " velodyne frames");
+  }
+  const kitti::CameraProjection projection = calibration.projection(drive.camera_index);
+  for (std::size_t frame = 0; frame < frames; ++frame) {
+    kitti::VelodyneScan velodyne;
+    {
+      ScopedTimer timer("offline/read");
+      velodyne = kitti::readVelodyneBin(raw.velodyne().framePath(frame));
+    }
+    const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+        velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
+    const Eigen::Isometry3d T_map_velo = T_map_imu[frame] * T_imu_velo;
+    char stem[16];
+    std::snprintf(stem, sizeof(stem), "%010zu", frame);
+    OwnedLabelImage image;
+    std::string evidence = "no labels";
+    if (camera_labels && (*camera_labels)(stem, &image)) {
+      const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                static_cast<std::size_t>(image.width)};
+      const CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
+                               image.width, image.height};
+      session->insertScan(buffer.topRows<3>(), T_map_velo, &view, &camera);
+      evidence = "camera labels";
+    } else {
+      session->insertScan(buffer.topRows<3>(), T_map_velo);
+    }
+    if (progress) {
+      *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
+                << velodyne.size() << " points, " << evidence << "), map " << session->tree().size()
+                << " nodes\n";
+    }
+  }
+  session->tree().updateInnerOccupancy();
 }
 
 }  // namespace mapping

@@ -5,6 +5,8 @@
 //
 //   semantic_map_offline --scans DIR --poses POSES.txt --calib CALIB.txt --output MAP.ot
 //       [--labels DIR | --images DIR --model MODEL [--model-card CARD.yaml]]
+//   semantic_map_offline --drive <date>/<date>_drive_NNNN_sync --output MAP.ot
+//       [--model MODEL [--model-card CARD.yaml]] [--poses IMU_POSES.txt] [--camera N]
 //       [--config semantic_mapping.yaml] [--resolution R] [--max-range M] [--confusion P]
 //       [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes] [--prob-hit P]
 //       [--prob-miss P] [--grazing-truncation VOXELS] [--max-scans N] [--export-ply MAP.ply]
@@ -30,7 +32,9 @@ using ism::common::UsageError;
 constexpr char kUsage[] =
     "usage: semantic_map_offline --scans DIR --poses POSES.txt --calib CALIB.txt --output MAP.ot\n"
     "         [--labels DIR | --images DIR --model MODEL [--model-card CARD.yaml]]\n"
-    "         [--config semantic_mapping.yaml] [--resolution R] [--max-range M]\n"
+    "       semantic_map_offline --drive DRIVE_SYNC_DIR --output MAP.ot [--model MODEL\n"
+    "         [--model-card CARD.yaml]] [--poses IMU_POSES.txt] [--calib-dir DIR] [--camera 2]\n"
+    "     both [--config semantic_mapping.yaml] [--resolution R] [--max-range M]\n"
     "         [--confusion P] [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes]\n"
     "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n"
     "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
@@ -38,6 +42,10 @@ constexpr char kUsage[] =
     "             semantickitti)\n"
     "  --images   camera images DIR/NNNNNN.png, segmented with MODEL (Cityscapes labelIds;\n"
     "             default classes cityscapes); calib.txt's P2 projects the scans into them\n"
+    "  --drive    a KITTI raw drive: velodyne_points/, oxts/, image_0N/ (N = --camera), the\n"
+    "             calibration in its date folder; poses: --poses (IMU in the map frame per frame,\n"
+    "             inekf_offline --output-kitti) or the OXTS RTK/INS solution; with --model the\n"
+    "             scans are labelled from image_0N\n"
     "  --config   the node's YAML (config/semantic_mapping.yaml); flags override its values\n";
 
 // The session config: the YAML file if given, then the flags.
@@ -96,42 +104,77 @@ ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
 int main(int argc, char** argv) {
   namespace mapping = ism::mapping;
   return ism::common::runCli("semantic_map_offline", kUsage, [&] {
-    const ism::common::CommandLine cli(
-        argc, argv,
-        {"--scans",      "--labels",    "--images",    "--model",      "--model-card",
-         "--poses",      "--calib",     "--config",    "--resolution", "--output",
-         "--export-ply", "--max-range", "--confusion", "--fusion",     "--max-scans",
-         "--classes",    "--color-ot",  "--prob-hit",  "--prob-miss",  "--grazing-truncation",
-         "--threads"});
+    const ism::common::CommandLine cli(argc, argv,
+                                       {"--scans",
+                                        "--drive",
+                                        "--calib-dir",
+                                        "--camera",
+                                        "--labels",
+                                        "--images",
+                                        "--model",
+                                        "--model-card",
+                                        "--poses",
+                                        "--calib",
+                                        "--config",
+                                        "--resolution",
+                                        "--output",
+                                        "--export-ply",
+                                        "--max-range",
+                                        "--confusion",
+                                        "--fusion",
+                                        "--max-scans",
+                                        "--classes",
+                                        "--color-ot",
+                                        "--prob-hit",
+                                        "--prob-miss",
+                                        "--grazing-truncation",
+                                        "--threads"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
-    mapping::OfflineSequence sequence;
-    sequence.scans_dir = cli.require("--scans");
-    sequence.poses_path = cli.require("--poses");
-    sequence.calib_path = cli.require("--calib");
-    sequence.labels_dir = cli.get("--labels");
-    sequence.max_scans = cli.getInt("--max-scans", -1);
-    const std::string output = cli.require("--output");
-    if (cli.has("--labels") && cli.has("--images")) {
-      throw UsageError("give --labels or --images, not both");
+    const bool raw_drive = cli.has("--drive");
+    if (raw_drive == cli.has("--scans")) throw UsageError("give --scans or --drive");
+    if (cli.has("--labels") && (cli.has("--images") || cli.has("--model"))) {
+      throw UsageError("give --labels or --images/--model, not both");
     }
-    if (cli.has("--images") != cli.has("--model")) {
+    if (!raw_drive && cli.has("--images") != cli.has("--model")) {
       throw UsageError("--images and --model go together");
     }
+    const std::string output = cli.require("--output");
     mapping::SemanticMappingSession session(configFrom(cli));
 
     mapping::CameraLabelSource camera_labels;
-    if (cli.has("--images")) {
+    if (cli.has("--model")) {
       const std::string model = cli.get("--model");
       const ism::perception::ModelCard card =
           cli.has("--model-card") ? ism::perception::loadModelCard(cli.get("--model-card"))
                                   : ism::perception::defaultModelCardFor(model);
       auto net =
           std::make_shared<ism::perception::Segmenter>(model, card, cli.getInt("--threads", 2));
-      std::cerr << "[semantic_map_offline] segmenting " << cli.get("--images") << " with " << model
-                << " (card " << card.source << ")\n";
-      camera_labels = segmentingSource(cli.get("--images"), net);
+      const std::string images = raw_drive ? cli.get("--drive") + "/image_" +
+                                                 (cli.getInt("--camera", 2) < 10 ? "0" : "") +
+                                                 std::to_string(cli.getInt("--camera", 2)) + "/data"
+                                           : cli.get("--images");
+      std::cerr << "[semantic_map_offline] segmenting " << images << " with " << model << " (card "
+                << card.source << ")\n";
+      camera_labels = segmentingSource(images, net);
     }
-    mapping::mapSequence(sequence, &session, camera_labels ? &camera_labels : nullptr, &std::cerr);
+    const mapping::CameraLabelSource* labels_source = camera_labels ? &camera_labels : nullptr;
+    if (raw_drive) {
+      mapping::OfflineRawDrive drive;
+      drive.drive_dir = cli.get("--drive");
+      drive.calib_dir = cli.get("--calib-dir");
+      drive.poses_path = cli.get("--poses");
+      drive.camera_index = cli.getInt("--camera", 2);
+      drive.max_scans = cli.getInt("--max-scans", -1);
+      mapping::mapRawDrive(drive, &session, labels_source, &std::cerr);
+    } else {
+      mapping::OfflineSequence sequence;
+      sequence.scans_dir = cli.require("--scans");
+      sequence.poses_path = cli.require("--poses");
+      sequence.calib_path = cli.require("--calib");
+      sequence.labels_dir = cli.get("--labels");
+      sequence.max_scans = cli.getInt("--max-scans", -1);
+      mapping::mapSequence(sequence, &session, labels_source, &std::cerr);
+    }
 
     const mapping::MappingStatistics& stats = session.statistics();
     std::cerr << "[semantic_map_offline] " << stats.scans_inserted << " scans, "

@@ -49,6 +49,23 @@ std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_sca
 // The left colour camera (P2) of an odometry calib.txt, for images of width x height.
 CameraModel odometryColorCamera(const std::string& calib_path, int width, int height);
 
+// A KITTI raw drive folder: <date>/<date>_drive_NNNN_sync with velodyne_points/, oxts/ and
+// image_0N/, calibration in the date folder (or calib_dir).
+struct OfflineRawDrive {
+  std::string drive_dir;
+  std::string calib_dir;   // "" = the drive's date folder
+  std::string poses_path;  // IMU poses in the map frame, one 3x4 per frame (inekf_offline
+                           // --output-kitti); "" = the OXTS RTK/INS solution
+  int camera_index = 2;
+  int max_scans = -1;  // < 0: all
+};
+
+// Inserts every velodyne frame of the drive at T_map_velo = T_map_imu * inv(T_velo_imu), with
+// camera labels from `camera_labels` (stem = the 10-digit frame number, image
+// image_0N/data/<stem>.png) when given. Map frame: the devkit's Mercator frame at the first fix.
+void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress);
+
 // Inserts the scans in frame order into `session` (per-point labels if labels_dir is set, else
 // camera labels if `camera_labels` is given, else occupancy only); progress lines go to
 // `progress` (may be null). Throws on missing or malformed inputs (the message names the file).
