@@ -45,8 +45,16 @@ void SemanticMappingConfig::validate() const {
   require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait", "must be in [0, 30] s");
 }
 
-SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source,
-                                                const std::vector<std::string>& other_keys) {
+const std::vector<std::string>& semanticMappingNodeKeys() {
+  static const std::vector<std::string> keys = {
+      "map_frame",    "marker_rate",   "max_display_cpu_fraction",
+      "marker_depth", "calib_dir",     "camera_index",
+      "map_file",     "autosave_path", "autosave_period",
+      "log_period"};
+  return keys;
+}
+
+SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source) {
   common::YamlReader reader(source, root);
   SemanticMappingConfig config;
   reader.read("resolution", &config.resolution_m);
@@ -73,7 +81,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
   reader.read("label_wait", &config.label_wait_s);
   reader.read("pose_wait", &config.pose_wait_s);
-  for (const std::string& key : other_keys) reader.allow(key);
+  for (const std::string& key : semanticMappingNodeKeys()) reader.allow(key);
   reader.rejectUnknown();
   try {
     config.validate();
@@ -83,15 +91,14 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   return config;
 }
 
-SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path,
-                                                const std::vector<std::string>& other_keys) {
+SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(yaml_path);
   } catch (const YAML::Exception& e) {
     throw common::ConfigError(yaml_path + ": cannot read config: " + e.what());
   }
-  return readSemanticMappingConfig(root, yaml_path, other_keys);
+  return readSemanticMappingConfig(root, yaml_path);
 }
 
 SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& config)

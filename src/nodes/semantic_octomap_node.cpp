@@ -7,7 +7,8 @@
 // its stamp. Poses come from tf (map_frame -> cloud frame at the scan stamp) when the session
 // inserts a scan: scans queue until their pose is there, nothing blocks the spinner.
 // Publishes /semantic_map/markers, /semantic_map/labeled_cloud, /semantic_map/info
-// (SemanticMapInfo); services ~save_map, ~reset. Parameters: config/semantic_mapping.yaml.
+// (SemanticMapInfo); services ~save_map, ~load_map, ~reset; ~map_file resumes from a saved map,
+// ~autosave_path saves periodically and at shutdown. Parameters: config/semantic_mapping.yaml.
 #include <ros/ros.h>
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
@@ -19,6 +20,7 @@
 #include <memory>
 #include <optional>
 
+#include "inekf_semantic_mapping/LoadMap.h"
 #include "inekf_semantic_mapping/SaveMap.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"
@@ -40,7 +42,9 @@ struct NodeOptions {
   int marker_depth = 15;
   std::string calib_dir;
   int camera_index = 2;
-  std::string map_file;  // loaded at start when set
+  std::string map_file;       // loaded at start when set
+  std::string autosave_path;  // saved every autosave_period and at shutdown when set
+  double autosave_period_s = 30.0;
   double log_period_s = 10.0;
 };
 
@@ -57,11 +61,11 @@ class SemanticOctomapNode {
     reader.read("calib_dir", &options_.calib_dir);
     reader.read("camera_index", &options_.camera_index);
     reader.read("map_file", &options_.map_file);
+    reader.read("autosave_path", &options_.autosave_path);
+    reader.read("autosave_period", &options_.autosave_period_s);
     reader.read("log_period", &options_.log_period_s);
-    session_ = std::make_unique<mapping::SemanticMappingSession>(mapping::readSemanticMappingConfig(
-        parameters, source,
-        {"map_frame", "marker_rate", "max_display_cpu_fraction", "marker_depth", "calib_dir",
-         "camera_index", "map_file", "log_period"}));
+    session_ = std::make_unique<mapping::SemanticMappingSession>(
+        mapping::readSemanticMappingConfig(parameters, source));
     session_->setPoseLookup([this](double stamp, const std::string& frame) {
       return lookup(options_.map_frame, frame, ros::Time(stamp));
     });
@@ -90,6 +94,11 @@ class SemanticOctomapNode {
         nh_.subscribe(topics::kSegmentationLabels, 5, &SemanticOctomapNode::onLabels, this);
     save_srv_ = pnh_.advertiseService("save_map", &SemanticOctomapNode::onSaveMap, this);
     reset_srv_ = pnh_.advertiseService("reset", &SemanticOctomapNode::onReset, this);
+    load_srv_ = pnh_.advertiseService("load_map", &SemanticOctomapNode::onLoadMap, this);
+    if (!options_.autosave_path.empty() && options_.autosave_period_s > 0) {
+      autosave_timer_ = nh_.createWallTimer(ros::WallDuration(options_.autosave_period_s),
+                                            [this](const ros::WallTimerEvent&) { autosave(); });
+    }
     // Pending scans go in when their wait is over, also after the last message of a bag.
     clock_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &SemanticOctomapNode::onTick, this);
     if (options_.marker_rate_hz > 0) {
@@ -104,6 +113,8 @@ class SemanticOctomapNode {
                     << " m, classes " << config.class_set << ", label wait " << config.label_wait_s
                     << " s");
   }
+
+  ~SemanticOctomapNode() { autosave(); }
 
  private:
   std::optional<Eigen::Isometry3d> lookup(const std::string& target, const std::string& source,
@@ -254,6 +265,36 @@ class SemanticOctomapNode {
     return true;  // the failure is in the response, the node keeps running
   }
 
+  bool onLoadMap(LoadMap::Request& request, LoadMap::Response& response) {
+    try {
+      session_->load(request.path);
+      map_changed_ = true;
+      response.success = true;
+      response.nodes = session_->tree().size();
+      response.message =
+          "loaded " + request.path + " (" + std::to_string(response.nodes) + " nodes)";
+      ROS_INFO_STREAM("semantic_octomap_node: " << response.message);
+    } catch (const std::exception& e) {
+      response.success = false;
+      response.message = e.what();
+      ROS_ERROR_STREAM(
+          "semantic_octomap_node: load_map failed, the current map is kept: " << e.what());
+    }
+    return true;
+  }
+
+  // Atomic, so a crash during a save never leaves a broken file.
+  void autosave() {
+    if (options_.autosave_path.empty() || !session_ || session_->statistics().scans_inserted == 0) {
+      return;
+    }
+    try {
+      session_->save(options_.autosave_path, mapping::MapFormat::kSemanticOt);
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(60, "semantic_octomap_node: autosave failed: " << e.what());
+    }
+  }
+
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
     session_->reset();
     map_changed_ = true;
@@ -286,8 +327,8 @@ class SemanticOctomapNode {
   std::array<std::size_t, 4> published_counts_{};
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher markers_pub_, cloud_pub_, info_pub_;
-  ros::ServiceServer save_srv_, reset_srv_;
-  ros::WallTimer clock_timer_, display_timer_, log_timer_;
+  ros::ServiceServer save_srv_, reset_srv_, load_srv_;
+  ros::WallTimer clock_timer_, display_timer_, log_timer_, autosave_timer_;
   ros::WallTime last_display_start_;
   double last_display_cost_s_ = 0.0;
   ros::Time last_clock_;

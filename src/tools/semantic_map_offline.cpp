@@ -53,11 +53,7 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   namespace mapping = ism::mapping;
   mapping::SemanticMappingConfig config;
   if (cli.has("--config")) {
-    // The node-only keys are valid in the file; the offline tool has no use for them.
-    config = mapping::loadSemanticMappingConfig(
-        cli.get("--config"),
-        {"map_frame", "marker_rate", "max_display_cpu_fraction", "marker_depth", "calib_dir",
-         "camera_index", "map_file", "log_period"});
+    config = mapping::loadSemanticMappingConfig(cli.get("--config"));
   }
   config.class_set = cli.has("--labels") ? "semantickitti" : "cityscapes";
   if (cli.has("--classes")) config.class_set = cli.get("--classes");

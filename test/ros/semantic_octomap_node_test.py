@@ -3,7 +3,8 @@
 building and its right half car in the label image, seen in three synchronized scans. Checks
 that per-class markers and the labeled cloud appear, that ~save_map writes a SemanticOcTree .ot
 and a PLY whose labels sit on the right side of the map, that an unwritable path returns
-success=False with the node still serving, and that ~reset empties the map."""
+success=False with the node still serving, that ~reset empties the map and that ~load_map
+refuses a corrupt file and restores a saved one."""
 import os
 import shutil
 import tempfile
@@ -20,7 +21,7 @@ from std_srvs.srv import Empty
 from visualization_msgs.msg import MarkerArray
 
 from inekf_semantic_mapping.msg import SemanticMapInfo
-from inekf_semantic_mapping.srv import SaveMap
+from inekf_semantic_mapping.srv import LoadMap, SaveMap
 
 PKG = "inekf_semantic_mapping"
 NODE = "/semantic_octomap_node"
@@ -122,6 +123,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
             rospy.sleep(0.5)
         cls.save = rospy.ServiceProxy(NODE + "/save_map", SaveMap)
         cls.reset = rospy.ServiceProxy(NODE + "/reset", Empty)
+        cls.load = rospy.ServiceProxy(NODE + "/load_map", LoadMap)
         cls.out_dir = tempfile.mkdtemp(prefix="ism_semantic_octomap_node_")
 
     @classmethod
@@ -239,11 +241,28 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         response = self.save(os.path.join(self.out_dir, "again.ot"), "ot")
         self.assertTrue(response.success, "node did not survive the failed save: " + response.message)
 
-    def test_6_reset_empties_the_map(self):
+    def test_6_reset_empties_the_map_and_load_map_restores_it(self):
+        saved = os.path.join(self.out_dir, "before_reset.ot")
+        before = self.save(saved, "ot")
+        self.assertTrue(before.success, before.message)
         self.reset()
         response = self.save(os.path.join(self.out_dir, "empty.ply"), "ply")
         self.assertTrue(response.success, response.message)
         self.assertEqual(response.voxel_count, 0)
+        # A corrupt file is refused and the (empty) map is kept; the saved one loads back.
+        with open(saved, "rb") as f:
+            data = bytearray(f.read())
+        data[-10] ^= 0x5A
+        corrupt = os.path.join(self.out_dir, "corrupt.ot")
+        with open(corrupt, "wb") as f:
+            f.write(bytes(data))
+        refused = self.load(corrupt)
+        self.assertFalse(refused.success)
+        self.assertIn("corrupt", refused.message)
+        loaded = self.load(saved)
+        self.assertTrue(loaded.success, loaded.message)
+        again = self.save(os.path.join(self.out_dir, "after_load.ot"), "ot")
+        self.assertEqual(again.voxel_count, before.voxel_count)
 
 
 if __name__ == "__main__":

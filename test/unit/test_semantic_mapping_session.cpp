@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <sstream>
 
@@ -14,11 +16,6 @@
 namespace inekf_semantic_mapping {
 namespace mapping {
 namespace {
-
-const std::vector<std::string> kNodeKeys = {
-    "map_frame",    "marker_rate", "max_display_cpu_fraction",
-    "marker_depth", "calib_dir",   "camera_index",
-    "map_file",     "log_period"};
 
 // A 100 x 100 pinhole camera at the sensor origin looking along +z.
 CameraModel testCamera() {
@@ -77,7 +74,7 @@ std::uint32_t labelAt(const SemanticMappingSession& session, double x, double y,
 
 TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
   const SemanticMappingConfig from_yaml =
-      loadSemanticMappingConfig(test::repoPath("config/semantic_mapping.yaml"), kNodeKeys);
+      loadSemanticMappingConfig(test::repoPath("config/semantic_mapping.yaml"));
   const SemanticMappingConfig defaults;
   EXPECT_EQ(from_yaml.resolution_m, defaults.resolution_m);
   EXPECT_EQ(from_yaml.max_range_m, defaults.max_range_m);
@@ -275,6 +272,69 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
   session.reset();
   EXPECT_EQ(session.tree().size(), 0u);
   EXPECT_EQ(session.statistics().scans_inserted, 0u);
+  std::filesystem::remove_all(dir);
+}
+
+// The hardened .ot reader: corruption anywhere in the node data, truncation, other tree types and
+// crafted depth bombs are refused with a reason; the map in memory is untouched.
+TEST(SemanticMapFileTest, CorruptOrCraftedMapsAreRefusedWithAReason) {
+  SemanticMappingSession session(testConfig());
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  const std::string dir = test::makeTempDir("map_file");
+  const std::string good = dir + "/map.ot";
+  session.save(good, MapFormat::kSemanticOt);
+  std::ifstream in(good, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto write = [&](const std::string& name, const std::string& content) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << content;
+    return dir + "/" + name;
+  };
+  const auto refusal = [&](const std::string& path) {
+    SemanticMappingSession target(testConfig());
+    try {
+      target.load(path);
+    } catch (const MapIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string("loaded");
+  };
+  // Ten single-byte corruptions spread over the node data (the last 40 % of the file).
+  for (int k = 0; k < 10; ++k) {
+    std::string corrupt = bytes;
+    const std::size_t at = bytes.size() - 1 - k * (bytes.size() * 2 / 5) / 10;
+    corrupt[at] = static_cast<char>(corrupt[at] ^ 0x5A);
+    const std::string why = refusal(write("corrupt.ot", corrupt));
+    EXPECT_NE(why, "loaded") << "byte " << at;
+    EXPECT_NE(why.find("corrupt.ot"), std::string::npos) << why;
+  }
+  EXPECT_NE(refusal(write("truncated.ot", bytes.substr(0, bytes.size() - 100))).find("truncated"),
+            std::string::npos);
+  EXPECT_NE(refusal(write("other.ot", "# Octomap OcTree file\nid OcTree\nsize 1\nres 0.1\ndata\n"))
+                .find("not a SemanticOcTree"),
+            std::string::npos);
+  EXPECT_NE(refusal(dir).find("directory"), std::string::npos);
+  // A V1 file (no integrity record) whose nodes each claim one child, 40 levels deep.
+  std::string bomb = "# Octomap OcTree file\nid SemanticOcTree\nsize 40\nres 0.1\ndata\n";
+  bomb += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
+  bomb += '\0';  // bayes
+  const double probability = 0.8, prior = 0.5;
+  bomb.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
+  bomb.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
+  bomb.append(4, '\0');  // no classes
+  for (int level = 0; level < 40; ++level) {
+    bomb.append(4, '\0');             // log-odds 0
+    bomb.append(4, '\xff');           // no classes in the slots
+    bomb.append(8, '\0');             // counts
+    bomb += static_cast<char>(0x01);  // one child
+  }
+  EXPECT_NE(refusal(write("bomb.ot", bomb)).find("finest level"), std::string::npos);
+  // The intact file still loads, and equals the map it came from.
+  SemanticMappingSession loaded(testConfig());
+  loaded.load(good);
+  EXPECT_EQ(serialized(loaded), serialized(session));
   std::filesystem::remove_all(dir);
 }
 

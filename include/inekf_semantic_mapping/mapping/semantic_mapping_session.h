@@ -57,12 +57,13 @@ struct SemanticMappingConfig {
   void validate() const;
 };
 
-// Reads the keys above (plus node-only keys, which it leaves to `unknown_ok`) from a YAML map;
-// unknown keys and bad values throw std::invalid_argument naming `source` and the key.
-SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source,
-                                                const std::vector<std::string>& other_keys = {});
-SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path,
-                                                const std::vector<std::string>& other_keys = {});
+// The keys of the same YAML that semantic_octomap_node reads itself (display, frames, files).
+const std::vector<std::string>& semanticMappingNodeKeys();
+
+// Reads the keys above from a YAML map (the node's keys are allowed and left alone); unknown keys
+// and bad values throw std::invalid_argument (common::ConfigError) naming `source` and the key.
+SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source);
+SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path);
 
 // A rectified camera: pixel ~ P [R_rect (T_camera_sensor x); 1] in a width x height image.
 struct CameraModel {
