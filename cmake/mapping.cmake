@@ -73,3 +73,8 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
 endif()
+
+# Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).
+ism_add_gtest(test_input_validation
+  SOURCES test/unit/test_input_validation.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)

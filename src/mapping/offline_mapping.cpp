@@ -37,8 +37,20 @@ std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path) {
                                  std::to_string(i));
       }
     }
+    std::string extra;
+    if (values >> extra) {
+      throw std::runtime_error(path + ":" + std::to_string(line_number) +
+                               ": more than 12 numbers (3x4 row-major pose), extra '" + extra +
+                               "'");
+    }
     if (!pose.allFinite()) {
       throw std::runtime_error(path + ":" + std::to_string(line_number) + ": non-finite pose");
+    }
+    const Eigen::Matrix3d R = pose.leftCols<3>();
+    if (!((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-3) ||
+        !(R.determinant() > 0)) {
+      throw std::runtime_error(path + ":" + std::to_string(line_number) +
+                               ": the 3x3 part is not a rotation");
     }
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     T.matrix().topRows<3>() = pose;
