@@ -103,8 +103,8 @@ std::uint64_t mixSeed(std::uint64_t seed, std::uint64_t stream, std::uint64_t in
   return h ^ (h >> 29);
 }
 
-// Fast PNG: level 1 with run-length matching costs ~20% less CPU than plain level 1 on these
-// noisy frames (38 vs 49 ms for colour + label image), for ~15% larger colour files.
+// Fast PNG: level 1 with run-length matching costs less CPU than plain level 1 on these noisy
+// frames, for somewhat larger colour files.
 void writePng(const std::string& path, const cv::Mat& image) {
   std::vector<uchar> bytes;
   if (!cv::imencode(".png", image, bytes,

@@ -157,7 +157,7 @@ inline Eigen::Vector3d rotateZ(const Eigen::Vector3d& v, double c, double s) {
 namespace {
 
 // The intersection proper, with the box's cos/sin(yaw) precomputed (the world caches them: the
-// trigonometry was 15% of a camera frame).
+// trigonometry was a large part of a camera frame).
 bool intersectPrimitive(const Primitive& primitive, double c, double s,
                         const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double t_min,
                         double t_max, double* t_hit, Eigen::Vector3d* normal) {

@@ -113,12 +113,11 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
 
   // Grazing rays: a ray that meets a horizontal surface (the road) at elevation angle e runs
   // within one voxel of it for the last resolution / sin(e) metres, and octomap's ray casting
-  // marks those surface voxels free (measured: 48 % of the true surface voxels of a synthetic
-  // drive were missing from the map). With voxels > 0 the free part of each downward ray that
-  // ends in a hit stops voxels * resolution / sin(e) before the hit (at most a quarter of the
-  // ray): what the ray cannot tell from the road is left as it is. The price: the last metres
-  // in front of low obstacles are cleared only by steeper rays (a moving car's trace lasts
-  // longer). 0: octomap's behaviour.
+  // marks those surface voxels free (the README's semantic-map results measure how many). With
+  // voxels > 0 the free part of each downward ray that ends in a hit stops voxels * resolution /
+  // sin(e) before the hit (at most a quarter of the ray): what the ray cannot tell from the road is
+  // left as it is. The price: the last metres in front of low obstacles are cleared only by steeper
+  // rays (a moving car's trace lasts longer). 0: octomap's behaviour.
   void setGrazingRayTruncation(double voxels) { grazing_truncation_voxels_ = voxels; }
 
   // Adds one hit with class evidence at a leaf (max depth), expanding pruned nodes.
