@@ -29,6 +29,8 @@ PACKAGES=(
   # tests, benchmarks, scripts, headless rviz
   libgtest-dev libbenchmark-dev python3-numpy python3-matplotlib python3-yaml
   rviz xvfb imagemagick
+  # fuzz harnesses (libFuzzer with clang) run by scripts/fuzz.sh
+  clang-14 libfuzzer-14-dev
 )
 if [[ ${1:-} == --with-training ]]; then
   PACKAGES+=(python3-torch python3-onnx)

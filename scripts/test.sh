@@ -23,6 +23,13 @@ stdbuf -oL -eL catkin_make run_tests -j1 >"$log" 2>&1
 set -e
 grep -E '^\[ *(RUN|OK|FAILED|SKIPPED|PASSED) *\]|^\[ROSTEST\]|^\[ROSUNIT\]|SKIPPED:|FAILURE|Error' "$log" | tail -n 400 || true
 
+# The core's unit tests again under ASan + UBSan, and every parser's fuzz harness for a bounded
+# time (ISM_FUZZ_SECONDS each); both write their results beside the others.
+if [[ ${ISM_SKIP_SANITIZERS:-0} != 1 ]]; then
+  "$ISM_ROOT/scripts/sanitize.sh" || true
+  "$ISM_ROOT/scripts/fuzz.sh" "${ISM_FUZZ_SECONDS:-15}" || true
+fi
+
 summary=$(catkin_test_results build/test_results --verbose 2>&1 || true)
 echo "$summary" | grep -vE '^$' | tail -n 60
 line=$(echo "$summary" | grep -E '^Summary:' | tail -n 1)
