@@ -89,7 +89,8 @@ class SemanticOctomapNode {
     info_pub_ = nh_.advertise<SemanticMapInfo>(topics::kMapInfo, 1, true);
     camera_info_sub_ =
         nh_.subscribe(topics::kCameraColorLeftInfo, 1, &SemanticOctomapNode::onCameraInfo, this);
-    cloud_sub_ = nh_.subscribe(topics::kVelodyne, 5, &SemanticOctomapNode::onCloud, this);
+    // Room for the scans that arrive while a label image's batch of waiting scans goes in.
+    cloud_sub_ = nh_.subscribe(topics::kVelodyne, 30, &SemanticOctomapNode::onCloud, this);
     labels_sub_ =
         nh_.subscribe(topics::kSegmentationLabels, 5, &SemanticOctomapNode::onLabels, this);
     save_srv_ = pnh_.advertiseService("save_map", &SemanticOctomapNode::onSaveMap, this);
@@ -141,11 +142,32 @@ class SemanticOctomapNode {
     return conv::cameraModelFromInfo(*camera_info_, *T_camera_velo);
   }
 
+  // Scans that come before the first label image are cut to the camera's view as soon as the
+  // camera is known, like the labelled ones (a whole HDL-64 scan costs several times more).
+  void setCameraView() {
+    if (file_camera_ && file_camera_->width > 0 && file_camera_->height > 0) {
+      session_->setCameraView(mapping::CameraModel{file_camera_->P_rect, file_camera_->R_rect,
+                                                   file_camera_->T_cam0_velo, file_camera_->width,
+                                                   file_camera_->height});
+      return;
+    }
+    if (!camera_info_) return;
+    const auto T_camera_velo = lookup(camera_info_->header.frame_id, velo_frame_, ros::Time(0));
+    if (!T_camera_velo) return;
+    try {
+      session_->setCameraView(conv::cameraModelFromInfo(*camera_info_, *T_camera_velo));
+    } catch (const std::exception& e) {
+      ROS_WARN_STREAM_THROTTLE(10, "semantic_octomap_node: " << topics::kCameraColorLeftInfo
+                                                             << " unusable: " << e.what());
+    }
+  }
+
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& cloud) {
     try {
       ScopedTimer timer("semantic_map/scan");
       detectClockJump();
       velo_frame_ = cloud->header.frame_id;
+      if (!session_->hasCameraView()) setCameraView();
       session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
                         conv::pointsFromCloud(*cloud));
       passWaitingLabels();

@@ -120,6 +120,11 @@ class SemanticMappingSession {
   // the end of a run or before the node clears its tf buffer; the others are dropped.
   std::size_t flush();
   std::size_t pendingScans() const { return pending_scans_.size(); }
+  // The camera whose view scans without a label image are cut to (with
+  // insert_points_outside_image false) before the first label image brings its own; without it
+  // such scans go in whole (lidar-only runs).
+  void setCameraView(const CameraModel& camera) { last_camera_ = camera; }
+  bool hasCameraView() const { return last_camera_.has_value(); }
 
   // --- Direct insertion (offline tools): a scan with its pose and, optionally, its label image
   // or per-point label ids (points.cols() of them; `ignored_label` adds no class evidence).
