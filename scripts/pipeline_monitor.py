@@ -103,6 +103,11 @@ class PipelineMonitor:
                     span = log.stamps[-1] - log.stamps[0]
                     entry.update(first_stamp=log.stamps[0], last_stamp=log.stamps[-1],
                                  rate_hz=(len(log.stamps) - 1) / span if span > 0 else None)
+                # Over wall time: what a slow stage (segmentation) really delivers, whatever the
+                # playback rate and however sparse the stamps of what it kept.
+                if len(log.arrivals) >= 2:
+                    wall_span = log.arrivals[-1] - log.arrivals[0]
+                    entry["wall_rate_hz"] = (len(log.arrivals) - 1) / wall_span if wall_span > 0 else None
                 result["topics"][topic] = entry
             result["scan_to_map_latency_s"] = self._latency(SCAN_TOPIC, "/semantic_map/labeled_cloud")
             result["image_to_labels_latency_s"] = self._latency(IMAGE_TOPIC, "/segmentation/labels")
