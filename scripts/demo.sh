@@ -52,7 +52,9 @@ EOM
 elif [[ $model != none && -f $model && $(realpath "$model") == $(realpath "$synthetic_model") ]]; then
   echo "[demo] WARNING: the synthetic-world U-Net on a real drive: expect wrong labels" >&2
 fi
-if [[ $model != none ]]; then
+if [[ $model == none ]]; then
+  echo "[demo] --model none: no segmentation, the map holds occupancy only (unlabeled voxels)" >&2
+else
   [[ -f $model ]] || { echo "[demo] segmentation model $model not found (--model FILE, or --model none)" >&2; exit 2; }
   model=$(realpath "$model")
 fi
@@ -149,7 +151,7 @@ Xvfb "$display" -screen 0 1400x900x24 -nolisten tcp >"$out/xvfb.log" 2>&1 &
 xvfb_pid=$!
 export DISPLAY=$display LIBGL_ALWAYS_SOFTWARE=1
 
-log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port)"
+log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port, model $model)"
 roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" model:="$model" \
   rviz:=false play_delay:=5 origin_lat:="$origin_lat" origin_lon:="$origin_lon" origin_alt:="$origin_alt" gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
 launch_pid=$!
