@@ -9,11 +9,16 @@ ism_add_core_library(${PROJECT_NAME}_mapping
     src/mapping/semantic_octree.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
-  LINK ${PROJECT_NAME}_kitti ${OCTOMAP_LIBRARIES} Threads::Threads
+    src/mapping/semantic_mapping_session.cpp
+  LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
+       ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
 
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_semantic_mapping_session
+  SOURCES test/unit/test_semantic_mapping_session.cpp
   LINK ${PROJECT_NAME}_mapping)
 
 ism_add_tool(project_cloud
@@ -22,7 +27,7 @@ ism_add_tool(project_cloud
 target_include_directories(project_cloud SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
 ism_add_tool(semantic_map_offline
   SOURCES src/tools/semantic_map_offline.cpp
-  LINK ${PROJECT_NAME}_mapping)
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_perception)
 
 # Unit tests (the CLI tests run the tools, so they depend on them).
 ism_add_gtest(test_projection
@@ -50,10 +55,26 @@ if(benchmark_FOUND)
     ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
 endif()
 
+# Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
+add_library(${PROJECT_NAME}_mapping_ros src/ros/mapping_conversions.cpp)
+target_include_directories(${PROJECT_NAME}_mapping_ros PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+target_link_libraries(${PROJECT_NAME}_mapping_ros PUBLIC
+  ${PROJECT_NAME}_mapping ${catkin_LIBRARIES} yaml-cpp)
+add_dependencies(${PROJECT_NAME}_mapping_ros
+  ${PROJECT_NAME}_generate_messages_cpp ${catkin_EXPORTED_TARGETS})
+install(TARGETS ${PROJECT_NAME}_mapping_ros
+  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
+  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+
 ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp
-  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_projection)
+  LINK ${PROJECT_NAME}_mapping_ros)
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
 endif()
+
+# Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).
+ism_add_gtest(test_input_validation
+  SOURCES test/unit/test_input_validation.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)

@@ -84,6 +84,10 @@ KeyValues readKeyValues(const std::string& path) {
         throw KittiFormatError(path, line_number,
                                "'" + key + "': value '" + token + "' is not a number");
       }
+      if (!std::isfinite(v)) {
+        throw KittiFormatError(path, line_number,
+                               "'" + key + "': value '" + token + "' is not finite");
+      }
       values.push_back(v);
     }
     kv.values[key] = std::move(values);
@@ -97,6 +101,19 @@ KeyValues readKeyValues(const std::string& path) {
 void orthonormalize(Eigen::Isometry3d* t) {
   const Eigen::Quaterniond q(t->linear());
   t->linear() = q.normalized().toRotationMatrix();
+}
+
+// The same for a rotation read from `path`: a matrix that is no rotation within the files'
+// printing precision is an error naming the key, never silently made into one.
+void orthonormalizeRead(Eigen::Isometry3d* t, const std::string& path, const std::string& key) {
+  const Eigen::Matrix3d R = t->linear();
+  const double error = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (!(error < 1e-3) || !(R.determinant() > 0)) {
+    throw KittiFormatError(path, "'" + key +
+                                     "' is not a rotation (|R^T R - I| = " + std::to_string(error) +
+                                     ", det = " + std::to_string(R.determinant()) + ")");
+  }
+  orthonormalize(t);
 }
 
 }  // namespace
@@ -137,10 +154,10 @@ RawCalibration readRawCalibration(const std::string& date_dir) {
   RawCalibration calib;
   const KeyValues imu_to_velo = readKeyValues(date_dir + "/calib_imu_to_velo.txt");
   calib.T_velo_imu = imu_to_velo.isometryRT("R", "T");
-  orthonormalize(&calib.T_velo_imu);
+  orthonormalizeRead(&calib.T_velo_imu, imu_to_velo.path, "R");
   const KeyValues velo_to_cam = readKeyValues(date_dir + "/calib_velo_to_cam.txt");
   calib.T_cam0_velo = velo_to_cam.isometryRT("R", "T");
-  orthonormalize(&calib.T_cam0_velo);
+  orthonormalizeRead(&calib.T_cam0_velo, velo_to_cam.path, "R");
 
   const KeyValues cam_to_cam = readKeyValues(date_dir + "/calib_cam_to_cam.txt");
   bool any_camera = false;
@@ -160,6 +177,11 @@ RawCalibration readRawCalibration(const std::string& date_dir) {
     camera.T = Eigen::Vector3d(t[0], t[1], t[2]);
     const auto& s_rect = cam_to_cam.get(std::string("S_rect") + suffix, 2);
     camera.S_rect = Eigen::Vector2d(s_rect[0], s_rect[1]);
+    if (!(s_rect[0] >= 1 && s_rect[0] <= 100000 && s_rect[1] >= 1 && s_rect[1] <= 100000)) {
+      throw KittiFormatError(
+          cam_to_cam.path, cam_to_cam.line_of.at(std::string("S_rect") + suffix),
+          std::string("'S_rect") + suffix + "' must be an image size in [1, 100000]");
+    }
     camera.R_rect = cam_to_cam.matrix3(std::string("R_rect") + suffix);
     camera.P_rect = cam_to_cam.matrix34(std::string("P_rect") + suffix);
   }
@@ -193,11 +215,12 @@ ObjectCalibration readObjectCalibration(const std::string& calib_txt) {
   } else {
     throw KittiFormatError(calib_txt, "missing key 'Tr_velo_to_cam' (or odometry 'Tr')");
   }
-  orthonormalize(&calib.Tr_velo_to_cam);
+  orthonormalizeRead(&calib.Tr_velo_to_cam, calib_txt,
+                     kv.has("Tr_velo_to_cam") ? "Tr_velo_to_cam" : "Tr");
   calib.has_imu_to_velo = kv.has("Tr_imu_to_velo");
   if (calib.has_imu_to_velo) {
     calib.Tr_imu_to_velo = kv.isometry34("Tr_imu_to_velo");
-    orthonormalize(&calib.Tr_imu_to_velo);
+    orthonormalizeRead(&calib.Tr_imu_to_velo, calib_txt, "Tr_imu_to_velo");
   }
   return calib;
 }

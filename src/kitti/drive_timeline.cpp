@@ -10,8 +10,12 @@ namespace kitti {
 
 std::vector<TimelineEvent> buildDriveTimeline(const RawDrive& drive,
                                               const TimelineOptions& options) {
-  if (!(options.start_offset_s >= 0) || !std::isfinite(options.duration_s)) {
-    throw std::invalid_argument("drive timeline: start offset must be >= 0 and duration finite");
+  // Offsets beyond a century would overflow the nanosecond stamps (llround of 1e10 s * 1e9).
+  constexpr double kMaxSeconds = 100.0 * 365 * 86400;
+  if (!(options.start_offset_s >= 0 && options.start_offset_s <= kMaxSeconds) ||
+      !(options.duration_s <= kMaxSeconds) || !std::isfinite(options.duration_s)) {
+    throw std::invalid_argument(
+        "drive timeline: start offset must be in [0, 3.15e9] s and duration at most 3.15e9 s");
   }
   const std::int64_t first_ns = drive.firstStampNs();
   const std::int64_t begin_ns = first_ns + std::llround(options.start_offset_s * 1e9);

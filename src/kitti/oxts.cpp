@@ -44,6 +44,13 @@ OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_er
           std::string("field ") + kFieldNames[i] + " is not finite: '" + tokens[i] + "'");
     }
   }
+  // A latitude beyond the poles would make every Mercator pose NaN downstream.
+  if (std::fabs(values[0]) > 90.0 || std::fabs(values[1]) > 180.0 ||
+      std::fabs(values[2]) > 100000.0) {
+    throw KittiFormatError(file_for_errors, line_number,
+                           "lat/lon/alt out of range (|lat| <= 90, |lon| <= 180, |alt| <= 1e5): '" +
+                               tokens[0] + " " + tokens[1] + " " + tokens[2] + "'");
+  }
   int flags[5];
   for (int i = 0; i < 5; ++i) {
     const double v = values[25 + i];

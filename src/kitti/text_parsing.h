@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -36,6 +37,9 @@ inline bool parseDouble(const std::string& token, double* value) {
 }
 
 inline std::ifstream openOrThrow(const std::string& path) {
+  if (std::filesystem::is_directory(path)) {
+    throw KittiFormatError(path, "is a directory, expected a file");
+  }
   std::ifstream stream(path);
   if (!stream) throw KittiFormatError(path, "cannot open file (missing or unreadable)");
   return stream;

@@ -70,9 +70,16 @@ std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
       !readDigits(text, &pos, 2, &second)) {
     throw fail("malformed date/time");
   }
-  if (month < 1 || month > 12 || day < 1 || day > 31 || hour > 23 || minute > 59 || second > 60) {
+  if (month < 1 || month > 12 || day < 1 || hour > 23 || minute > 59 || second > 60) {
     throw fail("date/time field out of range");
   }
+  static constexpr int kDaysInMonth[] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+  const bool leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+  if (day > kDaysInMonth[month - 1] + (month == 2 && leap ? 1 : 0)) {
+    throw fail("day " + std::to_string(day) + " does not exist in month " + std::to_string(month));
+  }
+  // Nanoseconds since 1970 in an int64 reach from 1677 to 2262.
+  if (year < 1678 || year > 2261) throw fail("year outside 1678..2261");
   std::int64_t fraction_ns = 0;
   if (pos < text.size()) {
     if (!expectChar(text, &pos, '.')) throw fail("unexpected character after seconds");

@@ -146,13 +146,36 @@ std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat for
 std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw MapIoError("cannot read map '" + path + "': " + std::strerror(errno));
+  if (std::filesystem::is_directory(path)) {
+    throw MapIoError("cannot read map '" + path + "': it is a directory");
+  }
+  // Check the tree type in the header before octomap's factory builds anything: octomap's own
+  // readers recurse without a depth limit.
+  std::string line;
+  std::string id;
+  for (int i = 0; i < 8 && std::getline(in, line); ++i) {
+    if (line.rfind("id ", 0) == 0) {
+      id = line.substr(3);
+      break;
+    }
+  }
+  if (id != "SemanticOcTree") {
+    throw MapIoError("map '" + path + "' holds " + (id.empty() ? "no octomap header" : "a " + id) +
+                     ", not a SemanticOcTree");
+  }
+  in.clear();
+  in.seekg(0);
   std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(in));
   if (!tree) throw MapIoError("cannot read map '" + path + "': not a valid octomap .ot file");
-  if (in.fail()) throw MapIoError("cannot read map '" + path + "': truncated or corrupt data");
   auto* semantic = dynamic_cast<SemanticOcTree*>(tree.get());
   if (!semantic) {
     throw MapIoError("map '" + path + "' holds a " + tree->getTreeType() +
                      ", not a SemanticOcTree");
+  }
+  if (in.fail() || !semantic->readError().empty()) {
+    throw MapIoError(
+        "cannot read map '" + path + "': " +
+        (semantic->readError().empty() ? "truncated or corrupt data" : semantic->readError()));
   }
   tree.release();
   return std::unique_ptr<SemanticOcTree>(semantic);

@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
@@ -9,11 +10,14 @@
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
-#include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
 namespace mapping {
+
+namespace fs = std::filesystem;
 
 std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path) {
   std::ifstream in(path);
@@ -33,8 +37,20 @@ std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path) {
                                  std::to_string(i));
       }
     }
+    std::string extra;
+    if (values >> extra) {
+      throw std::runtime_error(path + ":" + std::to_string(line_number) +
+                               ": more than 12 numbers (3x4 row-major pose), extra '" + extra +
+                               "'");
+    }
     if (!pose.allFinite()) {
       throw std::runtime_error(path + ":" + std::to_string(line_number) + ": non-finite pose");
+    }
+    const Eigen::Matrix3d R = pose.leftCols<3>();
+    if (!((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-3) ||
+        !(R.determinant() > 0)) {
+      throw std::runtime_error(path + ":" + std::to_string(line_number) +
+                               ": the 3x3 part is not a rotation");
     }
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     T.matrix().topRows<3>() = pose;
@@ -43,37 +59,44 @@ std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path) {
   return poses;
 }
 
-std::unique_ptr<SemanticOcTree> buildSemanticMapFromSequence(const OfflineMappingOptions& options,
-                                                             std::ostream* progress) {
-  namespace fs = std::filesystem;
-  if (!fs::is_directory(options.scans_dir)) {
-    throw std::runtime_error(options.scans_dir + ": scans directory not found");
+std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans) {
+  if (!fs::is_directory(scans_dir)) {
+    throw std::runtime_error(scans_dir + ": scans directory not found");
   }
-  std::vector<fs::path> scan_paths;
-  for (const auto& entry : fs::directory_iterator(options.scans_dir)) {
-    if (entry.path().extension() == ".bin") scan_paths.push_back(entry.path());
+  std::vector<std::string> paths;
+  for (const auto& entry : fs::directory_iterator(scans_dir)) {
+    if (entry.path().extension() == ".bin") paths.push_back(entry.path().string());
   }
-  std::sort(scan_paths.begin(), scan_paths.end());
-  if (scan_paths.empty()) throw std::runtime_error(options.scans_dir + ": no .bin scans");
-  if (options.max_scans >= 0 && scan_paths.size() > static_cast<std::size_t>(options.max_scans)) {
-    scan_paths.resize(static_cast<std::size_t>(options.max_scans));
+  std::sort(paths.begin(), paths.end());
+  if (paths.empty()) throw std::runtime_error(scans_dir + ": no .bin scans");
+  if (max_scans >= 0 && paths.size() > static_cast<std::size_t>(max_scans)) {
+    paths.resize(static_cast<std::size_t>(max_scans));
   }
+  return paths;
+}
 
-  const std::vector<Eigen::Isometry3d> poses = readOdometryPoses(options.poses_path);
+CameraModel odometryColorCamera(const std::string& calib_path, int width, int height) {
+  const kitti::ObjectCalibration calib = kitti::readObjectCalibration(calib_path);
+  CameraModel camera;
+  camera.P = calib.P[2];
+  camera.R_rect = Eigen::Matrix3d::Identity();  // odometry Tr maps into rectified cam0
+  camera.T_camera_sensor = calib.Tr_velo_to_cam;
+  camera.width = width;
+  camera.height = height;
+  return camera;
+}
+
+void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress) {
+  const std::vector<std::string> scan_paths = listScanFiles(sequence.scans_dir, sequence.max_scans);
+  const std::vector<Eigen::Isometry3d> poses = readOdometryPoses(sequence.poses_path);
   const Eigen::Isometry3d T_cam0_velo =
-      kitti::readObjectCalibration(options.calib_path).Tr_velo_to_cam;
+      kitti::readObjectCalibration(sequence.calib_path).Tr_velo_to_cam;
   const Eigen::Isometry3d T_velo_cam0 = T_cam0_velo.inverse();
 
-  auto tree =
-      std::make_unique<SemanticOcTree>(options.resolution_m, options.classes, options.fusion);
-  tree->setProbHit(options.prob_hit);
-  tree->setProbMiss(options.prob_miss);
-  tree->setGrazingRayTruncation(options.grazing_truncation_voxels);
-  LabeledScan scan;
-  scan.unknown_label_id = options.ignored_label_id;
   std::size_t total_points = 0;
   for (std::size_t n = 0; n < scan_paths.size(); ++n) {
-    const fs::path& scan_path = scan_paths[n];
+    const fs::path scan_path(scan_paths[n]);
     const std::string stem = scan_path.stem().string();
     std::size_t frame = 0;
     try {
@@ -82,61 +105,122 @@ std::unique_ptr<SemanticOcTree> buildSemanticMapFromSequence(const OfflineMappin
       throw std::runtime_error(scan_path.string() + ": scan name is not a frame number");
     }
     if (frame >= poses.size()) {
-      throw std::runtime_error(options.poses_path + ": no pose for scan " + scan_path.string() +
+      throw std::runtime_error(sequence.poses_path + ": no pose for scan " + scan_path.string() +
                                " (" + std::to_string(poses.size()) + " poses)");
     }
     kitti::VelodyneScan velodyne;
-    std::vector<std::uint32_t> raw_labels;
     {
       ScopedTimer timer("offline/read");
       velodyne = kitti::readVelodyneBin(scan_path.string());
-      const std::string label_path = (fs::path(options.labels_dir) / (stem + ".label")).string();
-      raw_labels = kitti::readLabelFile(label_path);
-      if (raw_labels.size() != velodyne.size()) {
-        throw std::runtime_error(label_path + ": " + std::to_string(raw_labels.size()) +
+    }
+    const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+        velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
+    const Eigen::Matrix3Xf points = buffer.topRows<3>();
+    const Eigen::Isometry3d T_w_velo = T_velo_cam0 * poses[frame] * T_cam0_velo;
+    std::string evidence = "no labels";
+    if (!sequence.labels_dir.empty()) {
+      const std::string label_path = (fs::path(sequence.labels_dir) / (stem + ".label")).string();
+      std::vector<std::uint32_t> labels = kitti::readLabelFile(label_path);
+      if (labels.size() != velodyne.size()) {
+        throw std::runtime_error(label_path + ": " + std::to_string(labels.size()) +
                                  " labels for " + std::to_string(velodyne.size()) + " points in " +
                                  scan_path.string());
       }
-    }
-    {
-      ScopedTimer timer("offline/transform");
-      const Eigen::Isometry3d T_w_velo = T_velo_cam0 * poses[frame] * T_cam0_velo;
-      const Eigen::Matrix3f rotation = T_w_velo.linear().cast<float>();
-      const Eigen::Vector3f translation = T_w_velo.translation().cast<float>();
-      Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
-          velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
-      scan.points_map = (rotation * buffer.topRows<3>()).colwise() + translation;
-      scan.sensor_origin_map = translation;
-      scan.label_ids.resize(raw_labels.size());
-      for (std::size_t i = 0; i < raw_labels.size(); ++i) {
-        const std::uint32_t label = kitti::semanticClass(raw_labels[i]);
-        scan.label_ids[i] = label;
-        if (label != options.ignored_label_id) {
-          // Ids the configured set does not know get their own class (grey for display).
-          tree->mutableClassSet().addLabel(label);
-        }
+      for (std::uint32_t& label : labels) label = kitti::semanticClass(label);
+      session->insertScanWithPointLabels(points, T_w_velo, labels, sequence.ignored_label_id);
+      evidence = "point labels";
+    } else if (camera_labels) {
+      OwnedLabelImage image;
+      if ((*camera_labels)(stem, &image)) {
+        const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                  static_cast<std::size_t>(image.width)};
+        const CameraModel camera =
+            odometryColorCamera(sequence.calib_path, image.width, image.height);
+        session->insertScan(points, T_w_velo, &view, &camera);
+        evidence = "camera labels";
+      } else {
+        session->insertScan(points, T_w_velo);
+        evidence = "no label image";
       }
-    }
-    {
-      ScopedTimer timer("offline/insert");
-      tree->insertLabeledScan(scan, options.max_range_m);
+    } else {
+      session->insertScan(points, T_w_velo);
     }
     total_points += velodyne.size();
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scan_paths.size() << " ("
-                << scan_path.filename().string() << ", " << velodyne.size() << " points), map "
-                << tree->size() << " nodes\n";
+                << scan_path.filename().string() << ", " << velodyne.size() << " points, "
+                << evidence << "), map " << session->tree().size() << " nodes\n";
     }
   }
   {
     ScopedTimer timer("offline/update_inner");
-    tree->updateInnerOccupancy();
+    session->tree().updateInnerOccupancy();
   }
   if (progress) {
     *progress << "[semantic_map_offline] inserted " << total_points << " points from "
               << scan_paths.size() << " scans\n";
   }
-  return tree;
+}
+
+void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress) {
+  const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
+  if (!raw.hasVelodyne()) throw std::runtime_error(drive.drive_dir + ": no velodyne_points/");
+  if (!raw.hasCalibration()) {
+    throw std::runtime_error(drive.drive_dir + ": no calibration (calib_*.txt) found");
+  }
+  const kitti::RawCalibration calibration = raw.readCalibration();
+  const Eigen::Isometry3d T_imu_velo = calibration.T_velo_imu.inverse();
+  std::vector<Eigen::Isometry3d> T_map_imu;
+  if (!drive.poses_path.empty()) {
+    T_map_imu = readOdometryPoses(drive.poses_path);
+  } else {
+    const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
+    if (oxts.empty()) throw std::runtime_error(drive.drive_dir + ": oxts/ has no frames");
+    const auto projection = kitti::MercatorProjection::atFirstFix(oxts.front().record);
+    for (const kitti::OxtsFrame& frame : oxts) {
+      T_map_imu.push_back(projection.poseInMap(frame.record));
+    }
+  }
+  std::size_t frames = raw.velodyne().size();
+  if (drive.max_scans >= 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  if (frames > T_map_imu.size()) {
+    throw std::runtime_error(
+        (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) + ": " +
+        std::to_string(T_map_imu.size()) + " poses for " + std::to_string(frames) +
+        " velodyne frames");
+  }
+  const kitti::CameraProjection projection = calibration.projection(drive.camera_index);
+  for (std::size_t frame = 0; frame < frames; ++frame) {
+    kitti::VelodyneScan velodyne;
+    {
+      ScopedTimer timer("offline/read");
+      velodyne = kitti::readVelodyneBin(raw.velodyne().framePath(frame));
+    }
+    const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+        velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
+    const Eigen::Isometry3d T_map_velo = T_map_imu[frame] * T_imu_velo;
+    char stem[16];
+    std::snprintf(stem, sizeof(stem), "%010zu", frame);
+    OwnedLabelImage image;
+    std::string evidence = "no labels";
+    if (camera_labels && (*camera_labels)(stem, &image)) {
+      const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                static_cast<std::size_t>(image.width)};
+      const CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
+                               image.width, image.height};
+      session->insertScan(buffer.topRows<3>(), T_map_velo, &view, &camera);
+      evidence = "camera labels";
+    } else {
+      session->insertScan(buffer.topRows<3>(), T_map_velo);
+    }
+    if (progress) {
+      *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
+                << velodyne.size() << " points, " << evidence << "), map " << session->tree().size()
+                << " nodes\n";
+    }
+  }
+  session->tree().updateInnerOccupancy();
 }
 
 }  // namespace mapping

@@ -1,109 +1,195 @@
-// semantic_map_offline: builds a semantic OctoMap from a SemanticKITTI-layout sequence (ground
-// truth labels or any network's per-point predictions) and saves it as .ot (+ PLY).
+// semantic_map_offline: builds a semantic OctoMap from a SemanticKITTI-layout sequence through
+// the same SemanticMappingSession as semantic_octomap_node, and saves it as .ot (+ PLY). Class
+// evidence from per-point labels (ground truth or a network's per-point predictions), or from
+// the camera: each scan's image segmented with the same Segmenter as segmentation_node.
 //
-//   semantic_map_offline --scans DIR --labels DIR --poses POSES.txt --calib CALIB.txt
-//       --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M] [--confusion P]
-//       [--fusion bayes|dirichlet] [--max-scans N] [--classes semantickitti|cityscapes]
-//       [--color-ot MAP_COLOR.ot] [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS]
+//   semantic_map_offline --scans DIR --poses POSES.txt --calib CALIB.txt --output MAP.ot
+//       [--labels DIR | --images DIR --model MODEL [--model-card CARD.yaml]]
+//   semantic_map_offline --drive <date>/<date>_drive_NNNN_sync --output MAP.ot
+//       [--model MODEL [--model-card CARD.yaml]] [--poses IMU_POSES.txt] [--camera N]
+//       [--config semantic_mapping.yaml] [--resolution R] [--max-range M] [--confusion P]
+//       [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes] [--prob-hit P]
+//       [--prob-miss P] [--grazing-truncation VOXELS] [--max-scans N] [--export-ply MAP.ply]
+//       [--color-ot MAP_COLOR.ot] [--threads N]
 #include <iostream>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
 #include <string>
 
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
-#include "inekf_semantic_mapping/mapping/semantic_octree.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "inekf_semantic_mapping/perception/model_card.h"
+#include "inekf_semantic_mapping/perception/segmenter.h"
 
 namespace {
 
-constexpr char kUsage[] =
-    "usage: semantic_map_offline --scans DIR --labels DIR --poses POSES.txt --calib CALIB.txt\n"
-    "         --resolution R --output MAP.ot --export-ply MAP.ply [--max-range M]\n"
-    "         [--confusion P] [--fusion bayes|dirichlet] [--max-scans N]\n"
-    "         [--classes semantickitti|cityscapes] [--color-ot MAP_COLOR.ot]\n"
-    "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n";
+namespace ism = inekf_semantic_mapping;
+using ism::common::UsageError;
 
-// Builds and saves the map (errors propagate to runCli: exit 1).
-int run(const inekf_semantic_mapping::mapping::OfflineMappingOptions& options,
-        const std::string& output, const std::string& export_ply, const std::string& color_ot) {
-  using namespace inekf_semantic_mapping;
-  std::unique_ptr<mapping::SemanticOcTree> tree =
-      mapping::buildSemanticMapFromSequence(options, &std::cerr);
-  {
-    ScopedTimer timer("offline/save_ot");
-    const std::size_t occupied = mapping::saveMap(*tree, output, mapping::MapFormat::kSemanticOt);
-    std::cerr << "[semantic_map_offline] wrote " << output << " (" << tree->size() << " nodes, "
-              << occupied << " occupied leaves, " << tree->classSet().size() << " classes, "
-              << tree->memoryUsage() / 1e6 << " MB in memory)\n";
+constexpr char kUsage[] =
+    "usage: semantic_map_offline --scans DIR --poses POSES.txt --calib CALIB.txt --output MAP.ot\n"
+    "         [--labels DIR | --images DIR --model MODEL [--model-card CARD.yaml]]\n"
+    "       semantic_map_offline --drive DRIVE_SYNC_DIR --output MAP.ot [--model MODEL\n"
+    "         [--model-card CARD.yaml]] [--poses IMU_POSES.txt] [--calib-dir DIR] [--camera 2]\n"
+    "     both [--config semantic_mapping.yaml] [--resolution R] [--max-range M]\n"
+    "         [--confusion P] [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes]\n"
+    "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n"
+    "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
+    "  --labels   per-point labels DIR/NNNNNN.label (SemanticKITTI ids; default classes\n"
+    "             semantickitti)\n"
+    "  --images   camera images DIR/NNNNNN.png, segmented with MODEL (Cityscapes labelIds;\n"
+    "             default classes cityscapes); calib.txt's P2 projects the scans into them\n"
+    "  --drive    a KITTI raw drive: velodyne_points/, oxts/, image_0N/ (N = --camera), the\n"
+    "             calibration in its date folder; poses: --poses (IMU in the map frame per frame,\n"
+    "             inekf_offline --output-kitti) or the OXTS RTK/INS solution; with --model the\n"
+    "             scans are labelled from image_0N\n"
+    "  --config   the node's YAML (config/semantic_mapping.yaml); flags override its values\n";
+
+// The session config: the YAML file if given, then the flags.
+ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& cli) {
+  namespace mapping = ism::mapping;
+  mapping::SemanticMappingConfig config;
+  if (cli.has("--config")) {
+    config = mapping::loadSemanticMappingConfig(cli.get("--config"));
   }
-  if (!export_ply.empty()) {
-    ScopedTimer timer("offline/save_ply");
-    const std::size_t vertices = mapping::saveMap(*tree, export_ply, mapping::MapFormat::kPly);
-    std::cerr << "[semantic_map_offline] wrote " << export_ply << " (" << vertices
-              << " occupied voxels)\n";
+  config.class_set = cli.has("--labels") ? "semantickitti" : "cityscapes";
+  if (cli.has("--classes")) config.class_set = cli.get("--classes");
+  config.resolution_m = cli.getDouble("--resolution", config.resolution_m);
+  config.max_range_m = cli.getDouble("--max-range", config.max_range_m);
+  config.fusion.correct_probability =
+      cli.getDouble("--confusion", config.fusion.correct_probability);
+  config.prob_hit = cli.getDouble("--prob-hit", config.prob_hit);
+  config.prob_miss = cli.getDouble("--prob-miss", config.prob_miss);
+  config.grazing_ray_truncation_voxels =
+      cli.getDouble("--grazing-truncation", config.grazing_ray_truncation_voxels);
+  try {
+    if (cli.has("--fusion")) config.fusion.rule = mapping::parseFusionRule(cli.get("--fusion"));
+    config.validate();
+  } catch (const std::invalid_argument& error) {
+    throw UsageError(error.what());
   }
-  if (!color_ot.empty()) {
-    mapping::saveMap(*tree, color_ot, mapping::MapFormat::kColorOt);
-    std::cerr << "[semantic_map_offline] wrote " << color_ot << "\n";
-  }
-  std::cerr << TimingRegistry::instance().report();
-  return 0;
+  return config;
+}
+
+// Segments DIR/<stem>.png for each scan (the segmentation_node's Segmenter).
+ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
+                                                 std::shared_ptr<ism::perception::Segmenter> net) {
+  return [images_dir, net](const std::string& stem, ism::mapping::OwnedLabelImage* out) {
+    const std::string path = images_dir + "/" + stem + ".png";
+    const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
+    if (image.empty()) {
+      std::cerr << "[semantic_map_offline] " << path << ": no readable image, scan mapped "
+                << "without class evidence\n";
+      return false;
+    }
+    const ism::perception::Segmentation segmentation = net->segment(image);
+    out->width = segmentation.label_ids.cols;
+    out->height = segmentation.label_ids.rows;
+    const cv::Mat labels = segmentation.label_ids.isContinuous() ? segmentation.label_ids
+                                                                 : segmentation.label_ids.clone();
+    out->pixels.assign(labels.data, labels.data + labels.total());
+    return true;
+  };
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  using namespace inekf_semantic_mapping;
-  using common::UsageError;
-  return common::runCli("semantic_map_offline", kUsage, [&] {
-    const common::CommandLine cli(
-        argc, argv,
-        {"--scans", "--labels", "--poses", "--calib", "--resolution", "--output", "--export-ply",
-         "--max-range", "--confusion", "--fusion", "--max-scans", "--classes", "--color-ot",
-         "--prob-hit", "--prob-miss", "--grazing-truncation"});
-    if (cli.helpRequested()) return common::printUsage(kUsage);
-    mapping::OfflineMappingOptions options;
-    options.scans_dir = cli.require("--scans");
-    options.labels_dir = cli.require("--labels");
-    options.poses_path = cli.require("--poses");
-    options.calib_path = cli.require("--calib");
-    options.resolution_m = cli.parseDouble("--resolution", cli.require("--resolution"));
+  namespace mapping = ism::mapping;
+  return ism::common::runCli("semantic_map_offline", kUsage, [&] {
+    const ism::common::CommandLine cli(argc, argv,
+                                       {"--scans",
+                                        "--drive",
+                                        "--calib-dir",
+                                        "--camera",
+                                        "--labels",
+                                        "--images",
+                                        "--model",
+                                        "--model-card",
+                                        "--poses",
+                                        "--calib",
+                                        "--config",
+                                        "--resolution",
+                                        "--output",
+                                        "--export-ply",
+                                        "--max-range",
+                                        "--confusion",
+                                        "--fusion",
+                                        "--max-scans",
+                                        "--classes",
+                                        "--color-ot",
+                                        "--prob-hit",
+                                        "--prob-miss",
+                                        "--grazing-truncation",
+                                        "--threads"});
+    if (cli.helpRequested()) return ism::common::printUsage(kUsage);
+    const bool raw_drive = cli.has("--drive");
+    if (raw_drive == cli.has("--scans")) throw UsageError("give --scans or --drive");
+    if (cli.has("--labels") && (cli.has("--images") || cli.has("--model"))) {
+      throw UsageError("give --labels or --images/--model, not both");
+    }
+    if (!raw_drive && cli.has("--images") != cli.has("--model")) {
+      throw UsageError("--images and --model go together");
+    }
     const std::string output = cli.require("--output");
-    if (!(options.resolution_m > 0)) throw UsageError("--resolution must be > 0");
-    options.max_range_m = cli.getDouble("--max-range", options.max_range_m);
-    if (cli.has("--confusion")) {
-      options.fusion.correct_probability = cli.getDouble("--confusion", 0);
-      if (!(options.fusion.correct_probability > 0 && options.fusion.correct_probability < 1)) {
-        throw UsageError("--confusion must be in (0, 1)");
-      }
+    mapping::SemanticMappingSession session(configFrom(cli));
+
+    mapping::CameraLabelSource camera_labels;
+    if (cli.has("--model")) {
+      const std::string model = cli.get("--model");
+      const ism::perception::ModelCard card =
+          cli.has("--model-card") ? ism::perception::loadModelCard(cli.get("--model-card"))
+                                  : ism::perception::defaultModelCardFor(model);
+      auto net =
+          std::make_shared<ism::perception::Segmenter>(model, card, cli.getInt("--threads", 2));
+      const std::string images = raw_drive ? cli.get("--drive") + "/image_" +
+                                                 (cli.getInt("--camera", 2) < 10 ? "0" : "") +
+                                                 std::to_string(cli.getInt("--camera", 2)) + "/data"
+                                           : cli.get("--images");
+      std::cerr << "[semantic_map_offline] segmenting " << images << " with " << model << " (card "
+                << card.source << ")\n";
+      camera_labels = segmentingSource(images, net);
     }
-    options.prob_hit = cli.getDouble("--prob-hit", options.prob_hit);
-    options.prob_miss = cli.getDouble("--prob-miss", options.prob_miss);
-    options.grazing_truncation_voxels =
-        cli.getDouble("--grazing-truncation", options.grazing_truncation_voxels);
-    if (!(options.grazing_truncation_voxels >= 0)) {
-      throw UsageError("--grazing-truncation must be >= 0 (voxels)");
+    const mapping::CameraLabelSource* labels_source = camera_labels ? &camera_labels : nullptr;
+    if (raw_drive) {
+      mapping::OfflineRawDrive drive;
+      drive.drive_dir = cli.get("--drive");
+      drive.calib_dir = cli.get("--calib-dir");
+      drive.poses_path = cli.get("--poses");
+      drive.camera_index = cli.getInt("--camera", 2);
+      drive.max_scans = cli.getInt("--max-scans", -1);
+      mapping::mapRawDrive(drive, &session, labels_source, &std::cerr);
+    } else {
+      mapping::OfflineSequence sequence;
+      sequence.scans_dir = cli.require("--scans");
+      sequence.poses_path = cli.require("--poses");
+      sequence.calib_path = cli.require("--calib");
+      sequence.labels_dir = cli.get("--labels");
+      sequence.max_scans = cli.getInt("--max-scans", -1);
+      mapping::mapSequence(sequence, &session, labels_source, &std::cerr);
     }
-    if (!(options.prob_hit > 0.5 && options.prob_hit < 1 && options.prob_miss > 0 &&
-          options.prob_miss < 0.5)) {
-      throw UsageError("--prob-hit must be in (0.5, 1) and --prob-miss in (0, 0.5)");
+
+    const mapping::MappingStatistics& stats = session.statistics();
+    std::cerr << "[semantic_map_offline] " << stats.scans_inserted << " scans, "
+              << stats.scans_with_labels << " with class evidence, " << stats.points_with_class
+              << " of " << stats.points_inserted << " inserted points labelled\n";
+    const std::size_t occupied = session.save(output, mapping::MapFormat::kSemanticOt);
+    std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
+              << " nodes, " << occupied << " occupied leaves, " << session.tree().classSet().size()
+              << " classes, " << session.tree().memoryUsage() / 1e6 << " MB in memory)\n";
+    if (cli.has("--export-ply")) {
+      const std::size_t vertices = session.save(cli.get("--export-ply"), mapping::MapFormat::kPly);
+      std::cerr << "[semantic_map_offline] wrote " << cli.get("--export-ply") << " (" << vertices
+                << " occupied voxels)\n";
     }
-    if (cli.has("--fusion")) {
-      try {
-        options.fusion.rule = mapping::parseFusionRule(cli.get("--fusion"));
-      } catch (const std::exception& error) {
-        throw UsageError(error.what());
-      }
+    if (cli.has("--color-ot")) {
+      session.save(cli.get("--color-ot"), mapping::MapFormat::kColorOt);
+      std::cerr << "[semantic_map_offline] wrote " << cli.get("--color-ot") << "\n";
     }
-    options.max_scans = cli.getInt("--max-scans", options.max_scans);
-    if (cli.has("--classes")) {
-      const std::string set = cli.get("--classes");
-      if (set == "cityscapes") {
-        options.classes = mapping::ClassSet::cityscapes();
-      } else if (set != "semantickitti") {
-        throw UsageError("--classes must be semantickitti or cityscapes");
-      }
-    }
-    return run(options, output, cli.get("--export-ply"), cli.get("--color-ot"));
+    std::cerr << ism::TimingRegistry::instance().report();
+    return 0;
   });
 }

@@ -1,7 +1,6 @@
 #!/usr/bin/python3
-"""rostest: semantic_octomap_node maps scans that no label image comes for when
-~use_labels_without_image is set; the voxels carry no class (PLY label 0, markers 'unlabeled')."""
-import json
+"""rostest: semantic_octomap_node maps scans when no label image comes for a whole ~label_wait
+(lidar-only runs); the voxels carry no class (PLY label 0, markers 'unlabeled')."""
 import os
 import shutil
 import tempfile
@@ -12,7 +11,8 @@ import rospy
 import rostest
 import tf2_ros
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import String
+
+from inekf_semantic_mapping.msg import SemanticMapInfo
 from visualization_msgs.msg import MarkerArray
 
 from inekf_semantic_mapping.srv import SaveMap
@@ -29,13 +29,13 @@ class LidarOnlyTest(unittest.TestCase):
 
         def on_info(msg):
             with lock:
-                state["info"] = json.loads(msg.data)
+                state["info"] = msg
 
         def on_markers(msg):
             with lock:
                 state["markers"] = msg
 
-        rospy.Subscriber("/semantic_map/info", String, on_info)
+        rospy.Subscriber("/semantic_map/info", SemanticMapInfo, on_info)
         rospy.Subscriber("/semantic_map/markers", MarkerArray, on_markers)
         static_tf = tf2_ros.StaticTransformBroadcaster()
         static_tf.sendTransform([transform("map", "velo_link", (0.0, 0.0, 0.0), (0, 0, 0, 1))])
@@ -50,15 +50,16 @@ class LidarOnlyTest(unittest.TestCase):
         deadline = rospy.Time.now() + rospy.Duration(10)
         while rospy.Time.now() < deadline:
             with lock:
-                if state["info"] and state["info"]["scans"] >= 3:
+                if state["info"] and state["info"].scans_inserted >= 3:
                     break
             rospy.sleep(0.1)
         with lock:
             info = state["info"]
             markers = state["markers"]
         self.assertIsNotNone(info)
-        self.assertGreaterEqual(info["scans"], 3, info)
-        self.assertEqual(set(info["classes"]), {"unlabeled"}, info)
+        self.assertGreaterEqual(info.scans_inserted, 3, info)
+        self.assertEqual(info.scans_with_labels, 0, info)
+        self.assertEqual(set(info.class_names), {"unlabeled"}, info)
         self.assertIn("unlabeled", {m.ns for m in markers.markers})
 
         out_dir = tempfile.mkdtemp(prefix="ism_lidar_only_")

@@ -3,8 +3,8 @@
 building and its right half car in the label image, seen in three synchronized scans. Checks
 that per-class markers and the labeled cloud appear, that ~save_map writes a SemanticOcTree .ot
 and a PLY whose labels sit on the right side of the map, that an unwritable path returns
-success=False with the node still serving, and that ~reset empties the map."""
-import json
+success=False with the node still serving, that ~reset empties the map and that ~load_map
+refuses a corrupt file and restores a saved one."""
 import os
 import shutil
 import tempfile
@@ -17,11 +17,11 @@ import tf2_ros
 from geometry_msgs.msg import TransformStamped
 from sensor_msgs import point_cloud2
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
-from std_msgs.msg import String
 from std_srvs.srv import Empty
 from visualization_msgs.msg import MarkerArray
 
-from inekf_semantic_mapping.srv import SaveMap
+from inekf_semantic_mapping.msg import SemanticMapInfo
+from inekf_semantic_mapping.srv import LoadMap, SaveMap
 
 PKG = "inekf_semantic_mapping"
 NODE = "/semantic_octomap_node"
@@ -97,7 +97,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         cls.info = None
         cls.labeled_clouds = []
         rospy.Subscriber("/semantic_map/markers", MarkerArray, cls.on_markers)
-        rospy.Subscriber("/semantic_map/info", String, cls.on_info)
+        rospy.Subscriber("/semantic_map/info", SemanticMapInfo, cls.on_info)
         rospy.Subscriber("/semantic_map/labeled_cloud", PointCloud2, cls.on_cloud)
         cls.static_tf = tf2_ros.StaticTransformBroadcaster()
         # velo_link -> camera_color_left: camera z = velo x, camera x = -velo y, camera y = -velo z.
@@ -123,6 +123,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
             rospy.sleep(0.5)
         cls.save = rospy.ServiceProxy(NODE + "/save_map", SaveMap)
         cls.reset = rospy.ServiceProxy(NODE + "/reset", Empty)
+        cls.load = rospy.ServiceProxy(NODE + "/load_map", LoadMap)
         cls.out_dir = tempfile.mkdtemp(prefix="ism_semantic_octomap_node_")
 
     @classmethod
@@ -137,7 +138,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
     @classmethod
     def on_info(cls, msg):
         with cls.lock:
-            cls.info = json.loads(msg.data)
+            cls.info = msg
 
     @classmethod
     def on_cloud(cls, msg):
@@ -183,25 +184,30 @@ class SemanticOctomapNodeTest(unittest.TestCase):
             self.assertAlmostEqual(x, 10.0, delta=1e-3)
             if abs(y - MAP_Y_OFFSET) > 0.3:  # away from the image's centre column
                 self.assertEqual(label, BUILDING if y > MAP_Y_OFFSET else CAR, (x, y, label))
-        self.assertTrue(self.wait_for(lambda: self.info is not None and self.info["scans"] >= 3),
+        self.assertTrue(self.wait_for(lambda: self.info is not None and self.info.scans_inserted >= 3),
                         "info: %s" % self.info)
         with self.lock:
-            info = dict(self.info)
-        self.assertGreater(info["occupied_voxels"], 100, info)
-        self.assertIn("building", info["classes"])
-        self.assertIn("car", info["classes"])
+            info = self.info
+        self.assertGreater(info.occupied_voxels, 100, info)
+        self.assertEqual(info.scans_with_labels, 3, info)
+        self.assertEqual(info.label_images_used, 3, info)
+        self.assertIn("building", info.class_names)
+        self.assertIn("car", info.class_names)
 
     def test_3_scan_without_pose_is_skipped(self):
         with self.lock:
-            scans_before = self.info["scans"]
+            scans_before = self.info.scans_inserted
         stamp = rospy.Time.now()
         cloud = wall_cloud(stamp)
         cloud.header.frame_id = "frame_without_tf"
         self.cloud_pub.publish(cloud)
         self.labels_pub.publish(label_image(stamp))
-        rospy.sleep(1.5)
+        # Nothing blocks on the missing pose: the scan waits (label_wait + pose_wait), then it is
+        # dropped and counted.
+        self.assertTrue(self.wait_for(lambda: self.info.scans_without_pose >= 1, timeout=10),
+                        "info: %s" % self.info)
         with self.lock:
-            self.assertEqual(self.info["scans"], scans_before, "a scan without a pose was inserted")
+            self.assertEqual(self.info.scans_inserted, scans_before, "a scan without a pose was inserted")
 
     def test_4_save_map_ot_and_ply(self):
         ot_path = os.path.join(self.out_dir, "map.ot")
@@ -235,11 +241,28 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         response = self.save(os.path.join(self.out_dir, "again.ot"), "ot")
         self.assertTrue(response.success, "node did not survive the failed save: " + response.message)
 
-    def test_6_reset_empties_the_map(self):
+    def test_6_reset_empties_the_map_and_load_map_restores_it(self):
+        saved = os.path.join(self.out_dir, "before_reset.ot")
+        before = self.save(saved, "ot")
+        self.assertTrue(before.success, before.message)
         self.reset()
         response = self.save(os.path.join(self.out_dir, "empty.ply"), "ply")
         self.assertTrue(response.success, response.message)
         self.assertEqual(response.voxel_count, 0)
+        # A corrupt file is refused and the (empty) map is kept; the saved one loads back.
+        with open(saved, "rb") as f:
+            data = bytearray(f.read())
+        data[-10] ^= 0x5A
+        corrupt = os.path.join(self.out_dir, "corrupt.ot")
+        with open(corrupt, "wb") as f:
+            f.write(bytes(data))
+        refused = self.load(corrupt)
+        self.assertFalse(refused.success)
+        self.assertIn("corrupt", refused.message)
+        loaded = self.load(saved)
+        self.assertTrue(loaded.success, loaded.message)
+        again = self.save(os.path.join(self.out_dir, "after_load.ot"), "ot")
+        self.assertEqual(again.voxel_count, before.voxel_count)
 
 
 if __name__ == "__main__":

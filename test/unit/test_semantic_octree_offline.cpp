@@ -1,5 +1,6 @@
-// buildSemanticMapFromSequence (semantic_map_offline's core) on a small sequence written here:
-// the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input errors.
+// mapSequence (semantic_map_offline's core, through a SemanticMappingSession) on a small sequence
+// written here: the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input
+// errors.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -7,6 +8,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
@@ -53,21 +56,29 @@ class OfflineMappingTest : public ::testing::Test {
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
 
-  OfflineMappingOptions options() const {
-    OfflineMappingOptions o;
+  OfflineSequence options() const {
+    OfflineSequence o;
     o.scans_dir = dir_ + "/velodyne";
     o.labels_dir = dir_ + "/labels";
     o.poses_path = dir_ + "/poses.txt";
     o.calib_path = dir_ + "/calib.txt";
-    o.resolution_m = 0.1;
-    o.max_range_m = 30;
     return o;
+  }
+  static std::unique_ptr<SemanticMappingSession> buildMap(const OfflineSequence& sequence) {
+    SemanticMappingConfig config;
+    config.resolution_m = 0.1;
+    config.max_range_m = 30;
+    config.class_set = "semantickitti";
+    auto session = std::make_unique<SemanticMappingSession>(config);
+    mapSequence(sequence, session.get(), nullptr, nullptr);
+    return session;
   }
   std::string dir_;
 };
 
 TEST_F(OfflineMappingTest, ScansLandWhereThePoseChainPutsThem) {
-  auto tree = buildSemanticMapFromSequence(options(), nullptr);
+  auto session = buildMap(options());
+  SemanticOcTree* tree = &session->tree();
   // Scan 0 is the map frame: its points stay where they are.
   const SemanticOcTreeNode* first = tree->search(10.05, 0.05, 0.05);
   ASSERT_NE(first, nullptr);
@@ -96,16 +107,16 @@ TEST_F(OfflineMappingTest, ScansLandWhereThePoseChainPutsThem) {
   EXPECT_NE(text.find(" 300 "), std::string::npos);
   EXPECT_NE(text.find(" 50 "), std::string::npos);
 
-  OfflineMappingOptions one = options();
+  OfflineSequence one = options();
   one.max_scans = 1;
-  auto single = buildSemanticMapFromSequence(one, nullptr);
-  EXPECT_EQ(single->search(13.05, -0.95, 0.05), nullptr);
+  auto single = buildMap(one);
+  EXPECT_EQ(single->tree().search(13.05, -0.95, 0.05), nullptr);
 }
 
 TEST_F(OfflineMappingTest, BadInputsNameTheFile) {
   writeBinary<std::uint32_t>(dir_ + "/labels/000001.label", {50u, 50u});  // 2 labels, 3 points
   try {
-    buildSemanticMapFromSequence(options(), nullptr);
+    buildMap(options());
     FAIL() << "expected an error";
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("000001.label"), std::string::npos) << e.what();
@@ -146,6 +157,48 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
                               dir_ + "/y.ot 2>/dev/null";
   EXPECT_NE(std::system(bad_dir.c_str()), 0);
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/y.ot"));
+}
+
+}  // namespace
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+namespace {
+
+// The raw-drive path on the real drive in ../shared: the scans go in at T_map_imu * inv(T_velo_imu)
+// (the IMU sits about 0.93 m above the road, the lidar 0.8 m above the IMU), so the road ahead of
+// the car lies about 0.93 m below the OXTS position.
+TEST(OfflineRawDriveTest, RoadAheadLiesBelowTheImuAtItsMountingHeight) {
+  ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/velodyne_points");
+  SemanticMappingConfig config;
+  config.insert_points_outside_image = true;
+  SemanticMappingSession session(config);
+  OfflineRawDrive drive;
+  drive.drive_dir = test::sharedPath("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync");
+  drive.max_scans = 3;
+  mapRawDrive(drive, &session, nullptr, nullptr);
+  EXPECT_EQ(session.statistics().scans_inserted, 3u);
+  // The first OXTS pose is the map origin with the devkit's roll/pitch/yaw.
+  const Eigen::Isometry3d T_map_imu = [] {
+    const auto oxts = kitti::readOxtsFolder(
+        test::sharedPath("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/oxts"));
+    return kitti::MercatorProjection::atFirstFix(oxts.front().record)
+        .poseInMap(oxts.front().record);
+  }();
+  int road_columns = 0;
+  for (double ahead = 5.0; ahead <= 9.0; ahead += 1.0) {
+    const Eigen::Vector3d column = T_map_imu * Eigen::Vector3d(ahead, 0.0, 0.0);
+    double highest = -1e9;
+    for (double dz = -2.5; dz <= 0.5; dz += 0.1) {
+      const SemanticOcTreeNode* node =
+          session.tree().search(column.x(), column.y(), column.z() + dz);
+      if (node && session.tree().isNodeOccupied(node)) highest = dz;
+    }
+    if (highest > -1.3 && highest < -0.55) ++road_columns;
+  }
+  EXPECT_GE(road_columns, 4) << "the road ahead is not 0.6..1.3 m below the IMU";
 }
 
 }  // namespace

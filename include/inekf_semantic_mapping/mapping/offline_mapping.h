@@ -1,51 +1,76 @@
-// Building a semantic map from a labeled scan sequence on disk (SemanticKITTI layout): the core
-// of semantic_map_offline, ROS-free.
+// Mapping a scan sequence on disk (SemanticKITTI layout) through a SemanticMappingSession: the
+// core of semantic_map_offline, ROS-free.
 //
 //   scans_dir/NNNNNN.bin      velodyne scans (float32 x y z reflectance)
-//   labels_dir/NNNNNN.label   uint32 per point, class id in the lower 16 bits
+//   labels_dir/NNNNNN.label   uint32 per point, class id in the lower 16 bits (optional)
 //   poses.txt                 one 3x4 row-major pose per line: cam0 of scan i in cam0 of scan 0
-//   calib.txt                 odometry calibration, `Tr:` = velodyne -> cam0
+//   calib.txt                 odometry calibration: P2 (left colour camera), Tr = velodyne -> cam0
 // The map is built in the velodyne frame of the first scan: T_w_velo_i = inv(Tr) P_i Tr.
+// Class evidence comes from the per-point labels, or from camera label images (a callback that
+// the caller fills, e.g. by segmenting image_2/NNNNNN.png), or not at all.
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstdint>
+#include <functional>
 #include <iosfwd>
-#include <memory>
 #include <string>
 #include <vector>
 
-#include "inekf_semantic_mapping/mapping/semantic_classes.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 
 namespace inekf_semantic_mapping {
 namespace mapping {
 
-class SemanticOcTree;
-
-struct OfflineMappingOptions {
+struct OfflineSequence {
   std::string scans_dir;
-  std::string labels_dir;
+  std::string labels_dir;  // per-point labels; empty: none
   std::string poses_path;
   std::string calib_path;
-  double resolution_m = 0.2;
-  double max_range_m = 50.0;
-  double prob_hit = 0.7;  // occupancy sensor model (octomap's defaults)
-  double prob_miss = 0.4;
-  double grazing_truncation_voxels = 1.0;  // SemanticOcTree::setGrazingRayTruncation
-  FusionModel fusion;
-  int max_scans = -1;  // < 0: all
-  // Known classes (palette, names); ids outside it are added as they appear (grey).
-  ClassSet classes = ClassSet::semanticKitti();
-  std::uint32_t ignored_label_id = 0;  // "unlabeled": occupancy only, no class evidence
+  int max_scans = -1;                  // < 0: all
+  std::uint32_t ignored_label_id = 0;  // per-point label "unlabeled": occupancy only
 };
+
+// A label image owned by the caller's callback (row-major, width bytes per row).
+struct OwnedLabelImage {
+  std::vector<std::uint8_t> pixels;
+  int width = 0;
+  int height = 0;
+};
+// Fills `out` with the label image of the scan named `stem` (e.g. "000042"); false: none.
+using CameraLabelSource = std::function<bool(const std::string& stem, OwnedLabelImage* out)>;
 
 // KITTI odometry poses file. Throws std::runtime_error naming file:line on a malformed line.
 std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path);
 
-// Inserts the scans in file-name order; progress lines go to `progress` (may be null). Throws
-// on missing/malformed inputs (the message names the file), e.g. a label file whose size does
-// not match its scan or a scan without a pose.
-std::unique_ptr<SemanticOcTree> buildSemanticMapFromSequence(const OfflineMappingOptions& options,
-                                                             std::ostream* progress);
+// The scans of a sequence directory in frame order (NNNNNN.bin), at most max_scans (< 0: all).
+std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans);
+
+// The left colour camera (P2) of an odometry calib.txt, for images of width x height.
+CameraModel odometryColorCamera(const std::string& calib_path, int width, int height);
+
+// A KITTI raw drive folder: <date>/<date>_drive_NNNN_sync with velodyne_points/, oxts/ and
+// image_0N/, calibration in the date folder (or calib_dir).
+struct OfflineRawDrive {
+  std::string drive_dir;
+  std::string calib_dir;   // "" = the drive's date folder
+  std::string poses_path;  // IMU poses in the map frame, one 3x4 per frame (inekf_offline
+                           // --output-kitti); "" = the OXTS RTK/INS solution
+  int camera_index = 2;
+  int max_scans = -1;  // < 0: all
+};
+
+// Inserts every velodyne frame of the drive at T_map_velo = T_map_imu * inv(T_velo_imu), with
+// camera labels from `camera_labels` (stem = the 10-digit frame number, image
+// image_0N/data/<stem>.png) when given. Map frame: the devkit's Mercator frame at the first fix.
+void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress);
+
+// Inserts the scans in frame order into `session` (per-point labels if labels_dir is set, else
+// camera labels if `camera_labels` is given, else occupancy only); progress lines go to
+// `progress` (may be null). Throws on missing or malformed inputs (the message names the file).
+void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress);
 
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

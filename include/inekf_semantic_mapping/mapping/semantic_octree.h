@@ -135,10 +135,17 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   // Most likely label id of a node in the input id space; `fallback` when it has no evidence.
   std::uint32_t mostLikelyLabel(const SemanticOcTreeNode& node, std::uint32_t fallback) const;
 
+  // Reading checks an integrity record (node count, length, checksum) and bounds the depth and
+  // node count; a refused file sets the stream's failbit and readError() says why.
   std::istream& readData(std::istream& s) override;
   std::ostream& writeData(std::ostream& s) const override;
+  const std::string& readError() const { return read_error_; }
 
  protected:
+  bool fail(std::istream& s, const std::string& why);
+  std::istream& refuse(std::istream& s, const std::string& why);
+  bool readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
+                        std::uint64_t max_nodes, std::uint64_t* nodes_read);
   void updateInnerOccupancyRecurs(SemanticOcTreeNode* node, unsigned int depth);
   // One voxel update of a batch: Morton code of its key; class evidence for a hit, null for a
   // miss.
@@ -158,6 +165,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   FusionModel fusion_;
   int ray_casting_threads_ = 1;
   double grazing_truncation_voxels_ = 0.0;
+  std::string read_error_;
 
   // Registers the tree type with octomap's factory once (ColorOcTree's idiom).
   class StaticMemberInitializer {

@@ -1,0 +1,52 @@
+// A strict reader of YAML configuration maps: every value is checked for its type, and keys that
+// nobody reads are errors. Messages name the source (a file, or "ROS parameters of /node") and
+// the key, e.g. "config/x.yaml: key 'sensor_model.hit' is not a number".
+#pragma once
+
+#include <yaml-cpp/yaml.h>
+
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace inekf_semantic_mapping {
+namespace common {
+
+class ConfigError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+class YamlReader {
+ public:
+  // `root` must be a map (or null: an empty file).
+  YamlReader(std::string source, YAML::Node root);
+  // Parses a file; throws ConfigError naming it when it cannot be read or is not a YAML map.
+  static YamlReader fromFile(const std::string& path);
+
+  // Read `key` ("section.key" for nested maps) into *out if present; leave *out otherwise.
+  void read(const std::string& key, double* out);  // finite numbers only
+  void read(const std::string& key, int* out);     // integers that fit an int
+  void read(const std::string& key, bool* out);
+  void read(const std::string& key, std::string* out);
+  // Keys (or whole sections: "name.*") that are valid but read elsewhere.
+  void allow(const std::string& key);
+  // Throws ConfigError for the first key that was neither read nor allowed.
+  void rejectUnknown() const;
+
+  [[noreturn]] void fail(const std::string& key, const std::string& what) const;
+  const std::string& source() const { return source_; }
+
+ private:
+  YAML::Node lookup(const std::string& key);
+  void collectKeys(const YAML::Node& node, const std::string& prefix,
+                   std::vector<std::string>* keys) const;
+
+  std::string source_;
+  YAML::Node root_;
+  std::set<std::string> used_;
+};
+
+}  // namespace common
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,204 @@
+// SemanticMappingSession: the whole semantic-mapping pipeline of one run, ROS-free. The
+// semantic_octomap_node and semantic_map_offline are two faces of it (cartographer's
+// Node / offline_node split): they convert their inputs and call it, and it owns the policy —
+// tree construction from one config, pairing scans with label images by stamp, projection and
+// the label rules, the map-frame transform, statistics, save, load and reset.
+//
+// Occupancy comes from every scan; class evidence from a label image when one exists for the
+// scan's stamp. A scan waits (in data time) at most label_wait_s for its label image, so a
+// segmentation slower than the lidar delays class evidence but never drops a scan.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/semantic_classes.h"
+#include "inekf_semantic_mapping/mapping/semantic_octree.h"
+
+namespace YAML {
+class Node;
+}
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+
+// Every parameter of a mapping run; the keys of config/semantic_mapping.yaml (the node's ROS
+// parameters and semantic_map_offline --config read the same keys with the same reader).
+struct SemanticMappingConfig {
+  double resolution_m = 0.2;
+  double max_range_m = 50.0;
+  double prob_hit = 0.7;
+  double prob_miss = 0.4;
+  double clamping_min = 0.12;
+  double clamping_max = 0.97;
+  std::string class_set = "cityscapes";  // "cityscapes" | "semantickitti"
+  FusionModel fusion;
+  double grazing_ray_truncation_voxels = 1.0;
+  int ray_casting_threads = 1;
+  // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
+  // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
+  bool insert_points_outside_image = false;
+  // Pairing: a label image belongs to the scan whose stamp is within this tolerance (s).
+  double label_stamp_tolerance_s = 0.05;
+  // How long (data time, s) a scan waits for its label image before it goes in without one.
+  double label_wait_s = 2.0;
+  // How long (data time, s) a scan waits for its pose before it is dropped.
+  double pose_wait_s = 1.0;
+
+  // Throws std::invalid_argument naming the key of the first bad value.
+  void validate() const;
+};
+
+// The keys of the same YAML that semantic_octomap_node reads itself (display, frames, files).
+const std::vector<std::string>& semanticMappingNodeKeys();
+
+// Reads the keys above from a YAML map (the node's keys are allowed and left alone); unknown keys
+// and bad values throw std::invalid_argument (common::ConfigError) naming `source` and the key.
+SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source);
+SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path);
+
+// A rectified camera: pixel ~ P [R_rect (T_camera_sensor x); 1] in a width x height image.
+struct CameraModel {
+  Eigen::Matrix<double, 3, 4> P = Eigen::Matrix<double, 3, 4>::Zero();
+  Eigen::Matrix3d R_rect = Eigen::Matrix3d::Identity();
+  Eigen::Isometry3d T_camera_sensor = Eigen::Isometry3d::Identity();
+  int width = 0;
+  int height = 0;
+};
+
+// A row-major 8-bit label image (label ids of the config's class set), not owned.
+struct LabelImageView {
+  const std::uint8_t* data = nullptr;
+  int width = 0;
+  int height = 0;
+  std::size_t step = 0;  // bytes per row
+};
+
+struct MappingStatistics {
+  std::size_t scans_received = 0;
+  std::size_t scans_inserted = 0;
+  std::size_t scans_with_labels = 0;
+  std::size_t scans_without_pose = 0;  // dropped after pose_wait_s
+  std::size_t label_images_received = 0;
+  std::size_t label_images_used = 0;
+  std::size_t label_images_unmatched = 0;  // no scan within the tolerance while it was kept
+  std::size_t points_inserted = 0;
+  std::size_t points_with_class = 0;  // points that added class evidence
+};
+
+class SemanticMappingSession {
+ public:
+  // Pose of the scan's sensor frame in the map at `stamp`, or nullopt while it is unknown.
+  using PoseLookup =
+      std::function<std::optional<Eigen::Isometry3d>(double stamp, const std::string& frame)>;
+
+  explicit SemanticMappingSession(const SemanticMappingConfig& config);
+
+  const SemanticMappingConfig& config() const { return config_; }
+
+  // --- Streaming (the node): scans and label images in any order; poses looked up when a scan
+  // is inserted. Each call inserts what is ready and returns the number of scans inserted.
+  void setPoseLookup(PoseLookup lookup) { pose_lookup_ = std::move(lookup); }
+  // Called after each streamed scan went in, with its stamp and the scan as inserted (map frame).
+  using InsertedCallback = std::function<void(double stamp, const LabeledScan& scan)>;
+  void setInsertedCallback(InsertedCallback callback) { inserted_callback_ = std::move(callback); }
+  std::size_t addScan(double stamp, const std::string& frame, Eigen::Matrix3Xf points_sensor);
+  // The image is copied. Throws std::invalid_argument for a view that does not fit `camera`.
+  std::size_t addLabelImage(double stamp, const LabelImageView& labels, const CameraModel& camera);
+  // Data time has reached `now` (the clock, when no scan arrives): inserts scans whose wait is
+  // over.
+  std::size_t advanceTo(double now);
+  // Inserts every pending scan (with the labels that have arrived) whose pose is known, e.g. at
+  // the end of a run or before the node clears its tf buffer; the others are dropped.
+  std::size_t flush();
+  std::size_t pendingScans() const { return pending_scans_.size(); }
+
+  // --- Direct insertion (offline tools): a scan with its pose and, optionally, its label image
+  // or per-point label ids (points.cols() of them; `ignored_label` adds no class evidence).
+  void insertScan(const Eigen::Matrix3Xf& points_sensor, const Eigen::Isometry3d& T_map_sensor,
+                  const LabelImageView* labels = nullptr, const CameraModel* camera = nullptr);
+  void insertScanWithPointLabels(const Eigen::Matrix3Xf& points_sensor,
+                                 const Eigen::Isometry3d& T_map_sensor,
+                                 const std::vector<std::uint32_t>& label_ids,
+                                 std::uint32_t ignored_label);
+
+  // The last scan that went in (map frame, label per point: kNoLabel for none), e.g. for the
+  // node's labeled cloud; empty before the first.
+  const LabeledScan& lastInsertedScan() const { return last_scan_; }
+  static constexpr std::uint32_t kNoLabel = 0xFFFFFFFF;
+
+  SemanticOcTree& tree() { return *tree_; }
+  const SemanticOcTree& tree() const { return *tree_; }
+  const MappingStatistics& statistics() const { return statistics_; }
+
+  // Atomic save (map_io); returns the number of occupied leaves written.
+  std::size_t save(const std::string& path, MapFormat format);
+  // Replaces the map with a saved one (its resolution must equal the config's); the statistics
+  // restart. Throws MapIoError; the current map is kept on failure.
+  void load(const std::string& path);
+  // An empty map, no pending scans, statistics from zero.
+  void reset();
+
+ private:
+  struct PendingLabels {
+    double stamp;
+    std::vector<std::uint8_t> pixels;
+    LabelImageView view;  // into pixels
+    CameraModel camera;
+  };
+  struct PendingScan {
+    double stamp;
+    std::string frame;
+    Eigen::Matrix3Xf points_sensor;
+    std::shared_ptr<const PendingLabels> labels;  // its label image, once paired
+  };
+
+  std::unique_ptr<SemanticOcTree> makeTree() const;
+  // Class evidence per label id (kNoLabel for ids that carry none: unknown or "ignored" ids).
+  std::uint32_t evidenceLabel(std::uint32_t label_id) const;
+
+  // The stages of one insertion.
+  std::vector<std::uint32_t> labelPointsFromCamera(const Eigen::Matrix3Xf& points_sensor,
+                                                   const LabelImageView& labels,
+                                                   const CameraModel& camera,
+                                                   std::vector<std::uint8_t>* in_image) const;
+  std::vector<std::uint8_t> pointsInCameraView(const Eigen::Matrix3Xf& points_sensor,
+                                               const CameraModel& camera) const;
+  void keepPointsInImage(const std::vector<std::uint8_t>& in_image, Eigen::Matrix3Xf* points,
+                         std::vector<std::uint32_t>* labels) const;
+  void insertIntoTree(const Eigen::Matrix3Xf& points_sensor, const Eigen::Isometry3d& T_map_sensor,
+                      std::vector<std::uint32_t> labels);
+
+  // Streaming: inserts the pending scans that are ready at data time `now` (paired, or their
+  // wait is over) and whose pose is known; drops those whose pose never came.
+  std::size_t insertReadyScans(double now);
+  bool labelsMayStillCome(const PendingScan& scan, double now) const;
+  void insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose);
+  // Stamps went back (a bag loop): what is pending goes in, the data clock starts again.
+  void restartClock();
+
+  SemanticMappingConfig config_;
+  std::unique_ptr<SemanticOcTree> tree_;
+  std::vector<std::uint8_t> ignored_label_;  // per label id < 256: 1 = no class evidence
+  MappingStatistics statistics_;
+  LabeledScan last_scan_;
+  PoseLookup pose_lookup_;
+  InsertedCallback inserted_callback_;
+  std::deque<PendingScan> pending_scans_;
+  std::deque<PendingLabels> pending_labels_;
+  std::optional<CameraModel> last_camera_;
+  double newest_stamp_ = -1e300;        // newest scan or label stamp, or clock (data time)
+  double newest_label_stamp_ = -1e300;  // newest label image
+  double first_stamp_ = 1e300;          // first scan or label image of this timeline
+};
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping

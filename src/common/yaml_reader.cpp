@@ -1,0 +1,122 @@
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+namespace inekf_semantic_mapping {
+namespace common {
+
+YamlReader::YamlReader(std::string source, YAML::Node root)
+    : source_(std::move(source)), root_(std::move(root)) {
+  if (root_.IsNull() || !root_.IsDefined()) {
+    root_ = YAML::Node(YAML::NodeType::Map);
+  } else if (!root_.IsMap()) {
+    throw ConfigError(source_ + ": expected a map of keys to values at the top level");
+  }
+}
+
+YamlReader YamlReader::fromFile(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) {
+    throw ConfigError(path + ": config file not found (or not a regular file)");
+  }
+  try {
+    return YamlReader(path, YAML::LoadFile(path));
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(path + ": not valid YAML: " + e.what());
+  }
+}
+
+void YamlReader::fail(const std::string& key, const std::string& what) const {
+  throw ConfigError(source_ + ": key '" + key + "' " + what);
+}
+
+YAML::Node YamlReader::lookup(const std::string& key) {
+  used_.insert(key);
+  // Walk through const nodes: operator[] on a non-const node would insert the key.
+  YAML::Node node;
+  node.reset(root_);
+  std::size_t begin = 0;
+  while (true) {
+    const std::size_t dot = key.find('.', begin);
+    const std::string part = key.substr(begin, dot == std::string::npos ? dot : dot - begin);
+    if (!node.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+    const YAML::Node& const_node = node;
+    const YAML::Node child = const_node[part];
+    if (!child.IsDefined()) return YAML::Node(YAML::NodeType::Undefined);
+    if (dot == std::string::npos) return child;
+    node.reset(child);  // operator= would overwrite the referenced node's content
+    begin = dot + 1;
+  }
+}
+
+void YamlReader::read(const std::string& key, double* out) {
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  double value = 0.0;
+  try {
+    if (!node.IsScalar())
+      fail(key, "is not a number (got a " + std::string(node.IsMap() ? "map" : "list") + ")");
+    value = node.as<double>();
+  } catch (const YAML::Exception&) {
+    fail(key, "is not a number: '" + node.Scalar() + "'");
+  }
+  if (!std::isfinite(value)) fail(key, "must be a finite number");
+  *out = value;
+}
+
+void YamlReader::read(const std::string& key, int* out) {
+  double value = 0.0;
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  read(key, &value);
+  if (value != std::floor(value) || value < std::numeric_limits<int>::min() ||
+      value > std::numeric_limits<int>::max()) {
+    fail(key, "must be an integer in the range of int");
+  }
+  *out = static_cast<int>(value);
+}
+
+void YamlReader::read(const std::string& key, bool* out) {
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  try {
+    if (!node.IsScalar()) fail(key, "is not true/false");
+    *out = node.as<bool>();
+  } catch (const YAML::Exception&) {
+    fail(key, "is not true/false: '" + node.Scalar() + "'");
+  }
+}
+
+void YamlReader::read(const std::string& key, std::string* out) {
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  if (!node.IsScalar()) fail(key, "is not a string");
+  *out = node.Scalar();
+}
+
+void YamlReader::allow(const std::string& key) { used_.insert(key); }
+
+void YamlReader::collectKeys(const YAML::Node& node, const std::string& prefix,
+                             std::vector<std::string>* keys) const {
+  for (const auto& entry : node) {
+    const std::string key = prefix + entry.first.as<std::string>();
+    if (entry.second.IsMap() && !used_.count(key) && !used_.count(key + ".*")) {
+      collectKeys(entry.second, key + ".", keys);
+    } else {
+      keys->push_back(key);
+    }
+  }
+}
+
+void YamlReader::rejectUnknown() const {
+  std::vector<std::string> keys;
+  collectKeys(root_, "", &keys);
+  for (const std::string& key : keys) {
+    if (used_.count(key) || used_.count(key + ".*")) continue;
+    fail(key, "is not a known key");
+  }
+}
+
+}  // namespace common
+}  // namespace inekf_semantic_mapping

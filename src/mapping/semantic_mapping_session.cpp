@@ -1,0 +1,451 @@
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/projection.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+namespace {
+
+// Label images are kept this long past the newest scan for a scan that may still come (s).
+constexpr double kLabelKeepMargin_s = 1.0;
+// A stamp this much older than the newest one means the clock went back (a bag loop).
+constexpr double kTimeJump_s = 1.0;
+
+void require(bool ok, const std::string& key, const std::string& what) {
+  if (!ok) throw std::invalid_argument("semantic mapping config: '" + key + "' " + what);
+}
+
+}  // namespace
+
+void SemanticMappingConfig::validate() const {
+  require(resolution_m > 0 && resolution_m <= 100, "resolution", "must be in (0, 100] m");
+  require(max_range_m >= 0, "max_range", "must be >= 0 (0: unlimited)");
+  require(prob_hit > 0.5 && prob_hit < 1, "sensor_model.hit", "must be in (0.5, 1)");
+  require(prob_miss > 0 && prob_miss < 0.5, "sensor_model.miss", "must be in (0, 0.5)");
+  require(clamping_min > 0 && clamping_min < clamping_max && clamping_max < 1,
+          "sensor_model.clamping_min/clamping_max", "must satisfy 0 < min < max < 1");
+  require(class_set == "cityscapes" || class_set == "semantickitti", "class_set",
+          "must be cityscapes or semantickitti, got '" + class_set + "'");
+  require(fusion.correct_probability > 0 && fusion.correct_probability < 1, "confusion_probability",
+          "must be in (0, 1)");
+  require(fusion.dirichlet_prior > 0, "dirichlet_prior", "must be > 0");
+  require(grazing_ray_truncation_voxels >= 0, "grazing_ray_truncation_voxels", "must be >= 0");
+  require(ray_casting_threads >= 1 && ray_casting_threads <= 64, "ray_casting_threads",
+          "must be in [1, 64]");
+  require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance",
+          "must be in [0, 1] s");
+  require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait", "must be in [0, 30] s");
+  require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait", "must be in [0, 30] s");
+}
+
+const std::vector<std::string>& semanticMappingNodeKeys() {
+  static const std::vector<std::string> keys = {
+      "map_frame",    "marker_rate",   "max_display_cpu_fraction",
+      "marker_depth", "calib_dir",     "camera_index",
+      "map_file",     "autosave_path", "autosave_period",
+      "log_period"};
+  return keys;
+}
+
+SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source) {
+  common::YamlReader reader(source, root);
+  SemanticMappingConfig config;
+  reader.read("resolution", &config.resolution_m);
+  reader.read("max_range", &config.max_range_m);
+  reader.read("sensor_model.hit", &config.prob_hit);
+  reader.read("sensor_model.miss", &config.prob_miss);
+  reader.read("sensor_model.clamping_min", &config.clamping_min);
+  reader.read("sensor_model.clamping_max", &config.clamping_max);
+  reader.read("class_set", &config.class_set);
+  std::string rule;
+  reader.read("fusion_rule", &rule);
+  if (!rule.empty()) {
+    try {
+      config.fusion.rule = parseFusionRule(rule);
+    } catch (const std::exception& e) {
+      reader.fail("fusion_rule", e.what());
+    }
+  }
+  reader.read("confusion_probability", &config.fusion.correct_probability);
+  reader.read("dirichlet_prior", &config.fusion.dirichlet_prior);
+  reader.read("grazing_ray_truncation_voxels", &config.grazing_ray_truncation_voxels);
+  reader.read("ray_casting_threads", &config.ray_casting_threads);
+  reader.read("insert_points_outside_image", &config.insert_points_outside_image);
+  reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
+  reader.read("label_wait", &config.label_wait_s);
+  reader.read("pose_wait", &config.pose_wait_s);
+  for (const std::string& key : semanticMappingNodeKeys()) reader.allow(key);
+  reader.rejectUnknown();
+  try {
+    config.validate();
+  } catch (const std::invalid_argument& e) {
+    throw common::ConfigError(source + ": " + e.what());
+  }
+  return config;
+}
+
+SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(yaml_path);
+  } catch (const YAML::Exception& e) {
+    throw common::ConfigError(yaml_path + ": cannot read config: " + e.what());
+  }
+  return readSemanticMappingConfig(root, yaml_path);
+}
+
+SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& config)
+    : config_(config) {
+  config_.validate();
+  tree_ = makeTree();
+  // Cityscapes ids without a trainId (unlabeled, ego vehicle, ...) are what a network says when
+  // it has nothing to say: they carry no class evidence. So does SemanticKITTI's unlabeled (0).
+  ignored_label_.assign(256, 0);
+  for (int id = 0; id < 256; ++id) {
+    if (config_.class_set == "cityscapes") {
+      ignored_label_[id] = cityscapes::labelIdToTrainId(static_cast<std::uint8_t>(id)) == 255;
+    } else {
+      ignored_label_[id] = id == 0;
+    }
+  }
+}
+
+std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
+  auto tree = std::make_unique<SemanticOcTree>(
+      config_.resolution_m,
+      config_.class_set == "cityscapes" ? ClassSet::cityscapes() : ClassSet::semanticKitti(),
+      config_.fusion);
+  tree->setProbHit(config_.prob_hit);
+  tree->setProbMiss(config_.prob_miss);
+  tree->setClampingThresMin(config_.clamping_min);
+  tree->setClampingThresMax(config_.clamping_max);
+  tree->setRayCastingThreads(config_.ray_casting_threads);
+  tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
+  return tree;
+}
+
+std::uint32_t SemanticMappingSession::evidenceLabel(std::uint32_t label_id) const {
+  if (label_id < ignored_label_.size() && ignored_label_[label_id]) return kNoLabel;
+  return label_id;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Insertion stages
+
+std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
+    const Eigen::Matrix3Xf& points_sensor, const LabelImageView& labels, const CameraModel& camera,
+    std::vector<std::uint8_t>* in_image) const {
+  ScopedTimer timer("semantic_map/project_label");
+  const perception::PointProjector projector(camera.P, camera.R_rect, camera.T_camera_sensor,
+                                             labels.width, labels.height);
+  perception::ProjectedPoints projected;
+  projector.project(points_sensor, &projected);
+  std::vector<std::uint32_t> label_ids;
+  perception::labelPointsFromImage(projected, labels.data, labels.width, labels.height, labels.step,
+                                   kNoLabel, &label_ids);
+  for (std::uint32_t& id : label_ids) {
+    if (id != kNoLabel) id = evidenceLabel(id);
+  }
+  *in_image = std::move(projected.valid);
+  return label_ids;
+}
+
+std::vector<std::uint8_t> SemanticMappingSession::pointsInCameraView(
+    const Eigen::Matrix3Xf& points_sensor, const CameraModel& camera) const {
+  const perception::PointProjector projector(camera.P, camera.R_rect, camera.T_camera_sensor,
+                                             camera.width, camera.height);
+  perception::ProjectedPoints projected;
+  projector.project(points_sensor, &projected);
+  return std::move(projected.valid);
+}
+
+void SemanticMappingSession::keepPointsInImage(const std::vector<std::uint8_t>& in_image,
+                                               Eigen::Matrix3Xf* points,
+                                               std::vector<std::uint32_t>* labels) const {
+  Eigen::Index kept = 0;
+  for (Eigen::Index i = 0; i < points->cols(); ++i) {
+    if (!in_image[static_cast<std::size_t>(i)]) continue;
+    points->col(kept) = points->col(i);
+    if (!labels->empty()) (*labels)[kept] = (*labels)[i];
+    ++kept;
+  }
+  points->conservativeResize(3, kept);
+  if (!labels->empty()) labels->resize(static_cast<std::size_t>(kept));
+}
+
+void SemanticMappingSession::insertIntoTree(const Eigen::Matrix3Xf& points_sensor,
+                                            const Eigen::Isometry3d& T_map_sensor,
+                                            std::vector<std::uint32_t> labels) {
+  if (!T_map_sensor.matrix().allFinite()) {
+    throw std::invalid_argument("scan pose is not finite");
+  }
+  {
+    ScopedTimer timer("semantic_map/transform");
+    const Eigen::Matrix3f rotation = T_map_sensor.linear().cast<float>();
+    const Eigen::Vector3f translation = T_map_sensor.translation().cast<float>();
+    last_scan_.points_map = (rotation * points_sensor).colwise() + translation;
+    last_scan_.sensor_origin_map = translation;
+    last_scan_.label_ids = std::move(labels);
+    last_scan_.unknown_label_id = kNoLabel;
+  }
+  std::size_t with_class = 0;
+  {
+    ScopedTimer timer("semantic_map/insert");
+    with_class = tree_->insertLabeledScan(last_scan_, config_.max_range_m);
+  }
+  ++statistics_.scans_inserted;
+  statistics_.points_inserted += static_cast<std::size_t>(points_sensor.cols());
+  statistics_.points_with_class += with_class;
+}
+
+void SemanticMappingSession::insertScan(const Eigen::Matrix3Xf& points_sensor,
+                                        const Eigen::Isometry3d& T_map_sensor,
+                                        const LabelImageView* labels, const CameraModel* camera) {
+  if (labels && !camera) throw std::invalid_argument("insertScan: a label image needs a camera");
+  if (labels && (!labels->data || labels->width <= 0 || labels->height <= 0 ||
+                 labels->step < static_cast<std::size_t>(labels->width))) {
+    throw std::invalid_argument("insertScan: malformed label image view");
+  }
+  Eigen::Matrix3Xf points = points_sensor;
+  std::vector<std::uint32_t> label_ids;
+  std::vector<std::uint8_t> in_image;
+  if (labels) {
+    label_ids = labelPointsFromCamera(points, *labels, *camera, &in_image);
+    last_camera_ = *camera;
+  } else if (last_camera_ && !config_.insert_points_outside_image) {
+    // Without labels the scan still covers what the camera sees, so labelled and unlabelled
+    // scans build one consistent map.
+    in_image = pointsInCameraView(points, *last_camera_);
+  }
+  if (!in_image.empty() && !config_.insert_points_outside_image) {
+    keepPointsInImage(in_image, &points, &label_ids);
+  }
+  insertIntoTree(points, T_map_sensor, std::move(label_ids));
+  if (labels) ++statistics_.scans_with_labels;
+}
+
+void SemanticMappingSession::insertScanWithPointLabels(const Eigen::Matrix3Xf& points_sensor,
+                                                       const Eigen::Isometry3d& T_map_sensor,
+                                                       const std::vector<std::uint32_t>& label_ids,
+                                                       std::uint32_t ignored_label) {
+  if (label_ids.size() != static_cast<std::size_t>(points_sensor.cols())) {
+    throw std::invalid_argument("insertScanWithPointLabels: " + std::to_string(label_ids.size()) +
+                                " labels for " + std::to_string(points_sensor.cols()) + " points");
+  }
+  std::vector<std::uint32_t> labels(label_ids.size());
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    const std::uint32_t id = label_ids[i];
+    if (id == ignored_label) {
+      labels[i] = kNoLabel;
+      continue;
+    }
+    // Ids the class set does not know get their own class (grey for display).
+    tree_->mutableClassSet().addLabel(id);
+    labels[i] = id;
+  }
+  insertIntoTree(points_sensor, T_map_sensor, std::move(labels));
+  ++statistics_.scans_with_labels;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Streaming
+
+std::size_t SemanticMappingSession::addScan(double stamp, const std::string& frame,
+                                            Eigen::Matrix3Xf points_sensor) {
+  if (!std::isfinite(stamp)) throw std::invalid_argument("addScan: stamp is not finite");
+  ++statistics_.scans_received;
+  if (stamp + kTimeJump_s < newest_stamp_) restartClock();
+  PendingScan scan{stamp, frame, std::move(points_sensor), nullptr};
+  // A label image that came first (segmentation can beat the pose or the cloud's transport).
+  auto best = pending_labels_.end();
+  for (auto it = pending_labels_.begin(); it != pending_labels_.end(); ++it) {
+    const double gap = std::abs(it->stamp - stamp);
+    if (gap <= config_.label_stamp_tolerance_s &&
+        (best == pending_labels_.end() || gap < std::abs(best->stamp - stamp))) {
+      best = it;
+    }
+  }
+  if (best != pending_labels_.end()) {
+    scan.labels = std::make_shared<const PendingLabels>(std::move(*best));
+    pending_labels_.erase(best);
+  }
+  pending_scans_.push_back(std::move(scan));
+  newest_stamp_ = std::max(newest_stamp_, stamp);
+  first_stamp_ = std::min(first_stamp_, stamp);
+  return insertReadyScans(newest_stamp_);
+}
+
+std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
+                                                  const CameraModel& camera) {
+  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
+  if (!labels.data || labels.width <= 0 || labels.height <= 0 ||
+      labels.step < static_cast<std::size_t>(labels.width)) {
+    throw std::invalid_argument("label image: malformed (null data, size or row step)");
+  }
+  if (camera.width != labels.width || camera.height != labels.height) {
+    throw std::invalid_argument("label image is " + std::to_string(labels.width) + "x" +
+                                std::to_string(labels.height) + " but the camera is " +
+                                std::to_string(camera.width) + "x" + std::to_string(camera.height));
+  }
+  ++statistics_.label_images_received;
+  if (stamp + kTimeJump_s < newest_stamp_) restartClock();
+  auto copy = std::make_shared<PendingLabels>();
+  copy->stamp = stamp;
+  copy->camera = camera;
+  const std::size_t row = static_cast<std::size_t>(labels.width);
+  copy->pixels.resize(row * static_cast<std::size_t>(labels.height));
+  for (int r = 0; r < labels.height; ++r) {
+    std::copy_n(labels.data + static_cast<std::size_t>(r) * labels.step, row,
+                copy->pixels.data() + static_cast<std::size_t>(r) * row);
+  }
+  copy->view = LabelImageView{copy->pixels.data(), labels.width, labels.height, row};
+  last_camera_ = camera;
+  newest_label_stamp_ = std::max(newest_label_stamp_, stamp);
+  newest_stamp_ = std::max(newest_stamp_, stamp);
+  first_stamp_ = std::min(first_stamp_, stamp);
+
+  PendingScan* best = nullptr;
+  for (PendingScan& scan : pending_scans_) {
+    const double gap = std::abs(scan.stamp - stamp);
+    if (!scan.labels && gap <= config_.label_stamp_tolerance_s &&
+        (!best || gap < std::abs(best->stamp - stamp))) {
+      best = &scan;
+    }
+  }
+  if (best) {
+    best->labels = std::move(copy);
+  } else {
+    pending_labels_.push_back(std::move(*copy));
+  }
+  return insertReadyScans(newest_stamp_);
+}
+
+std::size_t SemanticMappingSession::advanceTo(double now) {
+  if (std::isfinite(now)) newest_stamp_ = std::max(newest_stamp_, now);
+  return insertReadyScans(newest_stamp_);
+}
+
+bool SemanticMappingSession::labelsMayStillCome(const PendingScan& scan, double now) const {
+  if (scan.labels) return false;
+  // Segmentation publishes in stamp order: once a newer label image is here, none will come
+  // for this scan.
+  if (newest_label_stamp_ > scan.stamp + config_.label_stamp_tolerance_s) return false;
+  // No label image for a whole wait, and the run is older than that: segmentation is not
+  // running (lidar-only runs). At the start, scans wait for the first label image.
+  if (newest_label_stamp_ < now - config_.label_wait_s &&
+      first_stamp_ < now - config_.label_wait_s) {
+    return false;
+  }
+  return now - scan.stamp <= config_.label_wait_s;
+}
+
+void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose) {
+  if (scan.labels) {
+    insertScan(scan.points_sensor, pose, &scan.labels->view, &scan.labels->camera);
+    ++statistics_.label_images_used;
+  } else {
+    insertScan(scan.points_sensor, pose);
+  }
+  if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_);
+}
+
+std::size_t SemanticMappingSession::insertReadyScans(double now) {
+  std::size_t inserted = 0;
+  for (auto it = pending_scans_.begin(); it != pending_scans_.end();) {
+    if (labelsMayStillCome(*it, now)) {
+      ++it;
+      continue;
+    }
+    std::optional<Eigen::Isometry3d> pose;
+    if (pose_lookup_) pose = pose_lookup_(it->stamp, it->frame);
+    if (!pose) {
+      if (now - it->stamp > config_.label_wait_s + config_.pose_wait_s) {
+        ++statistics_.scans_without_pose;
+        it = pending_scans_.erase(it);
+      } else {
+        ++it;
+      }
+      continue;
+    }
+    insertPending(*it, *pose);
+    ++inserted;
+    it = pending_scans_.erase(it);
+  }
+  // Label images no scan will claim any more.
+  while (!pending_labels_.empty() &&
+         pending_labels_.front().stamp < now - config_.label_wait_s - kLabelKeepMargin_s) {
+    ++statistics_.label_images_unmatched;
+    pending_labels_.pop_front();
+  }
+  return inserted;
+}
+
+void SemanticMappingSession::restartClock() {
+  flush();
+  newest_stamp_ = newest_label_stamp_ = -1e300;
+  first_stamp_ = 1e300;
+}
+
+std::size_t SemanticMappingSession::flush() {
+  std::size_t inserted = 0;
+  for (auto it = pending_scans_.begin(); it != pending_scans_.end();) {
+    std::optional<Eigen::Isometry3d> pose;
+    if (pose_lookup_) pose = pose_lookup_(it->stamp, it->frame);
+    if (pose) {
+      insertPending(*it, *pose);
+      ++inserted;
+    } else {
+      ++statistics_.scans_without_pose;
+    }
+    it = pending_scans_.erase(it);
+  }
+  statistics_.label_images_unmatched += pending_labels_.size();
+  pending_labels_.clear();
+  return inserted;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Map files
+
+std::size_t SemanticMappingSession::save(const std::string& path, MapFormat format) {
+  ScopedTimer timer("semantic_map/save");
+  return saveMap(*tree_, path, format);
+}
+
+void SemanticMappingSession::load(const std::string& path) {
+  std::unique_ptr<SemanticOcTree> loaded = loadSemanticOcTree(path);
+  if (std::abs(loaded->getResolution() - config_.resolution_m) > 1e-9) {
+    throw MapIoError(path + ": map resolution " + std::to_string(loaded->getResolution()) +
+                     " m differs from the configured " + std::to_string(config_.resolution_m) +
+                     " m");
+  }
+  loaded->setProbHit(config_.prob_hit);
+  loaded->setProbMiss(config_.prob_miss);
+  loaded->setClampingThresMin(config_.clamping_min);
+  loaded->setClampingThresMax(config_.clamping_max);
+  loaded->setRayCastingThreads(config_.ray_casting_threads);
+  loaded->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
+  loaded->setFusionModel(config_.fusion);
+  tree_ = std::move(loaded);
+  statistics_ = MappingStatistics();
+}
+
+void SemanticMappingSession::reset() {
+  tree_ = makeTree();
+  pending_scans_.clear();
+  pending_labels_.clear();
+  statistics_ = MappingStatistics();
+  last_scan_ = LabeledScan();
+  newest_stamp_ = newest_label_stamp_ = -1e300;
+  first_stamp_ = 1e300;
+}
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping

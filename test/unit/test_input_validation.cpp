@@ -1,0 +1,137 @@
+// Bad values in KITTI files and pose files (found by fault injection): each is refused with an
+// error that names the file (and line) and the field, never read as a silently wrong value.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/drive_timeline.h"
+#include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/timestamps.h"
+#include "inekf_semantic_mapping/mapping/offline_mapping.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace {
+
+// The message of what `call` throws, or "no error".
+template <typename Call>
+std::string errorOf(Call call) {
+  try {
+    call();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+void expectMentions(const std::string& message, std::initializer_list<const char*> parts) {
+  for (const char* part : parts) {
+    EXPECT_NE(message.find(part), std::string::npos) << "'" << part << "' not in: " << message;
+  }
+}
+
+std::string oxtsLine(const std::string& lat) {
+  return lat +
+         " 8.4 116.4 0.03 0.01 0.9 1.0 2.0 3.0 0.1 0.0 0.1 0.2 9.8 0.1 0.2 9.8 0.01 0.02 "
+         "0.03 0.01 0.02 0.03 0.5 0.1 4 9 4 4 4";
+}
+
+TEST(InputValidation, OxtsLatitudeBeyondThePoles) {
+  EXPECT_NO_THROW(kitti::parseOxtsLine(oxtsLine("49.0"), "f.txt", 1));
+  expectMentions(errorOf([] { kitti::parseOxtsLine(oxtsLine("270"), "f.txt", 3); }),
+                 {"f.txt:3", "lat"});
+}
+
+TEST(InputValidation, TimestampsMustBeRealCalendarDates) {
+  EXPECT_NO_THROW(kitti::parseKittiTimestampNs("2012-02-29 10:00:00.5"));  // leap year
+  expectMentions(errorOf([] { kitti::parseKittiTimestampNs("2011-02-31 10:00:00"); }),
+                 {"2011-02-31", "does not exist"});
+  expectMentions(errorOf([] { kitti::parseKittiTimestampNs("2011-02-29 10:00:00"); }),
+                 {"does not exist"});
+  expectMentions(errorOf([] { kitti::parseKittiTimestampNs("1500-01-01 00:00:00"); }), {"year"});
+  expectMentions(errorOf([] { kitti::parseKittiTimestampNs("2300-01-01 00:00:00"); }), {"year"});
+}
+
+class CalibrationFiles : public ::testing::Test {
+ protected:
+  void SetUp() override { dir_ = test::makeTempDir("calib_validation"); }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string write(const std::string& name, const std::string& text) {
+    std::ofstream(dir_ + "/" + name) << text;
+    return dir_ + "/" + name;
+  }
+  std::string dir_;
+};
+
+constexpr char kOdometryCalib[] =
+    "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n"
+    "P1: 700 0 600 -380 0 700 180 0 0 0 1 0\n"
+    "P2: 700 0 600 45 0 700 180 0 0 0 1 0\n"
+    "P3: 700 0 600 -330 0 700 180 0 0 0 1 0\n";
+
+TEST_F(CalibrationFiles, NonFiniteValuesAndNonRotationsAreRefused) {
+  EXPECT_NO_THROW(kitti::readObjectCalibration(
+      write("good.txt", std::string(kOdometryCalib) + "Tr: 0 -1 0 0.1 0 0 -1 -0.2 1 0 0 -0.3\n")));
+  expectMentions(
+      errorOf([&] {
+        kitti::readObjectCalibration(
+            write("nan.txt", std::string(kOdometryCalib) + "Tr: 0 -1 0 nan 0 0 -1 0 1 0 0 0\n"));
+      }),
+      {"nan.txt:5", "Tr", "not finite"});
+  expectMentions(errorOf([&] {
+                   kitti::readObjectCalibration(write(
+                       "zero.txt", std::string(kOdometryCalib) + "Tr: 0 0 0 0 0 0 0 0 0 0 0 0\n"));
+                 }),
+                 {"zero.txt", "'Tr' is not a rotation"});
+  std::filesystem::create_directories(dir_ + "/a_directory");
+  expectMentions(errorOf([&] { kitti::readObjectCalibration(dir_ + "/a_directory"); }),
+                 {"a_directory", "is a directory"});
+}
+
+TEST_F(CalibrationFiles, RectifiedImageSizeMustBeAnImageSize) {
+  write("calib_imu_to_velo.txt", "R: 1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
+  write("calib_velo_to_cam.txt", "R: 0 -1 0 0 0 -1 1 0 0\nT: 0 0 0\n");
+  const std::string camera =
+      "S_00: 1392 512\nK_00: 700 0 600 0 700 180 0 0 1\nD_00: 0 0 0 0 0\n"
+      "R_00: 1 0 0 0 1 0 0 0 1\nT_00: 0 0 0\nR_rect_00: 1 0 0 0 1 0 0 0 1\n"
+      "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n";
+  write("calib_cam_to_cam.txt", camera + "S_rect_00: 1242 375\n");
+  EXPECT_NO_THROW(kitti::readRawCalibration(dir_));
+  write("calib_cam_to_cam.txt", camera + "S_rect_00: 1e30 375\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt", "S_rect_00"});
+}
+
+TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
+  EXPECT_EQ(mapping::readOdometryPoses(write("ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n")).size(), 1u);
+  expectMentions(errorOf([&] {
+                   mapping::readOdometryPoses(write("extra.txt", "1 0 0 0 0 1 0 0 0 0 1 0 7\n"));
+                 }),
+                 {"extra.txt:1", "more than 12"});
+  expectMentions(errorOf([&] {
+                   mapping::readOdometryPoses(
+                       write("zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n"));
+                 }),
+                 {"zero.txt:2", "not a rotation"});
+}
+
+TEST(InputValidation, DriveTimelineOffsetsThatWouldOverflowAreRefused) {
+  ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync");
+  const kitti::RawDrive drive(
+      test::sharedPath("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync"));
+  kitti::TimelineOptions options;
+  options.start_offset_s = 1e10;
+  EXPECT_THROW(kitti::buildDriveTimeline(drive, options), std::invalid_argument);
+  options.start_offset_s = 2.0;
+  options.duration_s = 1.0;
+  const auto events = kitti::buildDriveTimeline(drive, options);
+  EXPECT_FALSE(events.empty());
+  EXPECT_LT(events.back().stamp_ns - events.front().stamp_ns, 1'000'000'001);
+}
+
+}  // namespace
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,343 @@
+// SemanticMappingSession: one config for node and tools (the YAML's defaults are the struct's),
+// scans paired with label images in any arrival order, every scan in the map, poses that come
+// late or never, time jumps, and the same map whether scans stream in or are inserted directly.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "test_data.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+namespace {
+
+// A 100 x 100 pinhole camera at the sensor origin looking along +z.
+CameraModel testCamera() {
+  CameraModel camera;
+  camera.P << 50, 0, 50, 0, 0, 50, 50, 0, 0, 0, 1, 0;
+  camera.width = 100;
+  camera.height = 100;
+  return camera;
+}
+
+// A wall 10 m ahead (x in [-2, 2], y in [-1, 1]) and a few points behind the camera.
+Eigen::Matrix3Xf testScan() {
+  std::vector<Eigen::Vector3f> points;
+  for (float x = -1.95f; x < 2.f; x += 0.1f) {
+    for (float y = -0.95f; y < 1.f; y += 0.1f) points.emplace_back(x, y, 10.05f);
+  }
+  for (float x = -1.95f; x < 2.f; x += 0.5f) points.emplace_back(x, 0.05f, -8.05f);
+  Eigen::Matrix3Xf matrix(3, static_cast<Eigen::Index>(points.size()));
+  for (std::size_t i = 0; i < points.size(); ++i)
+    matrix.col(static_cast<Eigen::Index>(i)) = points[i];
+  return matrix;
+}
+
+// Left half road (7), right half building (11), top rows "unlabeled" (0: no evidence).
+std::vector<std::uint8_t> testLabels() {
+  std::vector<std::uint8_t> pixels(100 * 100);
+  for (int r = 0; r < 100; ++r) {
+    for (int c = 0; c < 100; ++c) pixels[r * 100 + c] = r < 48 ? 0 : (c < 50 ? 7 : 11);
+  }
+  return pixels;
+}
+
+Eigen::Isometry3d poseAt(double stamp) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() << 0.0, 0.0, stamp;  // 1 m/s along the camera axis
+  return pose;
+}
+
+SemanticMappingConfig testConfig() {
+  SemanticMappingConfig config;
+  config.resolution_m = 0.1;
+  return config;
+}
+
+std::string serialized(SemanticMappingSession& session) {
+  session.tree().updateInnerOccupancy();
+  std::ostringstream out;
+  session.tree().write(out);
+  return out.str();
+}
+
+std::uint32_t labelAt(const SemanticMappingSession& session, double x, double y, double z) {
+  const SemanticOcTreeNode* node = session.tree().search(x, y, z);
+  return node ? session.tree().mostLikelyLabel(*node, 999) : 1000;
+}
+
+TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
+  const SemanticMappingConfig from_yaml =
+      loadSemanticMappingConfig(test::repoPath("config/semantic_mapping.yaml"));
+  const SemanticMappingConfig defaults;
+  EXPECT_EQ(from_yaml.resolution_m, defaults.resolution_m);
+  EXPECT_EQ(from_yaml.max_range_m, defaults.max_range_m);
+  EXPECT_EQ(from_yaml.prob_hit, defaults.prob_hit);
+  EXPECT_EQ(from_yaml.prob_miss, defaults.prob_miss);
+  EXPECT_EQ(from_yaml.clamping_min, defaults.clamping_min);
+  EXPECT_EQ(from_yaml.clamping_max, defaults.clamping_max);
+  EXPECT_EQ(from_yaml.class_set, defaults.class_set);
+  EXPECT_EQ(from_yaml.fusion.rule, defaults.fusion.rule);
+  EXPECT_EQ(from_yaml.fusion.correct_probability, defaults.fusion.correct_probability);
+  EXPECT_EQ(from_yaml.fusion.dirichlet_prior, defaults.fusion.dirichlet_prior);
+  EXPECT_EQ(from_yaml.grazing_ray_truncation_voxels, defaults.grazing_ray_truncation_voxels);
+  EXPECT_EQ(from_yaml.ray_casting_threads, defaults.ray_casting_threads);
+  EXPECT_EQ(from_yaml.insert_points_outside_image, defaults.insert_points_outside_image);
+  EXPECT_EQ(from_yaml.label_stamp_tolerance_s, defaults.label_stamp_tolerance_s);
+  EXPECT_EQ(from_yaml.label_wait_s, defaults.label_wait_s);
+  EXPECT_EQ(from_yaml.pose_wait_s, defaults.pose_wait_s);
+}
+
+TEST(SemanticMappingConfigTest, ErrorsNameTheSourceAndTheKey) {
+  const auto message = [](const std::string& yaml) {
+    try {
+      readSemanticMappingConfig(YAML::Load(yaml), "test.yaml");
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("resolutoin: 0.2").find("test.yaml: key 'resolutoin' is not a known key"),
+            std::string::npos);
+  EXPECT_NE(message("sensor_model: {hit: 0.3}").find("sensor_model.hit"), std::string::npos);
+  EXPECT_NE(message("sensor_model: {hitt: 0.7}").find("'sensor_model.hitt'"), std::string::npos);
+  EXPECT_NE(message("max_range: fifty").find("'max_range' is not a number"), std::string::npos);
+  EXPECT_NE(message("label_wait: [1, 2]").find("'label_wait'"), std::string::npos);
+  EXPECT_NE(message("ray_casting_threads: 1.5").find("'ray_casting_threads'"), std::string::npos);
+  EXPECT_NE(message("class_set: coco").find("class_set"), std::string::npos);
+  EXPECT_NE(message("fusion_rule: vote").find("fusion_rule"), std::string::npos);
+  EXPECT_EQ(message("resolution: 0.1\nlabel_wait: 0.5"), "no error");
+  EXPECT_THROW(loadSemanticMappingConfig("/nonexistent/semantic_mapping.yaml"),
+               common::ConfigError);
+}
+
+TEST(SemanticMappingSessionTest, LabelledScansCarryClassesAndStayInTheCameraView) {
+  SemanticMappingSession session(testConfig());
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  EXPECT_EQ(labelAt(session, -1.05, 0.55, 10.05), 7u);    // left half, lower rows: road
+  EXPECT_EQ(labelAt(session, 1.05, 0.55, 10.05), 11u);    // right half: building
+  EXPECT_EQ(labelAt(session, 1.05, -0.55, 10.05), 999u);  // "unlabeled" pixels: occupied, no class
+  EXPECT_TRUE(session.tree().isNodeOccupied(session.tree().search(1.05, -0.55, 10.05)));
+  EXPECT_EQ(session.tree().search(0.05, 0.05, -8.05), nullptr);  // behind the camera: left out
+
+  SemanticMappingConfig whole = testConfig();
+  whole.insert_points_outside_image = true;
+  SemanticMappingSession everything(whole);
+  everything.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  EXPECT_EQ(labelAt(everything, 0.05, 0.05, -8.05), 999u);  // occupancy only
+}
+
+// The streaming face (scans and labels in mixed order, late poses) builds the map the direct
+// face builds from the same pairs.
+TEST(SemanticMappingSessionTest, StreamingEqualsDirectInsertion) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  const Eigen::Matrix3Xf scan = testScan();
+
+  SemanticMappingSession streaming(testConfig());
+  double pose_known_until = 0.25;
+  streaming.setPoseLookup([&](double stamp, const std::string& frame) {
+    EXPECT_EQ(frame, "velo_link");
+    return stamp <= pose_known_until ? std::optional<Eigen::Isometry3d>(poseAt(stamp))
+                                     : std::nullopt;
+  });
+  // Labels of 0.0 before the scan; scan 0.1 before its labels; 0.2 never gets labels (the
+  // labels of 0.3 show it); 0.3's pose comes late.
+  EXPECT_EQ(streaming.addLabelImage(0.01, view, camera), 0u);
+  EXPECT_EQ(streaming.addScan(0.0, "velo_link", scan), 1u);
+  EXPECT_EQ(streaming.addScan(0.1, "velo_link", scan), 0u);
+  EXPECT_EQ(streaming.addLabelImage(0.11, view, camera), 1u);
+  EXPECT_EQ(streaming.addScan(0.2, "velo_link", scan), 0u);  // waits for its labels
+  EXPECT_EQ(streaming.addScan(0.3, "velo_link", scan), 0u);
+  EXPECT_EQ(streaming.addLabelImage(0.31, view, camera), 1u);  // 0.2 goes in; 0.3 has no pose
+  EXPECT_EQ(streaming.pendingScans(), 1u);
+  pose_known_until = 1.0;
+  EXPECT_EQ(streaming.advanceTo(0.4), 1u);
+  EXPECT_EQ(streaming.pendingScans(), 0u);
+  const MappingStatistics& stats = streaming.statistics();
+  EXPECT_EQ(stats.scans_received, 4u);
+  EXPECT_EQ(stats.scans_inserted, 4u);
+  EXPECT_EQ(stats.scans_with_labels, 3u);
+  EXPECT_EQ(stats.label_images_used, 3u);
+
+  SemanticMappingSession direct(testConfig());
+  direct.insertScan(scan, poseAt(0.0), &view, &camera);
+  direct.insertScan(scan, poseAt(0.1), &view, &camera);
+  direct.insertScan(scan, poseAt(0.2));
+  direct.insertScan(scan, poseAt(0.3), &view, &camera);
+  EXPECT_EQ(serialized(streaming), serialized(direct));
+}
+
+TEST(SemanticMappingSessionTest, EveryScanGoesInWhenSegmentationIsSlowOrAbsent) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 1.0;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  // At the start scans wait for the first label image; none for a whole wait: lidar only, and
+  // from then on scans go in at once.
+  EXPECT_EQ(session.addScan(0.0, "velo", testScan()), 0u);
+  EXPECT_EQ(session.advanceTo(1.01), 1u);
+  EXPECT_EQ(session.addScan(1.1, "velo", testScan()), 1u);
+  // Segmentation starts, at 1 Hz: scans between label images wait at most label_wait.
+  EXPECT_EQ(session.addLabelImage(1.5, view, testCamera()), 0u);  // no scan of that stamp yet
+  std::size_t inserted = 0;
+  for (int k = 1; k <= 30; ++k) {
+    const double stamp = 1.4 + 0.1 * k;
+    inserted += session.addScan(stamp, "velo", testScan());
+    if (k % 10 == 0) inserted += session.addLabelImage(stamp + 0.01, view, testCamera());
+  }
+  inserted += session.advanceTo(10.0);
+  EXPECT_EQ(inserted, 30u);
+  EXPECT_EQ(session.statistics().scans_inserted, 32u);
+  EXPECT_EQ(session.statistics().scans_with_labels, 4u);  // 1.5, 2.4, 3.4, 4.4
+  EXPECT_EQ(session.statistics().label_images_used, 4u);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
+}
+
+TEST(SemanticMappingSessionTest, ScansWithoutPoseAreDroppedAfterTheWaitAndTimeJumpsFlush) {
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 0.5;
+  config.pose_wait_s = 0.5;
+  SemanticMappingSession session(config);
+  bool have_pose = false;
+  session.setPoseLookup([&](double stamp, const std::string&) {
+    return have_pose ? std::optional<Eigen::Isometry3d>(poseAt(stamp)) : std::nullopt;
+  });
+  EXPECT_EQ(session.addScan(5.0, "velo", testScan()), 0u);
+  EXPECT_EQ(session.advanceTo(5.9), 0u);
+  EXPECT_EQ(session.pendingScans(), 1u);
+  EXPECT_EQ(session.advanceTo(6.1), 0u);
+  EXPECT_EQ(session.pendingScans(), 0u);
+  EXPECT_EQ(session.statistics().scans_without_pose, 1u);
+  // A bag loop: stamps go back. The pending scan of 7.0 goes in, the clock restarts.
+  have_pose = true;
+  session.addLabelImage(7.0, LabelImageView{testLabels().data(), 100, 100, 100}, testCamera());
+  EXPECT_EQ(session.statistics().label_images_received, 1u);
+  // The old label image is dropped; the new timeline starts: the scan waits for labels.
+  EXPECT_EQ(session.addScan(0.0, "velo", testScan()), 0u);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
+  EXPECT_EQ(session.advanceTo(0.6), 1u);
+  EXPECT_EQ(session.statistics().scans_inserted, 1u);
+}
+
+TEST(SemanticMappingSessionTest, BadLabelImagesAreRejectedAndTheMapIsKept) {
+  SemanticMappingSession session(testConfig());
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity());
+  const std::size_t nodes = session.tree().size();
+  const std::vector<std::uint8_t> pixels(50 * 100);
+  EXPECT_THROW(
+      session.addLabelImage(0.0, LabelImageView{pixels.data(), 100, 50, 100}, testCamera()),
+      std::invalid_argument);  // size differs from the camera
+  EXPECT_THROW(session.addLabelImage(0.0, LabelImageView{pixels.data(), 100, 50, 10}, testCamera()),
+               std::invalid_argument);  // step < width
+  EXPECT_THROW(session.addLabelImage(0.0, LabelImageView{nullptr, 100, 100, 100}, testCamera()),
+               std::invalid_argument);
+  EXPECT_EQ(session.tree().size(), nodes);
+  EXPECT_THROW(SemanticMappingSession([] {
+                 SemanticMappingConfig c;
+                 c.prob_hit = 0.4;
+                 return c;
+               }()),
+               std::invalid_argument);
+}
+
+TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
+  SemanticMappingSession session(testConfig());
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  const std::string dir = test::makeTempDir("session_io");
+  EXPECT_GT(session.save(dir + "/map.ot", MapFormat::kSemanticOt), 0u);
+  SemanticMappingSession resumed(testConfig());
+  resumed.load(dir + "/map.ot");
+  EXPECT_EQ(serialized(resumed), serialized(session));
+  EXPECT_EQ(labelAt(resumed, -1.05, 0.55, 10.05), 7u);
+  SemanticMappingConfig coarse = testConfig();
+  coarse.resolution_m = 0.2;
+  SemanticMappingSession other(coarse);
+  EXPECT_THROW(other.load(dir + "/map.ot"), MapIoError);
+  session.reset();
+  EXPECT_EQ(session.tree().size(), 0u);
+  EXPECT_EQ(session.statistics().scans_inserted, 0u);
+  std::filesystem::remove_all(dir);
+}
+
+// The hardened .ot reader: corruption anywhere in the node data, truncation, other tree types and
+// crafted depth bombs are refused with a reason; the map in memory is untouched.
+TEST(SemanticMapFileTest, CorruptOrCraftedMapsAreRefusedWithAReason) {
+  SemanticMappingSession session(testConfig());
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  const std::string dir = test::makeTempDir("map_file");
+  const std::string good = dir + "/map.ot";
+  session.save(good, MapFormat::kSemanticOt);
+  std::ifstream in(good, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto write = [&](const std::string& name, const std::string& content) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << content;
+    return dir + "/" + name;
+  };
+  const auto refusal = [&](const std::string& path) {
+    SemanticMappingSession target(testConfig());
+    try {
+      target.load(path);
+    } catch (const MapIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string("loaded");
+  };
+  // Ten single-byte corruptions spread over the node data (the last 40 % of the file).
+  for (int k = 0; k < 10; ++k) {
+    std::string corrupt = bytes;
+    const std::size_t at = bytes.size() - 1 - k * (bytes.size() * 2 / 5) / 10;
+    corrupt[at] = static_cast<char>(corrupt[at] ^ 0x5A);
+    const std::string why = refusal(write("corrupt.ot", corrupt));
+    EXPECT_NE(why, "loaded") << "byte " << at;
+    EXPECT_NE(why.find("corrupt.ot"), std::string::npos) << why;
+  }
+  EXPECT_NE(refusal(write("truncated.ot", bytes.substr(0, bytes.size() - 100))).find("truncated"),
+            std::string::npos);
+  EXPECT_NE(refusal(write("other.ot", "# Octomap OcTree file\nid OcTree\nsize 1\nres 0.1\ndata\n"))
+                .find("not a SemanticOcTree"),
+            std::string::npos);
+  EXPECT_NE(refusal(dir).find("directory"), std::string::npos);
+  // A V1 file (no integrity record) whose nodes each claim one child, 40 levels deep.
+  std::string bomb = "# Octomap OcTree file\nid SemanticOcTree\nsize 40\nres 0.1\ndata\n";
+  bomb += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
+  bomb += '\0';  // bayes
+  const double probability = 0.8, prior = 0.5;
+  bomb.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
+  bomb.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
+  bomb.append(4, '\0');  // no classes
+  for (int level = 0; level < 40; ++level) {
+    bomb.append(4, '\0');             // log-odds 0
+    bomb.append(4, '\xff');           // no classes in the slots
+    bomb.append(8, '\0');             // counts
+    bomb += static_cast<char>(0x01);  // one child
+  }
+  EXPECT_NE(refusal(write("bomb.ot", bomb)).find("finest level"), std::string::npos);
+  // The intact file still loads, and equals the map it came from.
+  SemanticMappingSession loaded(testConfig());
+  loaded.load(good);
+  EXPECT_EQ(serialized(loaded), serialized(session));
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
