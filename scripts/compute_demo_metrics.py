@@ -415,6 +415,7 @@ def main():
     metrics = {"trajectory": trajectory_errors(estimate, truth)}
     bag_counts, bag_duration = (bag_message_counts(args.bag) if args.bag else (None, None))
     metrics["messages"] = rates_and_drops(monitor, bag_counts)
+    metrics["map_info"] = monitor.get("map_info")
     if bag_counts:
         metrics["messages"]["bag"] = {"counts": bag_counts, "duration_s": bag_duration}
     if args.map_ply and os.path.exists(args.map_ply):
@@ -458,13 +459,21 @@ def summary_text(metrics):
     def count(topic):
         return topics.get(topic, {}).get("messages", 0)
     played = m.get("bag", {}).get("counts", {}).get(SCAN_TOPIC)
-    lines.append("scans: %s in the bag, %d received, %d map updates (labeled clouds)" % (
-        played if played is not None else "?", count(SCAN_TOPIC), count("/semantic_map/labeled_cloud")))
+    info = metrics.get("map_info")
+    if info:
+        lines.append("scans: %s in the bag, %d received by the map node, %d in the map (%d with labels), "
+                     "%d without a pose" % (played if played is not None else "?", info["scans_received"],
+                                            info["scans_inserted"], info["scans_with_labels"],
+                                            info["scans_without_pose"]))
+    else:
+        lines.append("scans: %s in the bag, %d received (no /semantic_map/info)" % (
+            played if played is not None else "?", count(SCAN_TOPIC)))
     labels = topics.get("/segmentation/labels", {})
     wall_rate = labels.get("wall_rate_hz")
-    lines.append("label images: %d of %d camera images segmented%s" % (
+    lines.append("label images: %d of %d camera images segmented%s%s" % (
         count("/segmentation/labels"), count(IMAGE_TOPIC),
-        ", %.2f per second (wall clock)" % wall_rate if wall_rate else ""))
+        ", %.2f per second (wall clock)" % wall_rate if wall_rate else "",
+        "; %d used by the map" % info["label_images_used"] if info else ""))
     for name, key in (("scan-to-map latency", "scan_to_map_latency_s"),
                       ("image-to-labels latency", "image_to_labels_latency_s")):
         lat = m.get(key)
