@@ -95,6 +95,9 @@ def main():
     parser.add_argument("--bag", required=True)
     parser.add_argument("--rate", type=float, default=1.0)
     parser.add_argument("--output-dir", required=True)
+    parser.add_argument("--model", required=True,
+                        help="segmentation model (kitti_bag.launch's model: ENet for real drives, "
+                             "models/unet_synthetic.onnx for synthetic ones, none)")
     parser.add_argument("--launch-args", default="", help="extra kitti_bag.launch args (name:=value ...)")
     args = parser.parse_args()
     os.makedirs(args.output_dir, exist_ok=True)
@@ -102,7 +105,8 @@ def main():
 
     launch_log = open(os.path.join(args.output_dir, "launch.log"), "w")
     launch = subprocess.Popen(["roslaunch", "-p", port, "inekf_semantic_mapping", "kitti_bag.launch",
-                               "bag:=" + os.path.abspath(args.bag), "rate:=%g" % args.rate, "rviz:=false",
+                               "bag:=" + os.path.abspath(args.bag), "model:=" + args.model,
+                               "rate:=%g" % args.rate, "rviz:=false",
                                "play_delay:=%g" % PLAY_DELAY_S] + args.launch_args.split(),
                               stdout=launch_log, stderr=subprocess.STDOUT)
     try:

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Real-time benchmark of the whole pipeline at rate 1.0 (see bench/realtime_pipeline.py):
-#   bench/realtime_pipeline.sh [BAG]
+#   bench/realtime_pipeline.sh [BAG]                  # ISM_BENCH_MODEL=/abs/model (see below)
 # Without BAG, a 30 s synthetic drive (seed 42) is generated and converted with kitti2bag into
-# output/bench/. Needs a built workspace (ISM_WS, default .ws). Prints markdown tables
+# output/bench/. ISM_BENCH_MODEL is the segmentation model; it defaults to the synthetic-world
+# U-Net (models/unet_synthetic.onnx), which suits synthetic bags only: give the ENet for a real
+# one. Needs a built workspace (ISM_WS, default .ws). Prints markdown tables
 # (output/bench/realtime.md).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../scripts/env.sh"
@@ -22,5 +24,7 @@ if [[ -z $bag ]]; then
   fi
 fi
 export ROS_MASTER_URI=http://localhost:${ISM_BENCH_PORT:-$((11900 + RANDOM % 90))} ROS_HOSTNAME=localhost
+model=${ISM_BENCH_MODEL:-$ISM_ROOT/models/unet_synthetic.onnx}
+echo "[bench] segmentation model: $model (ISM_BENCH_MODEL)"
 exec /usr/bin/python3 "$ISM_ROOT/bench/realtime_pipeline.py" --bag "$bag" --rate "${ISM_BENCH_RATE:-1.0}" \
-  --output-dir "$out"
+  --model "$model" --output-dir "$out"

@@ -34,6 +34,9 @@ if(CATKIN_ENABLE_TESTING)
   ism_add_system_rostest(test/ros/e2e_synthetic.test
     NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
   ism_add_system_rostest(test/ros/e2e_real_oxts.test NEEDS kitti2bag inekf_node)
+  # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
+  ism_add_system_rostest(test/ros/e2e_real_drive.test
+    NEEDS kitti2bag inekf_node segmentation_node semantic_octomap_node)
   ism_add_system_rostest(test/ros/robustness_gps_outage.test
     NEEDS generate_synthetic_drive kitti2bag inekf_node)
   ism_add_system_rostest(test/ros/robustness_bag_loop.test

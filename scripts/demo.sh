@@ -1,26 +1,68 @@
 #!/usr/bin/env bash
 # The whole system on one drive, headless, in a few minutes:
-#   scripts/demo.sh                   # synthetic 30 s drive (fixed seed), generated here
-#   scripts/demo.sh KITTI_DRIVE_DIR   # a KITTI raw <date>_drive_<nnnn>_sync folder
+#   scripts/demo.sh                                   # synthetic 30 s drive (fixed seed), generated here
+#   scripts/demo.sh KITTI_DRIVE_DIR --model MODEL     # a KITTI raw <date>_drive_<nnnn>_sync folder
+# MODEL is the segmentation network for the drive's camera images (ONNX, Torch7 .net, ...): for a
+# real drive the Cityscapes ENet (.../enet-cityscapes/enet-model.net), or `none` for a lidar-only
+# map. A real drive without --model is an error: the default U-Net (models/unet_synthetic.onnx)
+# was trained on the project's synthetic world only and labels real images wrongly, and a demo
+# that quietly maps with it would look like a broken pipeline.
 # Installs what is missing and builds (scripts/build.sh), converts the drive into a bag with
 # kitti2bag (GPS degraded as in the issue 3 protocol: 1.5 m / 3 m noise, 1 Hz), runs
 # launch/kitti_bag.launch with rviz on a virtual display (Xvfb + Mesa), saves the map with
 # ~save_map, and writes output/demo/: trajectory.png, metrics.json, semantic_map.ot,
-# semantic_map.ply, rviz.png (+ logs).
-# Environment: ISM_DEMO_DURATION (synthetic drive seconds, 30), ISM_DEMO_SEED (42),
+# semantic_map.ply, rviz.png (+ logs), and prints a summary (trajectory error against the OXTS
+# truth, scans in the map, label images per second, scan-to-map latency).
+# Environment: ISM_DEMO_MODEL (same as --model; the synthetic drive's default is
+# models/unet_synthetic.onnx), ISM_DEMO_DURATION (synthetic drive seconds, 30), ISM_DEMO_SEED (42),
 # ISM_DEMO_GENERATOR_ARGS (default: a 32-beam lidar and 621x188 images, so that generation and
 # segmentation fit a few minutes on 2 cores; "" for the full HDL-64 / 1242x375 rig),
-# ISM_DEMO_MODEL (segmentation model, default models/unet_synthetic.onnx), ISM_DEMO_RATE
-# (playback rate, 1.0), ISM_DEMO_SKIP_BUILD=1, ISM_DEMO_PORT (ROS master port).
+# ISM_DEMO_RATE (playback rate, 1.0), ISM_DEMO_SKIP_BUILD=1, ISM_DEMO_PORT (ROS master port).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 start=$(date +%s)
-drive=${1:-}
+usage() { sed -n '2,20p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+drive=""
+model=${ISM_DEMO_MODEL:-}
+while (($#)); do
+  case $1 in
+    --model) [[ $# -ge 2 ]] || { echo "[demo] --model needs a value (a model file or none)" >&2; exit 2; }
+             model=$2; shift 2 ;;
+    --model=*) model=${1#--model=}; shift ;;
+    -h | --help) usage; exit 0 ;;
+    -*) echo "[demo] unknown option $1" >&2; usage >&2; exit 2 ;;
+    *) [[ -z $drive ]] || { echo "[demo] one drive only (got $drive and $1)" >&2; exit 2; }
+       drive=$1; shift ;;
+  esac
+done
+synthetic_model=$ISM_ROOT/models/unet_synthetic.onnx
+if [[ -z $drive ]]; then
+  model=${model:-$synthetic_model}
+elif [[ -z $model ]]; then
+  cat >&2 <<EOM
+[demo] ERROR: $drive is a real drive and no segmentation model was given.
+[demo] The default U-Net (models/unet_synthetic.onnx) knows only the synthetic world; on real
+[demo] images its labels are wrong. Pass the Cityscapes ENet (the e-lab ENet, Torch7
+[demo] enet-model.net, CC BY-NC 4.0: not part of this repository), e.g.
+[demo]   scripts/demo.sh $drive --model /path/to/shared/models/enet-cityscapes/enet-model.net
+[demo] or map without labels (occupancy only):
+[demo]   scripts/demo.sh $drive --model none
+EOM
+  exit 2
+elif [[ $model != none && -f $model && $(realpath "$model") == $(realpath "$synthetic_model") ]]; then
+  echo "[demo] WARNING: the synthetic-world U-Net on a real drive: expect wrong labels" >&2
+fi
+if [[ $model == none ]]; then
+  echo "[demo] --model none: no segmentation, the map holds occupancy only (unlabeled voxels)" >&2
+else
+  [[ -f $model ]] || { echo "[demo] segmentation model $model not found (--model FILE, or --model none)" >&2; exit 2; }
+  model=$(realpath "$model")
+fi
+[[ -z $drive || -d $drive/oxts ]] || { echo "[demo] $drive is not a KITTI raw drive folder (no oxts/)" >&2; exit 2; }
 duration=${ISM_DEMO_DURATION:-30}
 seed=${ISM_DEMO_SEED:-42}
 rate=${ISM_DEMO_RATE:-1.0}
 generator_args=${ISM_DEMO_GENERATOR_ARGS---lidar-beams 32 --azimuth-step-deg 0.4 --image-size 621x188}
-model=${ISM_DEMO_MODEL:-$ISM_ROOT/models/unet_synthetic.onnx}
 out=$ISM_ROOT/output/demo
 log() { echo "[demo $(($(date +%s) - start))s] $*"; }
 
@@ -36,7 +78,6 @@ ism_source_workspace
 for exe in kitti2bag inekf_node segmentation_node semantic_octomap_node; do
   [[ -x $ISM_BIN/$exe ]] || { echo "[demo] $ISM_BIN/$exe missing: build failed?"; exit 1; }
 done
-[[ -f $model ]] || { echo "[demo] segmentation model $model missing (set ISM_DEMO_MODEL)"; exit 1; }
 
 rm -rf "$out"
 mkdir -p "$out"
@@ -81,30 +122,48 @@ bag_running() {
 port=${ISM_DEMO_PORT:-$((11400 + RANDOM % 500))}
 export ROS_MASTER_URI=http://localhost:$port ROS_HOSTNAME=localhost
 display=:$((90 + RANDOM % 100))
-pids=()
+xvfb_pid="" launch_pid="" monitor_pid="" rviz_pid="" clock_pid=""
+# Stops one child and reaps it: SIGNAL, up to SECONDS to exit, then SIGKILL.
+stop_child() {
+  local pid=$1 signal=$2 seconds=$3 i
+  [[ -n $pid ]] || return 0
+  kill "-$signal" "$pid" 2>/dev/null || return 0
+  for ((i = 0; i < seconds * 10; i++)); do
+    kill -0 "$pid" 2>/dev/null || break
+    sleep 0.1
+  done
+  kill -0 "$pid" 2>/dev/null && kill -KILL "$pid" 2>/dev/null
+  wait "$pid" 2>/dev/null || true
+}
+# Users of the X display first, the display last: rviz whose X server goes away first dies with
+# "Aborted" (Qt's fatal X I/O error) instead of shutting down.
 cleanup() {
-  for ((i = ${#pids[@]} - 1; i >= 0; i--)); do kill -INT "${pids[i]}" 2>/dev/null || true; done
-  sleep 2
-  for pid in "${pids[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  stop_child "$rviz_pid" INT 10
+  stop_child "$monitor_pid" INT 10
+  stop_child "$clock_pid" INT 5
+  stop_child "$launch_pid" INT 30
+  stop_child "$xvfb_pid" TERM 5
+  xvfb_pid="" launch_pid="" monitor_pid="" rviz_pid="" clock_pid=""
 }
 trap cleanup EXIT
 
 Xvfb "$display" -screen 0 1400x900x24 -nolisten tcp >"$out/xvfb.log" 2>&1 &
-pids+=($!)
+xvfb_pid=$!
 export DISPLAY=$display LIBGL_ALWAYS_SOFTWARE=1
 
-log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port)"
+log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port $port, model $model)"
 roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" model:="$model" \
   rviz:=false play_delay:=5 origin_lat:="$origin_lat" origin_lon:="$origin_lon" origin_alt:="$origin_alt" gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
-pids+=($!)
+launch_pid=$!
 until rosnode list 2>/dev/null | grep -q /semantic_octomap_node; do sleep 0.5; done
 "$ISM_ROOT/scripts/pipeline_monitor.py" _output_dir:="$out" >"$out/monitor.log" 2>&1 &
 monitor_pid=$!
-pids+=($monitor_pid)
 until rosnode list 2>/dev/null | grep -q /rosbag_play; do sleep 0.5; done
 play_start=$(date +%s)
 sleep 2
-for node in /inekf_node /segmentation_node /semantic_octomap_node; do
+nodes=(/inekf_node /semantic_octomap_node)
+[[ $model == none ]] || nodes+=(/segmentation_node)
+for node in "${nodes[@]}"; do
   for ((try = 0; try < 30; try++)); do
     rosnode list 2>/dev/null | grep -qx "$node" && break
     sleep 1
@@ -120,7 +179,7 @@ while bag_running; do
   remaining=$(/usr/bin/python3 -c "print(int(($bag_duration + 5) / $rate - $elapsed))")
   if ((rviz_started == 0 && remaining <= 15)); then
     rosrun rviz rviz -d "$ISM_ROOT/rviz/kitti.rviz" >"$out/rviz.log" 2>&1 &
-    pids+=($!)
+    rviz_pid=$!
     rviz_started=1
   fi
   sleep 1
@@ -130,17 +189,19 @@ log "bag finished after ${play_wall_s} s; saving the map"
 # Time goes on after the bag (see scripts/clock_after_bag.py: a tf wait under a stopped sim clock
 # would block the map node's service).
 "$ISM_ROOT/scripts/clock_after_bag.py" _start:="$bag_end" >"$out/clock.log" 2>&1 &
-pids+=($!)
+clock_pid=$!
 sleep 3
-((rviz_started)) || { rosrun rviz rviz -d "$ISM_ROOT/rviz/kitti.rviz" >"$out/rviz.log" 2>&1 & pids+=($!); sleep 15; }
+if ((rviz_started == 0)); then
+  rosrun rviz rviz -d "$ISM_ROOT/rviz/kitti.rviz" >"$out/rviz.log" 2>&1 &
+  rviz_pid=$!
+  sleep 15
+fi
 for format in ot ply; do
   timeout 120 rosservice call /semantic_octomap_node/save_map "{path: '$out/semantic_map.$format', format: $format}" |
     tee -a "$out/save_map.log" || log "save_map ($format) failed or timed out"
 done
 sleep 2
 import -display "$display" -window root "$out/rviz.png" || log "screenshot failed"
-kill -INT "$monitor_pid"
-wait "$monitor_pid" || true
 cleanup
 trap - EXIT
 

@@ -8,8 +8,9 @@ estimated and ground-truth trajectories (TUM files). On shutdown (Ctrl-C, roslau
 
   scripts/pipeline_monitor.py _output_dir:=output/demo [_idle_timeout:=5]
 
-The JSON holds per topic: messages, first/last stamp, mean rate over sim time, and for the map
-cloud the wall-clock latency from the scan's arrival to the map update with the same stamp.
+The JSON holds per topic: messages, first/last stamp, mean rate over sim and over wall time, for
+the map cloud the wall-clock latency from the scan's arrival to the map update with the same
+stamp, and the map node's latest /semantic_map/info (SemanticMapInfo) as "map_info".
 """
 import json
 import math
@@ -21,18 +22,24 @@ import time
 import rospy
 from nav_msgs.msg import Odometry
 
+from inekf_semantic_mapping.msg import SemanticMapInfo
+
 SCAN_TOPIC = "/kitti/velo/pointcloud"
 IMAGE_TOPIC = "/kitti/camera_color_left/image_raw"
 WATCHED_TOPICS = [
     "/kitti/oxts/imu", "/kitti/oxts/gps/fix", SCAN_TOPIC, IMAGE_TOPIC,
     "/segmentation/labels", "/segmentation/overlay", "/semantic_map/labeled_cloud",
-    "/semantic_map/markers", "/inekf/status", "/semantic_map/info",
+    "/semantic_map/markers", "/inekf/status",
 ]
+MAP_INFO_TOPIC = "/semantic_map/info"
+MAP_INFO_FIELDS = ("scans_received", "scans_inserted", "scans_with_labels", "scans_without_pose",
+                   "label_images_received", "label_images_used", "resolution", "nodes",
+                   "occupied_voxels", "memory_bytes")
 # Subscribed with their type (a rospy process has one subscription type per topic), and logged
 # like the raw ones.
 ODOMETRY_TOPICS = ["/inekf/odometry", "/kitti/oxts/ground_truth"]
 # Topics whose first field is a std_msgs/Header (the others are only counted).
-STAMPED_TOPICS = {t for t in WATCHED_TOPICS if t not in ("/semantic_map/markers", "/semantic_map/info")}
+STAMPED_TOPICS = {t for t in WATCHED_TOPICS if t != "/semantic_map/markers"}
 
 
 def header_stamp_from_raw(buff):
@@ -53,7 +60,8 @@ class TopicLog:
 class PipelineMonitor:
     def __init__(self, topics=WATCHED_TOPICS):
         self.lock = threading.Lock()
-        self.logs = {t: TopicLog() for t in list(topics) + ODOMETRY_TOPICS}
+        self.logs = {t: TopicLog() for t in list(topics) + ODOMETRY_TOPICS + [MAP_INFO_TOPIC]}
+        self.map_info = None  # the latest SemanticMapInfo
         self.estimate = []
         self.truth = []
         self.last_message_wall = None
@@ -66,6 +74,7 @@ class PipelineMonitor:
                          queue_size=200)
         rospy.Subscriber(ODOMETRY_TOPICS[1], Odometry, self.on_odometry, callback_args=self.truth,
                          queue_size=200)
+        rospy.Subscriber(MAP_INFO_TOPIC, SemanticMapInfo, self.on_map_info, queue_size=10)
 
     def on_raw(self, msg, topic):
         now = time.time()
@@ -77,6 +86,24 @@ class PipelineMonitor:
             if stamp is not None:
                 log.stamps.append(stamp)
             self.last_message_wall = now
+
+    def on_map_info(self, msg):
+        now = time.time()
+        with self.lock:
+            log = self.logs[MAP_INFO_TOPIC]
+            log.count += 1
+            log.arrivals.append(now)
+            self.map_info = msg
+
+    def latest_map_info(self):
+        """The latest SemanticMapInfo as a dict (class_voxels: {class name: voxels}), or None."""
+        with self.lock:
+            msg = self.map_info
+        if msg is None:
+            return None
+        info = {f: getattr(msg, f) for f in MAP_INFO_FIELDS}
+        info["class_voxels"] = dict(zip(msg.class_names, (int(n) for n in msg.class_voxels)))
+        return info
 
     def on_odometry(self, msg, store):
         now = time.time()
@@ -103,10 +130,16 @@ class PipelineMonitor:
                     span = log.stamps[-1] - log.stamps[0]
                     entry.update(first_stamp=log.stamps[0], last_stamp=log.stamps[-1],
                                  rate_hz=(len(log.stamps) - 1) / span if span > 0 else None)
+                # Over wall time: what a slow stage (segmentation) really delivers, whatever the
+                # playback rate and however sparse the stamps of what it kept.
+                if len(log.arrivals) >= 2:
+                    wall_span = log.arrivals[-1] - log.arrivals[0]
+                    entry["wall_rate_hz"] = (len(log.arrivals) - 1) / wall_span if wall_span > 0 else None
                 result["topics"][topic] = entry
             result["scan_to_map_latency_s"] = self._latency(SCAN_TOPIC, "/semantic_map/labeled_cloud")
             result["image_to_labels_latency_s"] = self._latency(IMAGE_TOPIC, "/segmentation/labels")
-            return result
+        result["map_info"] = self.latest_map_info()
+        return result
 
     def _latency(self, source, sink):
         """Wall time from a message's arrival on `source` to the arrival of `sink` with its stamp."""
