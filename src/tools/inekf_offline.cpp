@@ -1,6 +1,7 @@
 // inekf_offline: runs a filter over a KITTI raw oxts/ folder under the evaluation protocol and
 // writes the trajectory (KITTI 12-number poses, TUM), the OXTS truth in the same format, and the
-// per-frame states with the Euclidean pose covariance (for NEES). Same Localizer as inekf_node.
+// per-frame states with the Euclidean pose covariance (for NEES). The OXTS frames go through the
+// same LocalizationSession as inekf_node's messages (start, origin, fix policy).
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -74,14 +75,15 @@ int main(int argc, char** argv) {
     estimation::OxtsRunOptions options;
     try {
       if (cli.has("--config")) {
-        options.config = estimation::LocalizerConfig::fromYamlFile(cli.get("--config"));
+        options.config = estimation::LocalizationSessionConfig::fromYamlFile(cli.get("--config"));
       }
       if (cli.has("--filter")) {
-        options.config.filter_type = estimation::filterTypeFromString(cli.get("--filter"));
+        options.config.localizer.filter_type =
+            estimation::filterTypeFromString(cli.get("--filter"));
       }
-      options.config.initial_yaw_sigma_deg =
-          cli.getDouble("--init-yaw-sigma-deg", options.config.initial_yaw_sigma_deg);
-      if (cli.has("--init-yaw-sigma-deg") && !(options.config.initial_yaw_sigma_deg > 0)) {
+      double& yaw_sigma_deg = options.config.localizer.initial_yaw_sigma_deg;
+      yaw_sigma_deg = cli.getDouble("--init-yaw-sigma-deg", yaw_sigma_deg);
+      if (cli.has("--init-yaw-sigma-deg") && !(yaw_sigma_deg > 0)) {
         throw UsageError("--init-yaw-sigma-deg must be positive");
       }
       options.init_yaw_error_deg =
@@ -154,12 +156,12 @@ int main(int argc, char** argv) {
     std::printf(
         "inekf_offline: filter %s, %zu frames, imu used %lld dropped %lld, gps offered %d used "
         "%lld rejected %lld, ATE %.3f m, rotation RMSE %.3f deg, yaw RMSE %.3f deg\n",
-        estimation::toString(options.config.filter_type).c_str(), frames.size(),
-        static_cast<long long>(run.statistics.imu_used),
-        static_cast<long long>(run.statistics.imu_dropped), run.fixes_offered,
-        static_cast<long long>(run.statistics.gps_used),
-        static_cast<long long>(run.statistics.gps_rejected), errors.ate_m, errors.rotation_rmse_deg,
-        errors.yaw_rmse_deg);
+        estimation::toString(options.config.localizer.filter_type).c_str(), frames.size(),
+        static_cast<long long>(run.statistics.filter.imu_used),
+        static_cast<long long>(run.statistics.filter.imu_dropped), run.fixes_offered,
+        static_cast<long long>(run.statistics.filter.gps_used),
+        static_cast<long long>(run.statistics.filter.gps_rejected), errors.ate_m,
+        errors.rotation_rmse_deg, errors.yaw_rmse_deg);
     return 0;
   });
 }
