@@ -154,7 +154,9 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
         status == Localizer::ImuStatus::kUsed || status == Localizer::ImuStatus::kGap;
   }
   update.imu_status = status;
-  if (status != Localizer::ImuStatus::kUsed && update.note.empty()) {
+  const bool dropped = status == Localizer::ImuStatus::kDroppedDuplicate ||
+                       status == Localizer::ImuStatus::kDroppedOutOfOrder;
+  if ((dropped || status == Localizer::ImuStatus::kGap) && update.note.empty()) {
     std::ostringstream note;
     note << std::fixed << std::setprecision(3) << "IMU sample at " << sample.stamp_s << " s "
          << (status == Localizer::ImuStatus::kGap ? "after a gap: bridged with inflated noise"

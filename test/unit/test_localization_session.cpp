@@ -85,6 +85,17 @@ TEST(LocalizationSession, AStartOnAnImuSampleAfterTheFixCarriesOnToTheSample) {
   EXPECT_EQ(session.statistics().filter.imu_dropped, 0);  // no duplicate at the start
 }
 
+TEST(LocalizationSession, AStartOnASampleAtTheFixStampIsAnEstimateNotADrop) {
+  LocalizationSession session(originConfig());
+  session.setGpsVelocityExpected(false);
+  session.addFix(fixAt(10.0));
+  const LocalizationSession::Update update = session.addImu(restingImu(10.0));
+  ASSERT_TRUE(update.started);
+  EXPECT_TRUE(update.new_estimate);
+  EXPECT_EQ(update.note.find("dropped"), std::string::npos) << update.note;
+  EXPECT_EQ(session.statistics().filter.imu_dropped, 0);
+}
+
 TEST(LocalizationSession, WithoutOrientationTheStartLevelsAfterMaxWait) {
   LocalizationSession session(originConfig());
   session.setGpsVelocityExpected(false);

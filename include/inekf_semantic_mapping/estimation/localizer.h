@@ -77,8 +77,9 @@ struct LocalizerConfig {
   double fix_history_s = 2.0;  // how late a fix may arrive and still be applied at its own time
   int max_consecutive_rejected_fixes = 5;  // then re-acquire (see above); <= 0: never
 
-  // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
-  // OXTS orientation of the first Imu message) instead of levelling with yaw 0 and zero speed.
+  // Lazy initialization (LocalizationSession's start): take rotation and velocity from
+  // setInitialReference() (e.g. the OXTS orientation of the first Imu message) instead of levelling
+  // with yaw 0 and zero speed.
   bool init_orientation_from_reference = true;
 
   // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above; the
