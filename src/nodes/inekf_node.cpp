@@ -98,24 +98,21 @@ class InekfNode {
                                    ros::TransportHints().tcpNoDelay());
     fix_subscriber_ = nh.subscribe(topics::kGpsFix, 50, &InekfNode::onFix, this);
     velocity_subscriber_ = nh.subscribe(topics::kGpsVelocity, 10, &InekfNode::onVelocity, this);
-    ROS_INFO_STREAM("inekf_node: " << filterName() << " filter, config " << config_file_
-                                   << ", waiting for IMU on " << imu_subscriber_.getTopic()
-                                   << " and GPS on " << fix_subscriber_.getTopic());
+    ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " filter, config "
+                                   << config_file_ << ", waiting for IMU on "
+                                   << imu_subscriber_.getTopic() << " and GPS on "
+                                   << fix_subscriber_.getTopic());
   }
 
   ~InekfNode() { ROS_INFO_STREAM("inekf_node timing:\n" << TimingRegistry::instance().report()); }
 
  private:
-  std::string filterName() const {
-    return ros_conversions::filterStatusName(session_.config().localizer.filter_type);
-  }
-
-  // Runs one event through the session; a callback never lets an exception out. timer_name:
-  // its stage in the timing report.
-  void handle(const char* what, const char* timer_name, const ros::Time& stamp,
+  // Runs one event through the session (`stage` in the timing report); a callback never lets an
+  // exception out.
+  void handle(const char* stage, const ros::Time& stamp,
               const std::function<LocalizationSession::Update()>& event) {
     try {
-      ScopedTimer timer(timer_name);
+      ScopedTimer timer(stage);
       session_.setGpsVelocityExpected(velocity_subscriber_.getNumPublishers() > 0);
       const ros::Time now = ros::Time::now();
       if (!now.isZero()) report(session_.addClock(now.toSec()));
@@ -125,7 +122,7 @@ class InekfNode {
       if (update.new_estimate || update.correction || update.started) publishStatus(stamp);
     } catch (const std::exception& error) {
       ROS_ERROR_STREAM_THROTTLE(
-          5.0, "inekf_node: " << what << " message at " << stamp << " failed: " << error.what());
+          5.0, "inekf_node: " << stage << " message at " << stamp << " failed: " << error.what());
     }
   }
 
@@ -136,26 +133,26 @@ class InekfNode {
       path_publisher_.publish(path_);
       last_path_publish_ = ros::Time();
     } else if (update.started) {
-      ROS_INFO_STREAM("inekf_node: " << filterName() << " " << update.note);
+      ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " " << update.note);
     } else if (!update.note.empty()) {
       ROS_WARN_STREAM_THROTTLE(5.0, "inekf_node: " << update.note);
     }
   }
 
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
-    handle("IMU", "inekf_node/imu", message->header.stamp,
+    handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(ros_conversions::imuEvent(*message)); });
   }
 
   void onFix(const sensor_msgs::NavSatFix::ConstPtr& message) {
-    handle("GPS fix", "inekf_node/gps", message->header.stamp,
+    handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(ros_conversions::fixEvent(*message)); });
   }
 
   void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
     const auto velocity = ros_conversions::gpsVelocity(*message);
     if (!velocity) return;
-    handle("GPS velocity", "inekf_node/gps_velocity", message->header.stamp,
+    handle("inekf_node/gps_velocity", message->header.stamp,
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
@@ -180,8 +177,10 @@ class InekfNode {
     ROS_INFO_STREAM_THROTTLE(10.0, "inekf_node: " << session_.summary());
   }
 
+  FilterStatus filterStatus() const { return ros_conversions::filterStatus(session_); }
+
   void publishStatus(const ros::Time& stamp) {
-    FilterStatus status = ros_conversions::filterStatus(session_);
+    FilterStatus status = filterStatus();
     status.header.stamp = stamp;
     status.header.frame_id = base_frame_;
     status_publisher_.publish(status);
@@ -190,9 +189,9 @@ class InekfNode {
   std::string config_file_;
   LocalizationSession session_;
   bool publish_tf_ = true;
-  std::string base_frame_;
   int max_path_length_ = 5000;
   double path_publish_period_s_ = 1.0;
+  std::string base_frame_;
   ros::Time last_path_publish_;
   nav_msgs::Path path_;
   ros::Publisher odometry_publisher_, path_publisher_, status_publisher_;
