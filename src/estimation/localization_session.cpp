@@ -211,6 +211,8 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
 
 LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
   Update update;
+  // Checked like the others: after a bag loop the velocity may be the first message back.
+  checkStamp(event.stamp_s, "GPS velocity", &update);
   if (started()) return update;  // only the start uses it
   lazy_start_.offerVelocity(event.stamp_s, event.velocity, event.in_body_frame);
   tryStart(event.stamp_s, &update);

@@ -282,6 +282,21 @@ TEST(LocalizationSession, ABagLoopResetsAndTheReplayLocalizesAsTheFirstPass) {
   EXPECT_NE(loop.note.find("time jumped back"), std::string::npos) << loop.note;
 }
 
+TEST(LocalizationSession, AfterALoopTheVelocityArrivingFirstStillServesTheStart) {
+  LocalizationSession session(originConfig());
+  session.addImu(restingImu(100.0));
+  session.addGpsVelocity(stillAt(100.0));
+  session.addFix(fixAt(100.0));
+  session.addImu(restingImu(110.0));
+  ASSERT_TRUE(session.started());
+  GpsVelocityEvent moving = stillAt(100.0);
+  moving.velocity = Eigen::Vector3d(3.0, 0.0, 0.0);
+  EXPECT_TRUE(session.addGpsVelocity(moving).reset);  // the loop shows on the velocity first
+  session.addImu(restingImu(100.0));
+  ASSERT_TRUE(session.addFix(fixAt(100.0)).started);
+  EXPECT_TRUE(session.state().velocity_map.isApprox(moving.velocity));
+}
+
 TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
   const LocalizationSessionConfig config =
       LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
