@@ -33,7 +33,10 @@ constexpr char kUsage[] =
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
     "                     [--seed S]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
-    "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major 3x4)\n"
+    "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major "
+    "3x4);\n"
+    "                    the filter starts at the first fix (as inekf_node): frames before it\n"
+    "                    repeat the start's pose and are left out of the ATE\n"
     "  --output-tum      'stamp_s x y z qx qy qz qw' per frame\n"
     "  --output-truth    the OXTS truth poses, same format as --output-kitti\n"
     "  --output-states   CSV: stamp, position, quaternion, velocity, biases, 6x6 pose covariance\n"
@@ -162,6 +165,10 @@ int main(int argc, char** argv) {
         static_cast<long long>(run.statistics.filter.gps_used),
         static_cast<long long>(run.statistics.filter.gps_rejected), errors.ate_m,
         errors.rotation_rmse_deg, errors.yaw_rmse_deg);
+    if (run.first_estimated_frame > 0) {
+      std::printf("inekf_offline: no fix before frame %d: the filter started there\n",
+                  run.first_estimated_frame);
+    }
     return 0;
   });
 }

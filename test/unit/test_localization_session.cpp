@@ -321,6 +321,22 @@ TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
   EXPECT_ANY_THROW(LocalizationSessionConfig::fromYamlFile(path));
 }
 
+// 2011_09_30_drive_0028 has no GPS solution (posmode < 0) before frame 19, so under the protocol
+// the first fix is frame 20's: the offline run starts there, as the node would.
+TEST(LocalizationSession, OfflineRunStartsAtTheFirstFixLikeTheNode) {
+  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0028_sync/oxts";
+  ISM_REQUIRE_SHARED(drive);
+  std::vector<kitti::OxtsFrame> frames = kitti::readOxtsFolder(test::sharedPath(drive));
+  frames.resize(std::min<std::size_t>(frames.size(), 100));
+  OxtsRunOptions options;
+  options.gps.every_n_frames = 10;
+  const OxtsRunResult run = runLocalizerOnOxts(frames, options);
+  ASSERT_EQ(run.first_estimated_frame, 20);
+  EXPECT_NEAR(run.states[20].stamp_s, frames[20].stampSeconds(), 1e-9);
+  EXPECT_EQ(run.states[0].position_map, run.states[20].position_map);  // held at the start
+  EXPECT_EQ(run.states.size(), frames.size());
+}
+
 // inekf_node's path against inekf_offline's on the same data: the events kitti_player /
 // kitti2bag publish for the first 450 frames of 2011_09_30_drive_0027 under the protocol (IMU
 // with the OXTS orientation, GPS velocity in the map frame, the degraded fix with its
