@@ -24,11 +24,8 @@
 #include <tf2_ros/transform_broadcaster.h>
 
 #include <algorithm>
-#include <fstream>
 #include <functional>
-#include <stdexcept>
 #include <string>
-#include <utility>
 
 #include "inekf_semantic_mapping/FilterStatus.h"
 #include "inekf_semantic_mapping/common/timing.h"
@@ -40,51 +37,13 @@ namespace inekf_semantic_mapping {
 namespace {
 
 using estimation::LocalizationSession;
-using estimation::LocalizationSessionConfig;
-
-LocalizationSessionConfig loadConfig(ros::NodeHandle& nh, std::string* config_file) {
-  const std::string default_file =
-      ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml";
-  // An explicitly given config file must load (a bad one is fatal: the error names the file and
-  // the key); without the parameter a missing default file means the built-in defaults.
-  LocalizationSessionConfig config;
-  if (nh.getParam("config_file", *config_file) || std::ifstream(default_file).good()) {
-    if (config_file->empty()) *config_file = default_file;
-    config = LocalizationSessionConfig::fromYamlFile(*config_file);
-  } else {
-    *config_file = "(built-in defaults)";
-    ROS_WARN_STREAM("inekf_node: " << default_file << " not found, using the built-in defaults");
-  }
-  std::string filter;
-  if (nh.getParam("filter_type", filter) || nh.getParam("filter", filter)) {
-    config.localizer.filter_type = estimation::filterTypeFromString(filter);
-  }
-  estimation::LocalizerConfig& localizer = config.localizer;
-  nh.param("init_orientation_from_imu", localizer.init_orientation_from_reference,
-           localizer.init_orientation_from_reference);
-  for (const auto& [name, value] :
-       {std::pair{"min_fix_sigma_m", &localizer.min_gps_sigma_m},
-        {"default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m},
-        {"default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m},
-        {"time_jump_back_s", &config.time_jump_back_s}}) {
-    nh.param(name, *value, *value);
-  }
-  estimation::GeodeticOrigin origin;
-  const int origin_parts = nh.getParam("origin_lat", origin.lat_deg) +
-                           nh.getParam("origin_lon", origin.lon_deg) +
-                           nh.getParam("origin_alt", origin.alt_m);
-  if (origin_parts == 3) {
-    config.origin = origin;
-  } else if (origin_parts != 0) {
-    throw std::invalid_argument("set all three of ~origin_lat, ~origin_lon, ~origin_alt or none");
-  }
-  return config;
-}
 
 class InekfNode {
  public:
   InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
-      : session_(loadConfig(private_nh, &config_file_)) {
+      : session_(ros_conversions::sessionConfigFromParameters(
+            private_nh, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
+            &config_file_)) {
     private_nh.param("publish_tf", publish_tf_, true);
     private_nh.param<std::string>("map_frame", path_.header.frame_id, frames::kMap);
     private_nh.param<std::string>("base_frame", base_frame_, frames::kBaseLink);

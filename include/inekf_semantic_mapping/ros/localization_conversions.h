@@ -6,6 +6,7 @@
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
+#include <ros/node_handle.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
 
@@ -21,6 +22,15 @@
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
+
+// The session's configuration from a node's private parameters: ~config_file (else
+// default_file, else the built-in defaults; *config_file says which), then ~filter |
+// ~filter_type, ~init_orientation_from_imu, ~min_fix_sigma_m (gps.min_sigma_m),
+// ~default_fix_sigma_horizontal_m / _vertical_m, ~time_jump_back_s override it, and
+// ~origin_lat/lon/alt (all three or none) set the map origin. Throws on a bad file or origin.
+estimation::LocalizationSessionConfig sessionConfigFromParameters(const ros::NodeHandle& nh,
+                                                                  const std::string& default_file,
+                                                                  std::string* config_file);
 
 // The IMU sample of a message (stamp from its header); nullopt when a rate or an acceleration
 // is not finite.
