@@ -76,7 +76,7 @@ std::vector<kitti::OxtsFrame> benchmarkDrive() {
 void BM_WholeDriveThroughLocalizer(benchmark::State& state) {
   static const std::vector<kitti::OxtsFrame> frames = benchmarkDrive();
   estimation::OxtsRunOptions options;
-  options.config.filter_type = filterOf(state);
+  options.config.localizer.filter_type = filterOf(state);
   options.gps.every_n_frames = 10;
   options.gps.sigma_horizontal_m = 1.5;
   options.gps.sigma_vertical_m = 3.0;

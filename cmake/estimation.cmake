@@ -10,16 +10,23 @@ ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
 ism_add_gtest(test_imu_filters SOURCES test/unit/test_imu_filters.cpp
   LINK ${PROJECT_NAME}_estimation)
 
-# Runs the Localizer over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
+# The streaming session both inekf_node and inekf_offline drive (geodetic fixes: needs kitti's
+# Mercator).
+ism_add_core_library(${PROJECT_NAME}_localization_session
+  SOURCES src/estimation/localization_session.cpp
+  LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti ${PROJECT_NAME}_common)
+# Runs the session over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
 ism_add_core_library(${PROJECT_NAME}_estimation_oxts
   SOURCES src/estimation/oxts_run.cpp
-  LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti)
+  LINK ${PROJECT_NAME}_localization_session)
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
 ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp
   LINK ${PROJECT_NAME}_estimation)
+ism_add_gtest(test_localization_session SOURCES test/unit/test_localization_session.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts)
 ism_add_gtest(test_inekf_real_drives SOURCES test/unit/test_inekf_real_drives.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
 

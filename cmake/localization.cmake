@@ -5,14 +5,15 @@
 if(TARGET ${PROJECT_NAME}_estimation AND TARGET ${PROJECT_NAME}_kitti)
   ism_add_ros_executable(inekf_node
     SOURCES src/nodes/inekf_node.cpp src/ros/localization_conversions.cpp
-    LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti roslib)
+    LINK ${PROJECT_NAME}_localization_session roslib)
   # The node's message conversions (ROS headers: not a core library, so the ROS include path is
   # added here).
   ism_add_gtest(test_localization_conversions
     SOURCES test/unit/test_localization_conversions.cpp src/ros/localization_conversions.cpp
-    LINK ${catkin_LIBRARIES})
+    LINK ${PROJECT_NAME}_localization_session ${catkin_LIBRARIES})
   if(TARGET test_localization_conversions)
     target_include_directories(test_localization_conversions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+    add_dependencies(test_localization_conversions ${PROJECT_NAME}_generate_messages_cpp)
   endif()
   if(CATKIN_ENABLE_TESTING)
     # A real OXTS drive from ../shared played into inekf_node (skips without ../shared).

@@ -17,7 +17,7 @@ namespace estimation {
 namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
-constexpr double kDuplicateStampS = 1e-6;
+constexpr double kDuplicateStampS = Localizer::kDuplicateStampS;
 
 // Reads YAML keys into a config, naming the file and the key on any problem, and rejecting
 // unknown keys (a typo must not silently leave a default in place).
@@ -149,7 +149,7 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("imu", "interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale,
                 true);
   reader.boolean("", "init_orientation_from_reference", &config.init_orientation_from_reference);
-  reader.rejectUnknown({"node"});
+  reader.rejectUnknown({"node", "session"});
   return config;
 }
 

@@ -29,10 +29,13 @@ double headingDeg(const Eigen::Matrix3d& r) { return std::atan2(r(1, 0), r(0, 0)
 OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options) {
   if (frames.empty()) throw std::invalid_argument("runLocalizerOnOxts: no OXTS frames");
-  const kitti::MercatorProjection projection =
-      kitti::MercatorProjection::atFirstFix(frames.front().record);
+  const kitti::OxtsRecord& origin = frames.front().record;
+  LocalizationSessionConfig config = options.config;
+  // The truth's map frame, so that the estimate compares with it directly.
+  config.origin = GeodeticOrigin{origin.lat, origin.lon, origin.alt};
+  LocalizationSession session(config);
+  const kitti::MercatorProjection& projection = *session.projection();
   kitti::GpsDegrader degrader(options.gps);
-  Localizer localizer(options.config);
   OxtsRunResult run;
   run.states.reserve(frames.size());
   run.pose_covariances.reserve(frames.size());
@@ -40,66 +43,57 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
   for (const kitti::OxtsFrame& frame : frames) {
     run.truth.push_back(projection.poseInMap(frame.record));
   }
+  run.first_estimated_frame = static_cast<int>(frames.size());
 
   const double t0 = frames.front().stampSeconds();
-  auto fixOf = [&](std::size_t k) -> std::optional<PositionFix> {
+  for (std::size_t k = 0; k < frames.size(); ++k) {
     const kitti::OxtsRecord& record = frames[k].record;
-    const std::optional<kitti::GeodeticFix> geodetic =
-        degrader.degrade(k, frames[k].stampSeconds() - t0, record);
-    if (!geodetic) return std::nullopt;
-    ++run.fixes_offered;
-    PositionFix fix;
-    fix.stamp_s = frames[k].stampSeconds();
-    fix.position_map = projection.toMap(geodetic->lat_deg, geodetic->lon_deg, geodetic->alt_m);
-    const double h2 = geodetic->sigma_horizontal_m * geodetic->sigma_horizontal_m;
-    const double v2 = geodetic->sigma_vertical_m * geodetic->sigma_vertical_m;
-    fix.covariance_map = Eigen::Vector3d(h2, h2, v2).asDiagonal();
-    return fix;
-  };
-
-  // Frame 0: attitude and world velocity from the OXTS solution, position from its fix.
-  {
-    ScopedTimer timer("oxts_run.initialize");
-    const kitti::OxtsRecord& first = frames.front().record;
-    NavState initial;
-    initial.stamp_s = frames.front().stampSeconds();
-    initial.rotation = kitti::rotationFromRollPitchYaw(
-        first.roll, first.pitch, first.yaw + options.init_yaw_error_deg * kDegToRad);
-    initial.velocity_map = Eigen::Vector3d(first.ve, first.vn, first.vu);
-    ErrorCovariance world = localizer.initialWorldCovariance();
-    const std::optional<PositionFix> first_fix = fixOf(0);
-    if (first_fix) {
-      initial.position_map = first_fix->position_map;
-      world.block<3, 3>(6, 6) = first_fix->covariance_map.cwiseMax(options.config.min_gps_sigma_m *
-                                                                   options.config.min_gps_sigma_m *
-                                                                   Eigen::Matrix3d::Identity());
-    }
-    localizer.initialize(initial, world);
-    run.states.push_back(localizer.state());
-    run.pose_covariances.push_back(localizer.filter().poseCovariance());
-  }
-
-  for (std::size_t k = 1; k < frames.size(); ++k) {
-    const kitti::OxtsRecord& record = frames[k].record;
-    ImuSample sample;
-    sample.stamp_s = frames[k].stampSeconds();
-    sample.angular_velocity = Eigen::Vector3d(record.wx, record.wy, record.wz);
-    sample.specific_force = Eigen::Vector3d(record.ax, record.ay, record.az);
+    const double stamp_s = frames[k].stampSeconds();
+    ImuEvent imu;
+    imu.sample.stamp_s = stamp_s;
+    imu.sample.angular_velocity = Eigen::Vector3d(record.wx, record.wy, record.wz);
+    imu.sample.specific_force = Eigen::Vector3d(record.ax, record.ay, record.az);
     // The interval (k-1, k] touches an interpolated frame at either end.
-    sample.interpolated = record.posmode < 0 || frames[k - 1].record.posmode < 0;
+    imu.sample.interpolated = record.posmode < 0 || (k > 0 && frames[k - 1].record.posmode < 0);
+    imu.orientation = kitti::rotationFromRollPitchYaw(
+        record.roll, record.pitch, record.yaw + options.init_yaw_error_deg * kDegToRad);
     {
       ScopedTimer timer("oxts_run.propagate");
-      localizer.addImu(sample);
+      session.addImu(imu);
     }
-    const std::optional<PositionFix> fix = fixOf(k);
-    if (fix) {
+    GpsVelocityEvent velocity;
+    velocity.stamp_s = stamp_s;
+    velocity.velocity = Eigen::Vector3d(record.ve, record.vn, record.vu);
+    session.addGpsVelocity(velocity);
+    if (const std::optional<kitti::GeodeticFix> geodetic =
+            degrader.degrade(k, stamp_s - t0, record)) {
       ScopedTimer timer("oxts_run.correct");
-      localizer.addPositionFix(*fix);
+      ++run.fixes_offered;
+      GeodeticFixEvent fix;
+      fix.stamp_s = stamp_s;
+      fix.lat_deg = geodetic->lat_deg;
+      fix.lon_deg = geodetic->lon_deg;
+      fix.alt_m = geodetic->alt_m;
+      const double h2 = geodetic->sigma_horizontal_m * geodetic->sigma_horizontal_m;
+      const double v2 = geodetic->sigma_vertical_m * geodetic->sigma_vertical_m;
+      fix.covariance_enu = Eigen::Matrix3d(Eigen::Vector3d(h2, h2, v2).asDiagonal());
+      session.addFix(fix);
     }
-    run.states.push_back(localizer.state());
-    run.pose_covariances.push_back(localizer.filter().poseCovariance());
+    if (!session.started()) continue;
+    if (run.states.empty()) {
+      // Frames before the start have no estimate of their own: they repeat the start's.
+      run.first_estimated_frame = static_cast<int>(k);
+      run.states.assign(k, session.state());
+      run.pose_covariances.assign(k, session.poseCovariance());
+    }
+    run.states.push_back(session.state());
+    run.pose_covariances.push_back(session.poseCovariance());
   }
-  run.statistics = localizer.statistics();
+  if (run.states.empty()) {  // never started: nothing to report but the (unstarted) defaults
+    run.states.assign(frames.size(), session.state());
+    run.pose_covariances.assign(frames.size(), session.poseCovariance());
+  }
+  run.statistics = session.statistics();
   return run;
 }
 
@@ -107,7 +101,7 @@ TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first, int last)
   const int end = last < 0 ? static_cast<int>(run.states.size()) : last;
   TrajectoryErrors errors;
   int count = 0;
-  for (int k = std::max(first, 0); k < end; ++k) {
+  for (int k = std::max(first, run.first_estimated_frame); k < end; ++k) {
     const NavState& s = run.states[k];
     const Eigen::Isometry3d& truth = run.truth[k];
     errors.ate_m += (s.position_map - truth.translation()).squaredNorm();

@@ -3,7 +3,10 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "inekf_semantic_mapping/ros/names.h"
 
@@ -15,6 +18,44 @@ namespace {
 Eigen::Vector3d toEigen(const geometry_msgs::Vector3& v) { return {v.x, v.y, v.z}; }
 
 }  // namespace
+
+estimation::LocalizationSessionConfig sessionConfigFromParameters(const ros::NodeHandle& nh,
+                                                                  const std::string& default_file,
+                                                                  std::string* config_file) {
+  // An explicitly given config file must load (a bad one is fatal: the error names the file and
+  // the key); without the parameter a missing default file means the built-in defaults.
+  estimation::LocalizationSessionConfig config;
+  if (nh.getParam("config_file", *config_file) || std::ifstream(default_file).good()) {
+    if (config_file->empty()) *config_file = default_file;
+    config = estimation::LocalizationSessionConfig::fromYamlFile(*config_file);
+  } else {
+    *config_file = "built-in defaults (" + default_file + " not found)";
+  }
+  std::string filter;
+  if (nh.getParam("filter_type", filter) || nh.getParam("filter", filter)) {
+    config.localizer.filter_type = estimation::filterTypeFromString(filter);
+  }
+  estimation::LocalizerConfig& localizer = config.localizer;
+  nh.param("init_orientation_from_imu", localizer.init_orientation_from_reference,
+           localizer.init_orientation_from_reference);
+  for (const auto& [name, value] :
+       {std::pair{"min_fix_sigma_m", &localizer.min_gps_sigma_m},
+        {"default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m},
+        {"default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m},
+        {"time_jump_back_s", &config.time_jump_back_s}}) {
+    nh.param(name, *value, *value);
+  }
+  estimation::GeodeticOrigin origin;
+  const int origin_parts = nh.getParam("origin_lat", origin.lat_deg) +
+                           nh.getParam("origin_lon", origin.lon_deg) +
+                           nh.getParam("origin_alt", origin.alt_m);
+  if (origin_parts == 3) {
+    config.origin = origin;
+  } else if (origin_parts != 0) {
+    throw std::invalid_argument("set all three of ~origin_lat, ~origin_lon, ~origin_alt or none");
+  }
+  return config;
+}
 
 std::optional<estimation::ImuSample> imuSampleFromMessage(const sensor_msgs::Imu& message) {
   estimation::ImuSample sample;
@@ -40,37 +81,44 @@ bool isUsableFix(const sensor_msgs::NavSatFix& fix) {
          std::isfinite(fix.latitude) && std::isfinite(fix.longitude) && std::isfinite(fix.altitude);
 }
 
-Eigen::Matrix3d fixCovarianceMap(const sensor_msgs::NavSatFix& fix, double min_sigma_m,
-                                 double default_sigma_horizontal_m,
-                                 double default_sigma_vertical_m) {
-  Eigen::Matrix3d covariance = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+std::optional<Eigen::Matrix3d> fixCovarianceEnu(const sensor_msgs::NavSatFix& fix) {
+  const Eigen::Matrix3d covariance = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
       fix.position_covariance.data());
-  const bool known =
-      fix.position_covariance_type != sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN &&
-      covariance.allFinite() && covariance.diagonal().minCoeff() > 0.0;
-  if (!known) {
-    covariance = Eigen::Vector3d(default_sigma_horizontal_m * default_sigma_horizontal_m,
-                                 default_sigma_horizontal_m * default_sigma_horizontal_m,
-                                 default_sigma_vertical_m * default_sigma_vertical_m)
-                     .asDiagonal();
-  }
-  covariance = 0.5 * (covariance + covariance.transpose()).eval();
-  // A receiver's optimistic covariance (or a perfect-truth fix) must not make the filter
-  // overconfident: floor each axis' variance.
-  const double floor = min_sigma_m * min_sigma_m;
-  for (int axis = 0; axis < 3; ++axis) {
-    covariance(axis, axis) = std::max(covariance(axis, axis), floor);
+  if (fix.position_covariance_type == sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN ||
+      !covariance.allFinite() || !(covariance.diagonal().minCoeff() > 0.0)) {
+    return std::nullopt;
   }
   return covariance;
 }
 
-std::optional<GpsVelocity> gpsVelocity(const geometry_msgs::TwistStamped& message) {
-  GpsVelocity velocity;
+std::optional<estimation::GpsVelocityEvent> gpsVelocity(
+    const geometry_msgs::TwistStamped& message) {
+  estimation::GpsVelocityEvent velocity;
   velocity.stamp_s = message.header.stamp.toSec();
   velocity.velocity = toEigen(message.twist.linear);
   velocity.in_body_frame = message.header.frame_id != frames::kMap;
   if (!velocity.velocity.allFinite()) return std::nullopt;
   return velocity;
+}
+
+estimation::ImuEvent imuEvent(const sensor_msgs::Imu& message) {
+  estimation::ImuEvent event;
+  event.sample.stamp_s = message.header.stamp.toSec();
+  event.sample.angular_velocity = toEigen(message.angular_velocity);
+  event.sample.specific_force = toEigen(message.linear_acceleration);
+  event.orientation = imuOrientation(message);
+  return event;
+}
+
+estimation::GeodeticFixEvent fixEvent(const sensor_msgs::NavSatFix& message) {
+  estimation::GeodeticFixEvent event;
+  event.stamp_s = message.header.stamp.toSec();
+  event.lat_deg = message.latitude;
+  event.lon_deg = message.longitude;
+  event.alt_m = message.altitude;
+  event.covariance_enu = fixCovarianceEnu(message);
+  event.has_solution = isUsableFix(message);
+  return event;
 }
 
 std::array<double, 36> rosPoseCovariance(const Eigen::Matrix3d& body_to_map,
@@ -108,6 +156,65 @@ void fillOdometry(const estimation::NavState& state,
   odometry->twist.twist.angular.z = rate_body.z();
   // The filter's velocity covariance lives in filter-specific error coordinates: leave the twist
   // covariance unknown (all zero) rather than publish a wrong one.
+}
+
+void appendToPath(const nav_msgs::Odometry& odometry, std::size_t max_length,
+                  nav_msgs::Path* path) {
+  geometry_msgs::PoseStamped pose;
+  pose.header = odometry.header;
+  pose.pose = odometry.pose.pose;
+  path->poses.push_back(pose);
+  max_length = std::max<std::size_t>(max_length, 1);
+  if (path->poses.size() > max_length + max_length / 10) {
+    path->poses.erase(path->poses.begin(), path->poses.end() - max_length);
+  }
+}
+
+geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry) {
+  geometry_msgs::TransformStamped transform;
+  transform.header = odometry.header;
+  transform.child_frame_id = odometry.child_frame_id;
+  transform.transform.translation.x = odometry.pose.pose.position.x;
+  transform.transform.translation.y = odometry.pose.pose.position.y;
+  transform.transform.translation.z = odometry.pose.pose.position.z;
+  transform.transform.rotation = odometry.pose.pose.orientation;
+  return transform;
+}
+
+std::string filterStatusName(estimation::FilterType type) {
+  switch (type) {
+    case estimation::FilterType::kLeftInvariant:
+      return "left_inekf";
+    case estimation::FilterType::kRightInvariant:
+      return "right_inekf";
+    case estimation::FilterType::kQuaternionEskf:
+      return "quaternion_eskf";
+  }
+  return "unknown";
+}
+
+FilterStatus filterStatus(const estimation::LocalizationSession& session) {
+  const estimation::LocalizationSession::Statistics statistics = session.statistics();
+  FilterStatus status;
+  status.filter_type = filterStatusName(session.config().localizer.filter_type);
+  if (session.started()) {
+    const estimation::NavState& state = session.state();
+    status.gyro_bias.x = state.gyro_bias.x();
+    status.gyro_bias.y = state.gyro_bias.y();
+    status.gyro_bias.z = state.gyro_bias.z();
+    status.accel_bias.x = state.accel_bias.x();
+    status.accel_bias.y = state.accel_bias.y();
+    status.accel_bias.z = state.accel_bias.z();
+  }
+  const double d2 = session.lastMahalanobisSquared();
+  status.last_innovation_mahalanobis = std::isfinite(d2) ? std::sqrt(std::max(0.0, d2)) : 0.0;
+  status.gps_fixes_used = static_cast<uint32_t>(statistics.filter.gps_used);
+  status.gps_fixes_rejected =
+      static_cast<uint32_t>(statistics.filter.gps_rejected + statistics.fixes_ignored);
+  status.imu_samples = static_cast<uint32_t>(statistics.filter.imu_used);
+  status.imu_samples_dropped =
+      static_cast<uint32_t>(statistics.filter.imu_dropped + statistics.imu_invalid);
+  return status;
 }
 
 bool isFinite(const estimation::NavState& state, const estimation::PoseCovariance& covariance) {

@@ -22,8 +22,8 @@ std::string oxtsDir(const std::string& drive) {
 
 OxtsRunOptions protocol(FilterType type) {
   OxtsRunOptions options;
-  options.config = LocalizerConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.config.filter_type = type;
+  options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
+  options.config.localizer.filter_type = type;
   options.gps.sigma_horizontal_m = 1.5;
   options.gps.sigma_vertical_m = 3.0;
   options.gps.every_n_frames = 10;
@@ -82,7 +82,7 @@ TEST(RealDrives, LeftInvariantEkfMeetsTheTargets) {
                 target.rotation_rmse_deg);
     EXPECT_LT(errors.ate_m, target.ate_m) << target.drive;
     EXPECT_LT(errors.rotation_rmse_deg, target.rotation_rmse_deg) << target.drive;
-    EXPECT_EQ(run.statistics.gps_rejected, 0) << target.drive;
+    EXPECT_EQ(run.statistics.filter.gps_rejected, 0) << target.drive;
     EXPECT_EQ(run.states.size(), run.truth.size());
     ++ran;
   }
@@ -108,7 +108,7 @@ TEST(RealDrives, LeftInvariantEkfRecoversFromA90DegreeYawErrorFasterThanTheEskf)
        {FilterType::kLeftInvariant, FilterType::kQuaternionEskf, FilterType::kRightInvariant}) {
     OxtsRunOptions options = protocol(type);
     options.init_yaw_error_deg = 90.0;
-    options.config.initial_yaw_sigma_deg = 180.0;
+    options.config.localizer.initial_yaw_sigma_deg = 180.0;
     const OxtsRunResult run = runLocalizerOnOxts(frames, options);
     EXPECT_NEAR(std::abs(yawErrorDeg(run, 0)), 90.0, 1e-6);
     worst_after_20s[i] = worstYawAfter(run, 20.0);

@@ -56,28 +56,44 @@ TEST(RosPoseCovariance, MatchesTheFirstOrderMapErrorOfSampledBodyErrors) {
   EXPECT_TRUE(rotation_block.isApprox(expected));
 }
 
-TEST(FixCovariance, FloorsSmallSigmasAndKeepsLargerOnes) {
+TEST(FixCovariance, KeepsTheReceiversCovarianceUnfloored) {
   sensor_msgs::NavSatFix fix;
   fix.position_covariance = {0.01, 0.002, 0, 0.002, 4.0, 0, 0, 0, 9.0};
   fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_KNOWN;
-  const Eigen::Matrix3d covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
-  EXPECT_NEAR(covariance(0, 0), 0.09, 1e-12);
-  EXPECT_NEAR(covariance(1, 1), 4.0, 1e-12);
-  EXPECT_NEAR(covariance(2, 2), 9.0, 1e-12);
-  EXPECT_NEAR(covariance(0, 1), 0.002, 1e-12);
+  const auto covariance = fixCovarianceEnu(fix);
+  ASSERT_TRUE(covariance.has_value());
+  EXPECT_NEAR((*covariance)(0, 0), 0.01, 1e-12);  // the Localizer floors it, once
+  EXPECT_NEAR((*covariance)(1, 1), 4.0, 1e-12);
+  EXPECT_NEAR((*covariance)(0, 1), 0.002, 1e-12);
+  EXPECT_NEAR(fixEvent(fix).covariance_enu->coeff(2, 2), 9.0, 1e-12);
 }
 
-TEST(FixCovariance, UnknownOrNonFiniteCovarianceUsesTheDefaults) {
+TEST(FixCovariance, UnknownOrNonFiniteCovarianceIsNone) {
   sensor_msgs::NavSatFix fix;
   fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_UNKNOWN;
   fix.position_covariance = {4, 0, 0, 0, 4, 0, 0, 0, 4};
-  Eigen::Matrix3d covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
-  EXPECT_TRUE(covariance.isApprox(Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal().toDenseMatrix()));
+  EXPECT_FALSE(fixCovarianceEnu(fix).has_value());
   fix.position_covariance_type = sensor_msgs::NavSatFix::COVARIANCE_TYPE_DIAGONAL_KNOWN;
+  EXPECT_TRUE(fixCovarianceEnu(fix).has_value());
   fix.position_covariance[4] = kNaN;
-  covariance = fixCovarianceMap(fix, 0.3, 1.5, 3.0);
-  EXPECT_TRUE(covariance.allFinite());
-  EXPECT_NEAR(covariance(1, 1), 2.25, 1e-12);
+  EXPECT_FALSE(fixCovarianceEnu(fix).has_value());
+}
+
+TEST(FixEvent, CarriesTheFixAndWhetherItIsASolution) {
+  sensor_msgs::NavSatFix fix;
+  fix.header.stamp = ros::Time(12, 500000000);
+  fix.latitude = 49.0;
+  fix.longitude = 8.4;
+  fix.altitude = 110.0;
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_FIX;
+  estimation::GeodeticFixEvent event = fixEvent(fix);
+  EXPECT_DOUBLE_EQ(event.stamp_s, 12.5);
+  EXPECT_DOUBLE_EQ(event.lat_deg, 49.0);
+  EXPECT_DOUBLE_EQ(event.alt_m, 110.0);
+  EXPECT_TRUE(event.has_solution);
+  EXPECT_FALSE(event.covariance_enu.has_value());
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_NO_FIX;
+  EXPECT_FALSE(fixEvent(fix).has_solution);
 }
 
 TEST(UsableFix, RejectsNoFixAndNaN) {
@@ -135,6 +151,8 @@ TEST(Imu, SampleAndOrientation) {
   EXPECT_FALSE(imuOrientation(message).has_value());
   message.linear_acceleration.x = kNaN;
   EXPECT_FALSE(imuSampleFromMessage(message).has_value());
+  // The session's event is unfiltered: the session counts the invalid sample.
+  EXPECT_TRUE(std::isnan(imuEvent(message).sample.specific_force.x()));
 }
 
 TEST(Odometry, TwistIsInTheBodyFrameAndBiasCorrected) {
@@ -156,6 +174,48 @@ TEST(Odometry, TwistIsInTheBodyFrameAndBiasCorrected) {
   EXPECT_TRUE(isFinite(state, estimation::PoseCovariance::Identity()));
   state.position_map.x() = kNaN;
   EXPECT_FALSE(isFinite(state, estimation::PoseCovariance::Identity()));
+}
+
+TEST(Path, KeepsTheNewestPosesTrimmedInChunks) {
+  nav_msgs::Path path;
+  nav_msgs::Odometry odometry;
+  for (int k = 0; k < 11; ++k) {
+    odometry.pose.pose.position.x = k;
+    appendToPath(odometry, 10, &path);
+  }
+  EXPECT_EQ(path.poses.size(), 11u);  // within the chunk of 10 % above the limit
+  odometry.pose.pose.position.x = 11;
+  appendToPath(odometry, 10, &path);
+  ASSERT_EQ(path.poses.size(), 10u);
+  EXPECT_DOUBLE_EQ(path.poses.back().pose.position.x, 11.0);
+}
+
+TEST(Transform, IsTheOdometrysPoseBetweenItsFrames) {
+  nav_msgs::Odometry odometry;
+  odometry.header.frame_id = "map";
+  odometry.child_frame_id = "base_link";
+  odometry.pose.pose.position.y = 2.0;
+  odometry.pose.pose.orientation.w = 1.0;
+  const geometry_msgs::TransformStamped transform = transformOfOdometry(odometry);
+  EXPECT_EQ(transform.header.frame_id, "map");
+  EXPECT_EQ(transform.child_frame_id, "base_link");
+  EXPECT_DOUBLE_EQ(transform.transform.translation.y, 2.0);
+  EXPECT_DOUBLE_EQ(transform.transform.rotation.w, 1.0);
+}
+
+TEST(FilterStatus, CountsTheSessionsDropsWithTheFiltersOwn) {
+  estimation::LocalizationSession session{estimation::LocalizationSessionConfig()};
+  estimation::ImuEvent bad;
+  bad.sample.specific_force.x() = kNaN;
+  session.addImu(bad);
+  estimation::GeodeticFixEvent no_fix;
+  no_fix.has_solution = false;
+  session.addFix(no_fix);
+  const FilterStatus status = filterStatus(session);
+  EXPECT_EQ(status.filter_type, "left_inekf");
+  EXPECT_EQ(status.imu_samples_dropped, 1u);
+  EXPECT_EQ(status.gps_fixes_rejected, 1u);
+  EXPECT_EQ(status.gps_fixes_used, 0u);
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 // When and with what a streaming filter starts, when its first fix, the IMU orientation and the
-// GPS velocity arrive on separate connections in any order (inekf_node): at the newest fix, with
+// GPS velocity arrive on separate connections in any order (LocalizationSession, for inekf_node
+// and inekf_offline alike): at the newest fix, with
 // the orientation of the latest IMU message and the velocity of the fix's instant, once those
 // have arrived, or once a message max_wait_s (data time) newer than the fix shows that they are
 // not coming. Before this existed, a fix handled before any IMU message started the filter

@@ -1,5 +1,5 @@
-// The streaming front end shared by inekf_offline and inekf_node (same code, same behaviour):
-// stamps checks, gaps, stale fixes, gating, lazy initialization, statistics.
+// The streaming filter front end under LocalizationSession (which inekf_offline and inekf_node
+// both drive): stamp checks, gaps, stale and late fixes, gating, lazy initialization, statistics.
 //
 // Conventions and policies:
 //  - An IMU sample stamped t_k propagates the state from the previous sample's stamp t_{k-1} to
@@ -8,7 +8,7 @@
 //  - Out of order (t_k < t_{k-1}) or duplicate (|t_k - t_{k-1}| < 1 us) samples are dropped and
 //    counted. A gap longer than max_imu_gap_s is bridged by propagating over it with the process
 //    noise inflated by gap_noise_scale (the covariance grows honestly); the status says kGap.
-//    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the node calls reset().
+//    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the session calls reset().
 //  - A sample flagged `interpolated` propagates with the gyro/accel white noise inflated (see
 //    interpolated_gyro_noise_scale_per_s / interpolated_accel_noise_scale).
 //  - A fix OLDER than the state (it travelled slower than the IMU samples, e.g. on another ROS
@@ -77,12 +77,13 @@ struct LocalizerConfig {
   double fix_history_s = 2.0;  // how late a fix may arrive and still be applied at its own time
   int max_consecutive_rejected_fixes = 5;  // then re-acquire (see above); <= 0: never
 
-  // Lazy initialization (node): take rotation and velocity from setInitialReference() (e.g. the
-  // OXTS orientation of the first Imu message) instead of levelling with yaw 0 and zero speed.
+  // Lazy initialization (LocalizationSession's start): take rotation and velocity from
+  // setInitialReference() (e.g. the OXTS orientation of the first Imu message) instead of levelling
+  // with yaw 0 and zero speed.
   bool init_orientation_from_reference = true;
 
-  // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above; a
-  // top-level `node:` section is left to the node).
+  // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above; the
+  // top-level `session:` section is LocalizationSessionConfig's, a `node:` one the node's).
   // Throws std::runtime_error naming the file and the key on a bad value or an unknown key.
   static LocalizerConfig fromYamlFile(const std::string& path);
 };
@@ -90,6 +91,8 @@ struct LocalizerConfig {
 class Localizer {
  public:
   enum class ImuStatus { kUsed, kDroppedOutOfOrder, kDroppedDuplicate, kGap, kNotInitialized };
+  // Stamps closer than this are the same instant (a duplicate sample, a fix at a sample).
+  static constexpr double kDuplicateStampS = 1e-6;
 
   struct Statistics {
     std::int64_t imu_used = 0;

@@ -1,16 +1,20 @@
 // Runs the Localizer over a KITTI raw OXTS sequence under the evaluation protocol: the one
 // implementation behind inekf_offline, the real-drive tests and the benchmark.
 //
-// After frame 0 only the timestamps, ax..az, wx..wz and (degraded) lat/lon/alt fixes reach the
-// filter; frame 0's roll/pitch/yaw and vn/ve/vu initialize it (plus an optional injected yaw
-// error), its degraded fix gives the initial position. Frames with posmode < 0 (KITTI filled
-// them by interpolation) are fed as `interpolated` samples, so their IMU noise is inflated.
+// Each frame becomes the events inekf_node gets from kitti2bag / kitti_player, in stamp order,
+// fed to the same LocalizationSession: the IMU sample (ax..az, wx..wz, with the OXTS
+// orientation roll/pitch/yaw, plus an optional injected yaw error), the GPS velocity (ve, vn,
+// vu, map frame) and the (degraded) lat/lon/alt fix. The session starts the filter at the first
+// fix with that frame's orientation and velocity, as the node does; after the start only the
+// IMU samples and the fixes are used. The map origin is frame 0's OXTS position (the truth's).
+// Frames with posmode < 0 (KITTI filled them by interpolation) are fed as `interpolated`
+// samples, so their IMU noise is inflated.
 #pragma once
 
 #include <Eigen/Geometry>
 #include <vector>
 
-#include "inekf_semantic_mapping/estimation/localizer.h"
+#include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/kitti/gps_degradation.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
 
@@ -18,7 +22,7 @@ namespace inekf_semantic_mapping {
 namespace estimation {
 
 struct OxtsRunOptions {
-  LocalizerConfig config;
+  LocalizationSessionConfig config;  // its origin is replaced by frame 0's
   kitti::GpsDegradationOptions gps;
   double init_yaw_error_deg = 0.0;  // added to frame 0's yaw (tests convergence)
 };
@@ -27,8 +31,11 @@ struct OxtsRunResult {
   std::vector<NavState> states;                  // one per OXTS frame
   std::vector<PoseCovariance> pose_covariances;  // one per OXTS frame (see NavigationFilter)
   std::vector<Eigen::Isometry3d> truth;          // T_map_imu from the OXTS solution
-  Localizer::Statistics statistics;
+  LocalizationSession::Statistics statistics;
   int fixes_offered = 0;  // fixes the degrader produced
+  // The frame the filter started at (its first fix); earlier frames repeat the start's state
+  // and are left out of compareWithTruth. states.size() when it never started.
+  int first_estimated_frame = 0;
 };
 
 // Throws std::invalid_argument on an empty sequence.
@@ -36,7 +43,8 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options);
 
 // Quick accuracy figures against the truth (unaligned): RMS position error, RMS of the rotation
-// error angle, RMS yaw error; over frames [first, last) (last < 0: to the end).
+// error angle, RMS yaw error; over frames [first, last) (last < 0: to the end) from the
+// first estimated frame on.
 struct TrajectoryErrors {
   double ate_m = 0.0;
   double rotation_rmse_deg = 0.0;

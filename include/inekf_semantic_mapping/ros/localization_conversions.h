@@ -2,19 +2,35 @@
 // ROS-facing (src/ros): only nodes include this header.
 #pragma once
 
+#include <geometry_msgs/TransformStamped.h>
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <ros/node_handle.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
 
 #include <Eigen/Core>
 #include <array>
+#include <cstddef>
 #include <optional>
+#include <string>
 
+#include "inekf_semantic_mapping/FilterStatus.h"
+#include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/estimation/types.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
+
+// The session's configuration from a node's private parameters: ~config_file (else
+// default_file, else the built-in defaults; *config_file says which), then ~filter |
+// ~filter_type, ~init_orientation_from_imu, ~min_fix_sigma_m (gps.min_sigma_m),
+// ~default_fix_sigma_horizontal_m / _vertical_m, ~time_jump_back_s override it, and
+// ~origin_lat/lon/alt (all three or none) set the map origin. Throws on a bad file or origin.
+estimation::LocalizationSessionConfig sessionConfigFromParameters(const ros::NodeHandle& nh,
+                                                                  const std::string& default_file,
+                                                                  std::string* config_file);
 
 // The IMU sample of a message (stamp from its header); nullopt when a rate or an acceleration
 // is not finite.
@@ -27,22 +43,19 @@ std::optional<Eigen::Matrix3d> imuOrientation(const sensor_msgs::Imu& message);
 // A fix a filter may use: a GPS solution (status >= STATUS_FIX) with finite lat/lon/alt.
 bool isUsableFix(const sensor_msgs::NavSatFix& fix);
 
-// The fix covariance in the map frame (NavSatFix covariance is ENU, like `map`), symmetric, each
-// axis' variance raised to at least min_sigma_m^2. Unknown or non-finite covariance -> the
-// default sigmas (horizontal, vertical).
-Eigen::Matrix3d fixCovarianceMap(const sensor_msgs::NavSatFix& fix, double min_sigma_m,
-                                 double default_sigma_horizontal_m,
-                                 double default_sigma_vertical_m);
+// The receiver's covariance (NavSatFix covariance is ENU, like `map`); nullopt when it is
+// unknown, not finite or not positive on the diagonal (the session uses its default sigmas).
+// Not floored: the floor is the Localizer's gps.min_sigma_m.
+std::optional<Eigen::Matrix3d> fixCovarianceEnu(const sensor_msgs::NavSatFix& fix);
 
-// The velocity of a gps/vel message: kitti2bag publishes the OXTS body-frame velocity (vf, vl,
-// vu) with frame_id imu_link/base_link; a message whose frame_id is the map frame is in the map
-// frame. nullopt when not finite.
-struct GpsVelocity {
-  double stamp_s = 0.0;
-  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
-  bool in_body_frame = true;
-};
-std::optional<GpsVelocity> gpsVelocity(const geometry_msgs::TwistStamped& message);
+// The velocity of a gps/vel message: kitti2bag and kitti_player publish the OXTS (ve, vn, vu)
+// with frame_id map; any other frame_id (e.g. imu_link: body-frame vf, vl, vu) is taken as the
+// body frame. nullopt when not finite.
+std::optional<estimation::GpsVelocityEvent> gpsVelocity(const geometry_msgs::TwistStamped& message);
+
+// The session's events, unfiltered: the session counts and drops unusable ones.
+estimation::ImuEvent imuEvent(const sensor_msgs::Imu& message);
+estimation::GeodeticFixEvent fixEvent(const sensor_msgs::NavSatFix& message);
 
 // geometry_msgs/PoseWithCovariance covariance (row-major 6x6: x y z, then rotation about the
 // FIXED map axes x y z) from a filter's pose covariance (position in map, then body-frame
@@ -56,6 +69,20 @@ std::array<double, 36> rosPoseCovariance(const Eigen::Matrix3d& body_to_map,
 void fillOdometry(const estimation::NavState& state,
                   const estimation::PoseCovariance& pose_covariance,
                   const Eigen::Vector3d& latest_angular_velocity, nav_msgs::Odometry* odometry);
+
+// Appends the odometry's pose to the path, keeping the newest max_length poses (trimmed in
+// chunks: a long drive does not pay an O(n) erase on every sample).
+void appendToPath(const nav_msgs::Odometry& odometry, std::size_t max_length, nav_msgs::Path* path);
+
+// The map -> base transform of an odometry message (its header and child frame, its pose).
+geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry);
+
+// "left_inekf" | "right_inekf" | "quaternion_eskf": FilterStatus.filter_type.
+std::string filterStatusName(estimation::FilterType type);
+
+// The session's FilterStatus (biases once started, counts, last innovation); stamp and frame
+// are set by the caller.
+FilterStatus filterStatus(const estimation::LocalizationSession& session);
 
 // True when every number of the state and the covariance is finite (nothing NaN is published).
 bool isFinite(const estimation::NavState& state, const estimation::PoseCovariance& covariance);

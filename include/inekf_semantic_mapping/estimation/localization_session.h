@@ -1,0 +1,141 @@
+// LocalizationSession: the whole streaming localization behind inekf_node and inekf_offline (one
+// pipeline, two faces). It takes timestamped events (IMU samples, geodetic fixes, GPS velocities,
+// the clock) in arrival order and owns every policy between them and the Localizer:
+//  - the start: at the newest usable fix, with the orientation of the latest IMU sample and the
+//    GPS velocity of the fix's instant, once they have arrived or a message start.max_wait_s
+//    newer shows that they are not coming (LazyStart);
+//  - the map origin: the configured one, else Mercator (KITTI devkit) at the first usable fix;
+//  - fix covariance: the receiver's, or the default sigmas when it gives none; the only floor is
+//    the Localizer's gps.min_sigma_m;
+//  - the time-jump reset: a stamp or a clock time_jump_back_s earlier than the newest one means a
+//    bag loop or a restarted player: the state is meaningless in the new time line, start over
+//    (the map origin is kept: the same place keeps the same coordinates);
+//  - a non-finite state (never expected: the filter rejects such updates) is never reported:
+//    the session resets instead;
+//  - statistics.
+// Estimates are made at IMU stamps: an IMU event whose Update says `new_estimate` leaves state()
+// at that sample's stamp (a node publishes it then). A fix corrects the current estimate.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "inekf_semantic_mapping/estimation/lazy_start.h"
+#include "inekf_semantic_mapping/estimation/localizer.h"
+#include "inekf_semantic_mapping/kitti/mercator.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+
+struct GeodeticOrigin {
+  double lat_deg = 0.0, lon_deg = 0.0, alt_m = 0.0;
+};
+
+struct LocalizationSessionConfig {
+  LocalizerConfig localizer;
+  // Start timing; whether the start takes the IMU orientation and GPS velocity follows
+  // localizer.init_orientation_from_reference.
+  double start_max_wait_s = 0.2;
+  double start_max_velocity_age_s = 0.2;
+  std::optional<GeodeticOrigin> origin;  // nullopt: the first usable fix
+  // For fixes that carry no covariance.
+  double default_fix_sigma_horizontal_m = 1.5;
+  double default_fix_sigma_vertical_m = 3.0;
+  double time_jump_back_s = 1.0;
+
+  // config/inekf.yaml: the Localizer's keys plus the `session:` section (keys named as the
+  // members above). Throws std::runtime_error naming the file and the key.
+  static LocalizationSessionConfig fromYamlFile(const std::string& path);
+};
+
+// An IMU sample; orientation (body -> map), when the sensor reports one, is used for the start.
+struct ImuEvent {
+  ImuSample sample;
+  std::optional<Eigen::Matrix3d> orientation;
+};
+
+struct GeodeticFixEvent {
+  double stamp_s = 0.0;
+  double lat_deg = 0.0, lon_deg = 0.0, alt_m = 0.0;
+  // East-north-up (= map axes), m^2; nullopt: the receiver gives none (the default sigmas).
+  std::optional<Eigen::Matrix3d> covariance_enu;
+  bool has_solution = true;  // false: the receiver has no fix (never used)
+};
+
+struct GpsVelocityEvent {
+  double stamp_s = 0.0;
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  bool in_body_frame = false;  // else in the map frame
+};
+
+class LocalizationSession {
+ public:
+  struct Statistics {
+    Localizer::Statistics filter;  // the Localizer's counts (fixes used/rejected/late, ...)
+    std::int64_t imu_samples = 0;  // IMU events received
+    std::int64_t imu_invalid = 0;  // non-finite ones (never reach the filter)
+    std::int64_t fixes_received = 0;
+    std::int64_t fixes_ignored = 0;  // no solution or non-finite (never reach the filter)
+    std::int64_t starts = 0;
+    std::int64_t resets = 0;  // time jumps back and non-finite states
+  };
+
+  // What one event did.
+  struct Update {
+    bool new_estimate = false;  // state() is a fresh estimate at this IMU event's stamp
+    bool started = false;       // the filter started during this event
+    bool reset = false;         // the session started over during this event
+    std::optional<Localizer::ImuStatus> imu_status;  // IMU events that reached the filter
+    std::optional<CorrectionResult> correction;      // fixes (and starts) that reached it
+    // For the log, "" when all went as expected: why it reset, how it started, or why a sample
+    // or a fix was not used (dropped, gap bridged, rejected).
+    std::string note;
+  };
+
+  explicit LocalizationSession(LocalizationSessionConfig config);
+
+  Update addImu(const ImuEvent& event);
+  Update addFix(const GeodeticFixEvent& event);
+  Update addGpsVelocity(const GpsVelocityEvent& event);
+  // The receiving side's clock (e.g. /clock): a jump back resets like a stamp jumping back.
+  Update addClock(double now_s);
+  // Whether a GPS velocity source exists (default true): without one the start does not wait.
+  void setGpsVelocityExpected(bool expected) { gps_velocity_expected_ = expected; }
+
+  bool started() const { return localizer_.initialized(); }
+  const NavState& state() const { return localizer_.state(); }
+  PoseCovariance poseCovariance() const { return localizer_.filter().poseCovariance(); }
+  // The map frame's origin; nullopt before the first usable fix (without a configured origin).
+  const std::optional<kitti::MercatorProjection>& projection() const { return projection_; }
+  Statistics statistics() const;
+  // The latest finite IMU rate (body frame, not bias-corrected): the twist a node publishes.
+  const Eigen::Vector3d& latestAngularVelocity() const { return latest_angular_velocity_; }
+  // One line for a periodic log: time, position and its sigma, the statistics.
+  std::string summary() const;
+  // The latest innovation's squared Mahalanobis distance (0 before any).
+  double lastMahalanobisSquared() const { return last_mahalanobis_squared_; }
+  const LocalizationSessionConfig& config() const { return config_; }
+
+ private:
+  // Resets when stamp_s is time_jump_back_s older than the newest stamp; records stamp_s.
+  void checkStamp(double stamp_s, const char* source, Update* update);
+  void reset(const std::string& why, Update* update);
+  void tryStart(double now_s, Update* update);
+  // Resets if the state or its covariance is not finite.
+  void guardFinite(Update* update);
+
+  LocalizationSessionConfig config_;
+  Localizer localizer_;
+  LazyStart lazy_start_;
+  std::optional<kitti::MercatorProjection> projection_;
+  std::optional<double> newest_stamp_s_, newest_clock_s_;
+  bool gps_velocity_expected_ = true;
+  Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
+  double last_mahalanobis_squared_ = 0.0;
+  Statistics statistics_;
+};
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,257 @@
+#include "inekf_semantic_mapping/estimation/localization_session.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+#include <utility>
+
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+
+namespace inekf_semantic_mapping {
+namespace estimation {
+namespace {
+
+LazyStart::Config startConfig(const LocalizationSessionConfig& config) {
+  LazyStart::Config start;
+  start.max_wait_s = config.start_max_wait_s;
+  start.max_velocity_age_s = config.start_max_velocity_age_s;
+  start.use_reference = config.localizer.init_orientation_from_reference;
+  return start;
+}
+
+bool isFinite(const NavState& state, const PoseCovariance& covariance) {
+  return state.rotation.allFinite() && state.velocity_map.allFinite() &&
+         state.position_map.allFinite() && state.gyro_bias.allFinite() &&
+         state.accel_bias.allFinite() && covariance.allFinite();
+}
+
+}  // namespace
+
+LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::string& path) {
+  LocalizationSessionConfig config;
+  config.localizer = LocalizerConfig::fromYamlFile(path);
+  common::YamlReader reader = common::YamlReader::fromFile(path);
+  // Everything outside `session:` was checked by LocalizerConfig::fromYamlFile.
+  const YAML::Node root = YAML::LoadFile(path);
+  if (root.IsMap()) {
+    for (const auto& entry : root) {
+      const std::string key = entry.first.as<std::string>();
+      if (key != "session") reader.allow(entry.second.IsMap() ? key + ".*" : key);
+    }
+  }
+  const auto positive = [&reader](const std::string& key, double* out) {
+    reader.read(key, out);
+    if (!(*out > 0.0)) reader.fail(key, "must be a positive number");
+  };
+  positive("session.start_max_wait_s", &config.start_max_wait_s);
+  positive("session.start_max_velocity_age_s", &config.start_max_velocity_age_s);
+  positive("session.default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
+  positive("session.default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
+  positive("session.time_jump_back_s", &config.time_jump_back_s);
+  reader.rejectUnknown();
+  return config;
+}
+
+LocalizationSession::LocalizationSession(LocalizationSessionConfig config)
+    : config_(std::move(config)), localizer_(config_.localizer), lazy_start_(startConfig(config_)) {
+  if (config_.origin) {
+    projection_.emplace(config_.origin->lat_deg, config_.origin->lon_deg, config_.origin->alt_m);
+  }
+}
+
+LocalizationSession::Statistics LocalizationSession::statistics() const {
+  Statistics statistics = statistics_;
+  statistics.filter = localizer_.statistics();
+  return statistics;
+}
+
+std::string LocalizationSession::summary() const {
+  const Statistics s = statistics();
+  std::ostringstream line;
+  line << std::fixed << std::setprecision(2);
+  if (started()) {
+    const Eigen::Vector3d& p = state().position_map;
+    line << "t=" << state().stamp_s << " s position (" << std::setprecision(1) << p.x() << ", "
+         << p.y() << ", " << p.z() << ") m, sigma " << std::setprecision(2)
+         << std::sqrt(poseCovariance().topLeftCorner<3, 3>().trace()) << " m; ";
+  } else {
+    line << "not started; ";
+  }
+  line << "IMU " << s.filter.imu_used << " used / " << s.filter.imu_dropped + s.imu_invalid
+       << " dropped / " << s.filter.imu_gaps << " gaps; GPS " << s.filter.gps_used << " used ("
+       << s.filter.gps_applied_late << " late) / " << s.filter.gps_rejected << " rejected / "
+       << s.fixes_ignored << " ignored; " << s.resets << " resets";
+  return line.str();
+}
+
+void LocalizationSession::reset(const std::string& why, Update* update) {
+  localizer_.reset();
+  lazy_start_.reset();
+  newest_stamp_s_.reset();
+  ++statistics_.resets;
+  update->reset = true;
+  update->note = why;
+}
+
+void LocalizationSession::checkStamp(double stamp_s, const char* source, Update* update) {
+  if (!std::isfinite(stamp_s)) return;
+  if (newest_stamp_s_ && stamp_s + config_.time_jump_back_s < *newest_stamp_s_) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
+        << stamp_s << " s, newest " << *newest_stamp_s_ << " s)";
+    reset(why.str(), update);
+  }
+  newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
+}
+
+LocalizationSession::Update LocalizationSession::addClock(double now_s) {
+  Update update;
+  if (!std::isfinite(now_s)) return update;
+  if (newest_clock_s_ && now_s + config_.time_jump_back_s < *newest_clock_s_) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "time jumped back (clock " << now_s
+        << " s, newest " << *newest_clock_s_ << " s)";
+    reset(why.str(), &update);
+    newest_clock_s_ = now_s;
+  } else if (!newest_clock_s_ || now_s > *newest_clock_s_) {
+    newest_clock_s_ = now_s;
+  }
+  return update;
+}
+
+void LocalizationSession::guardFinite(Update* update) {
+  if (!started() || isFinite(state(), poseCovariance())) return;
+  std::ostringstream why;
+  why << std::fixed << std::setprecision(3) << "non-finite state at " << state().stamp_s << " s";
+  reset(why.str(), update);
+  update->new_estimate = false;
+}
+
+LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
+  Update update;
+  ++statistics_.imu_samples;
+  const ImuSample& sample = event.sample;
+  checkStamp(sample.stamp_s, "IMU", &update);
+  if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
+      !sample.specific_force.allFinite()) {
+    ++statistics_.imu_invalid;
+    return update;
+  }
+  latest_angular_velocity_ = sample.angular_velocity;
+  if (!started() && event.orientation) lazy_start_.offerOrientation(*event.orientation);
+  Localizer::ImuStatus status = localizer_.addImu(sample);
+  if (status == Localizer::ImuStatus::kNotInitialized) {
+    tryStart(sample.stamp_s, &update);
+    if (!started()) return update;
+    // The start is at the waiting fix's stamp: a later sample carries the state on to its own.
+    const double ahead_s = sample.stamp_s - state().stamp_s;
+    if (ahead_s >= Localizer::kDuplicateStampS) status = localizer_.addImu(sample);
+    update.new_estimate = std::abs(sample.stamp_s - state().stamp_s) < Localizer::kDuplicateStampS;
+  } else {
+    update.new_estimate =
+        status == Localizer::ImuStatus::kUsed || status == Localizer::ImuStatus::kGap;
+  }
+  update.imu_status = status;
+  const bool dropped = status == Localizer::ImuStatus::kDroppedDuplicate ||
+                       status == Localizer::ImuStatus::kDroppedOutOfOrder;
+  if ((dropped || status == Localizer::ImuStatus::kGap) && update.note.empty()) {
+    std::ostringstream note;
+    note << std::fixed << std::setprecision(3) << "IMU sample at " << sample.stamp_s << " s "
+         << (status == Localizer::ImuStatus::kGap ? "after a gap: bridged with inflated noise"
+                                                  : "duplicate or out of order: dropped");
+    update.note = note.str();
+  }
+  guardFinite(&update);
+  return update;
+}
+
+LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& event) {
+  Update update;
+  ++statistics_.fixes_received;
+  checkStamp(event.stamp_s, "GPS fix", &update);
+  if (!event.has_solution || !std::isfinite(event.stamp_s) || !std::isfinite(event.lat_deg) ||
+      !std::isfinite(event.lon_deg) || !std::isfinite(event.alt_m)) {
+    ++statistics_.fixes_ignored;
+    return update;
+  }
+  if (!projection_) projection_.emplace(event.lat_deg, event.lon_deg, event.alt_m);
+  PositionFix fix;
+  fix.stamp_s = event.stamp_s;
+  fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, event.alt_m);
+  const bool known = event.covariance_enu && event.covariance_enu->allFinite() &&
+                     event.covariance_enu->diagonal().minCoeff() > 0.0;
+  if (known) {
+    fix.covariance_map = 0.5 * (*event.covariance_enu + event.covariance_enu->transpose());
+  } else {
+    const double h = config_.default_fix_sigma_horizontal_m;
+    const double v = config_.default_fix_sigma_vertical_m;
+    fix.covariance_map = Eigen::Vector3d(h * h, h * h, v * v).asDiagonal();
+  }
+  // The floor (gps.min_sigma_m) is the Localizer's: the one place it is applied.
+  if (!started()) {
+    // The newest fix waits (briefly) for its instant's IMU orientation and GPS velocity.
+    lazy_start_.offerFix(fix);
+    tryStart(event.stamp_s, &update);
+    return update;
+  }
+  update.correction = localizer_.addPositionFix(fix);
+  last_mahalanobis_squared_ = update.correction->mahalanobis_squared;
+  if (!update.correction->accepted) {
+    std::ostringstream note;
+    note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s
+         << " s rejected: " << update.correction->reason << " (d^2 = " << std::setprecision(1)
+         << last_mahalanobis_squared_ << ")";
+    update.note = note.str();
+  }
+  guardFinite(&update);
+  return update;
+}
+
+LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
+  Update update;
+  // Checked like the others: after a bag loop the velocity may be the first message back.
+  checkStamp(event.stamp_s, "GPS velocity", &update);
+  if (started()) return update;  // only the start uses it
+  lazy_start_.offerVelocity(event.stamp_s, event.velocity, event.in_body_frame);
+  tryStart(event.stamp_s, &update);
+  return update;
+}
+
+void LocalizationSession::tryStart(double now_s, Update* update) {
+  if (started()) return;
+  const std::optional<LazyStart::Start> start = lazy_start_.poll(now_s, gps_velocity_expected_);
+  if (!start) return;
+  if (start->orientation) localizer_.setInitialReference(*start->orientation, start->velocity_map);
+  update->correction = localizer_.addPositionFix(start->fix);
+  last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
+  std::ostringstream note;
+  note << std::fixed << std::setprecision(3);
+  if (!started()) {
+    note << "GPS fix at " << start->fix.stamp_s << " s not used: " << update->correction->reason;
+    update->note = note.str();
+    return;
+  }
+  ++statistics_.starts;
+  update->started = true;
+  const double yaw_deg = std::atan2(state().rotation(1, 0), state().rotation(0, 0)) * 180.0 / M_PI;
+  note << "started at t=" << state().stamp_s << " s, position " << state().position_map.transpose()
+       << " m, yaw " << std::setprecision(1) << yaw_deg << " deg (";
+  if (start->orientation) {
+    note << "orientation from the IMU";
+  } else {
+    note << "levelled from gravity, yaw unknown (sigma " << config_.localizer.unknown_yaw_sigma_deg
+         << " deg)";
+  }
+  if (start->velocity_map) {
+    note << ", velocity from the GPS velocity)";
+  } else {
+    note << ", no GPS velocity: speed unknown (sigma "
+         << config_.localizer.unknown_velocity_sigma_horizontal_mps << " m/s))";
+  }
+  update->note = note.str();
+}
+
+}  // namespace estimation
+}  // namespace inekf_semantic_mapping
