@@ -90,6 +90,7 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
       prepared.valid_region = cv::Rect(left, top, width, height);
       break;
     }
+    case ResizePolicy::kTiles:  // handled by segmentTiles()
     case ResizePolicy::kPadToMultiple: {
       cv::Mat resized = bgr;
       cv::Size target = bgr.size();
@@ -118,6 +119,69 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
     }
   }
   return prepared;
+}
+
+// Maps each channel affinely so its mean and standard deviation over the image become the
+// card's color_mean / color_std (given in the network's channel order).
+cv::Mat standardizeColors(const cv::Mat& bgr, const ModelCard& card) {
+  cv::Scalar image_mean, image_std;
+  cv::meanStdDev(bgr, image_mean, image_std);
+  std::vector<cv::Mat> channels;
+  cv::split(bgr, channels);
+  for (int c = 0; c < 3; ++c) {
+    // BGR channel c is network channel 2 - c when the network takes RGB.
+    const int network_channel = card.swap_rb ? 2 - c : c;
+    const double gain = card.color_std[network_channel] / std::max(image_std[c], 1.0);
+    const double offset = card.color_mean[network_channel] - gain * image_mean[c];
+    channels[c].convertTo(channels[c], CV_8U, gain, offset);  // saturates at 0 and 255
+  }
+  cv::Mat standardized;
+  cv::merge(channels, standardized);
+  return standardized;
+}
+
+// Starts of the fewest windows of `window` pixels that cover [0, extent) with neighbours
+// overlapping by at least `overlap` pixels, spread evenly (first at 0, last at extent - window).
+std::vector<int> tileStarts(int extent, int window, int overlap) {
+  if (extent <= window) return {0};
+  const int stride = window - overlap;
+  const int count = std::max(2, (extent - overlap + stride - 1) / stride);
+  std::vector<int> starts(count);
+  for (int i = 0; i < count; ++i)
+    starts[i] =
+        static_cast<int>(std::lround(static_cast<double>(i) * (extent - window) / (count - 1)));
+  return starts;
+}
+
+// Softmax over the channels of a 1 x C x h x w score blob, added (times weight 1) into the C
+// planes of `sum` at `origin`; flipped: the scores are of the mirrored tile.
+void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
+                std::vector<cv::Mat>* sum) {
+  const int channels = scores.size[1];
+  const int height = scores.size[2];
+  const int width = scores.size[3];
+  cv::Mat max_score(height, width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
+  for (int c = 0; c < channels; ++c) {
+    const cv::Mat plane(height, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c)));
+    cv::max(max_score, plane, max_score);
+  }
+  std::vector<cv::Mat> exps(channels);
+  cv::Mat exp_sum(height, width, CV_32F, cv::Scalar(0));
+  for (int c = 0; c < channels; ++c) {
+    const cv::Mat plane(height, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c)));
+    cv::subtract(plane, max_score, exps[c]);
+    cv::exp(exps[c], exps[c]);
+    exp_sum += exps[c];
+  }
+  for (int c = 0; c < channels; ++c) {
+    cv::divide(exps[c], exp_sum, exps[c]);
+    if (flipped) cv::flip(exps[c], exps[c], 1);
+    // A network with a coarser output than its input: probabilities back to the tile's pixels.
+    if (exps[c].size() != tile.size())
+      cv::resize(exps[c], exps[c], tile.size(), 0, 0, cv::INTER_LINEAR);
+    cv::Mat target = (*sum)[c](tile);
+    target += exps[c];
+  }
 }
 
 }  // namespace
@@ -154,27 +218,18 @@ Segmenter::~Segmenter() = default;
 Segmenter::Segmenter(Segmenter&&) noexcept = default;
 Segmenter& Segmenter::operator=(Segmenter&&) noexcept = default;
 
-Segmentation Segmenter::segment(const cv::Mat& image) {
-  const cv::Mat bgr = toBgr(image);
-  PreparedInput prepared;
+cv::Mat Segmenter::forward(const cv::Mat& network_image) {
   cv::Mat output;
-  {
-    ScopedTimer timer("segmentation/preprocess");
-    prepared = prepareInput(bgr, card_);
-  }
-  {
-    ScopedTimer timer("segmentation/forward");
-    const cv::Scalar mean(card_.mean[0], card_.mean[1], card_.mean[2]);
-    const cv::Mat blob = cv::dnn::blobFromImage(prepared.network_image, card_.scale, cv::Size(),
-                                                mean, card_.swap_rb, false, CV_32F);
-    try {
-      network_->net.setInput(blob);
-      output = network_->net.forward();
-    } catch (const cv::Exception& e) {
-      throw SegmentationError("forward pass of " + model_path_ + " on a " +
-                              std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
-                              " input failed: " + e.what());
-    }
+  const cv::Scalar mean(card_.mean[0], card_.mean[1], card_.mean[2]);
+  const cv::Mat blob = cv::dnn::blobFromImage(network_image, card_.scale, cv::Size(), mean,
+                                              card_.swap_rb, false, CV_32F);
+  try {
+    network_->net.setInput(blob);
+    output = network_->net.forward();
+  } catch (const cv::Exception& e) {
+    throw SegmentationError("forward pass of " + model_path_ + " on a " +
+                            std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
+                            " input failed: " + e.what());
   }
   const int channels = output.dims == 4 ? output.size[1] : -1;
   if (output.dims != 4 || output.size[0] != 1 || channels != card_.numOutputChannels()) {
@@ -184,6 +239,118 @@ Segmentation Segmenter::segment(const cv::Mat& image) {
         << card_.numOutputChannels() << " channels to labelIds";
     throw SegmentationError(msg.str());
   }
+  return output;
+}
+
+double Segmenter::tileScaleFor(const cv::Size& image_size, double camera_focal_px) const {
+  if (card_.resize_policy != ResizePolicy::kTiles) return 1.0;
+  if (card_.network_focal_px > 0.0 && camera_focal_px > 0.0)
+    return card_.network_focal_px / camera_focal_px;
+  if (card_.tile_scale > 0.0) return card_.tile_scale;
+  return std::max(static_cast<double>(card_.input_width) / image_size.width,
+                  static_cast<double>(card_.input_height) / image_size.height);
+}
+
+bool Segmenter::skipsInArgmax(int channel) const {
+  return card_.suppress_unlabeled && card_.output_label_ids[channel] == cityscapes::kUnlabeled &&
+         card_.numOutputChannels() > 1;
+}
+
+Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px) {
+  const double scale = tileScaleFor(bgr.size(), camera_focal_px);
+  const cv::Size tile_size(card_.input_width, card_.input_height);
+  cv::Mat canvas;
+  std::vector<cv::Rect> tiles;
+  cv::Rect valid;
+  {
+    ScopedTimer timer("segmentation/preprocess");
+    const cv::Size scaled(std::max(1, static_cast<int>(std::lround(bgr.cols * scale))),
+                          std::max(1, static_cast<int>(std::lround(bgr.rows * scale))));
+    cv::resize(bgr, canvas, scaled, 0, 0, scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    valid = cv::Rect(cv::Point(0, 0), scaled);
+    // Smaller than a tile: reflect-pad (the scale stays), the padding is cropped afterwards.
+    const int pad_right = std::max(0, tile_size.width - scaled.width);
+    const int pad_bottom = std::max(0, tile_size.height - scaled.height);
+    if (pad_right > 0 || pad_bottom > 0) {
+      const bool reflect = pad_right < scaled.width && pad_bottom < scaled.height;
+      cv::copyMakeBorder(canvas, canvas, 0, pad_bottom, 0, pad_right,
+                         reflect ? cv::BORDER_REFLECT_101 : cv::BORDER_REPLICATE);
+    }
+    for (int y : tileStarts(canvas.rows, tile_size.height, card_.tile_overlap))
+      for (int x : tileStarts(canvas.cols, tile_size.width, card_.tile_overlap))
+        tiles.emplace_back(cv::Point(x, y), tile_size);
+  }
+
+  const int channels = card_.numOutputChannels();
+  std::vector<cv::Mat> sum(channels);
+  for (cv::Mat& plane : sum) plane = cv::Mat::zeros(canvas.size(), CV_32F);
+  cv::Mat weight = cv::Mat::zeros(canvas.size(), CV_32F);
+  for (const cv::Rect& tile : tiles) {
+    const cv::Mat input = canvas(tile);
+    cv::Mat scores;
+    {
+      ScopedTimer timer("segmentation/forward");
+      scores = forward(input);
+    }
+    {
+      ScopedTimer timer("segmentation/softmax");
+      addSoftmax(scores, false, tile, &sum);
+      cv::Mat tile_weight = weight(tile);
+      tile_weight += 1.0;
+    }
+    if (card_.flip_average) {
+      cv::Mat mirrored;
+      cv::flip(input, mirrored, 1);
+      {
+        ScopedTimer timer("segmentation/forward");
+        scores = forward(mirrored);
+      }
+      ScopedTimer timer("segmentation/softmax");
+      addSoftmax(scores, true, tile, &sum);
+      cv::Mat tile_weight = weight(tile);
+      tile_weight += 1.0;
+    }
+  }
+
+  Segmentation result;
+  ScopedTimer timer("segmentation/argmax");
+  // Mean probabilities, at the image's own size (the padding cropped).
+  cv::Mat best_probability(bgr.size(), CV_32F, cv::Scalar(-1.0));
+  cv::Mat best_index(bgr.size(), CV_8U, cv::Scalar(0));
+  cv::Mat probability;
+  for (int c = 0; c < channels; ++c) {
+    if (skipsInArgmax(c)) continue;
+    cv::divide(sum[c](valid), weight(valid), probability);
+    if (probability.size() != bgr.size())
+      cv::resize(probability, probability, bgr.size(), 0, 0,
+                 scale > 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    const cv::Mat better = probability > best_probability;
+    probability.copyTo(best_probability, better);
+    best_index.setTo(c, better);
+  }
+  cv::LUT(best_index, network_->label_lut, result.label_ids);
+  result.confidence = best_probability;
+  return result;
+}
+
+Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
+  cv::Mat bgr = toBgr(image);
+  if (card_.color_normalization == ColorNormalization::kStandardize) {
+    ScopedTimer timer("segmentation/preprocess");
+    bgr = standardizeColors(bgr, card_);
+  }
+  if (card_.resize_policy == ResizePolicy::kTiles) return segmentTiles(bgr, camera_focal_px);
+  PreparedInput prepared;
+  cv::Mat output;
+  {
+    ScopedTimer timer("segmentation/preprocess");
+    prepared = prepareInput(bgr, card_);
+  }
+  {
+    ScopedTimer timer("segmentation/forward");
+    output = forward(prepared.network_image);
+  }
+  const int channels = output.size[1];
   const int height = output.size[2];
   const int width = output.size[3];
 
@@ -199,6 +366,7 @@ Segmentation Segmenter::segment(const cv::Mat& image) {
     float* best = best_score.ptr<float>();
     std::uint8_t* index = best_index.ptr<std::uint8_t>();
     for (int c = 0; c < channels; ++c) {
+      if (skipsInArgmax(c)) continue;
       const float* score = output.ptr<float>(0, c);
       for (std::size_t i = 0; i < pixels; ++i) {
         if (score[i] > best[i]) {
@@ -264,6 +432,30 @@ cv::Mat labelIdsToTrainIds(const cv::Mat& label_ids) {
   cv::Mat train_ids;
   cv::LUT(label_ids, lut, train_ids);
   return train_ids;
+}
+
+cv::Mat filterLabels(const Segmentation& segmentation, double min_confidence,
+                     int boundary_radius_px) {
+  CV_Assert(segmentation.label_ids.type() == CV_8UC1);
+  cv::Mat filtered = segmentation.label_ids.clone();
+  if (boundary_radius_px > 0) {
+    // A pixel is near a boundary when the labels in its window are not all equal: the
+    // window's maximum (dilation) differs from its minimum (erosion).
+    const cv::Mat window = cv::getStructuringElement(
+        cv::MORPH_RECT, cv::Size(2 * boundary_radius_px + 1, 2 * boundary_radius_px + 1));
+    cv::Mat window_max, window_min;
+    cv::dilate(segmentation.label_ids, window_max, window, cv::Point(-1, -1), 1,
+               cv::BORDER_REPLICATE);
+    cv::erode(segmentation.label_ids, window_min, window, cv::Point(-1, -1), 1,
+              cv::BORDER_REPLICATE);
+    filtered.setTo(cityscapes::kUnlabeled, window_max != window_min);
+  }
+  if (min_confidence > 0.0) {
+    CV_Assert(segmentation.confidence.type() == CV_32FC1 &&
+              segmentation.confidence.size() == segmentation.label_ids.size());
+    filtered.setTo(cityscapes::kUnlabeled, segmentation.confidence < min_confidence);
+  }
+  return filtered;
 }
 
 }  // namespace perception
