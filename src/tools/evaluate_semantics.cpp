@@ -41,15 +41,15 @@ constexpr char kUsage[] =
     "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
     "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
     "         [--network-focal F] [--tile-overlap PX] [--flip 0|1] [--color none|standardize]\n"
-    "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
-    "         [--boundary-radius PX]...\n"
+    "         [--color-mean R,G,B] [--color-std R,G,B] [--suppress-unlabeled 0|1]\n"
+    "         [--no-focal] [--min-confidence C]... [--boundary-radius PX]...\n"
     "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]...\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
     "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
     "                     library defaults), scored in every combination besides 'raw'\n"
-    "  --occlusion        e.g. 4x2:2:3:0:0.1:0.3 = cells 4x2 px, window 2 cells to each side,\n"
-    "                     3 up, 0 down, margins 10 % + 0.3 m\n";
+    "  --occlusion        e.g. 4x1:2:6:0:0.1:0.3 = cells 4x1 px, window 2 cells to each side,\n"
+    "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n";
 
 struct Variant {
   std::string name;
@@ -168,6 +168,16 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
       throw UsageError("--color must be none or standardize, not '" + color + "'");
     }
   }
+  // Standardization targets in RGB order (experiments with other colour statistics).
+  for (const char* flag : {"--color-mean", "--color-std"}) {
+    if (!cli.has(flag)) continue;
+    double rgb[3];
+    if (std::sscanf(cli.get(flag).c_str(), "%lf,%lf,%lf", &rgb[0], &rgb[1], &rgb[2]) != 3)
+      throw UsageError(std::string(flag) + " expects R,G,B");
+    std::array<double, 3>& target =
+        std::string(flag) == "--color-mean" ? card.color_mean : card.color_std;
+    for (int c = 0; c < 3; ++c) target[c] = rgb[card.swap_rb ? c : 2 - c];
+  }
   return card;
 }
 
@@ -230,8 +240,8 @@ int main(int argc, char** argv) {
     const ism::common::CommandLine cli(
         argc, argv,
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
-         "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color",
-         "--suppress-unlabeled"},
+         "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
+         "--color-std", "--suppress-unlabeled"},
         {"--no-focal"}, {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const std::vector<std::string> sequences = cli.getAll("--sequence");
