@@ -153,34 +153,61 @@ std::vector<int> tileStarts(int extent, int window, int overlap) {
   return starts;
 }
 
-// Softmax over the channels of a 1 x C x h x w score blob, added (times weight 1) into the C
-// planes of `sum` at `origin`; flipped: the scores are of the mirrored tile.
+// Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
+// over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
+// channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
 void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
                 std::vector<cv::Mat>* sum) {
   const int channels = scores.size[1];
   const int height = scores.size[2];
   const int width = scores.size[3];
-  cv::Mat max_score(height, width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
-  for (int c = 0; c < channels; ++c) {
-    const cv::Mat plane(height, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c)));
-    cv::max(max_score, plane, max_score);
+  if (height != tile.height || width != tile.width) {
+    // A network with a coarser output than its input: the probabilities at its resolution,
+    // then resized to the tile's pixels.
+    cv::Mat probabilities(channels, height * width, CV_32F);
+    cv::Mat flat(channels, height * width, CV_32F, const_cast<float*>(scores.ptr<float>()));
+    cv::Mat column_max;
+    cv::reduce(flat, column_max, 0, cv::REDUCE_MAX);
+    for (int c = 0; c < channels; ++c) cv::subtract(flat.row(c), column_max, probabilities.row(c));
+    cv::exp(probabilities, probabilities);
+    cv::Mat column_sum;
+    cv::reduce(probabilities, column_sum, 0, cv::REDUCE_SUM);
+    for (int c = 0; c < channels; ++c) {
+      cv::Mat plane = probabilities.row(c) / column_sum;
+      plane = plane.reshape(1, height);
+      if (flipped) cv::flip(plane, plane, 1);
+      cv::resize(plane, plane, tile.size(), 0, 0, cv::INTER_LINEAR);
+      cv::Mat target = (*sum)[c](tile);
+      target += plane;
+    }
+    return;
   }
-  std::vector<cv::Mat> exps(channels);
-  cv::Mat exp_sum(height, width, CV_32F, cv::Scalar(0));
-  for (int c = 0; c < channels; ++c) {
-    const cv::Mat plane(height, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c)));
-    cv::subtract(plane, max_score, exps[c]);
-    cv::exp(exps[c], exps[c]);
-    exp_sum += exps[c];
-  }
-  for (int c = 0; c < channels; ++c) {
-    cv::divide(exps[c], exp_sum, exps[c]);
-    if (flipped) cv::flip(exps[c], exps[c], 1);
-    // A network with a coarser output than its input: probabilities back to the tile's pixels.
-    if (exps[c].size() != tile.size())
-      cv::resize(exps[c], exps[c], tile.size(), 0, 0, cv::INTER_LINEAR);
-    cv::Mat target = (*sum)[c](tile);
-    target += exps[c];
+  cv::Mat exps(channels, width, CV_32F);
+  cv::Mat row_max(1, width, CV_32F);
+  cv::Mat row_sum(1, width, CV_32F);
+  for (int y = 0; y < height; ++y) {
+    const auto score_row = [&](int c) {
+      return cv::Mat(1, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c, y)));
+    };
+    score_row(0).copyTo(row_max);
+    for (int c = 1; c < channels; ++c) cv::max(row_max, score_row(c), row_max);
+    for (int c = 0; c < channels; ++c) {
+      cv::Mat exp_row = exps.row(c);
+      cv::subtract(score_row(c), row_max, exp_row);
+    }
+    cv::exp(exps, exps);
+    cv::reduce(exps, row_sum, 0, cv::REDUCE_SUM);
+    cv::divide(1.0, row_sum, row_sum);
+    const float* inverse = row_sum.ptr<float>();
+    for (int c = 0; c < channels; ++c) {
+      const float* e = exps.ptr<float>(c);
+      float* target = (*sum)[c].ptr<float>(tile.y + y) + tile.x;
+      if (flipped) {
+        for (int x = 0; x < width; ++x) target[x] += e[width - 1 - x] * inverse[width - 1 - x];
+      } else {
+        for (int x = 0; x < width; ++x) target[x] += e[x] * inverse[x];
+      }
+    }
   }
 }
 
@@ -314,22 +341,37 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
 
   Segmentation result;
   ScopedTimer timer("segmentation/argmax");
-  // Mean probabilities, at the image's own size (the padding cropped).
-  cv::Mat best_probability(bgr.size(), CV_32F, cv::Scalar(-1.0));
-  cv::Mat best_index(bgr.size(), CV_8U, cv::Scalar(0));
-  cv::Mat probability;
+  // Argmax of the summed probabilities (the same as of their mean: every channel of a pixel has
+  // the same weight) at the scaled image's resolution, then labels and confidence back to the
+  // image's size: two resizes instead of one per channel.
+  const cv::Size scaled = valid.size();
+  cv::Mat best_sum(scaled, CV_32F, cv::Scalar(-1.0));
+  cv::Mat best_index(scaled, CV_8U, cv::Scalar(0));
   for (int c = 0; c < channels; ++c) {
     if (skipsInArgmax(c)) continue;
-    cv::divide(sum[c](valid), weight(valid), probability);
-    if (probability.size() != bgr.size())
-      cv::resize(probability, probability, bgr.size(), 0, 0,
-                 scale > 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
-    const cv::Mat better = probability > best_probability;
-    probability.copyTo(best_probability, better);
-    best_index.setTo(c, better);
+    for (int row = 0; row < scaled.height; ++row) {
+      const float* channel_sum = sum[c].ptr<float>(row);
+      float* best = best_sum.ptr<float>(row);
+      std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
+      for (int col = 0; col < scaled.width; ++col) {
+        if (channel_sum[col] > best[col]) {
+          best[col] = channel_sum[col];
+          index[col] = static_cast<std::uint8_t>(c);
+        }
+      }
+    }
   }
-  cv::LUT(best_index, network_->label_lut, result.label_ids);
-  result.confidence = best_probability;
+  cv::Mat confidence;
+  cv::divide(best_sum, weight(valid), confidence);
+  cv::Mat label_ids;
+  cv::LUT(best_index, network_->label_lut, label_ids);
+  if (scaled != bgr.size()) {
+    cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST);
+    cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_LINEAR);
+  } else {
+    result.label_ids = label_ids;
+    result.confidence = confidence;
+  }
   return result;
 }
 
