@@ -153,10 +153,26 @@ std::vector<int> tileStarts(int extent, int window, int overlap) {
   return starts;
 }
 
+// Weights along one side of a tile: ramping up over `ramp` pixels from an edge that lies inside
+// the canvas (a network sees least context at its input's edges, and the neighbouring tile
+// covers those pixels), 1 at edges on the canvas border (nothing else covers them).
+std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
+  std::vector<float> weights(length, 1.f);
+  if (ramp <= 1) return weights;
+  for (int i = 0; i < length; ++i) {
+    float w = 1.f;
+    if (start > 0) w = std::min(w, (i + 1.f) / ramp);
+    if (start + length < extent) w = std::min(w, (length - i) / static_cast<float>(ramp));
+    weights[i] = w;
+  }
+  return weights;
+}
+
 // Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
 // over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
 // channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
 void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
+                const std::vector<float>& column_weight, const std::vector<float>& row_weight,
                 std::vector<cv::Mat>* sum) {
   const int channels = scores.size[1];
   const int height = scores.size[2];
@@ -172,13 +188,15 @@ void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
     cv::exp(probabilities, probabilities);
     cv::Mat column_sum;
     cv::reduce(probabilities, column_sum, 0, cv::REDUCE_SUM);
+    const cv::Mat weight = cv::Mat(row_weight).reshape(1, tile.height) *
+                           cv::Mat(column_weight).reshape(1, 1);  // outer product
     for (int c = 0; c < channels; ++c) {
       cv::Mat plane = probabilities.row(c) / column_sum;
       plane = plane.reshape(1, height);
       if (flipped) cv::flip(plane, plane, 1);
       cv::resize(plane, plane, tile.size(), 0, 0, cv::INTER_LINEAR);
       cv::Mat target = (*sum)[c](tile);
-      target += plane;
+      target += plane.mul(weight);
     }
     return;
   }
@@ -197,8 +215,10 @@ void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
     }
     cv::exp(exps, exps);
     cv::reduce(exps, row_sum, 0, cv::REDUCE_SUM);
-    cv::divide(1.0, row_sum, row_sum);
-    const float* inverse = row_sum.ptr<float>();
+    // inverse[x]: the weight of output pixel x over its exp sum (in output order).
+    cv::divide(row_weight[y], row_sum, row_sum);
+    float* inverse = row_sum.ptr<float>();
+    for (int x = 0; x < width; ++x) inverse[x] *= column_weight[flipped ? width - 1 - x : x];
     for (int c = 0; c < channels; ++c) {
       const float* e = exps.ptr<float>(c);
       float* target = (*sum)[c].ptr<float>(tile.y + y) + tile.x;
@@ -274,8 +294,9 @@ double Segmenter::tileScaleFor(const cv::Size& image_size, double camera_focal_p
   if (card_.network_focal_px > 0.0 && camera_focal_px > 0.0)
     return card_.network_focal_px / camera_focal_px;
   if (card_.tile_scale > 0.0) return card_.tile_scale;
-  return std::max(static_cast<double>(card_.input_width) / image_size.width,
-                  static_cast<double>(card_.input_height) / image_size.height);
+  return std::max(
+      static_cast<double>(card_.input_width) / image_size.width,
+      static_cast<double>(card_.input_height - card_.tile_bottom_margin) / image_size.height);
 }
 
 bool Segmenter::skipsInArgmax(int channel) const {
@@ -296,8 +317,10 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
     cv::resize(bgr, canvas, scaled, 0, 0, scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
     valid = cv::Rect(cv::Point(0, 0), scaled);
     // Smaller than a tile: reflect-pad (the scale stays), the padding is cropped afterwards.
+    // The bottom margin is padding too: the image's bottom stays out of the rows where the
+    // training images showed the ego vehicle.
     const int pad_right = std::max(0, tile_size.width - scaled.width);
-    const int pad_bottom = std::max(0, tile_size.height - scaled.height);
+    const int pad_bottom = std::max(card_.tile_bottom_margin, tile_size.height - scaled.height);
     if (pad_right > 0 || pad_bottom > 0) {
       const bool reflect = pad_right < scaled.width && pad_bottom < scaled.height;
       cv::copyMakeBorder(canvas, canvas, 0, pad_bottom, 0, pad_right,
@@ -312,8 +335,13 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
   std::vector<cv::Mat> sum(channels);
   for (cv::Mat& plane : sum) plane = cv::Mat::zeros(canvas.size(), CV_32F);
   cv::Mat weight = cv::Mat::zeros(canvas.size(), CV_32F);
+  const int ramp = std::max(1, card_.tile_overlap / 2);
   for (const cv::Rect& tile : tiles) {
     const cv::Mat input = canvas(tile);
+    const std::vector<float> column_weight = featherWeights(tile.x, tile.width, canvas.cols, ramp);
+    const std::vector<float> row_weight = featherWeights(tile.y, tile.height, canvas.rows, ramp);
+    const cv::Mat tile_weights =
+        cv::Mat(row_weight).reshape(1, tile.height) * cv::Mat(column_weight).reshape(1, 1);
     cv::Mat scores;
     {
       ScopedTimer timer("segmentation/forward");
@@ -321,9 +349,9 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
     }
     {
       ScopedTimer timer("segmentation/softmax");
-      addSoftmax(scores, false, tile, &sum);
+      addSoftmax(scores, false, tile, column_weight, row_weight, &sum);
       cv::Mat tile_weight = weight(tile);
-      tile_weight += 1.0;
+      tile_weight += tile_weights;
     }
     if (card_.flip_average) {
       cv::Mat mirrored;
@@ -333,9 +361,9 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
         scores = forward(mirrored);
       }
       ScopedTimer timer("segmentation/softmax");
-      addSoftmax(scores, true, tile, &sum);
+      addSoftmax(scores, true, tile, column_weight, row_weight, &sum);
       cv::Mat tile_weight = weight(tile);
-      tile_weight += 1.0;
+      tile_weight += tile_weights;
     }
   }
 

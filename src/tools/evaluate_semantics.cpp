@@ -40,9 +40,10 @@ constexpr char kUsage[] =
     "usage: evaluate_semantics --sequence DIR [--sequence DIR ...] --model MODEL\n"
     "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
     "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
-    "         [--network-focal F] [--tile-overlap PX] [--flip 0|1] [--color none|standardize]\n"
-    "         [--color-mean R,G,B] [--color-std R,G,B] [--suppress-unlabeled 0|1]\n"
-    "         [--no-focal] [--min-confidence C]... [--boundary-radius PX]...\n"
+    "         [--network-focal F] [--tile-overlap PX] [--bottom-margin PX] [--flip 0|1]\n"
+    "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
+    "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
+    "         [--boundary-radius PX]...\n"
     "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]...\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
@@ -147,6 +148,7 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_scale = cli.getDouble("--tile-scale", card.tile_scale);
   card.network_focal_px = cli.getDouble("--network-focal", card.network_focal_px);
   card.tile_overlap = cli.getInt("--tile-overlap", card.tile_overlap);
+  card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
   card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
   card.suppress_unlabeled =
       cli.getInt("--suppress-unlabeled", card.suppress_unlabeled ? 1 : 0) != 0;
@@ -241,7 +243,7 @@ int main(int argc, char** argv) {
         argc, argv,
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
          "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
-         "--color-std", "--suppress-unlabeled"},
+         "--color-std", "--suppress-unlabeled", "--bottom-margin"},
         {"--no-focal"}, {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const std::vector<std::string> sequences = cli.getAll("--sequence");
@@ -258,10 +260,10 @@ int main(int argc, char** argv) {
     perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));
     std::printf(
         "model %s, card %s: policy %s, tile_scale %g, network_focal_px %g, overlap %d, "
-        "flip %d, color %s, suppress unlabeled %d, focal given %d\n",
+        "bottom margin %d, flip %d, color %s, suppress unlabeled %d, focal given %d\n",
         model.c_str(), card.source.c_str(), perception::resizePolicyName(card.resize_policy),
-        card.tile_scale, card.network_focal_px, card.tile_overlap, card.flip_average ? 1 : 0,
-        perception::colorNormalizationName(card.color_normalization),
+        card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_bottom_margin,
+        card.flip_average ? 1 : 0, perception::colorNormalizationName(card.color_normalization),
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
     std::vector<perception::PointLabelScore> totals(variants.size());

@@ -254,6 +254,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
                                      "tile_scale: 1.5\n"
                                      "network_focal_px: 1131\n"
                                      "tile_overlap: 64\n"
+                                     "tile_bottom_margin: 40\n"
                                      "flip_average: true\n"
                                      "color_normalization: standardize\n"
                                      "color_mean: [73, 83, 72]\n"
@@ -264,6 +265,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
   EXPECT_DOUBLE_EQ(card.tile_scale, 1.5);
   EXPECT_DOUBLE_EQ(card.network_focal_px, 1131.0);
   EXPECT_EQ(card.tile_overlap, 64);
+  EXPECT_EQ(card.tile_bottom_margin, 40);
   EXPECT_TRUE(card.flip_average);
   EXPECT_EQ(card.color_normalization, ColorNormalization::kStandardize);
   EXPECT_DOUBLE_EQ(card.color_mean[1], 83.0);
@@ -275,6 +277,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
   EXPECT_EQ(reloaded.resize_policy, ResizePolicy::kTiles);
   EXPECT_DOUBLE_EQ(reloaded.network_focal_px, card.network_focal_px);
   EXPECT_EQ(reloaded.tile_overlap, card.tile_overlap);
+  EXPECT_EQ(reloaded.tile_bottom_margin, card.tile_bottom_margin);
   EXPECT_EQ(reloaded.flip_average, card.flip_average);
   EXPECT_EQ(reloaded.color_normalization, card.color_normalization);
   EXPECT_DOUBLE_EQ(reloaded.color_std[2], card.color_std[2]);
@@ -293,6 +296,8 @@ TEST(ModelCard, BadTileAndColorFieldsAreRejectedNamingTheField) {
   EXPECT_EQ(cardError(head + tail), "");
   EXPECT_NE(cardError(head + "tile_overlap: 16\n" + tail).find("tile_overlap"), std::string::npos);
   EXPECT_NE(cardError(head + "tile_scale: -1\n" + tail).find("tile_scale"), std::string::npos);
+  EXPECT_NE(cardError(head + "tile_bottom_margin: 16\n" + tail).find("tile_bottom_margin"),
+            std::string::npos);
   EXPECT_NE(cardError(head + "network_focal_px: -5\n" + tail).find("network_focal_px"),
             std::string::npos);
   EXPECT_NE(cardError(head + "flip_average: maybe\n" + tail).find("flip_average"),
@@ -312,12 +317,17 @@ TEST(SegmenterEnet, TilesScaleByFocalLengthAndCoverWideImages) {
   card.network_focal_px = 1131.0;
   card.tile_scale = 0.0;
   card.tile_overlap = 128;
+  card.tile_bottom_margin = 0;
   Segmenter segmenter(sharedPath(kEnetModel), card);
   // The focal-length ratio when the camera's is known; otherwise the least scale that fills
   // one tile.
   EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(1226, 370), 707.0), 1131.0 / 707.0, 1e-12);
   EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(1226, 370)), 512.0 / 370.0, 1e-12);
   EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(256, 128)), 4.0, 1e-12);
+  // A bottom margin leaves input rows free below the image.
+  card.tile_bottom_margin = 112;
+  EXPECT_NEAR(Segmenter(sharedPath(kEnetModel), card).tileScaleFor(cv::Size(1226, 370)),
+              400.0 / 370.0, 1e-12);
 
   cv::Mat image(150, 500, CV_8UC3);
   cv::randu(image, cv::Scalar::all(0), cv::Scalar::all(255));

@@ -56,8 +56,13 @@ struct ModelCard {
   // on. When > 0 and segment() is given the camera's focal length, the image is scaled by
   // network_focal_px / camera focal so objects appear at the size the network learned.
   double network_focal_px = 0.0;
-  // kTiles: the least overlap of neighbouring tiles, in network input pixels.
+  // kTiles: the least overlap of neighbouring tiles, in network input pixels; tiles blend over
+  // half of it.
   int tile_overlap = 0;
+  // kTiles: network input rows at the bottom that are padding, not image: a network trained on
+  // images whose bottom rows show the ego vehicle calls whatever it sees there "unlabeled".
+  // The fitted scale leaves them free.
+  int tile_bottom_margin = 0;
   // Average the probabilities with those of the horizontally mirrored image (kTiles only).
   bool flip_average = false;
   // true: channels mapped to labelId 0 ("unlabeled") never win the argmax; their probability
