@@ -9,6 +9,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
@@ -181,14 +182,26 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
         "labelScanPoints: the segmentation and the projector differ in size");
   const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> xyzi(
       scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
-  projector.project(xyzi.topRows<3>(), projected);
-  const cv::Mat filtered = filterLabels(segmentation, options.filter);
+  {
+    ScopedTimer timer("labelling/project");
+    projector.project(xyzi.topRows<3>(), projected);
+  }
+  cv::Mat filtered;
+  {
+    ScopedTimer timer("labelling/filter_labels");
+    filtered = filterLabels(segmentation, options.filter);
+  }
   std::vector<std::uint32_t> labels;
-  labelPointsFromImage(*projected, filtered.ptr<std::uint8_t>(), filtered.cols, filtered.rows,
-                       filtered.step, cityscapes::kUnlabeled, &labels);
-  if (options.reject_occluded)
+  {
+    ScopedTimer timer("labelling/label_points");
+    labelPointsFromImage(*projected, filtered.ptr<std::uint8_t>(), filtered.cols, filtered.rows,
+                         filtered.step, cityscapes::kUnlabeled, &labels);
+  }
+  if (options.reject_occluded) {
+    ScopedTimer timer("labelling/reject_occluded");
     rejectOccludedPoints(*projected, projector.width(), projector.height(), options.occlusion,
                          cityscapes::kUnlabeled, &labels);
+  }
   return labels;
 }
 

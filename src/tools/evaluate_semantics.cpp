@@ -24,6 +24,7 @@
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
@@ -266,6 +267,7 @@ int main(int argc, char** argv) {
         card.flip_average ? 1 : 0, perception::colorNormalizationName(card.color_normalization),
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
+    ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     std::vector<perception::PointLabelScore> totals(variants.size());
     std::ostringstream json;
     json << "{\"sequences\":{";
@@ -323,6 +325,8 @@ int main(int argc, char** argv) {
       json << (v ? "," : "") << "\"" << variants[v].name << "\":" << totals[v].toJson();
     }
     json << "}}}";
+    // Stage timing (all frames and variants; the segmenter's warm-up pass excluded).
+    std::printf("\n%s", ism::TimingRegistry::instance().report().c_str());
     if (cli.has("--json")) ism::common::writeTextAtomically(cli.get("--json"), json.str() + "\n");
     std::printf("RESULT %s\n", json.str().c_str());
     return 0;
