@@ -1,7 +1,10 @@
 // Per-frame segmentation throughput on a KITTI-sized image (1242x375), the whole path the node
-// runs per frame: fit to the network (resize / reflect-pad), blob, forward, argmax + softmax
-// confidence, crop, nearest-neighbour back to the image size. Models: the Cityscapes ENet from
-// ../shared (skipped when absent) and the committed default U-Net. Threads: 2 (the machine).
+// runs per frame: fit to the network (resize / reflect-pad / tiles), blob, forward, argmax +
+// softmax confidence, crop, back to the image size. Models: the Cityscapes ENet from ../shared
+// (skipped when absent) with its built-in card (colour standardization, two undistorted tiles)
+// and, for comparison, with the former card (one pass on the image stretched to 1024x512); the
+// committed default U-Net. filterLabels: the confidence / boundary filter at its defaults.
+// Threads: 2 (the machine).
 //
 //   bench_segmentation [--benchmark_min_time=5]
 #include <benchmark/benchmark.h>
@@ -44,13 +47,13 @@ cv::Mat kittiImage() {
   return image;
 }
 
-void runSegmenter(benchmark::State& state, const std::string& model) {
+void runSegmenter(benchmark::State& state, const std::string& model,
+                  const perception::ModelCard& card) {
   if (!std::filesystem::exists(model)) {
     state.SkipWithError(("model not found: " + model).c_str());
     return;
   }
-  perception::Segmenter segmenter(model, perception::defaultModelCardFor(model),
-                                  static_cast<int>(state.range(0)));
+  perception::Segmenter segmenter(model, card, static_cast<int>(state.range(0)));
   const cv::Mat image = kittiImage();
   for (auto _ : state) {
     perception::Segmentation result = segmenter.segment(image);
@@ -60,12 +63,39 @@ void runSegmenter(benchmark::State& state, const std::string& model) {
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
+std::string enetPath() { return sharedDir() + "/models/enet-cityscapes/enet-model.net"; }
+
 void BM_EnetCityscapesKittiFrame(benchmark::State& state) {
-  runSegmenter(state, sharedDir() + "/models/enet-cityscapes/enet-model.net");
+  runSegmenter(state, enetPath(), perception::builtinEnetCityscapesCard());
+}
+
+void BM_EnetCityscapesKittiFrameStretched(benchmark::State& state) {
+  perception::ModelCard card = perception::builtinEnetCityscapesCard();
+  card.resize_policy = perception::ResizePolicy::kResize;
+  card.color_normalization = perception::ColorNormalization::kNone;
+  card.suppress_unlabeled = false;
+  runSegmenter(state, enetPath(), card);
 }
 
 void BM_UnetSyntheticKittiFrame(benchmark::State& state) {
-  runSegmenter(state, std::string(ISM_REPO_ROOT) + "/models/unet_synthetic.onnx");
+  const std::string model = std::string(ISM_REPO_ROOT) + "/models/unet_synthetic.onnx";
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError(("model not found: " + model).c_str());
+    return;
+  }
+  runSegmenter(state, model, perception::defaultModelCardFor(model));
+}
+
+void BM_FilterLabelsKittiFrame(benchmark::State& state) {
+  perception::Segmentation segmentation;
+  segmentation.label_ids.create(375, 1242, CV_8UC1);
+  cv::randu(segmentation.label_ids, 0, 34);
+  segmentation.confidence.create(375, 1242, CV_32FC1);
+  cv::randu(segmentation.confidence, 0.0, 1.0);
+  for (auto _ : state) {
+    cv::Mat filtered = perception::filterLabels(segmentation, perception::LabelFilterOptions{});
+    benchmark::DoNotOptimize(filtered.data);
+  }
 }
 
 void BM_OverlayKittiFrame(benchmark::State& state) {
@@ -81,6 +111,11 @@ void BM_OverlayKittiFrame(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_EnetCityscapesKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_EnetCityscapesKittiFrameStretched)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_UnetSyntheticKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_FilterLabelsKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OverlayKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

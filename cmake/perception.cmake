@@ -37,3 +37,17 @@ endif()
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/segmentation_node.test)
 endif()
+
+# Camera labels at lidar points scored against SemanticKITTI's human labels (issue 12).
+ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
+  SOURCES src/perception/semantic_evaluation.cpp
+  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
+
+ism_add_tool(evaluate_semantics
+  SOURCES src/tools/evaluate_semantics.cpp
+  LINK ${PROJECT_NAME}_semantic_evaluation)
+
+# The default ENet labelling path scored on the real SemanticKITTI frames of ../shared.
+ism_add_gtest(test_real_semantics
+  SOURCES test/unit/test_real_semantics.cpp
+  LINK ${PROJECT_NAME}_semantic_evaluation)

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -60,6 +61,72 @@ void labelPointsFromImage(const ProjectedPoints& projected, const std::uint8_t* 
     const int row = std::min(static_cast<int>(std::lround(projected.v[i])), height - 1);
     (*labels)[i] = label_image[static_cast<std::size_t>(row) * row_stride_bytes + col];
   }
+}
+
+void rejectOccludedPoints(const ProjectedPoints& projected, int width, int height,
+                          const OcclusionOptions& options, std::uint32_t unknown_label,
+                          std::vector<std::uint32_t>* labels, std::size_t* rejected) {
+  if (rejected) *rejected = 0;
+  if (labels->size() != projected.size()) {
+    throw std::invalid_argument("rejectOccludedPoints: " + std::to_string(labels->size()) +
+                                " labels for " + std::to_string(projected.size()) + " points");
+  }
+  if (width <= 0 || height <= 0 || options.cell_width_px <= 0 || options.cell_height_px <= 0 ||
+      options.window_radius_x < 0 || options.window_up < 0 || options.window_down < 0 ||
+      !(options.relative_margin >= 0.f) || !(options.absolute_margin_m >= 0.f)) {
+    throw std::invalid_argument(
+        "rejectOccludedPoints: image size and cell size must be > 0, window and margins >= 0");
+  }
+  const int grid_width = (width + options.cell_width_px - 1) / options.cell_width_px;
+  const int grid_height = (height + options.cell_height_px - 1) / options.cell_height_px;
+  const float kFar = std::numeric_limits<float>::infinity();
+  std::vector<float> nearest(static_cast<std::size_t>(grid_width) * grid_height, kFar);
+  const auto cellOf = [&](std::size_t i) {
+    const int col =
+        std::clamp(static_cast<int>(projected.u[i]) / options.cell_width_px, 0, grid_width - 1);
+    const int row =
+        std::clamp(static_cast<int>(projected.v[i]) / options.cell_height_px, 0, grid_height - 1);
+    return static_cast<std::size_t>(row) * grid_width + col;
+  };
+  const std::size_t n = projected.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!projected.valid[i]) continue;
+    float& cell = nearest[cellOf(i)];
+    cell = std::min(cell, projected.depth[i]);
+  }
+  // Window minimum, separable: along rows, then along columns.
+  const int rx = options.window_radius_x;
+  const int up = options.window_up;
+  const int down = options.window_down;
+  std::vector<float> row_min(nearest.size(), kFar);
+  for (int y = 0; y < grid_height; ++y) {
+    for (int x = 0; x < grid_width; ++x) {
+      float m = kFar;
+      for (int dx = std::max(0, x - rx); dx <= std::min(grid_width - 1, x + rx); ++dx)
+        m = std::min(m, nearest[static_cast<std::size_t>(y) * grid_width + dx]);
+      row_min[static_cast<std::size_t>(y) * grid_width + x] = m;
+    }
+  }
+  std::vector<float>& local_min = nearest;  // reused: nearest is not needed any more
+  for (int y = 0; y < grid_height; ++y) {
+    for (int x = 0; x < grid_width; ++x) {
+      float m = kFar;
+      for (int dy = std::max(0, y - up); dy <= std::min(grid_height - 1, y + down); ++dy)
+        m = std::min(m, row_min[static_cast<std::size_t>(dy) * grid_width + x]);
+      local_min[static_cast<std::size_t>(y) * grid_width + x] = m;
+    }
+  }
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!projected.valid[i]) continue;
+    const float limit =
+        local_min[cellOf(i)] * (1.f + options.relative_margin) + options.absolute_margin_m;
+    if (projected.depth[i] > limit) {
+      if ((*labels)[i] != unknown_label) ++changed;
+      (*labels)[i] = unknown_label;
+    }
+  }
+  if (rejected) *rejected = changed;
 }
 
 }  // namespace perception

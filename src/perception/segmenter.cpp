@@ -90,6 +90,7 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
       prepared.valid_region = cv::Rect(left, top, width, height);
       break;
     }
+    case ResizePolicy::kTiles:  // handled by segmentTiles()
     case ResizePolicy::kPadToMultiple: {
       cv::Mat resized = bgr;
       cv::Size target = bgr.size();
@@ -118,6 +119,116 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
     }
   }
   return prepared;
+}
+
+// Maps each channel affinely so its mean and standard deviation over the image become the
+// card's color_mean / color_std (given in the network's channel order).
+cv::Mat standardizeColors(const cv::Mat& bgr, const ModelCard& card) {
+  cv::Scalar image_mean, image_std;
+  cv::meanStdDev(bgr, image_mean, image_std);
+  std::vector<cv::Mat> channels;
+  cv::split(bgr, channels);
+  for (int c = 0; c < 3; ++c) {
+    // BGR channel c is network channel 2 - c when the network takes RGB.
+    const int network_channel = card.swap_rb ? 2 - c : c;
+    const double gain = card.color_std[network_channel] / std::max(image_std[c], 1.0);
+    const double offset = card.color_mean[network_channel] - gain * image_mean[c];
+    channels[c].convertTo(channels[c], CV_8U, gain, offset);  // saturates at 0 and 255
+  }
+  cv::Mat standardized;
+  cv::merge(channels, standardized);
+  return standardized;
+}
+
+// Starts of the fewest windows of `window` pixels that cover [0, extent) with neighbours
+// overlapping by at least `overlap` pixels, spread evenly (first at 0, last at extent - window).
+std::vector<int> tileStarts(int extent, int window, int overlap) {
+  if (extent <= window) return {0};
+  const int stride = window - overlap;
+  const int count = std::max(2, (extent - overlap + stride - 1) / stride);
+  std::vector<int> starts(count);
+  for (int i = 0; i < count; ++i)
+    starts[i] =
+        static_cast<int>(std::lround(static_cast<double>(i) * (extent - window) / (count - 1)));
+  return starts;
+}
+
+// Weights along one side of a tile: ramping up over `ramp` pixels from an edge that lies inside
+// the canvas (a network sees least context at its input's edges, and the neighbouring tile
+// covers those pixels), 1 at edges on the canvas border (nothing else covers them).
+std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
+  std::vector<float> weights(length, 1.f);
+  if (ramp <= 1) return weights;
+  for (int i = 0; i < length; ++i) {
+    float w = 1.f;
+    if (start > 0) w = std::min(w, (i + 1.f) / ramp);
+    if (start + length < extent) w = std::min(w, (length - i) / static_cast<float>(ramp));
+    weights[i] = w;
+  }
+  return weights;
+}
+
+// Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
+// over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
+// channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
+void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
+                const std::vector<float>& column_weight, const std::vector<float>& row_weight,
+                std::vector<cv::Mat>* sum) {
+  const int channels = scores.size[1];
+  const int height = scores.size[2];
+  const int width = scores.size[3];
+  if (height != tile.height || width != tile.width) {
+    // A network with a coarser output than its input: the probabilities at its resolution,
+    // then resized to the tile's pixels.
+    cv::Mat probabilities(channels, height * width, CV_32F);
+    cv::Mat flat(channels, height * width, CV_32F, const_cast<float*>(scores.ptr<float>()));
+    cv::Mat column_max;
+    cv::reduce(flat, column_max, 0, cv::REDUCE_MAX);
+    for (int c = 0; c < channels; ++c) cv::subtract(flat.row(c), column_max, probabilities.row(c));
+    cv::exp(probabilities, probabilities);
+    cv::Mat column_sum;
+    cv::reduce(probabilities, column_sum, 0, cv::REDUCE_SUM);
+    const cv::Mat weight = cv::Mat(row_weight).reshape(1, tile.height) *
+                           cv::Mat(column_weight).reshape(1, 1);  // outer product
+    for (int c = 0; c < channels; ++c) {
+      cv::Mat plane = probabilities.row(c) / column_sum;
+      plane = plane.reshape(1, height);
+      if (flipped) cv::flip(plane, plane, 1);
+      cv::resize(plane, plane, tile.size(), 0, 0, cv::INTER_LINEAR);
+      cv::Mat target = (*sum)[c](tile);
+      target += plane.mul(weight);
+    }
+    return;
+  }
+  cv::Mat exps(channels, width, CV_32F);
+  cv::Mat row_max(1, width, CV_32F);
+  cv::Mat row_sum(1, width, CV_32F);
+  for (int y = 0; y < height; ++y) {
+    const auto score_row = [&](int c) {
+      return cv::Mat(1, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c, y)));
+    };
+    score_row(0).copyTo(row_max);
+    for (int c = 1; c < channels; ++c) cv::max(row_max, score_row(c), row_max);
+    for (int c = 0; c < channels; ++c) {
+      cv::Mat exp_row = exps.row(c);
+      cv::subtract(score_row(c), row_max, exp_row);
+    }
+    cv::exp(exps, exps);
+    cv::reduce(exps, row_sum, 0, cv::REDUCE_SUM);
+    // inverse[x]: the weight of output pixel x over its exp sum (in output order).
+    cv::divide(row_weight[y], row_sum, row_sum);
+    float* inverse = row_sum.ptr<float>();
+    for (int x = 0; x < width; ++x) inverse[x] *= column_weight[flipped ? width - 1 - x : x];
+    for (int c = 0; c < channels; ++c) {
+      const float* e = exps.ptr<float>(c);
+      float* target = (*sum)[c].ptr<float>(tile.y + y) + tile.x;
+      if (flipped) {
+        for (int x = 0; x < width; ++x) target[x] += e[width - 1 - x] * inverse[width - 1 - x];
+      } else {
+        for (int x = 0; x < width; ++x) target[x] += e[x] * inverse[x];
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -154,27 +265,18 @@ Segmenter::~Segmenter() = default;
 Segmenter::Segmenter(Segmenter&&) noexcept = default;
 Segmenter& Segmenter::operator=(Segmenter&&) noexcept = default;
 
-Segmentation Segmenter::segment(const cv::Mat& image) {
-  const cv::Mat bgr = toBgr(image);
-  PreparedInput prepared;
+cv::Mat Segmenter::forward(const cv::Mat& network_image) {
   cv::Mat output;
-  {
-    ScopedTimer timer("segmentation/preprocess");
-    prepared = prepareInput(bgr, card_);
-  }
-  {
-    ScopedTimer timer("segmentation/forward");
-    const cv::Scalar mean(card_.mean[0], card_.mean[1], card_.mean[2]);
-    const cv::Mat blob = cv::dnn::blobFromImage(prepared.network_image, card_.scale, cv::Size(),
-                                                mean, card_.swap_rb, false, CV_32F);
-    try {
-      network_->net.setInput(blob);
-      output = network_->net.forward();
-    } catch (const cv::Exception& e) {
-      throw SegmentationError("forward pass of " + model_path_ + " on a " +
-                              std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
-                              " input failed: " + e.what());
-    }
+  const cv::Scalar mean(card_.mean[0], card_.mean[1], card_.mean[2]);
+  const cv::Mat blob = cv::dnn::blobFromImage(network_image, card_.scale, cv::Size(), mean,
+                                              card_.swap_rb, false, CV_32F);
+  try {
+    network_->net.setInput(blob);
+    output = network_->net.forward();
+  } catch (const cv::Exception& e) {
+    throw SegmentationError("forward pass of " + model_path_ + " on a " +
+                            std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
+                            " input failed: " + e.what());
   }
   const int channels = output.dims == 4 ? output.size[1] : -1;
   if (output.dims != 4 || output.size[0] != 1 || channels != card_.numOutputChannels()) {
@@ -184,6 +286,141 @@ Segmentation Segmenter::segment(const cv::Mat& image) {
         << card_.numOutputChannels() << " channels to labelIds";
     throw SegmentationError(msg.str());
   }
+  return output;
+}
+
+double Segmenter::tileScaleFor(const cv::Size& image_size, double camera_focal_px) const {
+  if (card_.resize_policy != ResizePolicy::kTiles) return 1.0;
+  if (card_.network_focal_px > 0.0 && camera_focal_px > 0.0)
+    return card_.network_focal_px / camera_focal_px;
+  if (card_.tile_scale > 0.0) return card_.tile_scale;
+  return std::max(
+      static_cast<double>(card_.input_width) / image_size.width,
+      static_cast<double>(card_.input_height - card_.tile_bottom_margin) / image_size.height);
+}
+
+bool Segmenter::skipsInArgmax(int channel) const {
+  return card_.suppress_unlabeled && card_.output_label_ids[channel] == cityscapes::kUnlabeled &&
+         card_.numOutputChannels() > 1;
+}
+
+Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px) {
+  const double scale = tileScaleFor(bgr.size(), camera_focal_px);
+  const cv::Size tile_size(card_.input_width, card_.input_height);
+  cv::Mat canvas;
+  std::vector<cv::Rect> tiles;
+  cv::Rect valid;
+  {
+    ScopedTimer timer("segmentation/preprocess");
+    const cv::Size scaled(std::max(1, static_cast<int>(std::lround(bgr.cols * scale))),
+                          std::max(1, static_cast<int>(std::lround(bgr.rows * scale))));
+    cv::resize(bgr, canvas, scaled, 0, 0, scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    valid = cv::Rect(cv::Point(0, 0), scaled);
+    // Smaller than a tile: reflect-pad (the scale stays), the padding is cropped afterwards.
+    // The bottom margin is padding too: the image's bottom stays out of the rows where the
+    // training images showed the ego vehicle.
+    const int pad_right = std::max(0, tile_size.width - scaled.width);
+    const int pad_bottom = std::max(card_.tile_bottom_margin, tile_size.height - scaled.height);
+    if (pad_right > 0 || pad_bottom > 0) {
+      const bool reflect = pad_right < scaled.width && pad_bottom < scaled.height;
+      cv::copyMakeBorder(canvas, canvas, 0, pad_bottom, 0, pad_right,
+                         reflect ? cv::BORDER_REFLECT_101 : cv::BORDER_REPLICATE);
+    }
+    for (int y : tileStarts(canvas.rows, tile_size.height, card_.tile_overlap))
+      for (int x : tileStarts(canvas.cols, tile_size.width, card_.tile_overlap))
+        tiles.emplace_back(cv::Point(x, y), tile_size);
+  }
+
+  const int channels = card_.numOutputChannels();
+  std::vector<cv::Mat> sum(channels);
+  for (cv::Mat& plane : sum) plane = cv::Mat::zeros(canvas.size(), CV_32F);
+  cv::Mat weight = cv::Mat::zeros(canvas.size(), CV_32F);
+  const int ramp = std::max(1, card_.tile_overlap / 2);
+  for (const cv::Rect& tile : tiles) {
+    const cv::Mat input = canvas(tile);
+    const std::vector<float> column_weight = featherWeights(tile.x, tile.width, canvas.cols, ramp);
+    const std::vector<float> row_weight = featherWeights(tile.y, tile.height, canvas.rows, ramp);
+    const cv::Mat tile_weights =
+        cv::Mat(row_weight).reshape(1, tile.height) * cv::Mat(column_weight).reshape(1, 1);
+    cv::Mat scores;
+    {
+      ScopedTimer timer("segmentation/forward");
+      scores = forward(input);
+    }
+    {
+      ScopedTimer timer("segmentation/softmax");
+      addSoftmax(scores, false, tile, column_weight, row_weight, &sum);
+      cv::Mat tile_weight = weight(tile);
+      tile_weight += tile_weights;
+    }
+    if (card_.flip_average) {
+      cv::Mat mirrored;
+      cv::flip(input, mirrored, 1);
+      {
+        ScopedTimer timer("segmentation/forward");
+        scores = forward(mirrored);
+      }
+      ScopedTimer timer("segmentation/softmax");
+      addSoftmax(scores, true, tile, column_weight, row_weight, &sum);
+      cv::Mat tile_weight = weight(tile);
+      tile_weight += tile_weights;
+    }
+  }
+
+  Segmentation result;
+  ScopedTimer timer("segmentation/argmax");
+  // Argmax of the summed probabilities (the same as of their mean: every channel of a pixel has
+  // the same weight) at the scaled image's resolution, then labels and confidence back to the
+  // image's size: two resizes instead of one per channel.
+  const cv::Size scaled = valid.size();
+  cv::Mat best_sum(scaled, CV_32F, cv::Scalar(-1.0));
+  cv::Mat best_index(scaled, CV_8U, cv::Scalar(0));
+  for (int c = 0; c < channels; ++c) {
+    if (skipsInArgmax(c)) continue;
+    for (int row = 0; row < scaled.height; ++row) {
+      const float* channel_sum = sum[c].ptr<float>(row);
+      float* best = best_sum.ptr<float>(row);
+      std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
+      for (int col = 0; col < scaled.width; ++col) {
+        if (channel_sum[col] > best[col]) {
+          best[col] = channel_sum[col];
+          index[col] = static_cast<std::uint8_t>(c);
+        }
+      }
+    }
+  }
+  cv::Mat confidence;
+  cv::divide(best_sum, weight(valid), confidence);
+  cv::Mat label_ids;
+  cv::LUT(best_index, network_->label_lut, label_ids);
+  if (scaled != bgr.size()) {
+    cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST);
+    cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_LINEAR);
+  } else {
+    result.label_ids = label_ids;
+    result.confidence = confidence;
+  }
+  return result;
+}
+
+Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
+  cv::Mat bgr = toBgr(image);
+  if (card_.color_normalization == ColorNormalization::kStandardize) {
+    ScopedTimer timer("segmentation/preprocess");
+    bgr = standardizeColors(bgr, card_);
+  }
+  if (card_.resize_policy == ResizePolicy::kTiles) return segmentTiles(bgr, camera_focal_px);
+  PreparedInput prepared;
+  cv::Mat output;
+  {
+    ScopedTimer timer("segmentation/preprocess");
+    prepared = prepareInput(bgr, card_);
+  }
+  {
+    ScopedTimer timer("segmentation/forward");
+    output = forward(prepared.network_image);
+  }
+  const int channels = output.size[1];
   const int height = output.size[2];
   const int width = output.size[3];
 
@@ -199,6 +436,7 @@ Segmentation Segmenter::segment(const cv::Mat& image) {
     float* best = best_score.ptr<float>();
     std::uint8_t* index = best_index.ptr<std::uint8_t>();
     for (int c = 0; c < channels; ++c) {
+      if (skipsInArgmax(c)) continue;
       const float* score = output.ptr<float>(0, c);
       for (std::size_t i = 0; i < pixels; ++i) {
         if (score[i] > best[i]) {
@@ -264,6 +502,30 @@ cv::Mat labelIdsToTrainIds(const cv::Mat& label_ids) {
   cv::Mat train_ids;
   cv::LUT(label_ids, lut, train_ids);
   return train_ids;
+}
+
+cv::Mat filterLabels(const Segmentation& segmentation, double min_confidence,
+                     int boundary_radius_px) {
+  CV_Assert(segmentation.label_ids.type() == CV_8UC1);
+  cv::Mat filtered = segmentation.label_ids.clone();
+  if (boundary_radius_px > 0) {
+    // A pixel is near a boundary when the labels in its window are not all equal: the
+    // window's maximum (dilation) differs from its minimum (erosion).
+    const cv::Mat window = cv::getStructuringElement(
+        cv::MORPH_RECT, cv::Size(2 * boundary_radius_px + 1, 2 * boundary_radius_px + 1));
+    cv::Mat window_max, window_min;
+    cv::dilate(segmentation.label_ids, window_max, window, cv::Point(-1, -1), 1,
+               cv::BORDER_REPLICATE);
+    cv::erode(segmentation.label_ids, window_min, window, cv::Point(-1, -1), 1,
+              cv::BORDER_REPLICATE);
+    filtered.setTo(cityscapes::kUnlabeled, window_max != window_min);
+  }
+  if (min_confidence > 0.0) {
+    CV_Assert(segmentation.confidence.type() == CV_32FC1 &&
+              segmentation.confidence.size() == segmentation.label_ids.size());
+    filtered.setTo(cityscapes::kUnlabeled, segmentation.confidence < min_confidence);
+  }
+  return filtered;
 }
 
 }  // namespace perception

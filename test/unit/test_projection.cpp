@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <limits>
 #include <sstream>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
@@ -226,6 +228,149 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
   }
   EXPECT_EQ(rows, projected.validCount());
   std::filesystem::remove_all(dir);
+}
+
+// A pinhole camera at the origin of the point frame (x right, y down, z forward), 1220 x 370
+// pixels with a KITTI-like focal length: points are given in camera coordinates.
+PointProjector pinholeProjector() {
+  Eigen::Matrix<double, 3, 4> P;
+  P << 700, 0, 610, 0, 0, 700, 185, 0, 0, 0, 1, 0;
+  return PointProjector(P, Eigen::Matrix3d::Identity(), Eigen::Isometry3d::Identity(), 1220, 370);
+}
+
+// Where a ray from `origin` along `direction` first hits the scene: the road plane 1.65 m below
+// the camera, a near wall 2 m wide at z = 8 m and a far wall 20 m wide at z = 20 m (both from
+// the road up to 1 m / 5 m above the camera). false when the ray hits nothing.
+struct Scene {
+  static bool inNearWall(const Eigen::Vector3d& p) {
+    return std::abs(p.x()) <= 1.0 && p.y() >= -1.0 && p.y() <= 1.65;
+  }
+  static bool inFarWall(const Eigen::Vector3d& p) {
+    return std::abs(p.x()) <= 10.0 && p.y() >= -5.0 && p.y() <= 1.65;
+  }
+  static bool hit(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                  Eigen::Vector3d* point, int* surface) {
+    double best = std::numeric_limits<double>::infinity();
+    const auto consider = [&](double t, int id, bool (*inside)(const Eigen::Vector3d&)) {
+      if (!(t > 1e-6) || t >= best) return;
+      const Eigen::Vector3d p = origin + t * direction;
+      if (inside && !inside(p)) return;
+      best = t;
+      *point = p;
+      *surface = id;
+    };
+    if (direction.y() > 1e-9) consider((1.65 - origin.y()) / direction.y(), 0, nullptr);
+    if (direction.z() > 1e-9) {
+      consider((8.0 - origin.z()) / direction.z(), 1, &inNearWall);
+      consider((20.0 - origin.z()) / direction.z(), 2, &inFarWall);
+    }
+    return std::isfinite(best);
+  }
+  // The camera (at the origin) sees p when nothing lies between them.
+  static bool visibleFromCamera(const Eigen::Vector3d& p) {
+    Eigen::Vector3d first;
+    int surface = -1;
+    if (!hit(Eigen::Vector3d::Zero(), p.normalized(), &first, &surface)) return false;
+    return (first - p).norm() < 1e-3;
+  }
+};
+
+// A 64-beam lidar at `lidar_origin` (camera coordinates) scanning the scene.
+Eigen::Matrix3Xf scanScene(const Eigen::Vector3d& lidar_origin) {
+  std::vector<Eigen::Vector3f> points;
+  const double kDeg = M_PI / 180.0;
+  for (int beam = 0; beam < 64; ++beam) {
+    const double elevation = (2.0 - beam * 26.8 / 63.0) * kDeg;
+    for (double azimuth = -40.0; azimuth <= 40.0; azimuth += 0.1) {
+      const Eigen::Vector3d direction(std::cos(elevation) * std::sin(azimuth * kDeg),
+                                      -std::sin(elevation),
+                                      std::cos(elevation) * std::cos(azimuth * kDeg));
+      Eigen::Vector3d p;
+      int surface = -1;
+      if (Scene::hit(lidar_origin, direction, &p, &surface)) points.push_back(p.cast<float>());
+    }
+  }
+  Eigen::Matrix3Xf matrix(3, points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) matrix.col(i) = points[i];
+  return matrix;
+}
+
+TEST(Occlusion, PointsBehindANearWallAreRejectedVisibleOnesKept) {
+  // The lidar far to the right of the camera (a large parallax, so many of its points are
+  // hidden from the camera), and a little above and behind it as on KITTI's car.
+  const Eigen::Matrix3Xf points = scanScene(Eigen::Vector3d(1.5, -0.08, -0.27));
+  const PointProjector projector = pinholeProjector();
+  ProjectedPoints projected;
+  projector.project(points, &projected);
+  std::vector<std::uint32_t> labels;
+  std::vector<std::uint8_t> image(1220 * 370, 7);
+  labelPointsFromImage(projected, image.data(), 1220, 370, 1220, 0, &labels);
+
+  std::size_t rejected = 0;
+  rejectOccludedPoints(projected, 1220, 370, OcclusionOptions{}, 0, &labels, &rejected);
+  std::size_t hidden = 0, hidden_rejected = 0, visible = 0, visible_rejected = 0;
+  std::size_t road = 0, road_rejected = 0;
+  for (std::size_t i = 0; i < projected.size(); ++i) {
+    if (!projected.valid[i]) continue;
+    const Eigen::Vector3d p = points.col(i).cast<double>();
+    const bool is_rejected = labels[i] == 0;
+    if (!Scene::visibleFromCamera(p)) {
+      ++hidden;
+      hidden_rejected += is_rejected;
+    } else {
+      ++visible;
+      visible_rejected += is_rejected;
+      if (std::abs(p.y() - 1.65) < 1e-6) {
+        ++road;
+        road_rejected += is_rejected;
+      }
+    }
+  }
+  std::cout << "hidden " << hidden << " (rejected " << hidden_rejected << "), visible " << visible
+            << " (rejected " << visible_rejected << "), road " << road << " (rejected "
+            << road_rejected << ")\n";
+  ASSERT_GT(hidden, 500u);
+  ASSERT_GT(road, 5000u);
+  EXPECT_EQ(rejected, hidden_rejected + visible_rejected);
+  EXPECT_GE(static_cast<double>(hidden_rejected) / hidden, 0.9);
+  EXPECT_LE(static_cast<double>(visible_rejected) / visible, 0.02);
+  // Road is lost only beside the near wall (the window's reach past the wall's edge).
+  EXPECT_LE(static_cast<double>(road_rejected) / road, 0.02);
+}
+
+TEST(Occlusion, SlantedRoadAloneLosesNoPoints) {
+  // Only the road: a lidar at the camera (no parallax) sees nothing the camera does not.
+  std::vector<Eigen::Vector3f> road;
+  for (double z = 4.0; z < 80.0; z *= 1.01)
+    for (double x = -15.0; x <= 15.0; x += 0.05) road.emplace_back(x, 1.65f, z);
+  Eigen::Matrix3Xf points(3, road.size());
+  for (std::size_t i = 0; i < road.size(); ++i) points.col(i) = road[i];
+  ProjectedPoints projected;
+  pinholeProjector().project(points, &projected);
+  std::vector<std::uint32_t> labels(projected.size(), 7);
+  std::size_t rejected = 0;
+  rejectOccludedPoints(projected, 1220, 370, OcclusionOptions{}, 0, &labels, &rejected);
+  EXPECT_GT(projected.validCount(), 10000u);
+  EXPECT_EQ(rejected, 0u);
+}
+
+TEST(Occlusion, RejectsMismatchedSizesAndBadOptions) {
+  ProjectedPoints projected;
+  Eigen::Matrix3Xf points(3, 2);
+  points << 0, 1, 0, 0, 10, 10;
+  pinholeProjector().project(points, &projected);
+  std::vector<std::uint32_t> labels(1, 7);
+  EXPECT_THROW(rejectOccludedPoints(projected, 1220, 370, OcclusionOptions{}, 0, &labels),
+               std::invalid_argument);
+  labels.assign(2, 7);
+  OcclusionOptions bad;
+  bad.cell_width_px = 0;
+  EXPECT_THROW(rejectOccludedPoints(projected, 1220, 370, bad, 0, &labels), std::invalid_argument);
+  // Two points at the same depth: nothing hidden.
+  std::size_t rejected = 5;
+  rejectOccludedPoints(projected, 1220, 370, OcclusionOptions{}, 0, &labels, &rejected);
+  EXPECT_EQ(rejected, 0u);
+  EXPECT_EQ(labels, (std::vector<std::uint32_t>{7, 7}));
 }
 
 }  // namespace

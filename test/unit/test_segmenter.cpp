@@ -2,6 +2,7 @@
 // on wide images, card parsing, and the error paths a user hits with a wrong model or image.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <opencv2/core.hpp>
@@ -60,7 +61,8 @@ TEST(SegmenterEnet, ReachesPixelAccuracyOnCityscapesSample) {
 
   double min_confidence = 0, max_confidence = 0;
   cv::minMaxLoc(result.confidence, &min_confidence, &max_confidence);
-  EXPECT_GE(min_confidence, 1.0 / 20.0 - 1e-6);  // the winner of 20 classes has >= 1/20
+  // The winner of 20 classes has >= 1/20, unless "unlabeled" may not win (then only > 0).
+  EXPECT_GE(min_confidence, segmenter.card().suppress_unlabeled ? 1e-9 : 1.0 / 20.0 - 1e-6);
   EXPECT_LE(max_confidence, 1.0 + 1e-6);
   // Every produced id is a real labelId.
   double max_label = 0;
@@ -197,6 +199,10 @@ TEST(ModelCard, DefaultCardFollowsTheModelFile) {
   EXPECT_EQ(enet.output_label_ids[1], cityscapes::kRoad);  // trainId 0
   EXPECT_EQ(enet.output_label_ids[14], cityscapes::kCar);  // trainId 13
   EXPECT_EQ(enet.output_label_ids[19], cityscapes::kBicycle);
+  // The KITTI-tuned fitting (issue 12): undistorted tiles, colours standardized to Cityscapes.
+  EXPECT_EQ(enet.resize_policy, ResizePolicy::kTiles);
+  EXPECT_EQ(enet.color_normalization, ColorNormalization::kStandardize);
+  EXPECT_TRUE(enet.suppress_unlabeled);
 
   const std::string dir = makeTempDir("card_default");
   EXPECT_THROW(defaultModelCardFor(dir + "/net.onnx"), ModelCardError);
@@ -238,6 +244,141 @@ TEST(Palette, ColorsAndTrainIdsFollowCityscapesTable) {
   const cv::Mat bgr(1, 3, CV_8UC3, cv::Scalar(10, 20, 30));
   EXPECT_EQ(overlayLabelIds(bgr, labels, 1.0).at<cv::Vec3b>(0), cv::Vec3b(128, 64, 128));
   EXPECT_EQ(overlayLabelIds(bgr, labels, 0.0).at<cv::Vec3b>(0), cv::Vec3b(30, 20, 10));
+}
+
+TEST(ModelCard, ParsesTileAndColorFields) {
+  const std::string dir = makeTempDir("card_tiles");
+  const std::string path = writeFile(dir, "enet.yaml",
+                                     "input: {width: 1024, height: 512}\n"
+                                     "resize_policy: tiles\n"
+                                     "tile_scale: 1.5\n"
+                                     "network_focal_px: 1131\n"
+                                     "tile_overlap: 64\n"
+                                     "tile_bottom_margin: 40\n"
+                                     "flip_average: true\n"
+                                     "color_normalization: standardize\n"
+                                     "color_mean: [73, 83, 72]\n"
+                                     "color_std: [48, 48.5, 47.7]\n"
+                                     "output_label_ids: [0, 7]\n");
+  const ModelCard card = loadModelCard(path);
+  EXPECT_EQ(card.resize_policy, ResizePolicy::kTiles);
+  EXPECT_DOUBLE_EQ(card.tile_scale, 1.5);
+  EXPECT_DOUBLE_EQ(card.network_focal_px, 1131.0);
+  EXPECT_EQ(card.tile_overlap, 64);
+  EXPECT_EQ(card.tile_bottom_margin, 40);
+  EXPECT_TRUE(card.flip_average);
+  EXPECT_EQ(card.color_normalization, ColorNormalization::kStandardize);
+  EXPECT_DOUBLE_EQ(card.color_mean[1], 83.0);
+  EXPECT_DOUBLE_EQ(card.color_std[1], 48.5);
+
+  const std::string saved = dir + "/saved.yaml";
+  saveModelCard(card, saved);
+  const ModelCard reloaded = loadModelCard(saved);
+  EXPECT_EQ(reloaded.resize_policy, ResizePolicy::kTiles);
+  EXPECT_DOUBLE_EQ(reloaded.network_focal_px, card.network_focal_px);
+  EXPECT_EQ(reloaded.tile_overlap, card.tile_overlap);
+  EXPECT_EQ(reloaded.tile_bottom_margin, card.tile_bottom_margin);
+  EXPECT_EQ(reloaded.flip_average, card.flip_average);
+  EXPECT_EQ(reloaded.color_normalization, card.color_normalization);
+  EXPECT_DOUBLE_EQ(reloaded.color_std[2], card.color_std[2]);
+
+  // The built-in ENet card round-trips too.
+  saveModelCard(builtinEnetCityscapesCard(), saved);
+  const ModelCard builtin = loadModelCard(saved);
+  EXPECT_EQ(builtin.resize_policy, builtinEnetCityscapesCard().resize_policy);
+  EXPECT_EQ(builtin.color_normalization, builtinEnetCityscapesCard().color_normalization);
+  fs::remove_all(dir);
+}
+
+TEST(ModelCard, BadTileAndColorFieldsAreRejectedNamingTheField) {
+  const std::string head = "input: {width: 64, height: 32}\nresize_policy: tiles\n";
+  const std::string tail = "output_label_ids: [7]\n";
+  EXPECT_EQ(cardError(head + tail), "");
+  EXPECT_NE(cardError(head + "tile_overlap: 16\n" + tail).find("tile_overlap"), std::string::npos);
+  EXPECT_NE(cardError(head + "tile_scale: -1\n" + tail).find("tile_scale"), std::string::npos);
+  EXPECT_NE(cardError(head + "tile_bottom_margin: 16\n" + tail).find("tile_bottom_margin"),
+            std::string::npos);
+  EXPECT_NE(cardError(head + "network_focal_px: -5\n" + tail).find("network_focal_px"),
+            std::string::npos);
+  EXPECT_NE(cardError(head + "flip_average: maybe\n" + tail).find("flip_average"),
+            std::string::npos);
+  EXPECT_NE(cardError(head + "color_normalization: auto\n" + tail).find("auto"), std::string::npos);
+  EXPECT_NE(cardError(head + "color_normalization: standardize\n" + tail).find("color_mean"),
+            std::string::npos);
+  EXPECT_NE(cardError(head + "color_mean: [1, 2]\n" + tail).find("color_mean"), std::string::npos);
+  EXPECT_NE(cardError(head + "color_std: [1, 0, 2]\n" + tail).find("color_std"), std::string::npos);
+  EXPECT_NE(cardError("resize_policy: tiles\n" + tail).find("input"), std::string::npos);
+}
+
+TEST(SegmenterEnet, TilesScaleByFocalLengthAndCoverWideImages) {
+  ISM_REQUIRE_SHARED(kEnetModel);
+  ModelCard card = builtinEnetCityscapesCard();
+  card.resize_policy = ResizePolicy::kTiles;
+  card.network_focal_px = 1131.0;
+  card.tile_scale = 0.0;
+  card.tile_overlap = 128;
+  card.tile_bottom_margin = 0;
+  Segmenter segmenter(sharedPath(kEnetModel), card);
+  // The focal-length ratio when the camera's is known; otherwise the least scale that fills
+  // one tile.
+  EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(1226, 370), 707.0), 1131.0 / 707.0, 1e-12);
+  EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(1226, 370)), 512.0 / 370.0, 1e-12);
+  EXPECT_NEAR(segmenter.tileScaleFor(cv::Size(256, 128)), 4.0, 1e-12);
+  // A bottom margin leaves input rows free below the image.
+  card.tile_bottom_margin = 112;
+  EXPECT_NEAR(Segmenter(sharedPath(kEnetModel), card).tileScaleFor(cv::Size(1226, 370)),
+              400.0 / 370.0, 1e-12);
+
+  cv::Mat image(150, 500, CV_8UC3);
+  cv::randu(image, cv::Scalar::all(0), cv::Scalar::all(255));
+  const Segmentation result = segmenter.segment(image, 1131.0 / 2.5);  // 1250 x 375: 2 tiles
+  ASSERT_EQ(result.label_ids.size(), image.size());
+  ASSERT_EQ(result.confidence.size(), image.size());
+  double min_confidence = 0, max_confidence = 0;
+  cv::minMaxLoc(result.confidence, &min_confidence, &max_confidence);
+  EXPECT_GT(min_confidence, 0.0);
+  EXPECT_LE(max_confidence, 1.0 + 1e-6);
+  // "unlabeled" never wins with suppress_unlabeled (the built-in card's choice).
+  EXPECT_EQ(cv::countNonZero(result.label_ids == cityscapes::kUnlabeled), 0);
+}
+
+// A 20 x 20 label image, road left of column 10 and car right of it, all confident but a 3 x 3
+// patch at rows 2..4, columns 2..4.
+Segmentation twoRegionSegmentation() {
+  Segmentation segmentation;
+  segmentation.label_ids = cv::Mat(20, 20, CV_8UC1, cv::Scalar(cityscapes::kRoad));
+  segmentation.label_ids.colRange(10, 20).setTo(cityscapes::kCar);
+  segmentation.confidence = cv::Mat(20, 20, CV_32FC1, cv::Scalar(0.9f));
+  segmentation.confidence(cv::Rect(2, 2, 3, 3)).setTo(0.3f);
+  return segmentation;
+}
+
+TEST(FilterLabels, RejectsUnconfidentPixelsAndLabelBoundaries) {
+  const Segmentation segmentation = twoRegionSegmentation();
+  const cv::Mat filtered = filterLabels(segmentation, 0.5, 2);
+  ASSERT_EQ(filtered.type(), CV_8UC1);
+  ASSERT_EQ(filtered.size(), segmentation.label_ids.size());
+  for (int row = 0; row < 20; ++row) {
+    for (int col = 0; col < 20; ++col) {
+      const bool unconfident = row >= 2 && row <= 4 && col >= 2 && col <= 4;
+      const bool boundary = col >= 8 && col <= 11;  // within 2 px of the road | car edge
+      const int expected =
+          (unconfident || boundary)
+              ? static_cast<int>(cityscapes::kUnlabeled)
+              : static_cast<int>(segmentation.label_ids.at<std::uint8_t>(row, col));
+      EXPECT_EQ(filtered.at<std::uint8_t>(row, col), expected) << "row " << row << " col " << col;
+    }
+  }
+  // Zero thresholds leave the labels alone; the input is not modified.
+  EXPECT_EQ(cv::countNonZero(filterLabels(segmentation, 0.0, 0) != segmentation.label_ids), 0);
+  EXPECT_EQ(cv::countNonZero(segmentation.label_ids == cityscapes::kUnlabeled), 0);
+  // Only the boundary, only the confidence.
+  EXPECT_EQ(cv::countNonZero(filterLabels(segmentation, 0.0, 1) == cityscapes::kUnlabeled), 20 * 2);
+  EXPECT_EQ(cv::countNonZero(filterLabels(segmentation, 0.5, 0) == cityscapes::kUnlabeled), 9);
+  LabelFilterOptions options;
+  options.min_confidence = 0.95;
+  options.boundary_radius_px = 0;
+  EXPECT_EQ(cv::countNonZero(filterLabels(segmentation, options) == cityscapes::kUnlabeled), 400);
 }
 
 }  // namespace

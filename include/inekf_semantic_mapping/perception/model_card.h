@@ -18,6 +18,18 @@ enum class ResizePolicy {
   kLetterbox,      // scale to fit inside the input size keeping the aspect, pad the rest
   kPadToMultiple,  // (optionally resize to input size, then) reflect-pad to pad_multiple, crop
                    // output
+  kTiles,          // scale the image keeping its aspect (tile_scale, or the focal-length ratio),
+                   // cover it with input_width x input_height tiles that overlap by at least
+                   // tile_overlap pixels, average the tiles' softmax probabilities
+};
+
+// Per-image colour normalization before the network's own mean/scale.
+enum class ColorNormalization {
+  kNone,
+  // Each channel is mapped affinely so the image's mean and standard deviation become
+  // color_mean / color_std: a camera with another exposure and white balance than the training
+  // camera then gives the network the colour statistics it was trained on.
+  kStandardize,
 };
 
 struct ModelCard {
@@ -36,11 +48,42 @@ struct ModelCard {
   double scale = 1.0 / 255.0;
   // true: the network expects RGB (images arrive as BGR from OpenCV).
   bool swap_rb = true;
+  // kTiles: the factor the image is scaled by before tiling. 0: the smallest factor with which
+  // the image covers one tile (no distortion, no tiling for an image of the input's aspect).
+  // Used when the camera's focal length is not known (see network_focal_px).
+  double tile_scale = 0.0;
+  // kTiles: the focal length, in network input pixels, of the images the network was trained
+  // on. When > 0 and segment() is given the camera's focal length, the image is scaled by
+  // network_focal_px / camera focal so objects appear at the size the network learned.
+  double network_focal_px = 0.0;
+  // kTiles: the least overlap of neighbouring tiles, in network input pixels; tiles blend over
+  // half of it.
+  int tile_overlap = 0;
+  // kTiles: network input rows at the bottom that are padding, not image: a network trained on
+  // images whose bottom rows show the ego vehicle calls whatever it sees there "unlabeled".
+  // The fitted scale leaves them free.
+  int tile_bottom_margin = 0;
+  // Average the probabilities with those of the horizontally mirrored image (kTiles only).
+  bool flip_average = false;
+  // true: channels mapped to labelId 0 ("unlabeled") never win the argmax; their probability
+  // still counts in the softmax, so where the network saw void the chosen class has a low
+  // confidence. Cityscapes' void is mostly the ego car's bonnet at the bottom of the frame, which
+  // a network trained there paints over the road of cameras without a bonnet in view.
+  bool suppress_unlabeled = false;
+  ColorNormalization color_normalization = ColorNormalization::kNone;
+  // kStandardize targets, per channel in the order of `mean` (pixel values 0..255).
+  std::array<double, 3> color_mean{{0.0, 0.0, 0.0}};
+  std::array<double, 3> color_std{{1.0, 1.0, 1.0}};
   // Output channel index -> Cityscapes labelId; its size is the number of output channels.
   std::vector<std::uint8_t> output_label_ids;
 
   int numOutputChannels() const { return static_cast<int>(output_label_ids.size()); }
 };
+
+// Cityscapes' colour statistics (train split, RGB, pixel values 0..255): the color_mean /
+// color_std of the built-in ENet card.
+constexpr double kCityscapesRgbMean[3] = {73.16, 82.91, 72.39};
+constexpr double kCityscapesRgbStd[3] = {47.68, 48.49, 47.74};
 
 // Thrown for unreadable or inconsistent model cards; the message names the file and field.
 class ModelCardError : public std::runtime_error {
@@ -64,6 +107,7 @@ ModelCard builtinEnetCityscapesCard();
 ModelCard defaultModelCardFor(const std::string& model_path);
 
 const char* resizePolicyName(ResizePolicy policy);
+const char* colorNormalizationName(ColorNormalization normalization);
 
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

@@ -54,5 +54,34 @@ void labelPointsFromImage(const ProjectedPoints& projected, const std::uint8_t* 
                           int width, int height, std::size_t row_stride_bytes,
                           std::uint32_t unknown_label, std::vector<std::uint32_t>* labels);
 
+// Lidar-camera parallax: the lidar sits elsewhere than the camera, so it measures surfaces the
+// camera does not see (behind a pole, past a car's edge...), which then project onto the pixels
+// of what hides them and would take its label. A depth buffer of the projected scan finds them:
+// the nearest depth per cell of cell_width_px x cell_height_px pixels, the minimum of that over
+// a window of cells (window_radius_x to each side, window_up rows of cells above and
+// window_down below the point's cell); a point farther than
+// local_min * (1 + relative_margin) + absolute_margin_m is taken as hidden from the camera.
+// The window reaches up rather than down: down an image column a road comes nearer with every
+// pixel, so a window reaching down would hide far road behind near road, while along a row and
+// upwards the road only recedes.
+struct OcclusionOptions {
+  int cell_width_px = 4;
+  int cell_height_px = 1;
+  int window_radius_x = 2;  // cells
+  int window_up = 6;        // cells
+  int window_down = 0;      // cells
+  float relative_margin = 0.1f;
+  float absolute_margin_m = 0.3f;
+};
+
+// Sets labels[i] = unknown_label for the valid points of `projected` (projected into a width x
+// height image) that the depth buffer finds hidden; `labels` holds one label per point (e.g.
+// from labelPointsFromImage). rejected (optional): how many labels it changed from another
+// value to unknown_label. Throws std::invalid_argument for sizes that do not match or options
+// out of range.
+void rejectOccludedPoints(const ProjectedPoints& projected, int width, int height,
+                          const OcclusionOptions& options, std::uint32_t unknown_label,
+                          std::vector<std::uint32_t>* labels, std::size_t* rejected = nullptr);
+
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

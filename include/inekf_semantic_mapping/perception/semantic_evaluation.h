@@ -1,0 +1,96 @@
+// Scoring camera labels at lidar points against human point labels (SemanticKITTI), and the
+// labelling path from a segmentation to per-point labels that the scores are taken on. ROS-free;
+// used by the evaluate_semantics tool and the real-data tests.
+#pragma once
+
+#include <cstdint>
+#include <opencv2/core/mat.hpp>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "inekf_semantic_mapping/perception/projection.h"
+#include "inekf_semantic_mapping/perception/segmenter.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+
+// Confusion counts of camera labels (Cityscapes labelIds, 0 = no label) against true labels
+// (Cityscapes labelIds of scored classes, kIgnoredLabel = not scored). A camera label of a class
+// that is not scored (sky, wall...) counts as wrong.
+class PointLabelScore {
+ public:
+  PointLabelScore();
+  void add(std::uint8_t truth, std::uint32_t predicted);
+  void merge(const PointLabelScore& other);
+
+  std::uint64_t scored() const;    // points with a scored true label
+  std::uint64_t labelled() const;  // of those, the ones with a camera label
+  std::uint64_t correct() const;
+  double coverage() const;  // labelled / scored
+  double accuracy() const;  // correct / labelled (NaN when none)
+
+  // Per class, over labelled points: points of that true class, points the camera gave that
+  // class, both; and scored points of that true class left without a camera label.
+  std::uint64_t truthCount(std::uint8_t label_id) const;
+  std::uint64_t predictedCount(std::uint8_t label_id) const;
+  std::uint64_t truePositives(std::uint8_t label_id) const;
+  std::uint64_t unlabelledCount(std::uint8_t label_id) const;
+  double iou(std::uint8_t label_id) const;  // NaN when the class is neither true nor predicted
+  double meanIoU() const;                   // over the scored classes present in the truth
+  // Points of true class `truth` the camera labelled `predicted` (0: no label).
+  std::uint64_t count(std::uint8_t truth, std::uint8_t predicted) const {
+    return at(truth, predicted);
+  }
+
+  // {"scored":..,"labelled":..,"coverage":..,"accuracy":..,"miou":..,"classes":{name:{..}}}
+  std::string toJson() const;
+
+ private:
+  static constexpr int kRows = 256;
+  static constexpr int kCols = 256;
+  std::uint64_t at(int truth, int predicted) const {
+    return confusion_[static_cast<std::size_t>(truth) * kCols + predicted];
+  }
+  std::vector<std::uint64_t> confusion_;  // [truth][predicted]
+};
+
+// One SemanticKITTI frame with what scoring needs.
+struct SemanticKittiFrame {
+  std::string name;  // "000000"
+  cv::Mat image;     // image_2, BGR
+  kitti::VelodyneScan scan;
+  std::vector<std::uint8_t> truth;  // per point: Cityscapes labelId or kIgnoredLabel
+};
+
+// The frames of a SemanticKITTI sequence folder that have velodyne/, labels/ and image_2/ files,
+// sorted. Throws std::runtime_error naming the folder when it has none.
+std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir);
+
+// Throws std::runtime_error / kitti::KittiFormatError naming the file that cannot be read, or
+// when the label file does not have one label per point.
+SemanticKittiFrame readSemanticKittiFrame(const std::string& sequence_dir, const std::string& name);
+
+// image_2's projection from the sequence's calib.txt (P2, Tr).
+kitti::CameraProjection readSemanticKittiCamera(const std::string& sequence_dir, int width,
+                                                int height);
+
+// The labelling path from a segmentation to point labels, as the mapping uses it.
+struct PointLabellingOptions {
+  LabelFilterOptions filter;
+  bool reject_occluded = true;
+  OcclusionOptions occlusion;
+};
+
+// Per point of the scan: the camera's labelId at its pixel after filterLabels, 0 for points
+// outside the image, hidden from the camera (when reject_occluded) or filtered. projected:
+// filled with the scan's projection.
+std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
+                                           const PointProjector& projector,
+                                           const kitti::VelodyneScan& scan,
+                                           const PointLabellingOptions& options,
+                                           ProjectedPoints* projected);
+
+}  // namespace perception
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,209 @@
+#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+double ratio(std::uint64_t numerator, std::uint64_t denominator) {
+  return denominator == 0 ? kNaN : static_cast<double>(numerator) / denominator;
+}
+
+// JSON has no NaN: null instead.
+std::string jsonNumber(double value) {
+  if (!std::isfinite(value)) return "null";
+  std::ostringstream out;
+  out << std::setprecision(6) << value;
+  return out.str();
+}
+
+}  // namespace
+
+PointLabelScore::PointLabelScore() : confusion_(static_cast<std::size_t>(kRows) * kCols, 0) {}
+
+void PointLabelScore::add(std::uint8_t truth, std::uint32_t predicted) {
+  if (truth == kIgnoredLabel) return;
+  ++confusion_[static_cast<std::size_t>(truth) * kCols + std::min<std::uint32_t>(predicted, 255)];
+}
+
+void PointLabelScore::merge(const PointLabelScore& other) {
+  for (std::size_t i = 0; i < confusion_.size(); ++i) confusion_[i] += other.confusion_[i];
+}
+
+std::uint64_t PointLabelScore::scored() const {
+  std::uint64_t total = 0;
+  for (std::uint64_t count : confusion_) total += count;
+  return total;
+}
+
+std::uint64_t PointLabelScore::labelled() const {
+  std::uint64_t total = 0;
+  for (int t = 0; t < kRows; ++t)
+    for (int p = 1; p < kCols; ++p) total += at(t, p);
+  return total;
+}
+
+std::uint64_t PointLabelScore::correct() const {
+  std::uint64_t total = 0;
+  for (int t = 1; t < kRows; ++t) total += at(t, t);
+  return total;
+}
+
+double PointLabelScore::coverage() const { return ratio(labelled(), scored()); }
+double PointLabelScore::accuracy() const { return ratio(correct(), labelled()); }
+
+std::uint64_t PointLabelScore::truthCount(std::uint8_t label_id) const {
+  std::uint64_t total = 0;
+  for (int p = 1; p < kCols; ++p) total += at(label_id, p);
+  return total;
+}
+
+std::uint64_t PointLabelScore::predictedCount(std::uint8_t label_id) const {
+  std::uint64_t total = 0;
+  for (int t = 0; t < kRows; ++t) total += at(t, label_id);
+  return total;
+}
+
+std::uint64_t PointLabelScore::truePositives(std::uint8_t label_id) const {
+  return label_id == 0 ? 0 : at(label_id, label_id);
+}
+
+std::uint64_t PointLabelScore::unlabelledCount(std::uint8_t label_id) const {
+  return at(label_id, 0);
+}
+
+double PointLabelScore::iou(std::uint8_t label_id) const {
+  const std::uint64_t tp = truePositives(label_id);
+  const std::uint64_t uni = truthCount(label_id) + predictedCount(label_id) - tp;
+  return ratio(tp, uni);
+}
+
+double PointLabelScore::meanIoU() const {
+  double sum = 0.0;
+  int classes = 0;
+  for (std::uint8_t label : kScoredCityscapesLabels) {
+    if (truthCount(label) == 0) continue;
+    sum += iou(label);
+    ++classes;
+  }
+  return classes == 0 ? kNaN : sum / classes;
+}
+
+std::string PointLabelScore::toJson() const {
+  std::ostringstream out;
+  out << "{\"scored\":" << scored() << ",\"labelled\":" << labelled()
+      << ",\"correct\":" << correct() << ",\"coverage\":" << jsonNumber(coverage())
+      << ",\"accuracy\":" << jsonNumber(accuracy()) << ",\"miou\":" << jsonNumber(meanIoU())
+      << ",\"classes\":{";
+  bool first = true;
+  for (std::uint8_t label : kScoredCityscapesLabels) {
+    if (truthCount(label) + predictedCount(label) + unlabelledCount(label) == 0) continue;
+    out << (first ? "" : ",") << "\"" << cityscapes::labelName(label)
+        << "\":{\"label_id\":" << static_cast<int>(label) << ",\"truth\":" << truthCount(label)
+        << ",\"predicted\":" << predictedCount(label) << ",\"correct\":" << truePositives(label)
+        << ",\"unlabelled\":" << unlabelledCount(label)
+        << ",\"accuracy\":" << jsonNumber(ratio(truePositives(label), truthCount(label)))
+        << ",\"iou\":" << jsonNumber(iou(label)) << "}";
+    first = false;
+  }
+  out << "}}";
+  return out.str();
+}
+
+std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir) {
+  const fs::path dir(sequence_dir);
+  if (!fs::is_directory(dir / "velodyne"))
+    throw std::runtime_error("not a SemanticKITTI sequence (no velodyne/): " + sequence_dir);
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir / "velodyne")) {
+    if (entry.path().extension() != ".bin") continue;
+    const std::string name = entry.path().stem().string();
+    if (fs::exists(dir / "labels" / (name + ".label")) &&
+        fs::exists(dir / "image_2" / (name + ".png")))
+      names.push_back(name);
+  }
+  if (names.empty())
+    throw std::runtime_error("no frame with velodyne/, labels/ and image_2/ files in " +
+                             sequence_dir);
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+SemanticKittiFrame readSemanticKittiFrame(const std::string& sequence_dir,
+                                          const std::string& name) {
+  const fs::path dir(sequence_dir);
+  SemanticKittiFrame frame;
+  frame.name = name;
+  const std::string image_path = (dir / "image_2" / (name + ".png")).string();
+  frame.image = cv::imread(image_path, cv::IMREAD_COLOR);
+  if (frame.image.empty()) throw std::runtime_error("cannot read image " + image_path);
+  frame.scan = kitti::readVelodyneBin((dir / "velodyne" / (name + ".bin")).string());
+  const std::string label_path = (dir / "labels" / (name + ".label")).string();
+  const std::vector<std::uint32_t> labels = kitti::readLabelFile(label_path);
+  if (labels.size() != frame.scan.size())
+    throw std::runtime_error(label_path + " has " + std::to_string(labels.size()) + " labels for " +
+                             std::to_string(frame.scan.size()) + " points");
+  frame.truth.resize(labels.size());
+  for (std::size_t i = 0; i < labels.size(); ++i)
+    frame.truth[i] = semanticKittiToCityscapes(kitti::semanticClass(labels[i]));
+  return frame;
+}
+
+kitti::CameraProjection readSemanticKittiCamera(const std::string& sequence_dir, int width,
+                                                int height) {
+  return kitti::readObjectCalibration((fs::path(sequence_dir) / "calib.txt").string())
+      .projection(2, width, height);
+}
+
+std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
+                                           const PointProjector& projector,
+                                           const kitti::VelodyneScan& scan,
+                                           const PointLabellingOptions& options,
+                                           ProjectedPoints* projected) {
+  if (segmentation.label_ids.cols != projector.width() ||
+      segmentation.label_ids.rows != projector.height())
+    throw std::invalid_argument(
+        "labelScanPoints: the segmentation and the projector differ in size");
+  const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> xyzi(
+      scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
+  {
+    ScopedTimer timer("labelling/project");
+    projector.project(xyzi.topRows<3>(), projected);
+  }
+  cv::Mat filtered;
+  {
+    ScopedTimer timer("labelling/filter_labels");
+    filtered = filterLabels(segmentation, options.filter);
+  }
+  std::vector<std::uint32_t> labels;
+  {
+    ScopedTimer timer("labelling/label_points");
+    labelPointsFromImage(*projected, filtered.ptr<std::uint8_t>(), filtered.cols, filtered.rows,
+                         filtered.step, cityscapes::kUnlabeled, &labels);
+  }
+  if (options.reject_occluded) {
+    ScopedTimer timer("labelling/reject_occluded");
+    rejectOccludedPoints(*projected, projector.width(), projector.height(), options.occlusion,
+                         cityscapes::kUnlabeled, &labels);
+  }
+  return labels;
+}
+
+}  // namespace perception
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,334 @@
+// evaluate_semantics: how well camera labels fit the human labels of real lidar scans. For each
+// SemanticKITTI frame it segments image_2, projects the scan into it, reads the camera label at
+// each point (after the confidence / boundary filter and the occlusion test) and scores it
+// against the point's human label mapped to Cityscapes (perception/semantickitti_to_cityscapes.h):
+// point accuracy over labelled points, coverage (labelled / scored points in the image), IoU per
+// class; per sequence and in total.
+//
+//   evaluate_semantics --sequence DIR [--sequence DIR ...] --model MODEL [--model-card CARD]
+//       [--max-frames N] [--threads 2] [--json FILE]
+//       [card overrides: --policy P --input WxH --tile-scale S --network-focal F --tile-overlap PX
+//       --flip 0|1 --suppress-unlabeled 0|1
+//        --color none|standardize --no-focal]
+//       [labelling variants, each repeatable, scored in every combination:
+//        --min-confidence C --boundary-radius PX --occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]
+//
+// Variant "raw" (no filter, no occlusion test) is always scored first. The last line printed is
+// `RESULT <json>` (the same JSON --json writes).
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/model_card.h"
+#include "inekf_semantic_mapping/perception/segmenter.h"
+#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
+#include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
+
+namespace ism = inekf_semantic_mapping;
+namespace perception = inekf_semantic_mapping::perception;
+using ism::common::UsageError;
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: evaluate_semantics --sequence DIR [--sequence DIR ...] --model MODEL\n"
+    "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
+    "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
+    "         [--network-focal F] [--tile-overlap PX] [--bottom-margin PX] [--flip 0|1]\n"
+    "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
+    "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
+    "         [--boundary-radius PX]...\n"
+    "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]...\n"
+    "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
+    "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
+    "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
+    "                     library defaults), scored in every combination besides 'raw'\n"
+    "  --occlusion        e.g. 4x1:2:6:0:0.1:0.3 = cells 4x1 px, window 2 cells to each side,\n"
+    "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n";
+
+struct Variant {
+  std::string name;
+  perception::PointLabellingOptions options;
+};
+
+perception::OcclusionOptions parseOcclusion(const std::string& text, bool* enabled) {
+  perception::OcclusionOptions options;
+  *enabled = text != "off";
+  if (!*enabled) return options;
+  int cw = 0, ch = 0, rx = 0, up = 0, down = 0;
+  float rel = 0.f, abs_m = 0.f;
+  if (std::sscanf(text.c_str(), "%dx%d:%d:%d:%d:%f:%f", &cw, &ch, &rx, &up, &down, &rel, &abs_m) !=
+      7)
+    throw UsageError("--occlusion expects off or CWxCH:RX:UP:DOWN:REL:ABS, got '" + text + "'");
+  options.cell_width_px = cw;
+  options.cell_height_px = ch;
+  options.window_radius_x = rx;
+  options.window_up = up;
+  options.window_down = down;
+  options.relative_margin = rel;
+  options.absolute_margin_m = abs_m;
+  return options;
+}
+
+std::string occlusionName(bool enabled, const perception::OcclusionOptions& o) {
+  if (!enabled) return "off";
+  std::ostringstream out;
+  out << o.cell_width_px << "x" << o.cell_height_px << ":" << o.window_radius_x << ":"
+      << o.window_up << ":" << o.window_down << ":" << o.relative_margin << ":"
+      << o.absolute_margin_m;
+  return out.str();
+}
+
+std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
+  const perception::PointLabellingOptions defaults;
+  std::vector<double> confidences;
+  for (const std::string& text : cli.getAll("--min-confidence"))
+    confidences.push_back(ism::common::CommandLine::parseDouble("--min-confidence", text));
+  if (confidences.empty()) confidences.push_back(defaults.filter.min_confidence);
+  std::vector<int> radii;
+  for (const std::string& text : cli.getAll("--boundary-radius"))
+    radii.push_back(ism::common::CommandLine::parseInt("--boundary-radius", text));
+  if (radii.empty()) radii.push_back(defaults.filter.boundary_radius_px);
+  std::vector<std::string> occlusions = cli.getAll("--occlusion");
+  if (occlusions.empty())
+    occlusions.push_back(defaults.reject_occluded ? occlusionName(true, defaults.occlusion)
+                                                  : "off");
+
+  std::vector<Variant> variants;
+  Variant raw;
+  raw.name = "raw";
+  raw.options.filter = perception::LabelFilterOptions{0.0, 0};
+  raw.options.reject_occluded = false;
+  variants.push_back(raw);
+  for (double confidence : confidences) {
+    for (int radius : radii) {
+      for (const std::string& occlusion : occlusions) {
+        Variant variant;
+        variant.options.filter = perception::LabelFilterOptions{confidence, radius};
+        variant.options.occlusion = parseOcclusion(occlusion, &variant.options.reject_occluded);
+        std::ostringstream name;
+        name << "conf=" << confidence << ",boundary=" << radius << ",occlusion="
+             << occlusionName(variant.options.reject_occluded, variant.options.occlusion);
+        variant.name = name.str();
+        variants.push_back(variant);
+      }
+    }
+  }
+  return variants;
+}
+
+perception::ModelCard applyOverrides(perception::ModelCard card,
+                                     const ism::common::CommandLine& cli) {
+  if (cli.has("--policy")) {
+    const std::string policy = cli.get("--policy");
+    if (policy == "resize") {
+      card.resize_policy = perception::ResizePolicy::kResize;
+    } else if (policy == "letterbox") {
+      card.resize_policy = perception::ResizePolicy::kLetterbox;
+    } else if (policy == "pad_to_multiple") {
+      card.resize_policy = perception::ResizePolicy::kPadToMultiple;
+    } else if (policy == "tiles") {
+      card.resize_policy = perception::ResizePolicy::kTiles;
+    } else {
+      throw UsageError("--policy: unknown policy '" + policy + "'");
+    }
+  }
+  if (cli.has("--input")) {
+    const std::string size = cli.get("--input");
+    if (std::sscanf(size.c_str(), "%dx%d", &card.input_width, &card.input_height) != 2 ||
+        card.input_width <= 0 || card.input_height <= 0)
+      throw UsageError("--input expects WxH, got '" + size + "'");
+  }
+  card.tile_scale = cli.getDouble("--tile-scale", card.tile_scale);
+  card.network_focal_px = cli.getDouble("--network-focal", card.network_focal_px);
+  card.tile_overlap = cli.getInt("--tile-overlap", card.tile_overlap);
+  card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
+  card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
+  card.suppress_unlabeled =
+      cli.getInt("--suppress-unlabeled", card.suppress_unlabeled ? 1 : 0) != 0;
+  if (cli.has("--color")) {
+    const std::string color = cli.get("--color");
+    if (color == "none") {
+      card.color_normalization = perception::ColorNormalization::kNone;
+    } else if (color == "standardize") {
+      card.color_normalization = perception::ColorNormalization::kStandardize;
+      if (card.color_std == std::array<double, 3>{{1.0, 1.0, 1.0}}) {
+        // Cards without targets of their own get Cityscapes' (in the network's channel order).
+        for (int c = 0; c < 3; ++c) {
+          const int rgb = card.swap_rb ? c : 2 - c;
+          card.color_mean[c] = perception::kCityscapesRgbMean[rgb];
+          card.color_std[c] = perception::kCityscapesRgbStd[rgb];
+        }
+      }
+    } else {
+      throw UsageError("--color must be none or standardize, not '" + color + "'");
+    }
+  }
+  // Standardization targets in RGB order (experiments with other colour statistics).
+  for (const char* flag : {"--color-mean", "--color-std"}) {
+    if (!cli.has(flag)) continue;
+    double rgb[3];
+    if (std::sscanf(cli.get(flag).c_str(), "%lf,%lf,%lf", &rgb[0], &rgb[1], &rgb[2]) != 3)
+      throw UsageError(std::string(flag) + " expects R,G,B");
+    std::array<double, 3>& target =
+        std::string(flag) == "--color-mean" ? card.color_mean : card.color_std;
+    for (int c = 0; c < 3; ++c) target[c] = rgb[card.swap_rb ? c : 2 - c];
+  }
+  return card;
+}
+
+void printScore(const std::string& title, const perception::PointLabelScore& score,
+                bool per_class) {
+  std::printf("%-58s acc %.4f  coverage %.4f  mIoU %.4f  (%llu of %llu points labelled)\n",
+              title.c_str(), score.accuracy(), score.coverage(), score.meanIoU(),
+              static_cast<unsigned long long>(score.labelled()),
+              static_cast<unsigned long long>(score.scored()));
+  if (!per_class) return;
+  std::printf("    %-14s %9s %9s %9s %7s %7s  %s\n", "class", "truth", "predicted", "no label",
+              "acc", "IoU", "mistaken for");
+  for (std::uint8_t label : perception::kScoredCityscapesLabels) {
+    const std::uint64_t truth = score.truthCount(label);
+    if (truth + score.predictedCount(label) + score.unlabelledCount(label) == 0) continue;
+    // The two classes this one is most often mistaken for.
+    int first = -1, second = -1;
+    for (int p = 1; p < 256; ++p) {
+      if (p == label || score.count(label, p) == 0) continue;
+      if (first < 0 || score.count(label, p) > score.count(label, first)) {
+        second = first;
+        first = p;
+      } else if (second < 0 || score.count(label, p) > score.count(label, second)) {
+        second = p;
+      }
+    }
+    std::string confusions;
+    for (int p : {first, second}) {
+      if (p < 0) continue;
+      char text[64];
+      std::snprintf(text, sizeof(text), "  %s %.2f", ism::cityscapes::labelName(p),
+                    truth ? static_cast<double>(score.count(label, p)) / truth : 0.0);
+      confusions += text;
+    }
+    std::printf("    %-14s %9llu %9llu %9llu %7.3f %7.3f %s\n", ism::cityscapes::labelName(label),
+                static_cast<unsigned long long>(truth),
+                static_cast<unsigned long long>(score.predictedCount(label)),
+                static_cast<unsigned long long>(score.unlabelledCount(label)),
+                truth ? static_cast<double>(score.truePositives(label)) / truth : 0.0,
+                score.iou(label), confusions.c_str());
+  }
+  // Points given a class that is never scored (sky, wall, traffic light...): all wrong.
+  std::uint64_t other = 0;
+  for (int label = 1; label < ism::cityscapes::kNumLabelIds; ++label) {
+    bool scored = false;
+    for (std::uint8_t s : perception::kScoredCityscapesLabels) scored |= s == label;
+    if (!scored && score.predictedCount(static_cast<std::uint8_t>(label)) > 0) {
+      std::printf(
+          "    predicted %-12s %llu\n", ism::cityscapes::labelName(label),
+          static_cast<unsigned long long>(score.predictedCount(static_cast<std::uint8_t>(label))));
+      other += score.predictedCount(static_cast<std::uint8_t>(label));
+    }
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return ism::common::runCli("evaluate_semantics", kUsage, [&] {
+    const ism::common::CommandLine cli(
+        argc, argv,
+        {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
+         "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
+         "--color-std", "--suppress-unlabeled", "--bottom-margin"},
+        {"--no-focal"}, {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
+    if (cli.helpRequested()) return ism::common::printUsage(kUsage);
+    const std::vector<std::string> sequences = cli.getAll("--sequence");
+    if (sequences.empty()) throw UsageError("--sequence is required");
+    const std::string model = cli.require("--model");
+    const int max_frames = cli.getInt("--max-frames", 0);
+    const bool use_focal = !cli.has("--no-focal");
+    const perception::ModelCard card =
+        applyOverrides(cli.has("--model-card") ? perception::loadModelCard(cli.get("--model-card"))
+                                               : perception::defaultModelCardFor(model),
+                       cli);
+    const std::vector<Variant> variants = makeVariants(cli);
+
+    perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));
+    std::printf(
+        "model %s, card %s: policy %s, tile_scale %g, network_focal_px %g, overlap %d, "
+        "bottom margin %d, flip %d, color %s, suppress unlabeled %d, focal given %d\n",
+        model.c_str(), card.source.c_str(), perception::resizePolicyName(card.resize_policy),
+        card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_bottom_margin,
+        card.flip_average ? 1 : 0, perception::colorNormalizationName(card.color_normalization),
+        card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
+
+    ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
+    std::vector<perception::PointLabelScore> totals(variants.size());
+    std::ostringstream json;
+    json << "{\"sequences\":{";
+    double total_ms = 0.0;
+    int total_frames = 0;
+    for (std::size_t s = 0; s < sequences.size(); ++s) {
+      const std::string& dir = sequences[s];
+      std::vector<std::string> frames = perception::listSemanticKittiFrames(dir);
+      if (max_frames > 0 && static_cast<int>(frames.size()) > max_frames) frames.resize(max_frames);
+      std::vector<perception::PointLabelScore> scores(variants.size());
+      double sequence_ms = 0.0;
+      double scale = 1.0;
+      for (const std::string& name : frames) {
+        const perception::SemanticKittiFrame frame = perception::readSemanticKittiFrame(dir, name);
+        const ism::kitti::CameraProjection camera =
+            perception::readSemanticKittiCamera(dir, frame.image.cols, frame.image.rows);
+        const double focal = use_focal ? camera.P_rect(0, 0) : 0.0;
+        scale = segmenter.tileScaleFor(frame.image.size(), focal);
+        const auto start = std::chrono::steady_clock::now();
+        const perception::Segmentation segmentation = segmenter.segment(frame.image, focal);
+        sequence_ms +=
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count();
+        const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
+                                                   frame.image.cols, frame.image.rows);
+        perception::ProjectedPoints projected;
+        for (std::size_t v = 0; v < variants.size(); ++v) {
+          const std::vector<std::uint32_t> labels = perception::labelScanPoints(
+              segmentation, projector, frame.scan, variants[v].options, &projected);
+          for (std::size_t i = 0; i < labels.size(); ++i) {
+            if (projected.valid[i]) scores[v].add(frame.truth[i], labels[i]);
+          }
+        }
+      }
+      const double ms_per_image = sequence_ms / frames.size();
+      total_ms += sequence_ms;
+      total_frames += static_cast<int>(frames.size());
+      std::printf("\n== %s: %zu frames, %.0f ms per image (segmentation), image scale %.3f\n",
+                  dir.c_str(), frames.size(), ms_per_image, scale);
+      json << (s ? "," : "") << "\"" << dir << "\":{\"frames\":" << frames.size()
+           << ",\"ms_per_image\":" << ms_per_image << ",\"variants\":{";
+      for (std::size_t v = 0; v < variants.size(); ++v) {
+        printScore(variants[v].name, scores[v], v <= 1);
+        totals[v].merge(scores[v]);
+        json << (v ? "," : "") << "\"" << variants[v].name << "\":" << scores[v].toJson();
+      }
+      json << "}}";
+    }
+    std::printf("\n== total: %d frames, %.0f ms per image\n", total_frames,
+                total_ms / total_frames);
+    json << "},\"total\":{\"frames\":" << total_frames
+         << ",\"ms_per_image\":" << total_ms / total_frames << ",\"variants\":{";
+    for (std::size_t v = 0; v < variants.size(); ++v) {
+      printScore(variants[v].name, totals[v], false);
+      json << (v ? "," : "") << "\"" << variants[v].name << "\":" << totals[v].toJson();
+    }
+    json << "}}}";
+    // Stage timing (all frames and variants; the segmenter's warm-up pass excluded).
+    std::printf("\n%s", ism::TimingRegistry::instance().report().c_str());
+    if (cli.has("--json")) ism::common::writeTextAtomically(cli.get("--json"), json.str() + "\n");
+    std::printf("RESULT %s\n", json.str().c_str());
+    return 0;
+  });
+}
