@@ -41,7 +41,8 @@ endif()
 # Camera labels at lidar points scored against SemanticKITTI's human labels (issue 12).
 ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
   SOURCES src/perception/semantic_evaluation.cpp
-  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
+  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti
+       ${PROJECT_NAME}_mapping)
 
 ism_add_tool(evaluate_semantics
   SOURCES src/tools/evaluate_semantics.cpp

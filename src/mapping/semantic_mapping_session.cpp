@@ -78,6 +78,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("grazing_ray_truncation_voxels", &config.grazing_ray_truncation_voxels);
   reader.read("ray_casting_threads", &config.ray_casting_threads);
   reader.read("insert_points_outside_image", &config.insert_points_outside_image);
+  reader.read("reject_occluded_points", &config.reject_occluded_points);
   reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
   reader.read("label_wait", &config.label_wait_s);
   reader.read("pose_wait", &config.pose_wait_s);
@@ -150,6 +151,10 @@ std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
   std::vector<std::uint32_t> label_ids;
   perception::labelPointsFromImage(projected, labels.data, labels.width, labels.height, labels.step,
                                    kNoLabel, &label_ids);
+  if (config_.reject_occluded_points) {
+    perception::rejectOccludedPoints(projected, labels.width, labels.height,
+                                     perception::OcclusionOptions(), kNoLabel, &label_ids);
+  }
   for (std::uint32_t& id : label_ids) {
     if (id != kNoLabel) id = evidenceLabel(id);
   }

@@ -1,5 +1,5 @@
-// segmentation_node: camera image -> /segmentation/labels (mono8 Cityscapes labelIds) and
-// /segmentation/overlay (rgb8), both with the input image's header.
+// segmentation_node: camera image -> /segmentation/labels (mono8 Cityscapes labelIds, after the
+// model card's label filter) and /segmentation/overlay (rgb8), both with the input image's header.
 //
 // Inference runs on a worker thread fed through a one-slot LatestFrameBuffer: when the network
 // is slower than the camera, stale frames are dropped (and counted) instead of queueing latency.
@@ -134,11 +134,12 @@ class SegmentationNode {
       ScopedTimer timer("segmentation_node/segment");
       result = segmenter_->segment(frame.image);
     }
-    labels_publisher_.publish(
-        cv_bridge::CvImage(frame.header, enc::MONO8, result.label_ids).toImageMsg());
+    // The card's label filter: doubtful pixels (low confidence, label edges) go out as
+    // "unlabeled", which the map takes as no class evidence.
+    const cv::Mat labels = perception::filterLabels(result, segmenter_->card().label_filter);
+    labels_publisher_.publish(cv_bridge::CvImage(frame.header, enc::MONO8, labels).toImageMsg());
     if (publish_overlay_ && overlay_publisher_.getNumSubscribers() > 0) {
-      const cv::Mat overlay =
-          perception::overlayLabelIds(frame.image, result.label_ids, overlay_alpha_);
+      const cv::Mat overlay = perception::overlayLabelIds(frame.image, labels, overlay_alpha_);
       overlay_publisher_.publish(cv_bridge::CvImage(frame.header, enc::RGB8, overlay).toImageMsg());
     }
   }

@@ -158,6 +158,16 @@ ModelCard loadModelCard(const std::string& yaml_path) {
   card.tile_bottom_margin = readOr<int>(yaml_path, root, "tile_bottom_margin", 0);
   card.flip_average = readOr<bool>(yaml_path, root, "flip_average", false);
   card.suppress_unlabeled = readOr<bool>(yaml_path, root, "suppress_unlabeled", false);
+  if (root["label_filter"]) {
+    const YAML::Node filter = root["label_filter"];
+    if (!filter.IsMap()) fail(yaml_path, filter, "label_filter must be a map");
+    card.label_filter.min_confidence = readOr<double>(yaml_path, filter, "min_confidence", 0.0);
+    card.label_filter.boundary_radius_px = readOr<int>(yaml_path, filter, "boundary_radius_px", 0);
+    if (!(card.label_filter.min_confidence >= 0 && card.label_filter.min_confidence < 1) ||
+        card.label_filter.boundary_radius_px < 0 || card.label_filter.boundary_radius_px > 50)
+      fail(yaml_path, filter,
+           "label_filter: min_confidence must be in [0, 1), boundary_radius_px in [0, 50]");
+  }
   if (root["color_normalization"]) {
     card.color_normalization = parseColorNormalization(yaml_path, root["color_normalization"]);
   }
@@ -205,6 +215,10 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
   out << YAML::Key << "tile_bottom_margin" << YAML::Value << card.tile_bottom_margin;
   out << YAML::Key << "flip_average" << YAML::Value << card.flip_average;
   out << YAML::Key << "suppress_unlabeled" << YAML::Value << card.suppress_unlabeled;
+  out << YAML::Key << "label_filter" << YAML::Value << YAML::BeginMap << YAML::Key
+      << "min_confidence" << YAML::Value << card.label_filter.min_confidence << YAML::Key
+      << "boundary_radius_px" << YAML::Value << card.label_filter.boundary_radius_px
+      << YAML::EndMap;
   out << YAML::Key << "color_normalization" << YAML::Value
       << colorNormalizationName(card.color_normalization);
   out << YAML::Key << "color_mean" << YAML::Value << YAML::Flow << YAML::BeginSeq
@@ -251,6 +265,7 @@ ModelCard builtinEnetCityscapesCard() {
     card.color_std[c] = kCityscapesRgbStd[c];
   }
   card.suppress_unlabeled = true;
+  card.label_filter = LabelFilterOptions{};  // the measured defaults
   card.pad_multiple = 1;
   card.scale = 1.0 / 255.0;
   card.swap_rb = true;

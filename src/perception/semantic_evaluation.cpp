@@ -10,6 +10,9 @@
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/offline_mapping.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
@@ -203,6 +206,84 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
                          cityscapes::kUnlabeled, &labels);
   }
   return labels;
+}
+
+SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
+                                    int max_frames, double resolution_m) {
+  std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
+  if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
+  const std::vector<Eigen::Isometry3d> poses =
+      mapping::readOdometryPoses(sequence_dir + "/poses.txt");
+  mapping::SemanticMappingConfig config;
+  config.resolution_m = resolution_m;
+  mapping::SemanticMappingSession camera_map(config);
+  mapping::SemanticMappingSession human_map(config);
+  struct Kept {
+    Eigen::Matrix3Xf points_in_view;
+    std::vector<std::uint8_t> truth_in_view;
+    Eigen::Isometry3d T_w_velo;
+  };
+  std::vector<Kept> kept;
+  for (const std::string& name : names) {
+    const SemanticKittiFrame frame = readSemanticKittiFrame(sequence_dir, name);
+    const std::size_t index = std::stoul(name);
+    if (index >= poses.size()) {
+      throw std::runtime_error(sequence_dir + "/poses.txt: no pose for frame " + name);
+    }
+    const kitti::CameraProjection projection =
+        readSemanticKittiCamera(sequence_dir, frame.image.cols, frame.image.rows);
+    const Eigen::Isometry3d T_velo_cam0 = projection.T_cam0_velo.inverse();
+    const Eigen::Isometry3d T_w_velo = T_velo_cam0 * poses[index] * projection.T_cam0_velo;
+    const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> xyzi(
+        frame.scan.xyzi.data(), 4, static_cast<Eigen::Index>(frame.scan.size()));
+    const Eigen::Matrix3Xf points = xyzi.topRows<3>();
+
+    const cv::Mat labels =
+        filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
+    const mapping::LabelImageView view{labels.ptr<std::uint8_t>(), labels.cols, labels.rows,
+                                       labels.step};
+    const mapping::CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
+                                      labels.cols, labels.rows};
+    camera_map.insertScan(points, T_w_velo, &view, &camera);
+
+    const PointProjector projector(projection.P_rect, projection.R_rect, projection.T_cam0_velo,
+                                   labels.cols, labels.rows);
+    ProjectedPoints projected;
+    projector.project(points, &projected);
+    Kept k;
+    k.T_w_velo = T_w_velo;
+    k.points_in_view.resize(3, static_cast<Eigen::Index>(projected.validCount()));
+    std::vector<std::uint32_t> human;
+    Eigen::Index n = 0;
+    for (std::size_t i = 0; i < projected.size(); ++i) {
+      if (!projected.valid[i]) continue;
+      k.points_in_view.col(n++) = points.col(static_cast<Eigen::Index>(i));
+      k.truth_in_view.push_back(frame.truth[i]);
+      human.push_back(frame.truth[i]);
+    }
+    human_map.insertScanWithPointLabels(k.points_in_view, T_w_velo, human, kIgnoredLabel);
+    kept.push_back(std::move(k));
+  }
+  SequenceMapScores scores;
+  camera_map.tree().updateInnerOccupancy();
+  human_map.tree().updateInnerOccupancy();
+  scores.map_voxels = mapping::countOccupiedFinestVoxels(camera_map.tree());
+  const auto voxelLabel = [](const mapping::SemanticOcTree& tree, const Eigen::Vector3f& p) {
+    const mapping::SemanticOcTreeNode* node = tree.search(p.x(), p.y(), p.z());
+    if (!node || !tree.isNodeOccupied(node)) return std::uint32_t{cityscapes::kUnlabeled};
+    return tree.mostLikelyLabel(*node, cityscapes::kUnlabeled);
+  };
+  for (const Kept& k : kept) {
+    const Eigen::Matrix3Xf points_map =
+        (k.T_w_velo.linear().cast<float>() * k.points_in_view).colwise() +
+        k.T_w_velo.translation().cast<float>();
+    for (Eigen::Index i = 0; i < points_map.cols(); ++i) {
+      const std::uint8_t truth = k.truth_in_view[static_cast<std::size_t>(i)];
+      scores.camera.add(truth, voxelLabel(camera_map.tree(), points_map.col(i)));
+      scores.ceiling.add(truth, voxelLabel(human_map.tree(), points_map.col(i)));
+    }
+  }
+  return scores;
 }
 
 }  // namespace perception

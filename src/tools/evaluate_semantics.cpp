@@ -45,13 +45,16 @@ constexpr char kUsage[] =
     "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
-    "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]...\n"
+    "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]... [--no-map]\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
     "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
     "                     library defaults), scored in every combination besides 'raw'\n"
     "  --occlusion        e.g. 4x1:2:6:0:0.1:0.3 = cells 4x1 px, window 2 cells to each side,\n"
-    "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n";
+    "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n"
+    "  --no-map           skip the maps: by default each sequence is also mapped (ground-truth\n"
+    "                     poses, 0.2 m, the node's labelling path) from the camera labels and\n"
+    "                     from the human labels (the ceiling), scored at the lidar points\n";
 
 struct Variant {
   std::string name;
@@ -245,7 +248,8 @@ int main(int argc, char** argv) {
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
          "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
          "--color-std", "--suppress-unlabeled", "--bottom-margin"},
-        {"--no-focal"}, {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
+        {"--no-focal", "--no-map"},
+        {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const std::vector<std::string> sequences = cli.getAll("--sequence");
     if (sequences.empty()) throw UsageError("--sequence is required");
@@ -269,6 +273,7 @@ int main(int argc, char** argv) {
 
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     std::vector<perception::PointLabelScore> totals(variants.size());
+    perception::PointLabelScore map_totals, ceiling_totals;
     std::ostringstream json;
     json << "{\"sequences\":{";
     double total_ms = 0.0;
@@ -314,7 +319,21 @@ int main(int argc, char** argv) {
         totals[v].merge(scores[v]);
         json << (v ? "," : "") << "\"" << variants[v].name << "\":" << scores[v].toJson();
       }
-      json << "}}";
+      json << "}";
+      if (!cli.has("--no-map")) {
+        // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
+        const perception::SequenceMapScores maps =
+            perception::scoreSequenceMaps(dir, &segmenter, max_frames);
+        printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
+        printScore("map from the human labels (ceiling)", maps.ceiling, false);
+        std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",
+                    maps.camera.meanIoU(), maps.ceiling.meanIoU(), maps.camera.accuracy(),
+                    maps.camera.coverage(), maps.map_voxels);
+        map_totals.merge(maps.camera);
+        ceiling_totals.merge(maps.ceiling);
+        json << ",\"map\":" << maps.camera.toJson() << ",\"map_ceiling\":" << maps.ceiling.toJson();
+      }
+      json << "}";
     }
     std::printf("\n== total: %d frames, %.0f ms per image\n", total_frames,
                 total_ms / total_frames);
@@ -324,7 +343,14 @@ int main(int argc, char** argv) {
       printScore(variants[v].name, totals[v], false);
       json << (v ? "," : "") << "\"" << variants[v].name << "\":" << totals[v].toJson();
     }
-    json << "}}}";
+    json << "}";
+    if (!cli.has("--no-map")) {
+      std::printf("\n== total map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f\n",
+                  map_totals.meanIoU(), ceiling_totals.meanIoU(), map_totals.accuracy(),
+                  map_totals.coverage());
+      json << ",\"map\":" << map_totals.toJson() << ",\"map_ceiling\":" << ceiling_totals.toJson();
+    }
+    json << "}}";
     // Stage timing (all frames and variants; the segmenter's warm-up pass excluded).
     std::printf("\n%s", ism::TimingRegistry::instance().report().c_str());
     if (cli.has("--json")) ism::common::writeTextAtomically(cli.get("--json"), json.str() + "\n");

@@ -86,10 +86,11 @@ ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
       return false;
     }
     const ism::perception::Segmentation segmentation = net->segment(image);
-    out->width = segmentation.label_ids.cols;
-    out->height = segmentation.label_ids.rows;
-    const cv::Mat labels = segmentation.label_ids.isContinuous() ? segmentation.label_ids
-                                                                 : segmentation.label_ids.clone();
+    // The same label filter as segmentation_node (the model card's).
+    cv::Mat labels = ism::perception::filterLabels(segmentation, net->card().label_filter);
+    if (!labels.isContinuous()) labels = labels.clone();
+    out->width = labels.cols;
+    out->height = labels.rows;
     out->pixels.assign(labels.data, labels.data + labels.total());
     return true;
   };

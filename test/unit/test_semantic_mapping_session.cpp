@@ -89,6 +89,7 @@ TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
   EXPECT_EQ(from_yaml.grazing_ray_truncation_voxels, defaults.grazing_ray_truncation_voxels);
   EXPECT_EQ(from_yaml.ray_casting_threads, defaults.ray_casting_threads);
   EXPECT_EQ(from_yaml.insert_points_outside_image, defaults.insert_points_outside_image);
+  EXPECT_EQ(from_yaml.reject_occluded_points, defaults.reject_occluded_points);
   EXPECT_EQ(from_yaml.label_stamp_tolerance_s, defaults.label_stamp_tolerance_s);
   EXPECT_EQ(from_yaml.label_wait_s, defaults.label_wait_s);
   EXPECT_EQ(from_yaml.pose_wait_s, defaults.pose_wait_s);

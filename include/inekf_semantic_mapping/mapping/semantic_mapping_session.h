@@ -46,6 +46,9 @@ struct SemanticMappingConfig {
   // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
   // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
   bool insert_points_outside_image = false;
+  // Lidar points the camera cannot see (lidar-camera parallax) take no label from the pixel
+  // they fall on (perception::rejectOccludedPoints with its measured defaults).
+  bool reject_occluded_points = true;
   // Pairing: a label image belongs to the scan whose stamp is within this tolerance (s).
   double label_stamp_tolerance_s = 0.05;
   // How long (data time, s) a scan waits for its label image before it goes in without one.

@@ -32,6 +32,16 @@ enum class ColorNormalization {
   kStandardize,
 };
 
+// Which labels a map should trust: pixels whose softmax confidence is below min_confidence, or
+// within boundary_radius_px of a label edge, become "unlabeled" (no class evidence). The
+// defaults are the knee of accuracy against coverage measured on SemanticKITTI 05 / 08 with the
+// built-in ENet card (README, issue 12); confidence is calibrated differently by every network,
+// so each card carries its own (cards without the key: no filter).
+struct LabelFilterOptions {
+  double min_confidence = 0.6;  // 0: keep every confidence
+  int boundary_radius_px = 2;   // 0: keep boundaries
+};
+
 struct ModelCard {
   std::string name;
   std::string source;  // the YAML file it came from, or "built-in ..." (for error messages)
@@ -76,6 +86,9 @@ struct ModelCard {
   std::array<double, 3> color_std{{1.0, 1.0, 1.0}};
   // Output channel index -> Cityscapes labelId; its size is the number of output channels.
   std::vector<std::uint8_t> output_label_ids;
+  // What segmentation_node and semantic_map_offline apply before labels reach a map (YAML
+  // label_filter: {min_confidence, boundary_radius_px}).
+  LabelFilterOptions label_filter{0.0, 0};
 
   int numOutputChannels() const { return static_cast<int>(output_label_ids.size()); }
 };

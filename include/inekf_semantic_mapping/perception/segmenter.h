@@ -57,13 +57,6 @@ class Segmenter {
 // Pixels whose class evidence is weak: the softmax probability of the chosen class is below
 // min_confidence, or a pixel with another label lies within boundary_radius_px (square window),
 // where the network's label edges and the lidar-camera calibration are least reliable.
-// The defaults are the knee of accuracy against coverage measured on SemanticKITTI 05 / 08 with
-// the built-in ENet card (README, issue 12).
-struct LabelFilterOptions {
-  double min_confidence = 0.6;  // 0: keep every confidence
-  int boundary_radius_px = 2;   // 0: keep boundaries
-};
-
 // The labelIds with the weak pixels set to 0 (Cityscapes "unlabeled", which the semantic map
 // treats as no class evidence). Boundaries are found on the unfiltered labels.
 cv::Mat filterLabels(const Segmentation& segmentation, double min_confidence,

@@ -92,5 +92,19 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
                                            const PointLabellingOptions& options,
                                            ProjectedPoints* projected);
 
+// The map at the lidar points (issue 12's map mIoU): the sequence's scans go through a
+// mapping::SemanticMappingSession with the poses of poses.txt (T_w_velo = inv(Tr) P Tr) twice,
+// once with the camera's label images (the node's path: the card's label filter, the session's
+// occlusion test) and once with the human labels of the points in the camera's view (the
+// ceiling of the same map). Then every scored point in the camera's view takes the most likely
+// class of its voxel (none: a free or classless voxel, counted as not covered).
+struct SequenceMapScores {
+  PointLabelScore camera;   // map built from the camera labels
+  PointLabelScore ceiling;  // map built from the human labels
+  std::size_t map_voxels = 0;
+};
+SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
+                                    int max_frames = -1, double resolution_m = 0.2);
+
 }  // namespace perception
 }  // namespace inekf_semantic_mapping
