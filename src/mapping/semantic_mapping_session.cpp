@@ -15,6 +15,8 @@ namespace {
 
 // Label images are kept this long past the newest scan for a scan that may still come (s).
 constexpr double kLabelKeepMargin_s = 1.0;
+// Scans that went in without labels are kept this long (data time) for a late label image.
+constexpr double kLateLabelWindow_s = 10.0;
 // A stamp this much older than the newest one means the clock went back (a bag loop).
 constexpr double kTimeJump_s = 1.0;
 
@@ -300,7 +302,12 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
   ++statistics_.label_images_received;
-  if (stamp + kTimeJump_s < newest_stamp_) restartClock();
+  // A label image comes one segmentation latency after its stamp, so an old stamp is no time
+  // jump (scans show those); one older than any scan that may still wait for it is too late.
+  if (stamp + config_.label_wait_s + config_.label_stamp_tolerance_s < newest_stamp_) {
+    if (!applyLateLabels(stamp, labels, camera)) ++statistics_.label_images_unmatched;
+    return insertReadyScans(newest_stamp_);
+  }
   auto copy = std::make_shared<PendingLabels>();
   copy->stamp = stamp;
   copy->camera = camera;
@@ -315,6 +322,7 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   newest_label_stamp_ = std::max(newest_label_stamp_, stamp);
   newest_stamp_ = std::max(newest_stamp_, stamp);
   first_stamp_ = std::min(first_stamp_, stamp);
+  last_label_arrival_ = newest_stamp_;
 
   PendingScan* best = nullptr;
   for (PendingScan& scan : pending_scans_) {
@@ -326,7 +334,7 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   }
   if (best) {
     best->labels = std::move(copy);
-  } else {
+  } else if (!applyLateLabels(stamp, copy->view, copy->camera)) {
     pending_labels_.push_back(std::move(*copy));
   }
   return insertReadyScans(newest_stamp_);
@@ -342,9 +350,10 @@ bool SemanticMappingSession::labelsMayStillCome(const PendingScan& scan, double 
   // Segmentation publishes in stamp order: once a newer label image is here, none will come
   // for this scan.
   if (newest_label_stamp_ > scan.stamp + config_.label_stamp_tolerance_s) return false;
-  // No label image for a whole wait, and the run is older than that: segmentation is not
-  // running (lidar-only runs). At the start, scans wait for the first label image.
-  if (newest_label_stamp_ < now - config_.label_wait_s &&
+  // No label image has arrived for a whole wait (data time of its arrival, not its stamp: a
+  // label image comes one segmentation latency after its stamp), and the run is older than that:
+  // segmentation is not running (lidar-only runs). At the start, scans wait for the first one.
+  if (last_label_arrival_ < now - config_.label_wait_s &&
       first_stamp_ < now - config_.label_wait_s) {
     return false;
   }
@@ -357,8 +366,46 @@ void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen:
     ++statistics_.label_images_used;
   } else {
     insertScan(scan.points_sensor, pose);
+    unlabelled_scans_.push_back({scan.stamp, last_scan_.points_map, pose});
+    while (!unlabelled_scans_.empty() &&
+           unlabelled_scans_.front().stamp < scan.stamp - kLateLabelWindow_s) {
+      unlabelled_scans_.pop_front();
+    }
   }
   if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_);
+}
+
+bool SemanticMappingSession::applyLateLabels(double stamp, const LabelImageView& labels,
+                                             const CameraModel& camera) {
+  auto best = unlabelled_scans_.end();
+  for (auto it = unlabelled_scans_.begin(); it != unlabelled_scans_.end(); ++it) {
+    const double gap = std::abs(it->stamp - stamp);
+    if (gap <= config_.label_stamp_tolerance_s &&
+        (best == unlabelled_scans_.end() || gap < std::abs(best->stamp - stamp))) {
+      best = it;
+    }
+  }
+  if (best == unlabelled_scans_.end()) return false;
+  const Eigen::Isometry3d T_sensor_map = best->T_map_sensor.inverse();
+  const Eigen::Matrix3Xf points_sensor =
+      (T_sensor_map.linear().cast<float>() * best->points_map).colwise() +
+      T_sensor_map.translation().cast<float>();
+  std::vector<std::uint8_t> in_image;
+  LabeledScan scan;
+  scan.label_ids = labelPointsFromCamera(points_sensor, labels, camera, &in_image);
+  scan.points_map = std::move(best->points_map);
+  scan.unknown_label_id = kNoLabel;
+  unlabelled_scans_.erase(best);
+  {
+    ScopedTimer timer("semantic_map/late_labels");
+    statistics_.points_with_class += tree_->addClassEvidence(scan);
+  }
+  ++statistics_.label_images_used;
+  ++statistics_.label_images_late;
+  ++statistics_.scans_with_labels;
+  last_scan_ = std::move(scan);
+  if (inserted_callback_) inserted_callback_(stamp, last_scan_);
+  return true;
 }
 
 std::size_t SemanticMappingSession::insertReadyScans(double now) {
@@ -394,7 +441,8 @@ std::size_t SemanticMappingSession::insertReadyScans(double now) {
 
 void SemanticMappingSession::restartClock() {
   flush();
-  newest_stamp_ = newest_label_stamp_ = -1e300;
+  unlabelled_scans_.clear();
+  newest_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
   first_stamp_ = 1e300;
 }
 
@@ -446,9 +494,10 @@ void SemanticMappingSession::reset() {
   tree_ = makeTree();
   pending_scans_.clear();
   pending_labels_.clear();
+  unlabelled_scans_.clear();
   statistics_ = MappingStatistics();
   last_scan_ = LabeledScan();
-  newest_stamp_ = newest_label_stamp_ = -1e300;
+  newest_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
   first_stamp_ = 1e300;
 }
 

@@ -377,6 +377,46 @@ void SemanticOcTree::updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_
   if (!pruneNode(node)) node->updateOccupancyChildren();
 }
 
+std::size_t SemanticOcTree::addClassEvidence(const LabeledScan& scan) {
+  if (root == nullptr ||
+      scan.label_ids.size() != static_cast<std::size_t>(scan.points_map.cols())) {
+    return 0;
+  }
+  std::size_t added = 0;
+  for (Eigen::Index i = 0; i < scan.points_map.cols(); ++i) {
+    const std::uint32_t label = scan.label_ids[static_cast<std::size_t>(i)];
+    if (label == scan.unknown_label_id) continue;
+    const ClassIndex index = classes_.indexOf(label);
+    octomap::OcTreeKey key;
+    if (index == kNoClass || !std::isfinite(scan.points_map(0, i)) ||
+        !coordToKeyChecked(
+            octomap::point3d(scan.points_map(0, i), scan.points_map(1, i), scan.points_map(2, i)),
+            key)) {
+      continue;
+    }
+    // Down to the finest level: a pruned block is expanded (its children copy it), a missing
+    // child is unknown space and gets no evidence.
+    SemanticOcTreeNode* node = root;
+    bool known = true;
+    for (int depth = 0; depth < static_cast<int>(tree_depth) && known; ++depth) {
+      const unsigned int child = octomap::computeChildIdx(key, tree_depth - 1 - depth);
+      if (!nodeHasChildren(node)) {
+        if (!isNodeOccupied(node)) {  // a pruned free block: nothing to label in it
+          known = false;
+          break;
+        }
+        expandNode(node);
+      }
+      known = nodeChildExists(node, child);
+      if (known) node = getNodeChild(node, child);
+    }
+    if (!known || !isNodeOccupied(node)) continue;
+    node->addClassEvidence(index, 1);
+    ++added;
+  }
+  return added;
+}
+
 SemanticOcTreeNode* SemanticOcTree::updateOccupiedVoxel(const octomap::OcTreeKey& key,
                                                         ClassIndex index,
                                                         std::uint32_t class_count) {

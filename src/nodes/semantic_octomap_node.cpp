@@ -330,10 +330,10 @@ class SemanticOctomapNode {
     const auto insert = stats.find("semantic_map/insert");
     ROS_INFO(
         "semantic_octomap_node: %zu of %zu scans in the map (%zu with labels, %zu pending, "
-        "%zu without pose), %zu of %zu label images used, %zu nodes, insert %.1f ms",
+        "%zu without pose), %zu of %zu label images used (%zu late), %zu nodes, insert %.1f ms",
         s.scans_inserted, s.scans_received, s.scans_with_labels, session_->pendingScans(),
-        s.scans_without_pose, s.label_images_used, s.label_images_received, session_->tree().size(),
-        insert == stats.end() ? 0.0 : 1e3 * insert->second.meanSeconds());
+        s.scans_without_pose, s.label_images_used, s.label_images_received, s.label_images_late,
+        session_->tree().size(), insert == stats.end() ? 0.0 : 1e3 * insert->second.meanSeconds());
   }
 
   ros::NodeHandle nh_, pnh_;

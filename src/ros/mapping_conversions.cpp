@@ -175,6 +175,7 @@ inekf_semantic_mapping::SemanticMapInfo mapInfoMessage(
   info.scans_without_pose = static_cast<std::uint32_t>(stats.scans_without_pose);
   info.label_images_received = static_cast<std::uint32_t>(stats.label_images_received);
   info.label_images_used = static_cast<std::uint32_t>(stats.label_images_used);
+  info.label_images_late = static_cast<std::uint32_t>(stats.label_images_late);
   info.resolution = tree.getResolution();
   info.nodes = tree.size();
   info.memory_bytes = tree.memoryUsage();

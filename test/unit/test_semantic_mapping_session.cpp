@@ -207,6 +207,72 @@ TEST(SemanticMappingSessionTest, EveryScanGoesInWhenSegmentationIsSlowOrAbsent) 
   EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
 }
 
+// Segmentation at 0.9 Hz with 1.2 s latency (ENet on 2 cores): the gap between a label image's
+// stamp and the next one's arrival exceeds label_wait, yet segmentation is running and every
+// label image finds its scan.
+TEST(SemanticMappingSessionTest, SlowSegmentationStillPairsEveryLabelImage) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 2.0;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  std::vector<double> label_stamps;
+  for (int k = 0; k < 100; k += 11) label_stamps.push_back(0.1 * k);
+  std::size_t next_label = 0;
+  for (int k = 0; k < 100; ++k) {
+    const double now = 0.1 * k;
+    while (next_label < label_stamps.size() && label_stamps[next_label] + 1.2 <= now + 1e-9) {
+      session.addLabelImage(label_stamps[next_label++], view, testCamera());
+    }
+    session.addScan(now, "velo", testScan());
+  }
+  session.advanceTo(20.0);
+  EXPECT_EQ(session.statistics().scans_inserted, 100u);
+  EXPECT_EQ(session.statistics().label_images_used, next_label);
+  EXPECT_EQ(session.statistics().scans_with_labels, next_label);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
+}
+
+// Label images later than label_wait: their scans went in without labels, and the labels still
+// add class evidence (no second occupancy update).
+TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 0.3;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double, const std::string&) { return Eigen::Isometry3d::Identity(); });
+  session.setCameraView(testCamera());
+  // Segmentation is running (a label image came), then scan 1.0 times out before its labels.
+  session.addLabelImage(0.0, view, testCamera());
+  session.addScan(0.0, "velo", testScan());
+  session.addScan(1.0, "velo", testScan());
+  session.addScan(1.5, "velo", testScan());  // 1.0 waited longer than label_wait: in, unlabelled
+  EXPECT_EQ(labelAt(session, -1.05, 0.55, 10.05), 7u);  // from the labels of 0.0
+  const std::size_t nodes_before = session.tree().size();
+  // The labels of 1.0 arrive now: class evidence for the scan that is already in.
+  const std::vector<std::uint8_t> building(100 * 100, 11);
+  session.addLabelImage(1.0, LabelImageView{building.data(), 100, 100, 100}, testCamera());
+  EXPECT_EQ(session.statistics().label_images_used, 2u);
+  EXPECT_EQ(session.statistics().label_images_late, 1u);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
+  EXPECT_EQ(session.statistics().scans_inserted, 3u);
+  EXPECT_EQ(session.tree().size(), nodes_before);  // no occupancy update, no new voxel
+  const SemanticOcTreeNode* node = session.tree().search(-1.05, 0.55, 10.05);
+  ASSERT_NE(node, nullptr);
+  bool has_building = false;
+  for (int slot = 0; slot < SemanticOcTreeNode::kSlots; ++slot) {
+    has_building |=
+        node->slotClass(slot) == session.tree().classSet().indexOf(11) && node->slotCount(slot) > 0;
+  }
+  EXPECT_TRUE(has_building);
+  // A label image with no scan of its stamp anywhere stays unmatched.
+  session.addLabelImage(1.25, view, testCamera());
+  session.advanceTo(10.0);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
+}
+
 TEST(SemanticMappingSessionTest, ScansWithoutPoseAreDroppedAfterTheWaitAndTimeJumpsFlush) {
   SemanticMappingConfig config = testConfig();
   config.label_wait_s = 0.5;

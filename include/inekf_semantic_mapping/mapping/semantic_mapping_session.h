@@ -52,7 +52,7 @@ struct SemanticMappingConfig {
   // Pairing: a label image belongs to the scan whose stamp is within this tolerance (s).
   double label_stamp_tolerance_s = 0.05;
   // How long (data time, s) a scan waits for its label image before it goes in without one.
-  double label_wait_s = 2.0;
+  double label_wait_s = 3.0;
   // How long (data time, s) a scan waits for its pose before it is dropped.
   double pose_wait_s = 1.0;
 
@@ -92,6 +92,8 @@ struct MappingStatistics {
   std::size_t scans_without_pose = 0;  // dropped after pose_wait_s
   std::size_t label_images_received = 0;
   std::size_t label_images_used = 0;
+  std::size_t label_images_late = 0;       // of the used ones: came after their scan went in
+                                           // (class evidence only)
   std::size_t label_images_unmatched = 0;  // no scan within the tolerance while it was kept
   std::size_t points_inserted = 0;
   std::size_t points_with_class = 0;  // points that added class evidence
@@ -162,6 +164,12 @@ class SemanticMappingSession {
     LabelImageView view;  // into pixels
     CameraModel camera;
   };
+  // A scan that went in without labels, kept a while for a label image that comes late.
+  struct InsertedScan {
+    double stamp;
+    Eigen::Matrix3Xf points_map;  // the points as inserted (cut to the camera's view)
+    Eigen::Isometry3d T_map_sensor;
+  };
   struct PendingScan {
     double stamp;
     std::string frame;
@@ -190,6 +198,8 @@ class SemanticMappingSession {
   std::size_t insertReadyScans(double now);
   bool labelsMayStillCome(const PendingScan& scan, double now) const;
   void insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose);
+  // Class evidence from a label image whose scan already went in; false if none matches.
+  bool applyLateLabels(double stamp, const LabelImageView& labels, const CameraModel& camera);
   // Stamps went back (a bag loop): what is pending goes in, the data clock starts again.
   void restartClock();
 
@@ -202,10 +212,12 @@ class SemanticMappingSession {
   InsertedCallback inserted_callback_;
   std::deque<PendingScan> pending_scans_;
   std::deque<PendingLabels> pending_labels_;
+  std::deque<InsertedScan> unlabelled_scans_;
   std::optional<CameraModel> last_camera_;
   double newest_stamp_ = -1e300;        // newest scan or label stamp, or clock (data time)
   double newest_label_stamp_ = -1e300;  // newest label image
   double first_stamp_ = 1e300;          // first scan or label image of this timeline
+  double last_label_arrival_ = -1e300;  // data time when the newest label image arrived
 };
 
 }  // namespace mapping

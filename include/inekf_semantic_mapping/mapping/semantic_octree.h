@@ -120,6 +120,12 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   // rays (a moving car's trace lasts longer). 0: octomap's behaviour.
   void setGrazingRayTruncation(double voxels) { grazing_truncation_voxels_ = voxels; }
 
+  // Class evidence without an occupancy update (a label image that came after its scan went
+  // in): one observation per labelled point whose finest-level voxel exists and is occupied;
+  // pruned blocks are expanded. Returns the number of points that added evidence. Inner nodes
+  // are refreshed by updateInnerOccupancy().
+  std::size_t addClassEvidence(const LabeledScan& scan);
+
   // Adds one hit with class evidence at a leaf (max depth), expanding pruned nodes.
   SemanticOcTreeNode* updateOccupiedVoxel(const octomap::OcTreeKey& key, ClassIndex index,
                                           std::uint32_t class_count);
