@@ -16,3 +16,13 @@ ism_source_workspace() {
     set -u
   fi
 }
+# Writes a JUnit file with one failed case, where catkin_test_results counts it:
+# ism_junit_failure FILE SUITE CASE MESSAGE (for a step that fails before it can report itself).
+ism_junit_failure() {
+  cat >"$1" <<XML
+<?xml version="1.0" encoding="UTF-8"?>
+<testsuite name="$2" tests="1" failures="1" errors="0">
+  <testcase classname="$2" name="$3"><failure message="$4"/></testcase>
+</testsuite>
+XML
+}

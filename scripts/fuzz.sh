@@ -14,12 +14,7 @@ mkdir -p "$build" "$results" "$findings"
 echo "[fuzz] building the harnesses (clang-14, ASan + UBSan) in $build"
 build_failed() {
   tail -n 60 "$1"
-  cat >"$results/fuzz-build.xml" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="fuzz_build" tests="1" failures="1" errors="0">
-  <testcase classname="fuzz" name="build"><failure message="see $1"/></testcase>
-</testsuite>
-XML
+  ism_junit_failure "$results/fuzz-build.xml" fuzz_build build "see $1"
   exit 1
 }
 CC=clang-14 CXX=clang++-14 cmake -S "$ISM_ROOT/test/fuzz" -B "$build" -DCMAKE_BUILD_TYPE=Debug \

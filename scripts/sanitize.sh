@@ -21,12 +21,7 @@ if ! ISM_SKIP_DEPS=1 ISM_WS="$asan_ws" "$ISM_ROOT/scripts/build.sh" \
     >"$ISM_WS/asan_build.log" 2>&1; then
   tail -n 40 "$ISM_WS/asan_build.log"
   echo "[sanitize] BUILD FAILED"
-  cat >"$results/asan-build.xml" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="asan_build" tests="1" failures="1" errors="0">
-  <testcase classname="asan" name="build"><failure message="see $ISM_WS/asan_build.log"/></testcase>
-</testsuite>
-XML
+  ism_junit_failure "$results/asan-build.xml" asan_build build "see $ISM_WS/asan_build.log"
   exit 1
 fi
 
@@ -43,12 +38,8 @@ for test in "${TESTS[@]}"; do
     echo "[sanitize] $test: FAILED (exit $rc), log $ISM_WS/asan-$test.log"
     grep -E 'ERROR: |runtime error|SUMMARY|FAILED' "$ISM_WS/asan-$test.log" | head -n 8 || true
     # A sanitizer abort leaves no XML: record the failure so the suite counts it.
-    [[ -s $results/asan-$test.xml ]] || cat >"$results/asan-$test.xml" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="asan_$test" tests="1" failures="1" errors="0">
-  <testcase classname="asan" name="$test"><failure message="exit $rc under ASan/UBSan"/></testcase>
-</testsuite>
-XML
+    [[ -s $results/asan-$test.xml ]] ||
+      ism_junit_failure "$results/asan-$test.xml" "asan_$test" "$test" "exit $rc under ASan/UBSan"
   else
     echo "[sanitize] $test: passed, no sanitizer report"
   fi

@@ -20,6 +20,22 @@ constexpr double kLateLabelWindow_s = 10.0;
 // A stamp this much older than the newest one means the clock went back (a bag loop).
 constexpr double kTimeJump_s = 1.0;
 
+// The item of `items` (scans or label images) whose stamp is nearest to `stamp`, within
+// `tolerance`, among those `eligible` accepts; items.end() if none.
+template <typename Items, typename Eligible>
+auto nearestInTime(Items& items, double stamp, double tolerance, Eligible eligible) {
+  auto best = items.end();
+  for (auto it = items.begin(); it != items.end(); ++it) {
+    const double gap = std::abs(it->stamp - stamp);
+    if (eligible(*it) && gap <= tolerance &&
+        (best == items.end() || gap < std::abs(best->stamp - stamp))) {
+      best = it;
+    }
+  }
+  return best;
+}
+constexpr auto kAny = [](const auto&) { return true; };
+
 void require(bool ok, const std::string& key, const std::string& what) {
   if (!ok) throw std::invalid_argument("semantic mapping config: '" + key + "' " + what);
 }
@@ -271,14 +287,7 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
   if (stamp + kTimeJump_s < newest_stamp_) restartClock();
   PendingScan scan{stamp, frame, std::move(points_sensor), nullptr};
   // A label image that came first (segmentation can beat the pose or the cloud's transport).
-  auto best = pending_labels_.end();
-  for (auto it = pending_labels_.begin(); it != pending_labels_.end(); ++it) {
-    const double gap = std::abs(it->stamp - stamp);
-    if (gap <= config_.label_stamp_tolerance_s &&
-        (best == pending_labels_.end() || gap < std::abs(best->stamp - stamp))) {
-      best = it;
-    }
-  }
+  const auto best = nearestInTime(pending_labels_, stamp, config_.label_stamp_tolerance_s, kAny);
   if (best != pending_labels_.end()) {
     scan.labels = std::make_shared<const PendingLabels>(std::move(*best));
     pending_labels_.erase(best);
@@ -324,15 +333,9 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   first_stamp_ = std::min(first_stamp_, stamp);
   last_label_arrival_ = newest_stamp_;
 
-  PendingScan* best = nullptr;
-  for (PendingScan& scan : pending_scans_) {
-    const double gap = std::abs(scan.stamp - stamp);
-    if (!scan.labels && gap <= config_.label_stamp_tolerance_s &&
-        (!best || gap < std::abs(best->stamp - stamp))) {
-      best = &scan;
-    }
-  }
-  if (best) {
+  const auto best = nearestInTime(pending_scans_, stamp, config_.label_stamp_tolerance_s,
+                                  [](const PendingScan& scan) { return !scan.labels; });
+  if (best != pending_scans_.end()) {
     best->labels = std::move(copy);
   } else if (!applyLateLabels(stamp, copy->view, copy->camera)) {
     pending_labels_.push_back(std::move(*copy));
@@ -377,14 +380,7 @@ void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen:
 
 bool SemanticMappingSession::applyLateLabels(double stamp, const LabelImageView& labels,
                                              const CameraModel& camera) {
-  auto best = unlabelled_scans_.end();
-  for (auto it = unlabelled_scans_.begin(); it != unlabelled_scans_.end(); ++it) {
-    const double gap = std::abs(it->stamp - stamp);
-    if (gap <= config_.label_stamp_tolerance_s &&
-        (best == unlabelled_scans_.end() || gap < std::abs(best->stamp - stamp))) {
-      best = it;
-    }
-  }
+  const auto best = nearestInTime(unlabelled_scans_, stamp, config_.label_stamp_tolerance_s, kAny);
   if (best == unlabelled_scans_.end()) return false;
   const Eigen::Isometry3d T_sensor_map = best->T_map_sensor.inverse();
   const Eigen::Matrix3Xf points_sensor =
