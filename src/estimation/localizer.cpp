@@ -141,7 +141,16 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
   reader.number("gps", "fix_history_s", &config.fix_history_s, false);
   double max_rejected = config.max_consecutive_rejected_fixes;
   reader.number("gps", "max_consecutive_rejected_fixes", &max_rejected, false);
+  if (max_rejected > 1e6 || max_rejected != std::floor(max_rejected)) {
+    throw std::runtime_error(path +
+                             ": key 'gps.max_consecutive_rejected_fixes' must be an "
+                             "integer in [0, 1000000], got " +
+                             std::to_string(max_rejected));
+  }
   config.max_consecutive_rejected_fixes = static_cast<int>(max_rejected);
+  reader.number("gps", "max_reacquisition_speed_mps", &config.max_reacquisition_speed_mps, true);
+  reader.number("imu", "max_angular_rate_radps", &config.max_angular_rate_radps, true);
+  reader.number("imu", "max_specific_force_mps2", &config.max_specific_force_mps2, true);
   reader.number("imu", "max_gap_s", &config.max_imu_gap_s, true);
   reader.number("imu", "gap_noise_scale", &config.gap_noise_scale, true);
   reader.number("imu", "interpolated_gyro_noise_scale_per_s",
@@ -258,7 +267,9 @@ void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
 
 Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
-      !sample.specific_force.allFinite()) {
+      !sample.specific_force.allFinite() ||
+      !(sample.angular_velocity.cwiseAbs().maxCoeff() <= config_.max_angular_rate_radps) ||
+      !(sample.specific_force.cwiseAbs().maxCoeff() <= config_.max_specific_force_mps2)) {
     ++statistics_.imu_dropped;
     return ImuStatus::kDroppedDuplicate;  // unusable; counted with the drops
   }
@@ -399,6 +410,13 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     const NavState& state = filter_->state();
     const Eigen::Vector3d innovation = used.position_map - state.position_map;
     const double since_last_fix_s = std::max(1.0, state.stamp_s - last_accepted_fix_s_);
+    if (innovation.norm() > config_.max_reacquisition_speed_mps * since_last_fix_s) {
+      result.reason = "re-acquisition refused: the fix is " + std::to_string(innovation.norm()) +
+                      " m away, more than a car moves in " + std::to_string(since_last_fix_s) +
+                      " s";
+      ++statistics_.gps_rejected;
+      return result;
+    }
     ErrorCovariance inflation = ErrorCovariance::Zero();
     inflation.block<3, 3>(3, 3).diagonal().setConstant(
         std::pow(innovation.norm() / since_last_fix_s, 2));

@@ -134,6 +134,40 @@ TEST(Localizer, ReacquiresAfterConsecutiveRejectedFixes) {
   EXPECT_FALSE(localizer.addPositionFix(fixAt(13.0, far + Eigen::Vector3d(0, 30, 0))).accepted);
 }
 
+// Fault injection found: ten fixes 1000 km away, the fifth accepted by re-acquisition and the
+// odometry published 1110 km off. Re-acquisition never moves the estimate faster than a car.
+TEST(Localizer, NeverReacquiresAFixFartherThanACarCanMove) {
+  LocalizerConfig config;
+  config.max_consecutive_rejected_fixes = 3;
+  Localizer localizer(config);
+  localizer.initialize(startState(0.0));
+  const Eigen::Vector3d far(1.0e6, 0.0, 0.0);
+  for (int k = 1; k <= 10; ++k) {
+    for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(k - 1 + 0.1 * i));
+    const CorrectionResult result = localizer.addPositionFix(fixAt(k, far));
+    EXPECT_FALSE(result.accepted) << "fix " << k;
+    if (k >= 3) EXPECT_NE(result.reason.find("re-acquisition refused"), std::string::npos);
+  }
+  EXPECT_EQ(localizer.statistics().gps_reacquisitions, 0);
+  EXPECT_LT(localizer.state().position_map.norm(), 1.0);
+}
+
+TEST(Localizer, DropsImuSamplesBeyondTheSensorRange) {
+  Localizer localizer{LocalizerConfig()};
+  localizer.initialize(startState(0.0));
+  localizer.addImu(restingSample(0.1));
+  const std::int64_t dropped_before = localizer.statistics().imu_dropped;
+  ImuSample spinning = restingSample(0.2);
+  spinning.angular_velocity = Eigen::Vector3d(0.0, 0.0, 1.0e6);
+  EXPECT_EQ(localizer.addImu(spinning), Localizer::ImuStatus::kDroppedDuplicate);
+  ImuSample crashing = restingSample(0.2);
+  crashing.specific_force = Eigen::Vector3d(1.0e4, 0.0, 9.81);
+  EXPECT_EQ(localizer.addImu(crashing), Localizer::ImuStatus::kDroppedDuplicate);
+  EXPECT_EQ(localizer.statistics().imu_dropped, dropped_before + 2);
+  EXPECT_NE(localizer.addImu(restingSample(0.2)), Localizer::ImuStatus::kDroppedDuplicate);
+  EXPECT_TRUE(localizer.state().rotation.isApprox(Eigen::Matrix3d::Identity(), 1e-6));
+}
+
 TEST(Localizer, LazyInitializationLevelsFromGravityOrUsesTheReference) {
   LocalizerConfig config;
   config.init_orientation_from_reference = false;
@@ -409,6 +443,9 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.min_gps_sigma_m, defaults.min_gps_sigma_m);
   EXPECT_DOUBLE_EQ(loaded.max_fix_age_s, defaults.max_fix_age_s);
   EXPECT_EQ(loaded.max_consecutive_rejected_fixes, defaults.max_consecutive_rejected_fixes);
+  EXPECT_DOUBLE_EQ(loaded.max_reacquisition_speed_mps, defaults.max_reacquisition_speed_mps);
+  EXPECT_DOUBLE_EQ(loaded.max_angular_rate_radps, defaults.max_angular_rate_radps);
+  EXPECT_DOUBLE_EQ(loaded.max_specific_force_mps2, defaults.max_specific_force_mps2);
   EXPECT_DOUBLE_EQ(loaded.max_imu_gap_s, defaults.max_imu_gap_s);
   EXPECT_DOUBLE_EQ(loaded.gap_noise_scale, defaults.gap_noise_scale);
   EXPECT_DOUBLE_EQ(loaded.interpolated_gyro_noise_scale_per_s,
@@ -435,6 +472,8 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("imu_noise:\n  gyro_noise_density: fast\n", "imu_noise.gyro_noise_density");
   expectError("gps:\n  gate_mahalanobis_squared: -3\n", "gps.gate_mahalanobis_squared");
   expectError("filter: middle\n", "filter");
+  expectError("gps:\n  max_consecutive_rejected_fixes: 1e30\n",
+              "gps.max_consecutive_rejected_fixes");
   expectError("imu: [1, 2]\n", "imu");
   expectError("a: [\n", "cannot read");
   // A node-only section and a partial file are fine.

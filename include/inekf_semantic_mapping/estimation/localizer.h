@@ -76,6 +76,12 @@ struct LocalizerConfig {
   double max_fix_age_s = 0.5;
   double fix_history_s = 2.0;  // how late a fix may arrive and still be applied at its own time
   int max_consecutive_rejected_fixes = 5;  // then re-acquire (see above); <= 0: never
+  // Re-acquisition moves the estimate to the fix: never faster than a car can move since the
+  // last accepted fix (a fix 1000 km away is a broken receiver, not a wrong filter).
+  double max_reacquisition_speed_mps = 70.0;
+  // IMU samples beyond the sensor's range are faults, not motion: rejected like NaN samples.
+  double max_angular_rate_radps = 35.0;    // 2000 deg/s, the widest common MEMS range
+  double max_specific_force_mps2 = 160.0;  // 16 g
 
   // Lazy initialization (LocalizationSession's start): take rotation and velocity from
   // setInitialReference() (e.g. the OXTS orientation of the first Imu message) instead of levelling
