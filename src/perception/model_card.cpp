@@ -67,8 +67,11 @@ std::array<double, 3> readTriple(const std::string& path, const YAML::Node& root
 }
 
 void validate(const ModelCard& card, const std::string& path, const YAML::Node& root) {
-  if (card.input_width < 0 || card.input_height < 0)
-    fail(path, root["input"], "input width/height must be >= 0");
+  // A network input beyond 16384 pixels a side is a typo, and would fail later inside OpenCV.
+  constexpr int kMaxInputSide = 16384;
+  if (card.input_width < 0 || card.input_height < 0 || card.input_width > kMaxInputSide ||
+      card.input_height > kMaxInputSide)
+    fail(path, root["input"], "input width/height must be in [0, 16384]");
   if (card.resize_policy != ResizePolicy::kPadToMultiple &&
       (card.input_width == 0 || card.input_height == 0))
     fail(path, root["input"], "resize, letterbox and tiles need input width and height > 0");
@@ -122,6 +125,10 @@ const char* colorNormalizationName(ColorNormalization normalization) {
   return "?";
 }
 
+namespace {
+ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root);
+}  // namespace
+
 ModelCard loadModelCard(const std::string& yaml_path) {
   YAML::Node root;
   try {
@@ -133,7 +140,17 @@ ModelCard loadModelCard(const std::string& yaml_path) {
                          ": YAML syntax error: " + e.msg);
   }
   if (!root.IsMap()) throw ModelCardError("model card " + yaml_path + ": top level is not a map");
+  try {
+    return parseModelCard(yaml_path, root);
+  } catch (const YAML::Exception& e) {
+    // A field of the wrong shape (a list where a map belongs...) that the checks did not name.
+    throw ModelCardError("model card " + yaml_path + ":" + std::to_string(e.mark.line + 1) + ": " +
+                         e.msg);
+  }
+}
 
+namespace {
+ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
   ModelCard card;
   card.source = yaml_path;
   card.name = readOr<std::string>(yaml_path, root, "name", fs::path(yaml_path).stem().string());
@@ -194,6 +211,7 @@ ModelCard loadModelCard(const std::string& yaml_path) {
   validate(card, yaml_path, root);
   return card;
 }
+}  // namespace
 
 void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
   YAML::Emitter out;

@@ -190,6 +190,15 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
   EXPECT_NE(cardError("output_label_ids: [7\n").find("syntax"), std::string::npos);
   EXPECT_EQ(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7]\n"), "");
   EXPECT_THROW(loadModelCard("/nonexistent/card.yaml"), ModelCardError);
+  // Found by fault injection: fields of the wrong shape escaped as bare YAML exceptions, and a
+  // 2e9 x 2e9 input was accepted.
+  EXPECT_NE(cardError("input: 5\noutput_label_ids: [7]\n").find("card"), std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nresize_policy: [a]\noutput_label_ids: [7]\n")
+                .find("card"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 2000000000, height: 2000000000}\noutput_label_ids: [7]\n")
+                .find("16384"),
+            std::string::npos);
 }
 
 TEST(ModelCard, DefaultCardFollowsTheModelFile) {
