@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <memory>
 #include <string>
 
 #include "gps_degradation_flags.h"
@@ -110,50 +111,64 @@ int run(const Arguments& args) {
   std::size_t messages = 0;
   common::commitFileAtomically(
       args.output, args.output + ".partial", [&](const std::string& partial) {
-        rosbag::Bag bag(partial, rosbag::bagmode::Write);
-        const ros::Time first = conv::toRosTime(timeline.front().stamp_ns);
-        tf2_msgs::TFMessage tf_static;
-        tf_static.transforms = factory.staticTransformMessages(first);
-        bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
-        ++messages;
-        const bool interactive = isatty(STDERR_FILENO);
-        for (std::size_t i = 0; i < timeline.size(); ++i) {
-          const kitti::TimelineEvent& event = timeline[i];
-          const ros::Time stamp = conv::toRosTime(event.stamp_ns);
-          switch (event.sensor) {
-            case kitti::DriveSensor::kOxts: {
-              ScopedTimer timer("kitti2bag/oxts");
-              const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
-              bag.write(topics::kImu, stamp, oxts.imu);
-              if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
-              bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
-              bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
-              messages += oxts.gps_fix ? 4 : 3;
-              break;
+        // rosbag::Bag's destructor closes the file and throws if that fails, which after a
+        // failed write (a full disk) would throw during unwinding and abort: on error the bag
+        // is closed here, its second failure ignored (the first error is the one to report), and
+        // the object released unclosed (the tool exits; commitFileAtomically removes the file).
+        auto owned_bag = std::make_unique<rosbag::Bag>(partial, rosbag::bagmode::Write);
+        rosbag::Bag& bag = *owned_bag;
+        try {
+          const ros::Time first = conv::toRosTime(timeline.front().stamp_ns);
+          tf2_msgs::TFMessage tf_static;
+          tf_static.transforms = factory.staticTransformMessages(first);
+          bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
+          ++messages;
+          const bool interactive = isatty(STDERR_FILENO);
+          for (std::size_t i = 0; i < timeline.size(); ++i) {
+            const kitti::TimelineEvent& event = timeline[i];
+            const ros::Time stamp = conv::toRosTime(event.stamp_ns);
+            switch (event.sensor) {
+              case kitti::DriveSensor::kOxts: {
+                ScopedTimer timer("kitti2bag/oxts");
+                const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
+                bag.write(topics::kImu, stamp, oxts.imu);
+                if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
+                bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
+                bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
+                messages += oxts.gps_fix ? 4 : 3;
+                break;
+              }
+              case kitti::DriveSensor::kVelodyne: {
+                ScopedTimer timer("kitti2bag/velodyne");
+                bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
+                ++messages;
+                break;
+              }
+              case kitti::DriveSensor::kCamera2: {
+                ScopedTimer timer("kitti2bag/camera");
+                const auto [image, info] = factory.cameraMessages(2, event.frame);
+                bag.write(topics::kCameraColorLeftImage, stamp, image);
+                bag.write(topics::kCameraColorLeftInfo, stamp, info);
+                messages += 2;
+                break;
+              }
+              default:
+                break;
             }
-            case kitti::DriveSensor::kVelodyne: {
-              ScopedTimer timer("kitti2bag/velodyne");
-              bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
-              ++messages;
-              break;
+            if (interactive ? (i % 20 == 0 || i + 1 == timeline.size())
+                            : (i % 1000 == 0 || i + 1 == timeline.size())) {
+              printProgress(i + 1, timeline.size());
             }
-            case kitti::DriveSensor::kCamera2: {
-              ScopedTimer timer("kitti2bag/camera");
-              const auto [image, info] = factory.cameraMessages(2, event.frame);
-              bag.write(topics::kCameraColorLeftImage, stamp, image);
-              bag.write(topics::kCameraColorLeftInfo, stamp, info);
-              messages += 2;
-              break;
-            }
-            default:
-              break;
           }
-          if (interactive ? (i % 20 == 0 || i + 1 == timeline.size())
-                          : (i % 1000 == 0 || i + 1 == timeline.size())) {
-            printProgress(i + 1, timeline.size());
+          bag.close();
+        } catch (const std::exception& error) {
+          try {
+            bag.close();
+          } catch (const std::exception&) {
           }
+          (void)owned_bag.release();
+          throw std::runtime_error("cannot write " + args.output + ": " + error.what());
         }
-        bag.close();
       });
   std::cerr << "kitti2bag: wrote " << messages << " messages ("
             << kitti::secondsBetween(timeline.front().stamp_ns, timeline.back().stamp_ns)

@@ -4,6 +4,7 @@
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <sys/wait.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_msgs/TFMessage.h>
 
@@ -274,6 +275,19 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
                          bag_path + ".3 --gps-outage 5 2>/dev/null")
                             .c_str()),
             0);
+  // A full disk (simulated with a file size limit) fails cleanly, naming the output, instead of
+  // aborting inside rosbag's destructor; no partial bag stays behind.
+  const std::string full_disk = "bash -c 'trap \"\" XFSZ; ulimit -f 64; " +
+                                std::string(KITTI2BAG_PATH) + " --drive " + drive + " --output " +
+                                bag_path + ".4 2>" + bag_path + ".4.log'";
+  const int status = std::system(full_disk.c_str());
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << "status " << status;
+  EXPECT_FALSE(fs::exists(bag_path + ".4"));
+  EXPECT_FALSE(fs::exists(bag_path + ".4.partial"));
+  std::ifstream log(bag_path + ".4.log");
+  const std::string message((std::istreambuf_iterator<char>(log)),
+                            std::istreambuf_iterator<char>());
+  EXPECT_NE(message.find("cannot write " + bag_path + ".4"), std::string::npos) << message;
   fs::remove_all(fs::path(drive).parent_path().parent_path());
 }
 
