@@ -355,6 +355,12 @@ void SyntheticWorld::buildIndex(double cell_size_m) {
     max_top_z_ = std::max(max_top_z_, p.topZ());
   }
   grid_min_ = lo - Eigen::Vector2d::Constant(1e-6);
+  // A world whose footprint would need more than kMaxGridCells cells gets coarser cells: the
+  // index stays bounded in memory whatever the coordinates in world.txt.
+  constexpr double kMaxGridCells = 4.0e6;
+  const Eigen::Vector2d extent = hi - grid_min_;
+  cell_size_ = std::max(cell_size_, std::sqrt(extent.x() * extent.y() / kMaxGridCells));
+  cell_size_ = std::max(cell_size_, std::max(extent.x(), extent.y()) / kMaxGridCells);
   grid_nx_ = std::max(1, static_cast<int>(std::ceil((hi.x() - grid_min_.x()) / cell_size_)) + 1);
   grid_ny_ = std::max(1, static_cast<int>(std::ceil((hi.y() - grid_min_.y()) / cell_size_)) + 1);
   const std::size_t cells = static_cast<std::size_t>(grid_nx_) * grid_ny_;
@@ -958,6 +964,10 @@ void SyntheticWorld::save(const std::string& path) const {
   });
 }
 
+namespace {
+constexpr double kMaxWorldValue = 1e5;
+}  // namespace
+
 SyntheticWorld SyntheticWorld::load(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open the world file");
@@ -979,6 +989,10 @@ SyntheticWorld SyntheticWorld::load(const std::string& path) {
     auto read = [&](const char* field_name) {
       double v;
       if (!(fields >> v) || !std::isfinite(v)) fail(std::string("bad or missing ") + field_name);
+      // A synthetic town is a few km across: a larger value is a broken file.
+      if (std::abs(v) > kMaxWorldValue) {
+        fail(std::string(field_name) + " out of range (|value| <= 1e5)");
+      }
       return v;
     };
     auto read_label = [&]() {

@@ -177,6 +177,30 @@ TEST(SyntheticWorld, LoadNamesTheBadLine) {
     EXPECT_NE(std::string(error.what()).find("world.txt:3"), std::string::npos) << error.what();
     EXPECT_NE(std::string(error.what()).find("half_z"), std::string::npos) << error.what();
   }
+  // Found by fault injection: a coordinate of 1e12 overflowed the spatial index's cell count
+  // and asked for 4.47 GB.
+  {
+    std::ofstream out(dir + "/world.txt");
+    out << "ground 0 1 0.1 0 1 0.1 0\nbox 11 1e12 0 0 1 1 1 0 0.5 0.5 0.5\n";
+  }
+  try {
+    SyntheticWorld::load(dir + "/world.txt");
+    FAIL() << "expected an exception";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("world.txt:2"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("out of range"), std::string::npos) << error.what();
+  }
+  // The largest allowed town still gets a bounded index (and answers rays).
+  {
+    std::ofstream out(dir + "/world.txt");
+    out << "ground 0 1 0.1 0 1 0.1 0\nbox 11 -99000 -99000 0 1 1 1 0 0.5 0.5 0.5\n"
+           "box 11 99000 99000 0 1 1 1 0 0.5 0.5 0.5\n";
+  }
+  const SyntheticWorld huge = SyntheticWorld::load(dir + "/world.txt");
+  RayHit hit;
+  ASSERT_TRUE(
+      huge.raycast(Eigen::Vector3d(99000, 99000, 5), Eigen::Vector3d(0, 0, -1), 10.0, &hit));
+  EXPECT_EQ(hit.label_id, 11);
   std::filesystem::remove_all(dir);
 }
 
