@@ -26,6 +26,18 @@ double headingDeg(const Eigen::Matrix3d& r) { return std::atan2(r(1, 0), r(0, 0)
 
 }  // namespace
 
+GeodeticFixEvent fixEventFromDegraded(const kitti::GeodeticFix& fix, double stamp_s) {
+  GeodeticFixEvent event;
+  event.stamp_s = stamp_s;
+  event.lat_deg = fix.lat_deg;
+  event.lon_deg = fix.lon_deg;
+  event.alt_m = fix.alt_m;
+  const double h2 = fix.sigma_horizontal_m * fix.sigma_horizontal_m;
+  const double v2 = fix.sigma_vertical_m * fix.sigma_vertical_m;
+  event.covariance_enu = Eigen::Matrix3d(Eigen::Vector3d(h2, h2, v2).asDiagonal());
+  return event;
+}
+
 OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options) {
   if (frames.empty()) throw std::invalid_argument("runLocalizerOnOxts: no OXTS frames");
@@ -69,15 +81,7 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
             degrader.degrade(k, stamp_s - t0, record)) {
       ScopedTimer timer("oxts_run.correct");
       ++run.fixes_offered;
-      GeodeticFixEvent fix;
-      fix.stamp_s = stamp_s;
-      fix.lat_deg = geodetic->lat_deg;
-      fix.lon_deg = geodetic->lon_deg;
-      fix.alt_m = geodetic->alt_m;
-      const double h2 = geodetic->sigma_horizontal_m * geodetic->sigma_horizontal_m;
-      const double v2 = geodetic->sigma_vertical_m * geodetic->sigma_vertical_m;
-      fix.covariance_enu = Eigen::Matrix3d(Eigen::Vector3d(h2, h2, v2).asDiagonal());
-      session.addFix(fix);
+      session.addFix(fixEventFromDegraded(*geodetic, stamp_s));
     }
     if (!session.started()) continue;
     if (run.states.empty()) {

@@ -342,28 +342,23 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
     const std::vector<float> row_weight = featherWeights(tile.y, tile.height, canvas.rows, ramp);
     const cv::Mat tile_weights =
         cv::Mat(row_weight).reshape(1, tile.height) * cv::Mat(column_weight).reshape(1, 1);
-    cv::Mat scores;
-    {
-      ScopedTimer timer("segmentation/forward");
-      scores = forward(input);
-    }
-    {
+    // One pass over the tile (or its mirror image): probabilities and weights accumulated.
+    const auto accumulate = [&](const cv::Mat& network_input, bool mirrored) {
+      cv::Mat scores;
+      {
+        ScopedTimer timer("segmentation/forward");
+        scores = forward(network_input);
+      }
       ScopedTimer timer("segmentation/softmax");
-      addSoftmax(scores, false, tile, column_weight, row_weight, &sum);
+      addSoftmax(scores, mirrored, tile, column_weight, row_weight, &sum);
       cv::Mat tile_weight = weight(tile);
       tile_weight += tile_weights;
-    }
+    };
+    accumulate(input, false);
     if (card_.flip_average) {
       cv::Mat mirrored;
       cv::flip(input, mirrored, 1);
-      {
-        ScopedTimer timer("segmentation/forward");
-        scores = forward(mirrored);
-      }
-      ScopedTimer timer("segmentation/softmax");
-      addSoftmax(scores, true, tile, column_weight, row_weight, &sum);
-      cv::Mat tile_weight = weight(tile);
-      tile_weight += tile_weights;
+      accumulate(mirrored, true);
     }
   }
 

@@ -372,13 +372,7 @@ TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
     GeodeticFixEvent fix;
     const std::optional<kitti::GeodeticFix> geodetic = degrader.degrade(k, stamp_s - t0, r);
     if (geodetic) {
-      fix.stamp_s = stamp_s;
-      fix.lat_deg = geodetic->lat_deg;
-      fix.lon_deg = geodetic->lon_deg;
-      fix.alt_m = geodetic->alt_m;
-      const double h2 = geodetic->sigma_horizontal_m * geodetic->sigma_horizontal_m;
-      const double v2 = geodetic->sigma_vertical_m * geodetic->sigma_vertical_m;
-      fix.covariance_enu = Eigen::Matrix3d(Eigen::Vector3d(h2, h2, v2).asDiagonal());
+      fix = fixEventFromDegraded(*geodetic, stamp_s);
       if (k == 0) {
         EXPECT_FALSE(node.addFix(fix).started);  // before its IMU: waits
       }

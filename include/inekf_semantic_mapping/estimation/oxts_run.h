@@ -38,6 +38,10 @@ struct OxtsRunResult {
   int first_estimated_frame = 0;
 };
 
+// The fix event a receiver reporting `fix` at `stamp_s` gives the session (diagonal ENU
+// covariance from its horizontal and vertical sigmas): what kitti_player/kitti2bag publish.
+GeodeticFixEvent fixEventFromDegraded(const kitti::GeodeticFix& fix, double stamp_s);
+
 // Throws std::invalid_argument on an empty sequence.
 OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options);
