@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iomanip>
 #include <sstream>
@@ -50,6 +51,10 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   positive("session.default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
   positive("session.default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
   positive("session.time_jump_back_s", &config.time_jump_back_s);
+  reader.read("session.fix_wait_for_imu_s", &config.fix_wait_for_imu_s);
+  if (!(config.fix_wait_for_imu_s >= 0.0)) {
+    reader.fail("session.fix_wait_for_imu_s", "must be a number >= 0");
+  }
   reader.rejectUnknown();
   return config;
 }
@@ -89,6 +94,7 @@ std::string LocalizationSession::summary() const {
 void LocalizationSession::reset(const std::string& why, Update* update) {
   localizer_.reset();
   lazy_start_.reset();
+  waiting_fixes_.clear();
   newest_stamp_s_.reset();
   ++statistics_.resets;
   update->reset = true;
@@ -153,6 +159,8 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
     update.new_estimate =
         status == Localizer::ImuStatus::kUsed || status == Localizer::ImuStatus::kGap;
   }
+  // Fixes of this instant that arrived first are applied before the estimate is published.
+  if (started()) releaseWaitingFixes(&update);
   update.imu_status = status;
   const bool dropped = status == Localizer::ImuStatus::kDroppedDuplicate ||
                        status == Localizer::ImuStatus::kDroppedOutOfOrder;
@@ -196,17 +204,45 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
     tryStart(event.stamp_s, &update);
     return update;
   }
-  update.correction = localizer_.addPositionFix(fix);
-  last_mahalanobis_squared_ = update.correction->mahalanobis_squared;
-  if (!update.correction->accepted) {
-    std::ostringstream note;
-    note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s
-         << " s rejected: " << update.correction->reason << " (d^2 = " << std::setprecision(1)
-         << last_mahalanobis_squared_ << ")";
-    update.note = note.str();
+  if (config_.fix_wait_for_imu_s > 0.0 &&
+      fix.stamp_s > state().stamp_s + Localizer::kDuplicateStampS) {
+    ++statistics_.fixes_waited_for_imu;
+    const auto later = std::upper_bound(
+        waiting_fixes_.begin(), waiting_fixes_.end(), fix.stamp_s,
+        [](double stamp_s, const PositionFix& waiting) { return stamp_s < waiting.stamp_s; });
+    waiting_fixes_.insert(later, fix);
+  } else {
+    correct(fix, &update);
   }
+  releaseWaitingFixes(&update);
   guardFinite(&update);
   return update;
+}
+
+void LocalizationSession::correct(const PositionFix& fix, Update* update) {
+  update->correction = localizer_.addPositionFix(fix);
+  last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
+  if (!update->correction->accepted) {
+    std::ostringstream note;
+    note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s
+         << " s rejected: " << update->correction->reason << " (d^2 = " << std::setprecision(1)
+         << last_mahalanobis_squared_ << ")";
+    update->note = note.str();
+  }
+}
+
+void LocalizationSession::releaseWaitingFixes(Update* update) {
+  while (!waiting_fixes_.empty() && started()) {
+    const PositionFix& oldest = waiting_fixes_.front();
+    const bool reached = oldest.stamp_s <= state().stamp_s + Localizer::kDuplicateStampS;
+    const bool given_up =
+        newest_stamp_s_ && *newest_stamp_s_ - oldest.stamp_s >= config_.fix_wait_for_imu_s;
+    if (!reached && !given_up) return;
+    if (!reached) ++statistics_.fixes_imu_never_came;
+    const PositionFix fix = oldest;
+    waiting_fixes_.erase(waiting_fixes_.begin());
+    correct(fix, update);
+  }
 }
 
 LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {

@@ -7,6 +7,9 @@
 //  - the map origin: the configured one, else Mercator (KITTI devkit) at the first usable fix;
 //  - fix covariance: the receiver's, or the default sigmas when it gives none; the only floor is
 //    the Localizer's gps.min_sigma_m;
+//  - fixes newer than the filter (their IMU sample has not arrived: IMU and GPS travel on
+//    separate connections) wait for it, up to fix_wait_for_imu_s of data time, so the estimate
+//    does not depend on which of the two messages of one instant a node receives first;
 //  - the time-jump reset: a stamp or a clock time_jump_back_s earlier than the newest one means a
 //    bag loop or a restarted player: the state is meaningless in the new time line, start over
 //    (the map origin is kept: the same place keeps the same coordinates);
@@ -21,6 +24,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/estimation/lazy_start.h"
 #include "inekf_semantic_mapping/estimation/localizer.h"
@@ -44,6 +48,9 @@ struct LocalizationSessionConfig {
   double default_fix_sigma_horizontal_m = 1.5;
   double default_fix_sigma_vertical_m = 3.0;
   double time_jump_back_s = 1.0;
+  // A fix ahead of the filter waits this long (data time) for the IMU to reach its stamp; then
+  // it is applied at the filter's time as the Localizer does (the IMU has stopped). 0: never wait.
+  double fix_wait_for_imu_s = 0.3;
 
   // config/inekf.yaml: the Localizer's keys plus the `session:` section (keys named as the
   // members above). Throws std::runtime_error naming the file and the key.
@@ -77,7 +84,9 @@ class LocalizationSession {
     std::int64_t imu_samples = 0;  // IMU events received
     std::int64_t imu_invalid = 0;  // non-finite ones (never reach the filter)
     std::int64_t fixes_received = 0;
-    std::int64_t fixes_ignored = 0;  // no solution or non-finite (never reach the filter)
+    std::int64_t fixes_ignored = 0;         // no solution or non-finite (never reach the filter)
+    std::int64_t fixes_waited_for_imu = 0;  // arrived before their instant's IMU sample
+    std::int64_t fixes_imu_never_came = 0;  // ... and were applied after fix_wait_for_imu_s
     std::int64_t starts = 0;
     std::int64_t resets = 0;  // time jumps back and non-finite states
   };
@@ -123,6 +132,11 @@ class LocalizationSession {
   void checkStamp(double stamp_s, const char* source, Update* update);
   void reset(const std::string& why, Update* update);
   void tryStart(double now_s, Update* update);
+  // Gives a fix to the started filter and records the result (and why it was not used).
+  void correct(const PositionFix& fix, Update* update);
+  // Applies the waiting fixes the IMU has reached, and those it has not reached within
+  // fix_wait_for_imu_s of the newest stamp, in stamp order.
+  void releaseWaitingFixes(Update* update);
   // Resets if the state or its covariance is not finite.
   void guardFinite(Update* update);
 
@@ -130,6 +144,7 @@ class LocalizationSession {
   Localizer localizer_;
   LazyStart lazy_start_;
   std::optional<kitti::MercatorProjection> projection_;
+  std::vector<PositionFix> waiting_fixes_;  // sorted by stamp
   std::optional<double> newest_stamp_s_, newest_clock_s_;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
