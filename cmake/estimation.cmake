@@ -4,7 +4,7 @@ ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cp
 ism_add_core_library(${PROJECT_NAME}_estimation
   SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
           src/estimation/localizer.cpp src/estimation/lazy_start.cpp
-  LINK ${PROJECT_NAME}_lie yaml-cpp)
+  LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)
 
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
 ism_add_gtest(test_imu_filters SOURCES test/unit/test_imu_filters.cpp

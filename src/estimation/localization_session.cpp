@@ -1,7 +1,5 @@
 #include "inekf_semantic_mapping/estimation/localization_session.h"
 
-#include <yaml-cpp/yaml.h>
-
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
@@ -31,17 +29,10 @@ bool isFinite(const NavState& state, const PoseCovariance& covariance) {
 }  // namespace
 
 LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::string& path) {
-  LocalizationSessionConfig config;
-  config.localizer = LocalizerConfig::fromYamlFile(path);
   common::YamlReader reader = common::YamlReader::fromFile(path);
-  // Everything outside `session:` was checked by LocalizerConfig::fromYamlFile.
-  const YAML::Node root = YAML::LoadFile(path);
-  if (root.IsMap()) {
-    for (const auto& entry : root) {
-      const std::string key = entry.first.as<std::string>();
-      if (key != "session") reader.allow(entry.second.IsMap() ? key + ".*" : key);
-    }
-  }
+  LocalizationSessionConfig config;
+  config.localizer = LocalizerConfig::fromYaml(&reader);
+  reader.allow("node.*");
   const auto positive = [&reader](const std::string& key, double* out) {
     reader.read(key, out);
     if (!(*out > 0.0)) reader.fail(key, "must be a positive number");

@@ -1,7 +1,5 @@
 #include "inekf_semantic_mapping/estimation/localizer.h"
 
-#include <yaml-cpp/yaml.h>
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -10,6 +8,7 @@
 #include <set>
 #include <stdexcept>
 
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -19,146 +18,71 @@ namespace {
 constexpr double kDegToRad = M_PI / 180.0;
 constexpr double kDuplicateStampS = Localizer::kDuplicateStampS;
 
-// Reads YAML keys into a config, naming the file and the key on any problem, and rejecting
-// unknown keys (a typo must not silently leave a default in place).
-class YamlReader {
- public:
-  YamlReader(const std::string& path, const YAML::Node& root) : path_(path), root_(root) {}
-
-  void number(const std::string& section, const std::string& key, double* out, bool positive) {
-    const YAML::Node node = lookup(section, key);
-    if (!node.IsDefined()) return;
-    double value;
-    try {
-      value = node.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(section, key, "is not a number");
-    }
-    if (!std::isfinite(value) || value < 0.0 || (positive && value == 0.0)) {
-      fail(section, key, positive ? "must be a positive number" : "must be >= 0");
-    }
-    *out = value;
-  }
-
-  void boolean(const std::string& section, const std::string& key, bool* out) {
-    const YAML::Node node = lookup(section, key);
-    if (!node.IsDefined()) return;
-    try {
-      *out = node.as<bool>();
-    } catch (const YAML::Exception&) {
-      fail(section, key, "is not true/false");
-    }
-  }
-
-  void filterType(const std::string& key, FilterType* out) {
-    const YAML::Node node = lookup("", key);
-    if (!node.IsDefined()) return;
-    try {
-      *out = filterTypeFromString(node.as<std::string>());
-    } catch (const std::exception& e) {
-      fail("", key, e.what());
-    }
-  }
-
-  // Throws on keys nobody read, except the sections listed in `ignored` (read by others).
-  void rejectUnknown(const std::set<std::string>& ignored) const {
-    for (const auto& entry : root_) {
-      const std::string key = entry.first.as<std::string>();
-      if (ignored.count(key)) continue;
-      if (!entry.second.IsMap()) {
-        if (!used_.count(key)) fail("", key, "is not a known key");
-        continue;
-      }
-      for (const auto& sub : entry.second) {
-        const std::string sub_key = sub.first.as<std::string>();
-        if (!used_.count(key + "." + sub_key)) fail(key, sub_key, "is not a known key");
-      }
-    }
-  }
-
- private:
-  // Read through a const node: operator[] on a non-const node would insert the key.
-  YAML::Node lookup(const std::string& section, const std::string& key) {
-    used_.insert(section.empty() ? key : section + "." + key);
-    const YAML::Node& root = root_;
-    if (section.empty()) return defined(root[key]);
-    const YAML::Node parent = root[section];
-    if (!parent.IsDefined() || parent.IsNull()) return YAML::Node(YAML::NodeType::Undefined);
-    if (!parent.IsMap()) fail("", section, "must be a mapping");
-    const YAML::Node& const_parent = parent;
-    return defined(const_parent[key]);
-  }
-
-  static YAML::Node defined(const YAML::Node& node) {
-    return node.IsDefined() && !node.IsNull() ? node : YAML::Node(YAML::NodeType::Undefined);
-  }
-
-  [[noreturn]] void fail(const std::string& section, const std::string& key,
-                         const std::string& what) const {
-    throw std::runtime_error(path_ + ": key '" + (section.empty() ? key : section + "." + key) +
-                             "' " + what);
-  }
-
-  std::string path_;
-  YAML::Node root_;
-  std::set<std::string> used_;
-};
-
 }  // namespace
 
 LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(path + ": cannot read YAML: " + e.what());
-  }
+  common::YamlReader reader = common::YamlReader::fromFile(path);
+  LocalizerConfig config = fromYaml(&reader);
+  reader.allow("node.*");
+  reader.allow("session.*");
+  reader.rejectUnknown();
+  return config;
+}
+
+LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   LocalizerConfig config;
-  if (root.IsNull()) return config;
-  if (!root.IsMap()) throw std::runtime_error(path + ": top level must be a mapping");
-  YamlReader reader(path, root);
-  reader.filterType("filter", &config.filter_type);
-  ImuNoise& n = config.imu_noise;
-  reader.number("imu_noise", "gyro_noise_density", &n.gyro_noise_density, true);
-  reader.number("imu_noise", "accel_noise_density", &n.accel_noise_density, true);
-  reader.number("imu_noise", "gyro_bias_random_walk", &n.gyro_bias_random_walk, false);
-  reader.number("imu_noise", "accel_bias_random_walk", &n.accel_bias_random_walk, false);
-  reader.number("imu_noise", "gravity_mps2", &n.gravity_mps2, true);
-  reader.number("initial_sigma", "rotation_deg", &config.initial_rotation_sigma_deg, true);
-  reader.number("initial_sigma", "yaw_deg", &config.initial_yaw_sigma_deg, true);
-  reader.number("initial_sigma", "velocity_mps", &config.initial_velocity_sigma_mps, true);
-  reader.number("initial_sigma", "unknown_velocity_horizontal_mps",
-                &config.unknown_velocity_sigma_horizontal_mps, true);
-  reader.number("initial_sigma", "unknown_velocity_vertical_mps",
-                &config.unknown_velocity_sigma_vertical_mps, true);
-  reader.number("initial_sigma", "unknown_yaw_deg", &config.unknown_yaw_sigma_deg, true);
-  reader.number("initial_sigma", "position_m", &config.initial_position_sigma_m, true);
-  reader.number("initial_sigma", "gyro_bias_radps", &config.initial_gyro_bias_sigma_radps, true);
-  reader.number("initial_sigma", "accel_bias_mps2", &config.initial_accel_bias_sigma_mps2, true);
-  reader.number("gps", "gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared, true);
-  reader.number("gps", "min_sigma_m", &config.min_gps_sigma_m, false);
-  reader.number("gps", "max_fix_age_s", &config.max_fix_age_s, false);
-  reader.number("gps", "fix_history_s", &config.fix_history_s, false);
-  double max_rejected = config.max_consecutive_rejected_fixes;
-  reader.number("gps", "max_consecutive_rejected_fixes", &max_rejected, false);
-  if (max_rejected > 1e6 || max_rejected != std::floor(max_rejected)) {
-    throw std::runtime_error(path +
-                             ": key 'gps.max_consecutive_rejected_fixes' must be an "
-                             "integer in [0, 1000000], got " +
-                             std::to_string(max_rejected));
+  const auto positive = [reader](const std::string& key, double* out) {
+    reader->read(key, out);
+    if (!(*out > 0.0)) reader->fail(key, "must be a positive number");
+  };
+  const auto non_negative = [reader](const std::string& key, double* out) {
+    reader->read(key, out);
+    if (!(*out >= 0.0)) reader->fail(key, "must be >= 0");
+  };
+  std::string filter;
+  reader->read("filter", &filter);
+  if (!filter.empty()) {
+    try {
+      config.filter_type = filterTypeFromString(filter);
+    } catch (const std::exception& e) {
+      reader->fail("filter", e.what());
+    }
   }
-  config.max_consecutive_rejected_fixes = static_cast<int>(max_rejected);
-  reader.number("gps", "max_reacquisition_speed_mps", &config.max_reacquisition_speed_mps, true);
-  reader.number("imu", "max_angular_rate_radps", &config.max_angular_rate_radps, true);
-  reader.number("imu", "max_specific_force_mps2", &config.max_specific_force_mps2, true);
-  reader.number("imu", "max_gap_s", &config.max_imu_gap_s, true);
-  reader.number("imu", "gap_noise_scale", &config.gap_noise_scale, true);
-  reader.number("imu", "interpolated_gyro_noise_scale_per_s",
-                &config.interpolated_gyro_noise_scale_per_s, false);
-  reader.number("imu", "interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale,
-                true);
-  reader.boolean("", "init_orientation_from_reference", &config.init_orientation_from_reference);
-  reader.rejectUnknown({"node", "session"});
+  ImuNoise& n = config.imu_noise;
+  positive("imu_noise.gyro_noise_density", &n.gyro_noise_density);
+  positive("imu_noise.accel_noise_density", &n.accel_noise_density);
+  non_negative("imu_noise.gyro_bias_random_walk", &n.gyro_bias_random_walk);
+  non_negative("imu_noise.accel_bias_random_walk", &n.accel_bias_random_walk);
+  positive("imu_noise.gravity_mps2", &n.gravity_mps2);
+  positive("initial_sigma.rotation_deg", &config.initial_rotation_sigma_deg);
+  positive("initial_sigma.yaw_deg", &config.initial_yaw_sigma_deg);
+  positive("initial_sigma.velocity_mps", &config.initial_velocity_sigma_mps);
+  positive("initial_sigma.unknown_velocity_horizontal_mps",
+           &config.unknown_velocity_sigma_horizontal_mps);
+  positive("initial_sigma.unknown_velocity_vertical_mps",
+           &config.unknown_velocity_sigma_vertical_mps);
+  positive("initial_sigma.unknown_yaw_deg", &config.unknown_yaw_sigma_deg);
+  positive("initial_sigma.position_m", &config.initial_position_sigma_m);
+  positive("initial_sigma.gyro_bias_radps", &config.initial_gyro_bias_sigma_radps);
+  positive("initial_sigma.accel_bias_mps2", &config.initial_accel_bias_sigma_mps2);
+  positive("gps.gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared);
+  non_negative("gps.min_sigma_m", &config.min_gps_sigma_m);
+  non_negative("gps.max_fix_age_s", &config.max_fix_age_s);
+  non_negative("gps.fix_history_s", &config.fix_history_s);
+  reader->read("gps.max_consecutive_rejected_fixes", &config.max_consecutive_rejected_fixes);
+  if (config.max_consecutive_rejected_fixes < 0 ||
+      config.max_consecutive_rejected_fixes > 1000000) {
+    reader->fail("gps.max_consecutive_rejected_fixes", "must be an integer in [0, 1000000]");
+  }
+  positive("gps.max_reacquisition_speed_mps", &config.max_reacquisition_speed_mps);
+  positive("imu.max_angular_rate_radps", &config.max_angular_rate_radps);
+  positive("imu.max_specific_force_mps2", &config.max_specific_force_mps2);
+  positive("imu.max_gap_s", &config.max_imu_gap_s);
+  positive("imu.gap_noise_scale", &config.gap_noise_scale);
+  non_negative("imu.interpolated_gyro_noise_scale_per_s",
+               &config.interpolated_gyro_noise_scale_per_s);
+  positive("imu.interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale);
+  reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   return config;
 }
 

@@ -462,7 +462,7 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
     try {
       LocalizerConfig::fromYamlFile(path);
       ADD_FAILURE() << "no error for: " << text;
-    } catch (const std::runtime_error& e) {
+    } catch (const std::exception& e) {
       const std::string what = e.what();
       EXPECT_NE(what.find(path), std::string::npos) << what;
       EXPECT_NE(what.find(needle), std::string::npos) << what;
@@ -475,7 +475,18 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("gps:\n  max_consecutive_rejected_fixes: 1e30\n",
               "gps.max_consecutive_rejected_fixes");
   expectError("imu: [1, 2]\n", "imu");
-  expectError("a: [\n", "cannot read");
+  // A list or a map where a number belongs (was a bare "bad conversion").
+  expectError("imu:\n  max_gap_s: [1, 2]\n", "imu.max_gap_s");
+  expectError("gps:\n  min_sigma_m: {a: 1}\n", "gps.min_sigma_m");
+  expectError("init_orientation_from_reference: [true]\n", "init_orientation_from_reference");
+  expectError("a: [\n", "not valid YAML");
+  // A folder passed as the config file.
+  try {
+    LocalizerConfig::fromYamlFile(dir);
+    ADD_FAILURE() << "a directory was read as a config";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find(dir), std::string::npos) << e.what();
+  }
   // A node-only section and a partial file are fine.
   const std::string path = dir + "/ok.yaml";
   std::ofstream(path)

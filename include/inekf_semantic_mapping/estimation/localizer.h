@@ -40,6 +40,9 @@
 #include "inekf_semantic_mapping/estimation/types.h"
 
 namespace inekf_semantic_mapping {
+namespace common {
+class YamlReader;
+}  // namespace common
 namespace estimation {
 
 // Defaults = config/inekf.yaml (tuned on KITTI, see the comments there).
@@ -90,8 +93,12 @@ struct LocalizerConfig {
 
   // Reads the YAML file (keys as in config/inekf.yaml; missing keys keep the defaults above; the
   // top-level `session:` section is LocalizationSessionConfig's, a `node:` one the node's).
-  // Throws std::runtime_error naming the file and the key on a bad value or an unknown key.
+  // Throws common::ConfigError (a std::invalid_argument) naming the file and the key on a bad
+  // value or an unknown key.
   static LocalizerConfig fromYamlFile(const std::string& path);
+  // Reads this config's keys through `reader` (which then knows them as read): the session reads
+  // its own section through the same reader, so one file is parsed and checked once.
+  static LocalizerConfig fromYaml(common::YamlReader* reader);
 };
 
 class Localizer {
