@@ -118,32 +118,42 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     const Eigen::Matrix3Xf points = buffer.topRows<3>();
     const Eigen::Isometry3d T_w_velo = T_velo_cam0 * poses[frame] * T_cam0_velo;
     std::string evidence = "no labels";
-    if (!sequence.labels_dir.empty()) {
-      const std::string label_path = (fs::path(sequence.labels_dir) / (stem + ".label")).string();
-      std::vector<std::uint32_t> labels = kitti::readLabelFile(label_path);
-      if (labels.size() != velodyne.size()) {
-        throw std::runtime_error(label_path + ": " + std::to_string(labels.size()) +
-                                 " labels for " + std::to_string(velodyne.size()) + " points in " +
-                                 scan_path.string());
-      }
-      for (std::uint32_t& label : labels) label = kitti::semanticClass(label);
-      session->insertScanWithPointLabels(points, T_w_velo, labels, sequence.ignored_label_id);
-      evidence = "point labels";
-    } else if (camera_labels) {
-      OwnedLabelImage image;
-      if ((*camera_labels)(stem, &image)) {
-        const LabelImageView view{image.pixels.data(), image.width, image.height,
-                                  static_cast<std::size_t>(image.width)};
-        const CameraModel camera =
-            odometryColorCamera(sequence.calib_path, image.width, image.height);
-        session->insertScan(points, T_w_velo, &view, &camera);
-        evidence = "camera labels";
+    try {
+      if (!sequence.labels_dir.empty()) {
+        const std::string label_path = (fs::path(sequence.labels_dir) / (stem + ".label")).string();
+        std::vector<std::uint32_t> labels = kitti::readLabelFile(label_path);
+        if (labels.size() != velodyne.size()) {
+          throw std::runtime_error(label_path + ": " + std::to_string(labels.size()) +
+                                   " labels for " + std::to_string(velodyne.size()) +
+                                   " points in " + scan_path.string());
+        }
+        for (std::uint32_t& label : labels) label = kitti::semanticClass(label);
+        try {
+          session->insertScanWithPointLabels(points, T_w_velo, labels, sequence.ignored_label_id);
+        } catch (const std::length_error& e) {
+          // More distinct label ids than the map holds classes: not a SemanticKITTI .label file.
+          throw std::runtime_error(label_path + ": " + e.what());
+        }
+        evidence = "point labels";
+      } else if (camera_labels) {
+        OwnedLabelImage image;
+        if ((*camera_labels)(stem, &image)) {
+          const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                    static_cast<std::size_t>(image.width)};
+          const CameraModel camera =
+              odometryColorCamera(sequence.calib_path, image.width, image.height);
+          session->insertScan(points, T_w_velo, &view, &camera);
+          evidence = "camera labels";
+        } else {
+          session->insertScan(points, T_w_velo);
+          evidence = "no label image";
+        }
       } else {
         session->insertScan(points, T_w_velo);
-        evidence = "no label image";
       }
-    } else {
-      session->insertScan(points, T_w_velo);
+    } catch (const std::out_of_range& e) {
+      // A scan far outside the map: its pose (or the calibration) is wrong.
+      throw std::runtime_error(sequence.poses_path + ": pose of frame " + stem + ": " + e.what());
     }
     total_points += velodyne.size();
     if (progress) {
@@ -204,15 +214,22 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
     std::snprintf(stem, sizeof(stem), "%010zu", frame);
     OwnedLabelImage image;
     std::string evidence = "no labels";
-    if (camera_labels && (*camera_labels)(stem, &image)) {
-      const LabelImageView view{image.pixels.data(), image.width, image.height,
-                                static_cast<std::size_t>(image.width)};
-      const CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
-                               image.width, image.height};
-      session->insertScan(buffer.topRows<3>(), T_map_velo, &view, &camera);
-      evidence = "camera labels";
-    } else {
-      session->insertScan(buffer.topRows<3>(), T_map_velo);
+    try {
+      if (camera_labels && (*camera_labels)(stem, &image)) {
+        const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                  static_cast<std::size_t>(image.width)};
+        const CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
+                                 image.width, image.height};
+        session->insertScan(buffer.topRows<3>(), T_map_velo, &view, &camera);
+        evidence = "camera labels";
+      } else {
+        session->insertScan(buffer.topRows<3>(), T_map_velo);
+      }
+    } catch (const std::out_of_range& e) {
+      // A scan far outside the map: its pose is wrong.
+      throw std::runtime_error(
+          (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) +
+          ": pose of frame " + stem + ": " + e.what());
     }
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("

@@ -233,7 +233,12 @@ std::size_t SemanticOcTree::insertLabeledScan(const LabeledScan& scan, double ma
                                 scan.sensor_origin_map.z());
   octomap::OcTreeKey origin_key;
   if (!coordToKeyChecked(origin, origin_key)) {
-    throw std::out_of_range("insertLabeledScan: sensor origin outside the octree's range");
+    // octomap keys are 16 bits per axis around the origin: +-32768 voxels.
+    std::ostringstream what;
+    what << "the scan's sensor origin (" << origin.x() << ", " << origin.y() << ", " << origin.z()
+         << ") m is outside the map's range (+-" << getResolution() * 32768.0 << " m at "
+         << getResolution() << " m voxels): a wrong pose or calibration";
+    throw std::out_of_range(what.str());
   }
 
   // 1. Endpoints grouped per voxel: the class evidence of all points in it and one ray end.

@@ -79,6 +79,8 @@ class KittiPlayer {
     }
     timeline_ = kitti::buildDriveTimeline(*drive_, timeline_options_);
     if (timeline_.empty()) throw std::invalid_argument("nothing to play in the chosen window");
+    conv::checkTimelineFitsRosTime(drive_dir, timeline_.front().stamp_ns,
+                                   timeline_.back().stamp_ns);
 
     imu_pub_ = nh.advertise<sensor_msgs::Imu>(topics::kImu, 200);
     fix_pub_ = nh.advertise<sensor_msgs::NavSatFix>(topics::kGpsFix, 50);

@@ -4,6 +4,7 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include <ctime>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
 
@@ -13,10 +14,42 @@
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
+namespace {
+
+constexpr std::int64_t kMaxRosTimeNs = 4294967295LL * 1000000000LL + 999999999LL;
+
+// "2106-02-08" for a stamp, for messages: the day (UTC) of a nanosecond stamp.
+std::string utcDay(std::int64_t stamp_ns) {
+  const std::time_t seconds = static_cast<std::time_t>(stamp_ns / 1000000000LL);
+  std::tm day{};
+  if (!gmtime_r(&seconds, &day)) return std::to_string(stamp_ns) + " ns";
+  char text[32];
+  std::strftime(text, sizeof(text), "%Y-%m-%d", &day);
+  return text;
+}
+
+}  // namespace
+
+bool fitsRosTime(std::int64_t stamp_ns) { return stamp_ns >= 0 && stamp_ns <= kMaxRosTimeNs; }
+
 ros::Time toRosTime(std::int64_t stamp_ns) {
+  if (!fitsRosTime(stamp_ns)) {
+    throw std::out_of_range("stamp " + utcDay(stamp_ns) +
+                            " is outside ROS time (1970-01-01 to 2106-02-07)");
+  }
   ros::Time time;
   time.fromNSec(static_cast<std::uint64_t>(stamp_ns));
   return time;
+}
+
+void checkTimelineFitsRosTime(const std::string& drive_dir, std::int64_t first_stamp_ns,
+                              std::int64_t last_stamp_ns) {
+  for (const std::int64_t stamp_ns : {first_stamp_ns, last_stamp_ns}) {
+    if (!fitsRosTime(stamp_ns)) {
+      throw std::out_of_range(drive_dir + ": timestamps.txt holds " + utcDay(stamp_ns) +
+                              ", outside what ROS time can hold (1970-01-01 to 2106-02-07)");
+    }
+  }
 }
 
 sensor_msgs::Imu toImuMessage(const kitti::OxtsRecord& r, const ros::Time& stamp,

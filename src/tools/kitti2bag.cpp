@@ -105,6 +105,8 @@ int run(const Arguments& args) {
   const std::vector<kitti::TimelineEvent> timeline =
       kitti::buildDriveTimeline(drive, timeline_options);
   if (timeline.empty()) throw std::invalid_argument("nothing to write in the chosen window");
+  conv::checkTimelineFitsRosTime(drive.driveDir(), timeline.front().stamp_ns,
+                                 timeline.back().stamp_ns);
 
   // Written as FILE.bag.partial (the name the usage documents), renamed when complete; on any
   // error the partial bag is removed.

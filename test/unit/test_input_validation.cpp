@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
@@ -117,6 +118,41 @@ TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
                        write("zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n"));
                  }),
                  {"zero.txt:2", "not a rotation"});
+}
+
+// A sequence of one 300-point scan: the errors of the map insertion name the file to blame.
+TEST_F(CalibrationFiles, MappingErrorsNameThePosesOrTheLabelFile) {
+  std::filesystem::create_directories(dir_ + "/velodyne");
+  std::filesystem::create_directories(dir_ + "/labels");
+  std::vector<float> xyzi;
+  std::vector<std::uint32_t> labels;
+  for (int i = 0; i < 300; ++i) {
+    xyzi.insert(xyzi.end(), {5.0f + 0.1f * i, 1.0f, -1.0f, 0.5f});
+    labels.push_back(1000u + static_cast<std::uint32_t>(i));  // 300 distinct classes
+  }
+  std::ofstream(dir_ + "/velodyne/000000.bin", std::ios::binary)
+      .write(reinterpret_cast<const char*>(xyzi.data()), xyzi.size() * sizeof(float));
+  std::ofstream(dir_ + "/labels/000000.label", std::ios::binary)
+      .write(reinterpret_cast<const char*>(labels.data()), labels.size() * sizeof(std::uint32_t));
+  mapping::OfflineSequence sequence;
+  sequence.scans_dir = dir_ + "/velodyne";
+  sequence.calib_path =
+      write("calib.txt", std::string(kOdometryCalib) + "Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n");
+  mapping::SemanticMappingConfig config;
+  config.class_set = "semantickitti";
+  // A pose 10,000 km away (a wrong poses file): outside the octree's +-6.5 km at 0.2 m.
+  sequence.poses_path = write("far.txt", "1 0 0 1e7 0 1 0 0 0 0 1 0\n");
+  {
+    mapping::SemanticMappingSession session(config);
+    expectMentions(errorOf([&] { mapping::mapSequence(sequence, &session, nullptr, nullptr); }),
+                   {"far.txt", "frame 000000", "outside the map's range"});
+  }
+  // More distinct label ids than a map holds classes: not a SemanticKITTI .label file.
+  sequence.poses_path = write("ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+  sequence.labels_dir = dir_ + "/labels";
+  mapping::SemanticMappingSession session(config);
+  expectMentions(errorOf([&] { mapping::mapSequence(sequence, &session, nullptr, nullptr); }),
+                 {"000000.label", "at most 255 classes"});
 }
 
 TEST(InputValidation, DriveTimelineOffsetsThatWouldOverflowAreRefused) {

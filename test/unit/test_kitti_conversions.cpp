@@ -135,6 +135,31 @@ TEST(KittiConversions, ImuUsesBodyFrameFieldsAndOrientation) {
   EXPECT_GT(imu.linear_acceleration_covariance[0], 0.0);
 }
 
+// ROS time is unsigned 32-bit seconds; roscpp's own error ("Time is out of dual 32-bit range")
+// names neither the stamp nor the file.
+TEST(KittiConversions, StampsOutsideRosTimeAreRefusedByDate) {
+  EXPECT_TRUE(fitsRosTime(0));
+  EXPECT_EQ(toRosTime(1317041067403000000LL).toNSec(), 1317041067403000000ULL);
+  EXPECT_TRUE(fitsRosTime(4294967295LL * 1000000000LL));
+  EXPECT_FALSE(fitsRosTime(4294967296LL * 1000000000LL));
+  EXPECT_FALSE(fitsRosTime(-1));
+  try {
+    toRosTime(-86400LL * 1000000000LL);
+    ADD_FAILURE() << "a 1969 stamp became a ROS time";
+  } catch (const std::out_of_range& e) {
+    EXPECT_NE(std::string(e.what()).find("1969-12-31"), std::string::npos) << e.what();
+  }
+  try {
+    checkTimelineFitsRosTime("/data/2011_09_26_drive_0001_sync", 0, 4294967296LL * 1000000000LL);
+    ADD_FAILURE() << "a 2106 stamp passed";
+  } catch (const std::out_of_range& e) {
+    EXPECT_NE(std::string(e.what()).find("2011_09_26_drive_0001_sync: timestamps.txt"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("2106-02-07"), std::string::npos) << e.what();
+  }
+}
+
 TEST(KittiConversions, NavSatStatusAndCovariance) {
   kitti::OxtsRecord r = recordAt(0);
   EXPECT_EQ(navSatStatusFromOxts(r), sensor_msgs::NavSatStatus::STATUS_GBAS_FIX);

@@ -38,7 +38,13 @@
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
+// ROS time holds unsigned 32-bit seconds: 1970-01-01 to 2106-02-07. toRosTime throws
+// std::out_of_range naming the stamp (as a date) outside that; checkTimelineFitsRosTime names the
+// drive's timestamps files, for the tools that load a whole timeline first.
+bool fitsRosTime(std::int64_t stamp_ns);
 ros::Time toRosTime(std::int64_t stamp_ns);
+void checkTimelineFitsRosTime(const std::string& drive_dir, std::int64_t first_stamp_ns,
+                              std::int64_t last_stamp_ns);
 
 // Nominal 1-sigma figures of the OXTS RT3003 (datasheet), used as diagonal covariances.
 struct OxtsImuNoise {
