@@ -122,9 +122,8 @@ Eigen::Isometry3d isometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
   return T;
 }
 
-}  // namespace
-
-DriveSummary generateSyntheticDrive(const DriveOptions& options) {
+// Writes the whole drive under options.output_dir (see generateSyntheticDrive).
+DriveSummary generateInto(const DriveOptions& options) {
   const auto wall_start = std::chrono::steady_clock::now();
   if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");
   if (!(options.duration_s > 0 && options.duration_s <= 3600)) {
@@ -417,6 +416,44 @@ DriveSummary generateSyntheticDrive(const DriveOptions& options) {
   }
   summary.wall_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  return summary;
+}
+
+}  // namespace
+
+DriveSummary generateSyntheticDrive(const DriveOptions& options) {
+  if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");
+  // Written into a hidden staging folder beside the result and moved in when complete: a full
+  // disk or any failure half way leaves no half drive that a reader would take for a whole one.
+  const fs::path date_dir = fs::path(options.output_dir) / options.date;
+  const fs::path staging =
+      fs::path(options.output_dir) /
+      ("." + options.date + "_drive_" + std::to_string(options.drive_number) + ".partial");
+  DriveOptions staged = options;
+  staged.output_dir = staging.string();
+  DriveSummary summary;
+  try {
+    fs::remove_all(staging);
+    summary = generateInto(staged);
+    fs::create_directories(date_dir);
+    const fs::path staged_date = staging / options.date;
+    // Calibration first (each file replaced atomically by rename), then the drive folders.
+    for (const auto& entry : fs::directory_iterator(staged_date)) {
+      if (entry.is_regular_file()) fs::rename(entry.path(), date_dir / entry.path().filename());
+    }
+    for (std::string* dir : {&summary.sync_dir, &summary.extract_dir}) {
+      const fs::path target = date_dir / fs::path(*dir).filename();
+      fs::remove_all(target);  // a drive generated again replaces the old one
+      fs::rename(*dir, target);
+      *dir = target.string();
+    }
+    summary.date_dir = date_dir.string();
+    fs::remove_all(staging);
+  } catch (...) {
+    std::error_code ignored;
+    fs::remove_all(staging, ignored);
+    throw;
+  }
   return summary;
 }
 

@@ -1,9 +1,13 @@
 // generateSyntheticDrive: a short drive written to a temp folder and read back with the KITTI
 // I/O library (layout, calibration, timestamps, Mercator, IMU, lidar labels, label images).
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -374,6 +378,55 @@ TEST(SyntheticDriveOptions, RejectsBadOptionsWithAClearMessage) {
   options.date = "2011_09_26";
   options.duration_s = -1;
   EXPECT_THROW(generateSyntheticDrive(options), std::invalid_argument);
+  fs::remove_all(options.output_dir);
+}
+
+// A full disk half way (simulated in a child process with a file size limit) leaves neither a
+// half drive nor the staging folder; generating again replaces a drive whole.
+TEST(SyntheticDriveOptions, AFailureHalfWayLeavesNoHalfDrive) {
+  DriveOptions options;
+  options.output_dir = test::makeTempDir("synthetic_full_disk");
+  options.duration_s = 1.0;
+  options.lidar.beams = 8;
+  options.image_width = 64;
+  options.image_height = 32;
+  options.threads = 1;
+  std::fflush(nullptr);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    std::signal(SIGXFSZ, SIG_IGN);  // a write past the limit fails with EFBIG instead
+    const rlimit limit{16 * 1024, 16 * 1024};
+    setrlimit(RLIMIT_FSIZE, &limit);
+    try {
+      generateSyntheticDrive(options);
+    } catch (const std::exception&) {
+      _exit(1);
+    }
+    _exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1) << "the generator did not notice the full disk";
+  EXPECT_TRUE(fs::is_empty(options.output_dir)) << "left behind in " << options.output_dir;
+
+  const DriveSummary first = generateSyntheticDrive(options);
+  options.duration_s = 0.5;
+  const DriveSummary second = generateSyntheticDrive(options);
+  EXPECT_EQ(second.sync_dir, first.sync_dir);
+  EXPECT_LT(second.scans, first.scans);
+  const kitti::RawDrive drive(second.sync_dir);
+  std::size_t files = 0;
+  for (const auto& entry : fs::directory_iterator(second.sync_dir + "/velodyne_points/data")) {
+    files += entry.is_regular_file();
+  }
+  EXPECT_EQ(files, static_cast<std::size_t>(second.scans)) << "old scans mixed into the new drive";
+  std::size_t hidden = 0;
+  for (const auto& entry : fs::directory_iterator(options.output_dir)) {
+    hidden += entry.path().filename().string().front() == '.';
+  }
+  EXPECT_EQ(hidden, 0u);
   fs::remove_all(options.output_dir);
 }
 
