@@ -44,9 +44,11 @@ constexpr char kUsage[] =
     "  --filter          overrides the config's filter\n"
     "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n";
 
-// Writes through a temporary file and a rename: a reader never sees half a file.
-void writeAtomically(const std::string& path, const std::function<void(std::ostream&)>& body) {
-  ism::common::writeStreamAtomically(path, [&](std::ostream& out) {
+// Adds one output to the run's set: written through a temporary file, and only renamed into
+// place with the others once all are written (a reader never sees half a file or half a set).
+void addOutput(ism::common::AtomicFileSet* outputs, const std::string& path,
+               const std::function<void(std::ostream&)>& body) {
+  outputs->addStream(path, [&](std::ostream& out) {
     out.precision(9);
     body(out);
   });
@@ -109,16 +111,17 @@ int main(int argc, char** argv) {
       run = estimation::runLocalizerOnOxts(frames, options);
     }
     ism::ScopedTimer write_timer("write_outputs");
-    writeAtomically(cli.get("--output-kitti"), [&](std::ostream& out) {
+    ism::common::AtomicFileSet outputs;
+    addOutput(&outputs, cli.get("--output-kitti"), [&](std::ostream& out) {
       for (const auto& s : run.states) writeKittiPose(out, s.rotation, s.position_map);
     });
     if (cli.has("--output-truth")) {
-      writeAtomically(cli.get("--output-truth"), [&](std::ostream& out) {
+      addOutput(&outputs, cli.get("--output-truth"), [&](std::ostream& out) {
         for (const auto& t : run.truth) writeKittiPose(out, t.linear(), t.translation());
       });
     }
     if (cli.has("--output-tum")) {
-      writeAtomically(cli.get("--output-tum"), [&](std::ostream& out) {
+      addOutput(&outputs, cli.get("--output-tum"), [&](std::ostream& out) {
         out.precision(6);
         out << std::fixed;
         for (const auto& s : run.states) {
@@ -130,7 +133,7 @@ int main(int argc, char** argv) {
       });
     }
     if (cli.has("--output-states")) {
-      writeAtomically(cli.get("--output-states"), [&](std::ostream& out) {
+      addOutput(&outputs, cli.get("--output-states"), [&](std::ostream& out) {
         out << "stamp,px,py,pz,qx,qy,qz,qw,vx,vy,vz,bgx,bgy,bgz,bax,bay,baz";
         for (int r = 0; r < 6; ++r) {
           for (int c = 0; c < 6; ++c) out << ",c" << r << c;
@@ -154,6 +157,7 @@ int main(int argc, char** argv) {
         }
       });
     }
+    outputs.commit();
     const estimation::TrajectoryErrors errors = estimation::compareWithTruth(run);
     std::cout << ism::TimingRegistry::instance().report();
     std::printf(

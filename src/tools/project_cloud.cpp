@@ -6,6 +6,7 @@
 // point's row in the .bin, u/v in pixels, depth in metres). The image is read for its size and
 // as the overlay's background (points colored by depth).
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -45,9 +46,11 @@ int run(const inekf_semantic_mapping::common::CommandLine& cli) {
         scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
     projector.project(buffer.topRows<3>(), &projected);
   }
+  // The CSV and the overlay appear together or not at all.
+  common::AtomicFileSet outputs;
   {
     ScopedTimer timer("project_cloud/write_csv");
-    common::writeStreamAtomically(cli.get("--output"), [&](std::ostream& csv) {
+    outputs.addStream(cli.get("--output"), [&](std::ostream& csv) {
       csv << "index,u,v,depth\n";
       char line[96];
       for (std::size_t i = 0; i < projected.size(); ++i) {
@@ -58,9 +61,6 @@ int run(const inekf_semantic_mapping::common::CommandLine& cli) {
       }
     });
   }
-  std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
-            << " points inside the " << image.cols << "x" << image.rows << " image -> "
-            << cli.get("--output") << "\n";
   if (cli.has("--overlay")) {
     ScopedTimer timer("project_cloud/overlay");
     cv::Mat overlay = image.clone();
@@ -78,13 +78,23 @@ int run(const inekf_semantic_mapping::common::CommandLine& cli) {
     }
     const std::string path = cli.get("--overlay");
     // imwrite picks the format from the temporary's extension: always PNG, as before.
-    common::commitFileAtomically(path, common::temporaryPathFor(path) + ".png",
-                                 [&](const std::string& tmp) {
-                                   if (!cv::imwrite(tmp, overlay))
-                                     throw std::runtime_error("cannot write '" + path + "'");
-                                 });
-    std::cerr << "[project_cloud] overlay -> " << path << "\n";
+    outputs.add(path, [&](const std::string& tmp) {
+      const std::string png = tmp + ".png";
+      const bool written = cv::imwrite(png, overlay);
+      std::error_code error;
+      if (written) std::filesystem::rename(png, tmp, error);
+      if (!written || error) {
+        std::filesystem::remove(png, error);
+        throw std::runtime_error("cannot write '" + path + "'");
+      }
+    });
   }
+  outputs.commit();
+  std::cerr << "[project_cloud] " << projected.validCount() << " of " << scan.size()
+            << " points inside the " << image.cols << "x" << image.rows << " image -> "
+            << cli.get("--output") << "\n";
+  if (cli.has("--overlay"))
+    std::cerr << "[project_cloud] overlay -> " << cli.get("--overlay") << "\n";
   std::cerr << TimingRegistry::instance().report();
   return 0;
 }

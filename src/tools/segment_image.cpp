@@ -33,11 +33,12 @@ constexpr char kUsage[] =
     "  --confidence  8-bit image of the softmax probability of the chosen class (x255)\n"
     "  --repeat      run the segmentation N times and print the stage timing (benchmarking)\n";
 
-// Writes via a temporary file and a rename, so a reader never sees half an image.
-void writeImageAtomically(const std::string& path, const cv::Mat& image) {
+// Adds an image to the run's outputs: written to a temporary file, renamed into place with the
+// others once all are written (a reader never sees half an image, nor labels without overlay).
+void addImage(ism::common::AtomicFileSet* outputs, const std::string& path, const cv::Mat& image) {
   // The temporary name keeps the extension: imwrite picks the format from it.
-  ism::common::commitFileAtomically(path, [&](const std::string& tmp_path) {
-    if (!cv::imwrite(tmp_path, image)) throw std::runtime_error("cannot write " + tmp_path);
+  outputs->add(path, [&](const std::string& tmp_path) {
+    if (!cv::imwrite(tmp_path, image)) throw std::runtime_error("cannot write " + path);
   });
 }
 
@@ -77,19 +78,22 @@ int main(int argc, char** argv) {
       result = segmenter.segment(image);
     }
 
-    writeImageAtomically(output, ids == "trainid" ? perception::labelIdsToTrainIds(result.label_ids)
-                                                  : result.label_ids);
+    ism::common::AtomicFileSet outputs;
+    addImage(
+        &outputs, output,
+        ids == "trainid" ? perception::labelIdsToTrainIds(result.label_ids) : result.label_ids);
     if (cli.has("--overlay")) {
       cv::Mat overlay_bgr;
       cv::cvtColor(perception::overlayLabelIds(image, result.label_ids, alpha), overlay_bgr,
                    cv::COLOR_RGB2BGR);
-      writeImageAtomically(cli.get("--overlay"), overlay_bgr);
+      addImage(&outputs, cli.get("--overlay"), overlay_bgr);
     }
     if (cli.has("--confidence")) {
       cv::Mat confidence_8u;
       result.confidence.convertTo(confidence_8u, CV_8U, 255.0);
-      writeImageAtomically(cli.get("--confidence"), confidence_8u);
+      addImage(&outputs, cli.get("--confidence"), confidence_8u);
     }
+    outputs.commit();
     std::cout << "segment_image: " << input << " (" << image.cols << "x" << image.rows << ") with "
               << model << " [card " << card.source << "] -> " << output << "\n"
               << ism::TimingRegistry::instance().report();

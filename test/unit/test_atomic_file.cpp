@@ -106,6 +106,47 @@ TEST(AtomicFile, ABodyThatThrowsLeavesThePreviousFileAndNoTemporary) {
   fs::remove_all(dir);
 }
 
+// A tool's outputs appear together or not at all.
+TEST(AtomicFileSet, AFailingOutputLeavesNoneOfTheSetAndNoTemporary) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_set");
+  writeTextAtomically(dir + "/a.txt", "old a\n");
+  {
+    AtomicFileSet outputs;
+    outputs.addStream(dir + "/a.txt", [](std::ostream& out) { out << "new a\n"; });
+    outputs.add(dir + "/b.txt", [](const std::string& tmp) { std::ofstream(tmp) << "new b\n"; });
+    EXPECT_THROW(outputs.addStream(dir + "/c.txt",
+                                   [](std::ostream& out) { out.setstate(std::ios::badbit); }),
+                 AtomicWriteError);
+  }  // never committed
+  EXPECT_EQ(listDir(dir), std::vector<std::string>{"a.txt"});
+  EXPECT_EQ(readFile(dir + "/a.txt"), "old a\n");
+
+  AtomicFileSet outputs;
+  outputs.addStream(dir + "/a.txt", [](std::ostream& out) { out << "new a\n"; });
+  outputs.add(dir + "/b.txt", [](const std::string& tmp) { std::ofstream(tmp) << "new b\n"; });
+  EXPECT_EQ(readFile(dir + "/a.txt"), "old a\n");  // nothing visible before the commit
+  outputs.commit();
+  EXPECT_EQ(listDir(dir), (std::vector<std::string>{"a.txt", "b.txt"}));
+  EXPECT_EQ(readFile(dir + "/a.txt"), "new a\n");
+  EXPECT_EQ(readFile(dir + "/b.txt"), "new b\n");
+
+  // A target that cannot be replaced (a directory) is refused before anything is renamed.
+  fs::create_directories(dir + "/d_is_a_dir");
+  {
+    AtomicFileSet blocked;
+    blocked.addStream(dir + "/a.txt", [](std::ostream& out) { out << "newer a\n"; });
+    try {
+      blocked.addStream(dir + "/d_is_a_dir", [](std::ostream& out) { out << "x"; });
+      ADD_FAILURE() << "no exception";
+    } catch (const AtomicWriteError& e) {
+      EXPECT_EQ(e.path(), dir + "/d_is_a_dir");
+    }
+  }
+  EXPECT_EQ(readFile(dir + "/a.txt"), "new a\n");
+  EXPECT_EQ(listDir(dir), (std::vector<std::string>{"a.txt", "b.txt", "d_is_a_dir"}));
+  fs::remove_all(dir);
+}
+
 TEST(AtomicFile, AMissingDirectoryThrowsNamingThePath) {
   const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_nodir");
   const std::string path = dir + "/no/such/dir/out.txt";

@@ -22,6 +22,8 @@
 #include <stdexcept>
 #include <string>
 #include <system_error>
+#include <utility>
+#include <vector>
 
 namespace inekf_semantic_mapping {
 namespace common {
@@ -83,23 +85,81 @@ inline void commitFileAtomically(const std::string& path,
   commitFileAtomically(path, temporaryPathFor(path), write);
 }
 
+// Writes tmp_path through a binary std::ofstream handed to body; errors name `path`, the file
+// the caller asked for. Throws AtomicWriteError if tmp_path cannot be created or the stream has
+// failed after body or after the flush; an exception thrown by body propagates unchanged.
+inline void writeStreamTo(const std::string& path, const std::string& tmp_path,
+                          const std::function<void(std::ostream&)>& body) {
+  std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
+  if (!out) {
+    throw AtomicWriteError(path, "cannot create '" + tmp_path + "': " + std::strerror(errno));
+  }
+  body(out);
+  if (out) out.flush();
+  if (out) out.close();
+  if (!out) throw AtomicWriteError(path, "write failed (disk full?)");
+}
+
 // Writes path through a binary std::ofstream handed to body. Throws AtomicWriteError if the
 // temporary cannot be created or the stream has failed after body or after the flush; an
 // exception thrown by body propagates unchanged. Either way the target is unchanged.
 inline void writeStreamAtomically(const std::string& path,
                                   const std::function<void(std::ostream&)>& body) {
   if (path.empty()) throw AtomicWriteError(path, "empty output path");
-  commitFileAtomically(path, [&](const std::string& tmp_path) {
-    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      throw AtomicWriteError(path, "cannot create '" + tmp_path + "': " + std::strerror(errno));
-    }
-    body(out);
-    if (out) out.flush();
-    if (out) out.close();
-    if (!out) throw AtomicWriteError(path, "write failed (disk full?)");
-  });
+  commitFileAtomically(path,
+                       [&](const std::string& tmp_path) { writeStreamTo(path, tmp_path, body); });
 }
+
+// The outputs of one run that appear together or not at all (a tool's trajectory, its truth
+// and its states; a CSV and its overlay): each is written to a temporary beside its target when
+// added, and commit() renames them all. Without commit() (an exception on the way) the
+// temporaries are removed and every target stays as it was.
+//   common::AtomicFileSet outputs;
+//   outputs.addStream("poses.txt", [&](std::ostream& out) { ... });
+//   outputs.add("overlay.png", [&](const std::string& tmp) { cv::imwrite(tmp, image) ...; });
+//   outputs.commit();
+// A target that is a directory is refused when added; a rename within a directory then fails
+// only on a filesystem fault, the one case that can leave part of the set (the target is named).
+class AtomicFileSet {
+ public:
+  AtomicFileSet() = default;
+  AtomicFileSet(const AtomicFileSet&) = delete;
+  AtomicFileSet& operator=(const AtomicFileSet&) = delete;
+  ~AtomicFileSet() { discard(); }
+
+  void add(const std::string& path, const std::function<void(const std::string& tmp_path)>& write) {
+    if (path.empty()) throw AtomicWriteError(path, "empty output path");
+    // The one target a rename cannot replace, refused before any of the set is renamed.
+    if (std::filesystem::is_directory(path)) throw AtomicWriteError(path, "is a directory");
+    staged_.push_back({path, temporaryPathFor(path)});
+    write(staged_.back().second);
+  }
+  void addStream(const std::string& path, const std::function<void(std::ostream&)>& body) {
+    add(path, [&](const std::string& tmp_path) { writeStreamTo(path, tmp_path, body); });
+  }
+  void commit() {
+    for (std::size_t i = 0; i < staged_.size(); ++i) {
+      std::error_code error;
+      std::filesystem::rename(staged_[i].second, staged_[i].first, error);
+      if (error) {
+        const std::string failed = staged_[i].first;
+        staged_.erase(staged_.begin(), staged_.begin() + static_cast<std::ptrdiff_t>(i));
+        discard();
+        throw AtomicWriteError(failed, "rename failed: " + error.message());
+      }
+    }
+    staged_.clear();
+  }
+
+ private:
+  void discard() {
+    std::error_code ignored;
+    for (const auto& [path, tmp_path] : staged_) std::filesystem::remove(tmp_path, ignored);
+    staged_.clear();
+  }
+
+  std::vector<std::pair<std::string, std::string>> staged_;  // target, temporary
+};
 
 // Writes size bytes from data to path atomically.
 inline void writeBytesAtomically(const std::string& path, const void* data, std::size_t size) {
