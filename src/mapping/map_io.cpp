@@ -17,12 +17,17 @@ namespace inekf_semantic_mapping {
 namespace mapping {
 namespace {
 
-// Writes through `write_body` into a temporary file beside `path`, then renames it over `path`.
-void writeAtomically(const std::string& path,
-                     const std::function<void(std::ostream&)>& write_body) {
+// Writes through `write_body` into a temporary file beside `path`, then renames it over `path`
+// (at once, or with the rest of `set` when one is given).
+void writeAtomically(const std::string& path, const std::function<void(std::ostream&)>& write_body,
+                     common::AtomicFileSet* set) {
   if (path.empty()) throw MapIoError("cannot save map: empty output path");
   try {
-    common::writeStreamAtomically(path, write_body);
+    if (set) {
+      set->addStream(path, write_body);
+    } else {
+      common::writeStreamAtomically(path, write_body);
+    }
   } catch (const common::AtomicWriteError& error) {
     throw MapIoError("cannot write map to '" + path + "': " + error.reason());
   }
@@ -91,56 +96,87 @@ std::size_t countOccupiedFinestVoxels(const SemanticOcTree& tree) {
   return count;
 }
 
-std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format) {
-  tree.updateInnerOccupancy();
+namespace {
+
+// One output of saveMap / saveMaps (inner nodes already refreshed).
+std::size_t saveMapInto(SemanticOcTree& tree, const std::string& path, MapFormat format,
+                        common::AtomicFileSet* set) {
   switch (format) {
     case MapFormat::kSemanticOt: {
-      writeAtomically(path, [&](std::ostream& out) { tree.write(out); });
+      writeAtomically(
+          path, [&](std::ostream& out) { tree.write(out); }, set);
       return countOccupiedLeaves(tree);
     }
     case MapFormat::kColorOt: {
       MirrorColorOcTree color(tree.getResolution());
       color.mirror(tree);
-      writeAtomically(path, [&](std::ostream& out) { color.write(out); });
+      writeAtomically(
+          path, [&](std::ostream& out) { color.write(out); }, set);
       return countOccupiedLeaves(tree);
     }
     case MapFormat::kPly: {
       const std::size_t vertex_count = countOccupiedFinestVoxels(tree);
       const unsigned int max_depth = tree.getTreeDepth();
-      writeAtomically(path, [&](std::ostream& out) {
-        out << "ply\nformat ascii 1.0\ncomment inekf_semantic_mapping semantic map, resolution "
-            << tree.getResolution() << " m\nelement vertex " << vertex_count
-            << "\nproperty float x\nproperty float y\nproperty float z\nproperty uint label\n"
-               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
-        char line[128];
-        for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-          if (!tree.isNodeOccupied(*it)) continue;
-          const ClassIndex index = it->mostLikelyClass();
-          const bool known = index != kNoClass && index < tree.classSet().size();
-          const std::uint32_t label = known ? tree.classSet().info(index).label_id : 0;
-          const std::array<std::uint8_t, 3> rgb =
-              known ? tree.classSet().info(index).rgb
-                    : std::array<std::uint8_t, 3>{{128, 128, 128}};
-          // A pruned leaf stands for 2^(3k) finest voxels: one vertex for each.
-          const unsigned int cells = 1u << (max_depth - it.getDepth());
-          const octomap::OcTreeKey base_key = it.getIndexKey();
-          for (unsigned int dx = 0; dx < cells; ++dx) {
-            for (unsigned int dy = 0; dy < cells; ++dy) {
-              for (unsigned int dz = 0; dz < cells; ++dz) {
-                const octomap::OcTreeKey key(base_key[0] + dx, base_key[1] + dy, base_key[2] + dz);
-                const octomap::point3d center = tree.keyToCoord(key);
-                std::snprintf(line, sizeof(line), "%.4f %.4f %.4f %u %u %u %u\n", center.x(),
-                              center.y(), center.z(), label, rgb[0], rgb[1], rgb[2]);
-                out << line;
+      writeAtomically(
+          path,
+          [&](std::ostream& out) {
+            out << "ply\nformat ascii 1.0\ncomment inekf_semantic_mapping semantic map, resolution "
+                << tree.getResolution() << " m\nelement vertex " << vertex_count
+                << "\nproperty float x\nproperty float y\nproperty float z\nproperty uint label\n"
+                   "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+            char line[128];
+            for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+              if (!tree.isNodeOccupied(*it)) continue;
+              const ClassIndex index = it->mostLikelyClass();
+              const bool known = index != kNoClass && index < tree.classSet().size();
+              const std::uint32_t label = known ? tree.classSet().info(index).label_id : 0;
+              const std::array<std::uint8_t, 3> rgb =
+                  known ? tree.classSet().info(index).rgb
+                        : std::array<std::uint8_t, 3>{{128, 128, 128}};
+              // A pruned leaf stands for 2^(3k) finest voxels: one vertex for each.
+              const unsigned int cells = 1u << (max_depth - it.getDepth());
+              const octomap::OcTreeKey base_key = it.getIndexKey();
+              for (unsigned int dx = 0; dx < cells; ++dx) {
+                for (unsigned int dy = 0; dy < cells; ++dy) {
+                  for (unsigned int dz = 0; dz < cells; ++dz) {
+                    const octomap::OcTreeKey key(base_key[0] + dx, base_key[1] + dy,
+                                                 base_key[2] + dz);
+                    const octomap::point3d center = tree.keyToCoord(key);
+                    std::snprintf(line, sizeof(line), "%.4f %.4f %.4f %u %u %u %u\n", center.x(),
+                                  center.y(), center.z(), label, rgb[0], rgb[1], rgb[2]);
+                    out << line;
+                  }
+                }
               }
             }
-          }
-        }
-      });
+          },
+          set);
       return vertex_count;
     }
   }
   throw MapIoError("unhandled map format");
+}
+
+}  // namespace
+
+std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format) {
+  tree.updateInnerOccupancy();
+  return saveMapInto(tree, path, format, nullptr);
+}
+
+std::vector<std::size_t> saveMaps(SemanticOcTree& tree,
+                                  const std::vector<std::pair<std::string, MapFormat>>& outputs) {
+  tree.updateInnerOccupancy();
+  common::AtomicFileSet set;
+  std::vector<std::size_t> counts;
+  for (const auto& [path, format] : outputs)
+    counts.push_back(saveMapInto(tree, path, format, &set));
+  try {
+    set.commit();
+  } catch (const common::AtomicWriteError& error) {
+    throw MapIoError("cannot write map to '" + error.path() + "': " + error.reason());
+  }
+  return counts;
 }
 
 std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {

@@ -15,6 +15,8 @@
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
@@ -177,18 +179,27 @@ int main(int argc, char** argv) {
     std::cerr << "[semantic_map_offline] " << stats.scans_inserted << " scans, "
               << stats.scans_with_labels << " with class evidence, " << stats.points_with_class
               << " of " << stats.points_inserted << " inserted points labelled\n";
-    const std::size_t occupied = session.save(output, mapping::MapFormat::kSemanticOt);
-    std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
-              << " nodes, " << occupied << " occupied leaves, " << session.tree().classSet().size()
-              << " classes, " << session.tree().memoryUsage() / 1e6 << " MB in memory)\n";
-    if (cli.has("--export-ply")) {
-      const std::size_t vertices = session.save(cli.get("--export-ply"), mapping::MapFormat::kPly);
-      std::cerr << "[semantic_map_offline] wrote " << cli.get("--export-ply") << " (" << vertices
-                << " occupied voxels)\n";
-    }
+    // The map and its exports appear together or not at all.
+    std::vector<std::pair<std::string, mapping::MapFormat>> outputs{
+        {output, mapping::MapFormat::kSemanticOt}};
+    if (cli.has("--export-ply"))
+      outputs.emplace_back(cli.get("--export-ply"), mapping::MapFormat::kPly);
     if (cli.has("--color-ot")) {
-      session.save(cli.get("--color-ot"), mapping::MapFormat::kColorOt);
-      std::cerr << "[semantic_map_offline] wrote " << cli.get("--color-ot") << "\n";
+      outputs.emplace_back(cli.get("--color-ot"), mapping::MapFormat::kColorOt);
+    }
+    std::vector<std::size_t> counts;
+    {
+      ism::ScopedTimer timer("semantic_map/save");
+      counts = mapping::saveMaps(session.tree(), outputs);
+    }
+    std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
+              << " nodes, " << counts[0] << " occupied leaves, " << session.tree().classSet().size()
+              << " classes, " << session.tree().memoryUsage() / 1e6 << " MB in memory)\n";
+    for (std::size_t i = 1; i < outputs.size(); ++i) {
+      std::cerr << "[semantic_map_offline] wrote " << outputs[i].first;
+      if (outputs[i].second == mapping::MapFormat::kPly)
+        std::cerr << " (" << counts[i] << " occupied voxels)";
+      std::cerr << "\n";
     }
     std::cerr << ism::TimingRegistry::instance().report();
     return 0;

@@ -454,6 +454,28 @@ TEST(SemanticOcTreeIo, UnwritablePathFailsClearly) {
   EXPECT_EQ(parseMapFormat("", "x.ply"), MapFormat::kPly);
 }
 
+// A tool's map and its exports appear together or not at all.
+TEST(SemanticOcTreeIo, SeveralFormatsAreWrittenAsASet) {
+  SemanticOcTree tree = makeRandomMap(3);
+  const std::string dir = test::makeTempDir("map_set");
+  std::filesystem::create_directories(dir + "/blocked.ply");
+  EXPECT_THROW(saveMaps(tree, {{dir + "/map.ot", MapFormat::kSemanticOt},
+                               {dir + "/blocked.ply", MapFormat::kPly}}),
+               MapIoError);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/map.ot"));
+  const std::vector<std::size_t> counts = saveMaps(
+      tree, {{dir + "/map.ot", MapFormat::kSemanticOt}, {dir + "/map.ply", MapFormat::kPly}});
+  ASSERT_EQ(counts.size(), 2u);
+  EXPECT_EQ(counts[0], saveMap(tree, dir + "/again.ot", MapFormat::kSemanticOt));
+  EXPECT_EQ(counts[1], countOccupiedFinestVoxels(tree));
+  EXPECT_EQ(loadSemanticOcTree(dir + "/map.ot")->size(), tree.size());
+  std::size_t entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    entries += !entry.path().empty();
+  EXPECT_EQ(entries, 4u);  // blocked.ply, map.ot, map.ply, again.ot: no temporaries
+  std::filesystem::remove_all(dir);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Fusion target: a ray-cast scene (ground, building, car, pole, vegetation), 4 scans from
 // different poses, 20 % of the point labels replaced by a random other class of the scene.

@@ -7,6 +7,8 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace inekf_semantic_mapping {
 namespace mapping {
@@ -30,6 +32,10 @@ MapFormat parseMapFormat(const std::string& format, const std::string& path);
 // Writes `tree` in `format` to `path`; returns the number of occupied leaves written (finest
 // resolution for PLY, leaf nodes as stored for the octree formats). Refreshes inner nodes first.
 std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format);
+// Several formats of one map (a tool's --output, --export-ply, --color-ot) as a set: all are
+// written, or none replaces its target. Returns saveMap's count for each.
+std::vector<std::size_t> saveMaps(SemanticOcTree& tree,
+                                  const std::vector<std::pair<std::string, MapFormat>>& outputs);
 
 // Reads a .ot written by saveMap (through octomap's factory); throws MapIoError if the file is
 // missing, unreadable or holds another tree type.
