@@ -2,6 +2,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -66,7 +68,40 @@ std::array<double, 3> readTriple(const std::string& path, const YAML::Node& root
   return {values[0], values[1], values[2]};
 }
 
+// A misspelt key would silently leave its default in place (the same rule as the configs).
+void rejectUnknownKeys(const std::string& path, const YAML::Node& map,
+                       const std::vector<std::string>& known, const std::string& prefix) {
+  for (const auto& entry : map) {
+    const std::string key = entry.first.Scalar();
+    if (std::find(known.begin(), known.end(), key) == known.end()) {
+      fail(path, entry.first, "unknown key '" + prefix + key + "'");
+    }
+  }
+}
+
 void validate(const ModelCard& card, const std::string& path, const YAML::Node& root) {
+  rejectUnknownKeys(
+      path, root,
+      {"name", "input", "resize_policy", "pad_multiple", "resize_factor", "mean", "scale",
+       "swap_rb", "tile_scale", "network_focal_px", "tile_overlap", "tile_bottom_margin",
+       "flip_average", "suppress_unlabeled", "label_filter", "color_normalization", "color_mean",
+       "color_std", "output_label_ids", "num_output_channels",
+       // Informational (scripts/train_unet.py records the network's validation score).
+       "validation_miou"},
+      "");
+  if (root["input"]) {
+    if (!root["input"].IsMap()) fail(path, root["input"], "input must be a map {width, height}");
+    rejectUnknownKeys(path, root["input"], {"width", "height"}, "input.");
+  }
+  if (root["label_filter"]) {
+    rejectUnknownKeys(path, root["label_filter"], {"min_confidence", "boundary_radius_px"},
+                      "label_filter.");
+  }
+  for (const auto* triple : {&card.mean, &card.color_mean}) {
+    for (double value : *triple) {
+      if (!std::isfinite(value)) fail(path, root, "mean / color_mean values must be finite");
+    }
+  }
   // A network input beyond 16384 pixels a side is a typo, and would fail later inside OpenCV.
   constexpr int kMaxInputSide = 16384;
   if (card.input_width < 0 || card.input_height < 0 || card.input_width > kMaxInputSide ||

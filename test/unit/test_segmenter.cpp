@@ -199,6 +199,23 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
   EXPECT_NE(cardError("input: {width: 2000000000, height: 2000000000}\noutput_label_ids: [7]\n")
                 .find("16384"),
             std::string::npos);
+  // A misspelt key would leave its default silently in place: named with its line.
+  const std::string typo =
+      cardError("input: {width: 10, height: 10}\ntile_scal: 1.2\noutput_label_ids: [7]\n");
+  EXPECT_NE(typo.find(":2: unknown key 'tile_scal'"), std::string::npos) << typo;
+  EXPECT_NE(cardError("input: {width: 10, height: 10, depth: 3}\noutput_label_ids: [7]\n")
+                .find("input.depth"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nlabel_filter: {min_conf: 0.5}\n"
+                      "output_label_ids: [7]\n")
+                .find("label_filter.min_conf"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nmean: [.nan, 0, 0]\noutput_label_ids: [7]\n")
+                .find("finite"),
+            std::string::npos);
+  EXPECT_EQ(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7]\n"
+                      "validation_miou: 0.9\n"),
+            "");
 }
 
 TEST(ModelCard, DefaultCardFollowsTheModelFile) {
