@@ -17,6 +17,10 @@ import sys
 
 import numpy as np
 
+# One definition of each trajectory metric and pose format: evaluate_trajectory's (beside this).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import evaluate_trajectory as trajectory_metrics  # noqa: E402
+
 SCAN_TOPIC = "/kitti/velo/pointcloud"
 IMAGE_TOPIC = "/kitti/camera_color_left/image_raw"
 # Cityscapes labelIds (the map's PLY label, class_set cityscapes), for printing.
@@ -48,10 +52,7 @@ def read_tum(path):
 
 
 def quaternion_to_matrix(q):
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return trajectory_metrics.quaternion_to_rotation(*q)
 
 
 def associate(estimate, truth, max_dt=0.02):
@@ -83,23 +84,21 @@ def trajectory_errors(estimate, truth, max_dt=0.02):
     est, gt = associate(estimate, truth, max_dt)
     if len(est) == 0:
         return {"matched_poses": 0}
+    tm = trajectory_metrics
     position_errors = np.linalg.norm(est[:, 1:4] - gt[:, 1:4], axis=1)
     rotation_errors_deg, yaw_errors_deg = [], []
     for e, g in zip(est, gt):
         Re, Rg = quaternion_to_matrix(e[4:8]), quaternion_to_matrix(g[4:8])
-        dR = Rg.T @ Re
-        rotation_errors_deg.append(math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(dR) - 1) / 2)))))
-        dyaw = math.atan2(Re[1, 0], Re[0, 0]) - math.atan2(Rg[1, 0], Rg[0, 0])
-        yaw_errors_deg.append(math.degrees(math.atan2(math.sin(dyaw), math.cos(dyaw))))
-    rot, yaw = np.array(rotation_errors_deg), np.array(yaw_errors_deg)
+        rotation_errors_deg.append(math.degrees(tm.rotation_angle(Re.T @ Rg)))
+        yaw_errors_deg.append(math.degrees(tm.wrap_angle(tm.yaw_of(Re) - tm.yaw_of(Rg))))
     return {
         "matched_poses": int(len(est)),
         "duration_s": float(est[-1, 0] - est[0, 0]),
-        "ate_rmse_m": float(np.sqrt(np.mean(position_errors ** 2))),
+        "ate_rmse_m": tm.rms(position_errors),
         "position_error_max_m": float(position_errors.max()),
         "position_error_final_m": float(position_errors[-1]),
-        "rotation_rmse_deg": float(np.sqrt(np.mean(rot ** 2))),
-        "yaw_rmse_deg": float(np.sqrt(np.mean(yaw ** 2))),
+        "rotation_rmse_deg": tm.rms(np.array(rotation_errors_deg)),
+        "yaw_rmse_deg": tm.rms(np.array(yaw_errors_deg)),
         "path_length_m": float(np.sum(np.linalg.norm(np.diff(gt[:, 1:4], axis=0), axis=1))),
         "finite": bool(np.all(np.isfinite(est))),
     }
@@ -217,12 +216,10 @@ def ply_resolution(path):
 
 def read_kitti_poses(path):
     """N x 4 x 4 from a KITTI 12-numbers-per-line pose file."""
-    rows = np.loadtxt(path, ndmin=2)
-    if rows.shape[1] != 12:
-        raise ValueError("%s: expected 12 numbers per line, got %d" % (path, rows.shape[1]))
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :4] = rows.reshape(-1, 3, 4)
-    return poses
+    poses = trajectory_metrics.read_trajectory(path)
+    if poses.stamps is not None:
+        raise ValueError("%s: expected 12 numbers per line (KITTI poses), got a TUM file" % path)
+    return poses.matrices()
 
 
 def read_calib_rigid(path):
