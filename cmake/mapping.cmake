@@ -1,7 +1,5 @@
-# Component: mapping — lidar-to-camera projection (Eigen only), SemanticOcTree (octomap),
-# semantic_octomap_node, project_cloud, semantic_map_offline.
-ism_add_core_library(${PROJECT_NAME}_projection
-  SOURCES src/perception/projection.cpp)
+# Component: mapping — SemanticOcTree (octomap), the mapping session, semantic_octomap_node,
+# semantic_map_offline; project_cloud (the projection library is perception's).
 
 ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES

@@ -1,5 +1,8 @@
-# Component: perception — Segmenter (OpenCV dnn) and model cards; segmentation_node,
-# segment_image. projection.* in the same folder is built by the mapping fragment.
+# Component: perception — lidar-to-camera projection (Eigen only), Segmenter (OpenCV dnn) and
+# model cards; segmentation_node, segment_image.
+ism_add_core_library(${PROJECT_NAME}_projection
+  SOURCES src/perception/projection.cpp)
+
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp
   LINK ${OpenCV_LIBS} yaml-cpp
