@@ -94,6 +94,106 @@ class FlatKeySet {
   std::size_t size_ = 0;
 };
 
+// A voxel the scan ends in: the class evidence of all its points and one of them as ray end.
+struct EndpointVoxel {
+  octomap::point3d ray_end;
+  SemanticOcTreeNode evidence;
+};
+using EndpointVoxels =
+    std::unordered_map<octomap::OcTreeKey, EndpointVoxel, octomap::OcTreeKey::KeyHash>;
+
+// Stage 1 of insertLabeledScan: the scan's endpoints grouped per voxel (the class evidence of all
+// points in it and one ray end); points beyond max_range_m only end a free ray there
+// (`clipped_ends`, one per voxel). Returns the points that added class evidence.
+std::size_t groupEndpoints(const SemanticOcTree& tree, const LabeledScan& scan,
+                           const octomap::point3d& origin, double max_range_m,
+                           EndpointVoxels* endpoints, std::vector<octomap::point3d>* clipped_ends) {
+  const std::size_t num_points = static_cast<std::size_t>(scan.points_map.cols());
+  const bool labeled = !scan.label_ids.empty();
+  endpoints->reserve(num_points / 2 + 1);
+  octomap::KeySet clipped_ray_ends;
+  std::size_t labeled_points = 0;
+  const bool limit_range = max_range_m > 0.0;
+  for (std::size_t i = 0; i < num_points; ++i) {
+    const octomap::point3d point(scan.points_map(0, i), scan.points_map(1, i),
+                                 scan.points_map(2, i));
+    if (!std::isfinite(point.x()) || !std::isfinite(point.y()) || !std::isfinite(point.z())) {
+      continue;
+    }
+    const double range = (point - origin).norm();
+    if (limit_range && range > max_range_m) {
+      const octomap::point3d end = origin + (point - origin) * (max_range_m / range);
+      octomap::OcTreeKey key;
+      if (tree.coordToKeyChecked(end, key) && clipped_ray_ends.insert(key).second) {
+        clipped_ends->push_back(end);
+      }
+      continue;
+    }
+    octomap::OcTreeKey key;
+    if (!tree.coordToKeyChecked(point, key)) continue;
+    auto [it, inserted] = endpoints->try_emplace(key);
+    if (inserted) it->second.ray_end = point;
+    if (labeled && scan.label_ids[i] != scan.unknown_label_id) {
+      const ClassIndex index = tree.classSet().indexOf(scan.label_ids[i]);
+      if (index != kNoClass) {
+        it->second.evidence.addClassEvidence(index, 1);
+        ++labeled_points;
+      }
+    }
+  }
+  return labeled_points;
+}
+
+// Stage 2: where the free rays end: one per endpoint voxel and per clipped ray end. A ray going
+// down stops short of its hit by truncation_m (grazing rays would otherwise carve the road).
+std::vector<octomap::point3d> rayEnds(const EndpointVoxels& endpoints,
+                                      const std::vector<octomap::point3d>& clipped_ends,
+                                      const octomap::point3d& origin, double truncation_m) {
+  std::vector<octomap::point3d> ray_ends;
+  ray_ends.reserve(endpoints.size() + clipped_ends.size());
+  for (const auto& [key, voxel] : endpoints) {
+    const octomap::point3d ray = voxel.ray_end - origin;
+    if (truncation_m > 0.0 && ray.z() < 0.0) {
+      // Only rays that go down can graze the road. For a hit on flat ground the cut is
+      // truncation_m / (sensor height) of the ray (12 % for 1 voxel of 0.2 m at 1.73 m); the cap
+      // keeps a nearly level ray to a wall or a car from losing more than a quarter.
+      const double length = ray.norm();
+      const double sin_elevation = -ray.z() / length;
+      const double cut = std::min(kMaxGrazingCutFraction * length, truncation_m / sin_elevation);
+      ray_ends.push_back(origin + ray * static_cast<float>(1.0 - cut / length));
+    } else {
+      ray_ends.push_back(voxel.ray_end);
+    }
+  }
+  ray_ends.insert(ray_ends.end(), clipped_ends.begin(), clipped_ends.end());
+  return ray_ends;
+}
+
+// Stage 3: the keys the rays cross (free space). Rays near the sensor cross the same voxels over
+// and over, so the keys go through a flat open-addressing set (far cheaper than octomap's
+// node-allocating KeySet); one set per thread, merged after.
+FlatKeySet castFreeRays(const SemanticOcTree& tree, const octomap::point3d& origin,
+                        const std::vector<octomap::point3d>& ray_ends, int threads) {
+  std::vector<FlatKeySet> free_keys(static_cast<std::size_t>(threads));
+  auto cast_range = [&](int t) {
+    octomap::KeyRay ray;
+    FlatKeySet& keys = free_keys[static_cast<std::size_t>(t)];
+    keys.reserve(ray_ends.size() * 4 / static_cast<std::size_t>(threads));
+    for (std::size_t i = static_cast<std::size_t>(t); i < ray_ends.size();
+         i += static_cast<std::size_t>(threads)) {
+      if (tree.computeRayKeys(origin, ray_ends[i], ray)) {
+        for (const octomap::OcTreeKey& key : ray) keys.insert(packKey(key));
+      }
+    }
+  };
+  std::vector<std::thread> workers;
+  for (int t = 1; t < threads; ++t) workers.emplace_back(cast_range, t);
+  cast_range(0);
+  for (std::thread& worker : workers) worker.join();
+  for (std::size_t t = 1; t < free_keys.size(); ++t) free_keys[0].insertAll(free_keys[t]);
+  return std::move(free_keys[0]);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -241,109 +341,40 @@ std::size_t SemanticOcTree::insertLabeledScan(const LabeledScan& scan, double ma
     throw std::out_of_range(what.str());
   }
 
-  // 1. Endpoints grouped per voxel: the class evidence of all points in it and one ray end.
-  struct EndpointVoxel {
-    octomap::point3d ray_end;
-    SemanticOcTreeNode evidence;
-  };
-  std::unordered_map<octomap::OcTreeKey, EndpointVoxel, octomap::OcTreeKey::KeyHash> endpoints;
-  endpoints.reserve(num_points / 2 + 1);
-  octomap::KeySet clipped_ray_ends;  // voxels where rays longer than max range stop
+  EndpointVoxels endpoints;
   std::vector<octomap::point3d> clipped_ends;
-  std::size_t labeled_points = 0;
-  const bool limit_range = max_range_m > 0.0;
-  for (std::size_t i = 0; i < num_points; ++i) {
-    const octomap::point3d point(scan.points_map(0, i), scan.points_map(1, i),
-                                 scan.points_map(2, i));
-    if (!std::isfinite(point.x()) || !std::isfinite(point.y()) || !std::isfinite(point.z())) {
-      continue;
-    }
-    const double range = (point - origin).norm();
-    if (limit_range && range > max_range_m) {
-      const octomap::point3d end = origin + (point - origin) * (max_range_m / range);
-      octomap::OcTreeKey key;
-      if (coordToKeyChecked(end, key) && clipped_ray_ends.insert(key).second) {
-        clipped_ends.push_back(end);
-      }
-      continue;
-    }
-    octomap::OcTreeKey key;
-    if (!coordToKeyChecked(point, key)) continue;
-    auto [it, inserted] = endpoints.try_emplace(key);
-    if (inserted) it->second.ray_end = point;
-    if (labeled && scan.label_ids[i] != scan.unknown_label_id) {
-      const ClassIndex index = classes_.indexOf(scan.label_ids[i]);
-      if (index != kNoClass) {
-        it->second.evidence.addClassEvidence(index, 1);
-        ++labeled_points;
-      }
-    }
-  }
-
-  // 2. Free voxels: one ray per endpoint voxel and per clipped ray end. Rays near the sensor
-  //    cross the same voxels over and over, so the keys go through a flat open-addressing set
-  //    (far cheaper than octomap's node-allocating KeySet); one set per thread, merged after.
-  std::vector<octomap::point3d> ray_ends;
-  ray_ends.reserve(endpoints.size() + clipped_ends.size());
-  const double truncation_m = grazing_truncation_voxels_ * resolution;
-  for (const auto& [key, voxel] : endpoints) {
-    const octomap::point3d ray = voxel.ray_end - origin;
-    if (truncation_m > 0.0 && ray.z() < 0.0) {
-      // Only rays that go down can graze the road. For a hit on flat ground the cut is
-      // truncation_m / (sensor height) of the ray (12 % for 1 voxel of 0.2 m at 1.73 m); the cap
-      // keeps a nearly level ray to a wall or a car from losing more than a quarter.
-      const double length = ray.norm();
-      const double sin_elevation = -ray.z() / length;
-      const double cut = std::min(kMaxGrazingCutFraction * length, truncation_m / sin_elevation);
-      ray_ends.push_back(origin + ray * static_cast<float>(1.0 - cut / length));
-    } else {
-      ray_ends.push_back(voxel.ray_end);
-    }
-  }
-  ray_ends.insert(ray_ends.end(), clipped_ends.begin(), clipped_ends.end());
+  const std::size_t labeled_points =
+      groupEndpoints(*this, scan, origin, max_range_m, &endpoints, &clipped_ends);
+  const std::vector<octomap::point3d> ray_ends =
+      rayEnds(endpoints, clipped_ends, origin, grazing_truncation_voxels_ * resolution);
   const int threads = ray_ends.size() < 4000 ? 1 : std::max(1, ray_casting_threads_);
-  std::vector<FlatKeySet> free_keys(static_cast<std::size_t>(threads));
-  auto cast_range = [&](int t) {
-    octomap::KeyRay ray;
-    FlatKeySet& keys = free_keys[static_cast<std::size_t>(t)];
-    keys.reserve(ray_ends.size() * 4 / static_cast<std::size_t>(threads));
-    for (std::size_t i = static_cast<std::size_t>(t); i < ray_ends.size();
-         i += static_cast<std::size_t>(threads)) {
-      if (computeRayKeys(origin, ray_ends[i], ray)) {
-        for (const octomap::OcTreeKey& key : ray) keys.insert(packKey(key));
-      }
-    }
-  };
-  {
-    std::vector<std::thread> workers;
-    for (int t = 1; t < threads; ++t) workers.emplace_back(cast_range, t);
-    cast_range(0);
-    for (std::thread& worker : workers) worker.join();
-  }
-  for (std::size_t t = 1; t < free_keys.size(); ++t) free_keys[0].insertAll(free_keys[t]);
-
-  // 3. Each voxel updated once, in one pass over the tree: the updates sorted in Morton order
-  //    are grouped by child at every level, so every touched inner node is visited once (its
-  //    occupancy and pruning refreshed once) instead of once per voxel below it.
+  const FlatKeySet free_keys = castFreeRays(*this, origin, ray_ends, threads);
+  // Stage 4: every touched voxel once, a hit (with its class evidence) or a miss.
   std::vector<VoxelUpdate> updates;
-  updates.reserve(free_keys[0].size() + endpoints.size());
-  free_keys[0].forEach([&](std::uint64_t packed) {
+  updates.reserve(free_keys.size() + endpoints.size());
+  free_keys.forEach([&](std::uint64_t packed) {
     const octomap::OcTreeKey key = unpackKey(packed);
     if (!endpoints.count(key)) updates.push_back({mortonCode(key), nullptr});
   });
   for (const auto& [key, voxel] : endpoints) updates.push_back({mortonCode(key), &voxel.evidence});
-  std::sort(updates.begin(), updates.end(),
-            [](const VoxelUpdate& a, const VoxelUpdate& b) { return a.morton < b.morton; });
-  if (!updates.empty()) {
-    bool created_root = false;
-    if (root == nullptr) {
-      root = new SemanticOcTreeNode();
-      ++tree_size;
-      created_root = true;
-    }
-    updateBatchRecurs(root, created_root, 0, updates.data(), updates.data() + updates.size());
-  }
+  applyVoxelUpdates(&updates);
   return labeled_points;
+}
+
+void SemanticOcTree::applyVoxelUpdates(std::vector<VoxelUpdate>* updates) {
+  // One pass over the tree: the updates sorted in Morton order are grouped by child at every
+  // level, so every touched inner node is visited once (its occupancy and pruning refreshed
+  // once) instead of once per voxel below it.
+  std::sort(updates->begin(), updates->end(),
+            [](const VoxelUpdate& a, const VoxelUpdate& b) { return a.morton < b.morton; });
+  if (updates->empty()) return;
+  bool created_root = false;
+  if (root == nullptr) {
+    root = new SemanticOcTreeNode();
+    ++tree_size;
+    created_root = true;
+  }
+  updateBatchRecurs(root, created_root, 0, updates->data(), updates->data() + updates->size());
 }
 
 void SemanticOcTree::updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created,

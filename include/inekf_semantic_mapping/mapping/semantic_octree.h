@@ -158,6 +158,8 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
     std::uint64_t morton;
     const SemanticOcTreeNode* evidence;
   };
+  // The last stage of insertLabeledScan (the earlier ones are free functions in the .cpp).
+  void applyVoxelUpdates(std::vector<VoxelUpdate>* updates);
   void updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
                          const VoxelUpdate* begin, const VoxelUpdate* end);
   SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
