@@ -3,6 +3,8 @@
 ism_add_core_library(${PROJECT_NAME}_synthetic
   SOURCES
     src/synthetic/world.cpp
+    src/synthetic/world_town.cpp
+    src/synthetic/world_io.cpp
     src/synthetic/route.cpp
     src/synthetic/sensors.cpp
     src/synthetic/drive_generator.cpp
