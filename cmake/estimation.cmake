@@ -27,7 +27,7 @@ ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_localization_session SOURCES test/unit/test_localization_session.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
-ism_add_gtest(test_inekf_real_drives SOURCES test/unit/test_inekf_real_drives.cpp
+ism_add_gtest(test_inekf_real_drives SOURCES test/accuracy/test_inekf_real_drives.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
 
 if(benchmark_FOUND)

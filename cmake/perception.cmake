@@ -14,7 +14,7 @@ ism_add_gtest(test_segmenter
 
 # The default U-Net's mIoU target on held-out synthetic drives it renders itself.
 ism_add_gtest(test_unet_synthetic_accuracy
-  SOURCES test/unit/test_unet_synthetic_accuracy.cpp
+  SOURCES test/accuracy/test_unet_synthetic_accuracy.cpp
   LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_synthetic)
 
 ism_add_tool(segment_image
