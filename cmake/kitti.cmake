@@ -15,16 +15,10 @@ ism_add_gtest(test_kitti_gps_degradation
   SOURCES test/unit/test_kitti_gps_degradation.cpp LINK ${PROJECT_NAME}_kitti)
 
 # KITTI -> ROS message conversions shared by kitti_player and kitti2bag (ROS-facing, not core).
-add_library(${PROJECT_NAME}_kitti_ros src/ros/kitti_conversions.cpp)
-# Include paths PRIVATE (catkin_lint: no exported external paths); users add ISM_ROS_INCLUDE_DIRS.
-target_include_directories(${PROJECT_NAME}_kitti_ros PRIVATE ${ISM_ROS_INCLUDE_DIRS})
-target_include_directories(${PROJECT_NAME}_kitti_ros SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
-target_link_libraries(${PROJECT_NAME}_kitti_ros PUBLIC
-  ${PROJECT_NAME}_kitti ${catkin_LIBRARIES} opencv_core opencv_imgcodecs)
-add_dependencies(${PROJECT_NAME}_kitti_ros ${catkin_EXPORTED_TARGETS})
-install(TARGETS ${PROJECT_NAME}_kitti_ros
-  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
-  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+ism_add_ros_library(${PROJECT_NAME}_kitti_ros
+  SOURCES src/ros/kitti_conversions.cpp
+  LINK ${PROJECT_NAME}_kitti opencv_core opencv_imgcodecs
+  SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
 ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp
   LINK ${PROJECT_NAME}_kitti_ros)

@@ -3,15 +3,9 @@
 
 # Message <-> session conversions of inekf_node (ROS-facing, not core): one library for the node
 # and its test.
-add_library(${PROJECT_NAME}_localization_ros src/ros/localization_conversions.cpp)
-target_include_directories(${PROJECT_NAME}_localization_ros PUBLIC ${ISM_ROS_INCLUDE_DIRS})
-target_link_libraries(${PROJECT_NAME}_localization_ros PUBLIC
-  ${PROJECT_NAME}_localization_session ${catkin_LIBRARIES})
-add_dependencies(${PROJECT_NAME}_localization_ros
-  ${PROJECT_NAME}_generate_messages_cpp ${catkin_EXPORTED_TARGETS})
-install(TARGETS ${PROJECT_NAME}_localization_ros
-  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
-  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+ism_add_ros_library(${PROJECT_NAME}_localization_ros
+  SOURCES src/ros/localization_conversions.cpp
+  LINK ${PROJECT_NAME}_localization_session)
 
 ism_add_ros_executable(inekf_node
   SOURCES src/nodes/inekf_node.cpp
@@ -19,6 +13,9 @@ ism_add_ros_executable(inekf_node
 ism_add_gtest(test_localization_conversions
   SOURCES test/unit/test_localization_conversions.cpp
   LINK ${PROJECT_NAME}_localization_ros)
+if(TARGET test_localization_conversions)
+  target_include_directories(test_localization_conversions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+endif()
 if(CATKIN_ENABLE_TESTING)
   # A real OXTS drive from ../shared played into inekf_node (skips without ../shared).
   add_rostest(test/ros/inekf_node.test

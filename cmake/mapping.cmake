@@ -54,15 +54,9 @@ if(benchmark_FOUND)
 endif()
 
 # Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
-add_library(${PROJECT_NAME}_mapping_ros src/ros/mapping_conversions.cpp)
-target_include_directories(${PROJECT_NAME}_mapping_ros PRIVATE ${ISM_ROS_INCLUDE_DIRS})
-target_link_libraries(${PROJECT_NAME}_mapping_ros PUBLIC
-  ${PROJECT_NAME}_mapping ${catkin_LIBRARIES} yaml-cpp)
-add_dependencies(${PROJECT_NAME}_mapping_ros
-  ${PROJECT_NAME}_generate_messages_cpp ${catkin_EXPORTED_TARGETS})
-install(TARGETS ${PROJECT_NAME}_mapping_ros
-  ARCHIVE DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION}
-  LIBRARY DESTINATION ${CATKIN_PACKAGE_LIB_DESTINATION})
+ism_add_ros_library(${PROJECT_NAME}_mapping_ros
+  SOURCES src/ros/mapping_conversions.cpp
+  LINK ${PROJECT_NAME}_mapping yaml-cpp)
 
 ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp
