@@ -4,6 +4,7 @@ ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cp
 ism_add_core_library(${PROJECT_NAME}_estimation
   SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
           src/estimation/localizer.cpp src/estimation/lazy_start.cpp
+          src/estimation/smoother.cpp
   LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)
 
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
@@ -21,6 +22,8 @@ ism_add_core_library(${PROJECT_NAME}_estimation_oxts
   LINK ${PROJECT_NAME}_localization_session)
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
+ism_add_gtest(test_smoother SOURCES test/unit/test_smoother.cpp
+  LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <stdexcept>
+#include <string>
 
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/estimation/smoother.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
@@ -23,6 +26,30 @@ double wrapDeg(double deg) {
 
 // Heading of the body x axis in the map frame.
 double headingDeg(const Eigen::Matrix3d& r) { return std::atan2(r(1, 0), r(0, 0)) / kDegToRad; }
+
+// The IMU step the filter just made from `previous` (the last reported state) to the session's
+// state, for the smoother: the prediction before any fix and the step's transition. A step the
+// filter did not make with this one sample (a dropped or duplicate sample, a bridged gap) is
+// not reproduced exactly: has_step stays false and the smoother restarts there.
+ForwardEpoch recordStep(const NavState& previous, const ImuSample& sample,
+                        const LocalizationSession& session, double gravity_mps2) {
+  ForwardEpoch epoch;
+  const NavState& predicted = session.state();
+  const double dt = predicted.stamp_s - previous.stamp_s;
+  if (!(dt > 0.0)) return epoch;
+  const NavState replay =
+      integrateImu(previous, sample.angular_velocity, sample.specific_force, gravity_mps2, dt);
+  if ((replay.position_map - predicted.position_map).norm() > 1e-6 ||
+      (replay.velocity_map - predicted.velocity_map).norm() > 1e-6) {
+    return epoch;
+  }
+  epoch.has_step = true;
+  epoch.predicted = predicted;
+  epoch.predicted_covariance = session.errorCovariance();
+  epoch.transition = leftErrorTransition(sample.angular_velocity - previous.gyro_bias,
+                                         sample.specific_force - previous.accel_bias, dt);
+  return epoch;
+}
 
 }  // namespace
 
@@ -45,8 +72,14 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
   LocalizationSessionConfig config = options.config;
   // The truth's map frame, so that the estimate compares with it directly.
   config.origin = GeodeticOrigin{origin.lat, origin.lon, origin.alt};
+  if (options.smooth && config.localizer.filter_type != FilterType::kLeftInvariant) {
+    throw std::invalid_argument(
+        "smoothing runs on the left-invariant filter's error (filter: left), not on " +
+        toString(config.localizer.filter_type));
+  }
   LocalizationSession session(config);
   const kitti::MercatorProjection& projection = *session.projection();
+  std::vector<ForwardEpoch> epochs;  // one per reported frame from the start on (smoothing)
   kitti::GpsDegrader degrader(options.gps);
   OxtsRunResult run;
   run.states.reserve(frames.size());
@@ -69,9 +102,18 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
     imu.sample.interpolated = record.posmode < 0 || (k > 0 && frames[k - 1].record.posmode < 0);
     imu.orientation = kitti::rotationFromRollPitchYaw(
         record.roll, record.pitch, record.yaw + options.init_yaw_error_deg * kDegToRad);
+    const bool started_before = session.started();
+    const std::int64_t resets_before = session.statistics().resets;
     {
       ScopedTimer timer("oxts_run.propagate");
       session.addImu(imu);
+    }
+    ForwardEpoch epoch;
+    if (options.smooth && started_before && session.started() && !epochs.empty() &&
+        session.statistics().resets == resets_before) {
+      epoch = recordStep(epochs.back().filtered, imu.sample, session,
+                         config.localizer.imu_noise.gravity_mps2);
+      if (!epoch.has_step) ++run.smoother_breaks;
     }
     GpsVelocityEvent velocity;
     velocity.stamp_s = stamp_s;
@@ -92,6 +134,29 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
     }
     run.states.push_back(session.state());
     run.pose_covariances.push_back(session.poseCovariance());
+    if (options.smooth) {
+      epoch.filtered = session.state();
+      epoch.filtered_covariance = session.errorCovariance();
+      epochs.push_back(epoch);
+    }
+  }
+  if (options.smooth && !epochs.empty()) {
+    ScopedTimer timer("oxts_run.smooth");
+    const std::vector<SmoothedEpoch> smoothed = smoothLeftInvariant(epochs);
+    // The pose covariance a filter reports for a state and covariance: one definition.
+    const std::unique_ptr<NavigationFilter> reporter =
+        makeFilter(FilterType::kLeftInvariant, config.localizer.imu_noise);
+    const std::size_t first = static_cast<std::size_t>(run.first_estimated_frame);
+    for (std::size_t i = 0; i < smoothed.size(); ++i) {
+      reporter->initialize(smoothed[i].state, smoothed[i].covariance);
+      run.states[first + i] = smoothed[i].state;
+      run.pose_covariances[first + i] = reporter->poseCovariance();
+    }
+    for (std::size_t k = 0; k < first; ++k) {  // frames before the start repeat it
+      run.states[k] = run.states[first];
+      run.pose_covariances[k] = run.pose_covariances[first];
+    }
+    run.smoothed = true;
   }
   if (run.states.empty()) {  // never started: nothing to report but the (unstarted) defaults
     run.states.assign(frames.size(), session.state());

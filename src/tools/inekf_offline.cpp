@@ -31,7 +31,7 @@ constexpr char kUsage[] =
     "                     [--gps-every N] [--filter left|right|ekf] [--config FILE]\n"
     "                     [--init-yaw-sigma-deg DEG] [--init-yaw-error-deg DEG]\n"
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
-    "                     [--seed S]\n"
+    "                     [--seed S] [--smooth]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
     "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major "
     "3x4);\n"
@@ -42,7 +42,9 @@ constexpr char kUsage[] =
     "  --output-states   CSV: stamp, position, quaternion, velocity, biases, 6x6 pose covariance\n"
     "  --config          YAML as config/inekf.yaml (default: built-in defaults)\n"
     "  --filter          overrides the config's filter\n"
-    "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n";
+    "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n"
+    "  --smooth          after the causal run, a Rauch-Tung-Striebel pass on the left-invariant\n"
+    "                    error (filter left): every --output-* holds the smoothed estimate\n";
 
 // Adds one output to the run's set: written through a temporary file, and only renamed into
 // place with the others once all are written (a reader never sees half a file or half a set).
@@ -71,7 +73,7 @@ int main(int argc, char** argv) {
         ism::tools::withGpsValueFlags({"--oxts", "--output-kitti", "--output-tum", "--output-truth",
                                        "--output-states", "--filter", "--config",
                                        "--init-yaw-sigma-deg", "--init-yaw-error-deg"}),
-        {}, ism::tools::kGpsRepeatableFlags);
+        {"--smooth"}, ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
@@ -94,6 +96,11 @@ int main(int argc, char** argv) {
       options.init_yaw_error_deg =
           cli.getDouble("--init-yaw-error-deg", options.init_yaw_error_deg);
       ism::tools::readGpsDegradationFlags(cli, &options.gps);
+      options.smooth = cli.has("--smooth");
+      if (options.smooth &&
+          options.config.localizer.filter_type != estimation::FilterType::kLeftInvariant) {
+        throw UsageError("--smooth needs the left-invariant filter (--filter left)");
+      }
     } catch (const UsageError&) {
       throw;
     } catch (const std::exception& e) {
@@ -161,14 +168,19 @@ int main(int argc, char** argv) {
     const estimation::TrajectoryErrors errors = estimation::compareWithTruth(run);
     std::cout << ism::TimingRegistry::instance().report();
     std::printf(
-        "inekf_offline: filter %s, %zu frames, imu used %lld dropped %lld, gps offered %d used "
+        "inekf_offline: filter %s%s, %zu frames, imu used %lld dropped %lld, gps offered %d used "
         "%lld rejected %lld, ATE %.3f m, rotation RMSE %.3f deg, yaw RMSE %.3f deg\n",
-        estimation::toString(options.config.localizer.filter_type).c_str(), frames.size(),
+        estimation::toString(options.config.localizer.filter_type).c_str(),
+        run.smoothed ? " + RTS smoother" : "", frames.size(),
         static_cast<long long>(run.statistics.filter.imu_used),
         static_cast<long long>(run.statistics.filter.imu_dropped), run.fixes_offered,
         static_cast<long long>(run.statistics.filter.gps_used),
         static_cast<long long>(run.statistics.filter.gps_rejected), errors.ate_m,
         errors.rotation_rmse_deg, errors.yaw_rmse_deg);
+    if (run.smoother_breaks > 0) {
+      std::printf("inekf_offline: the smoother restarted at %d IMU steps it could not reproduce\n",
+                  run.smoother_breaks);
+    }
     if (run.first_estimated_frame > 0) {
       std::printf("inekf_offline: no fix before frame %d: the filter started there\n",
                   run.first_estimated_frame);

@@ -12,6 +12,7 @@
 #include "inekf_semantic_mapping/estimation/imu_filters.h"
 #include "inekf_semantic_mapping/lie/se23.h"
 #include "inekf_semantic_mapping/lie/so3.h"
+#include "simulated_drive.h"
 
 namespace inekf_semantic_mapping {
 namespace estimation {
@@ -20,7 +21,10 @@ namespace {
 using Vector15d = Eigen::Matrix<double, 15, 1>;
 using lie::ExtendedPose;
 
-constexpr double kGravity = 9.81;
+using test_drive::fixAt;
+using test_drive::kGravity;
+using test_drive::SimulatedDrive;
+using test_drive::simulateDrive;
 const FilterType kAllFilters[] = {FilterType::kLeftInvariant, FilterType::kRightInvariant,
                                   FilterType::kQuaternionEskf};
 
@@ -121,61 +125,6 @@ TEST(ErrorCoordinates, MapsMatchNumericalDifferences) {
   }
 }
 
-// A drive with piecewise-constant body rates (turning and accelerating), integrated
-// independently by RK4 with fine substeps.
-struct SimulatedDrive {
-  std::vector<NavState> truth;  // at each sample stamp
-  std::vector<ImuSample> imu;   // imu[k] holds over (t_{k-1}, t_k]; imu[0] unused
-};
-
-SimulatedDrive simulateDrive(int steps, double dt) {
-  SimulatedDrive drive;
-  NavState s;
-  s.rotation = lie::expSO3(Eigen::Vector3d(0.02, -0.03, 0.7));
-  s.velocity_map = s.rotation * Eigen::Vector3d(5.0, 0.0, 0.0);
-  drive.truth.push_back(s);
-  drive.imu.push_back(ImuSample());
-  const Eigen::Vector3d g(0, 0, -kGravity);
-  for (int k = 1; k <= steps; ++k) {
-    ImuSample sample;
-    sample.stamp_s = k * dt;
-    sample.angular_velocity =
-        Eigen::Vector3d(0.02 * std::sin(0.3 * k), 0.01, 0.25 * std::cos(0.05 * k));
-    sample.specific_force =
-        Eigen::Vector3d(0.6, 0.25 * std::sin(0.1 * k), kGravity + 0.1 * std::cos(0.2 * k));
-    const int substeps = 50;
-    const double h = dt / substeps;
-    Eigen::Matrix3d r = s.rotation;
-    Eigen::Vector3d v = s.velocity_map, p = s.position_map;
-    const Eigen::Matrix3d w = lie::hat(sample.angular_velocity);
-    const Eigen::Vector3d f = sample.specific_force;
-    for (int i = 0; i < substeps; ++i) {
-      // RK4 on (R, v, p) with dR = R w^, dv = R f + g, dp = v.
-      const Eigen::Matrix3d k1r = r * w;
-      const Eigen::Vector3d k1v = r * f + g, k1p = v;
-      const Eigen::Matrix3d r2 = r + 0.5 * h * k1r;
-      const Eigen::Matrix3d k2r = r2 * w;
-      const Eigen::Vector3d k2v = r2 * f + g, k2p = v + 0.5 * h * k1v;
-      const Eigen::Matrix3d r3 = r + 0.5 * h * k2r;
-      const Eigen::Matrix3d k3r = r3 * w;
-      const Eigen::Vector3d k3v = r3 * f + g, k3p = v + 0.5 * h * k2v;
-      const Eigen::Matrix3d r4 = r + h * k3r;
-      const Eigen::Matrix3d k4r = r4 * w;
-      const Eigen::Vector3d k4v = r4 * f + g, k4p = v + h * k3v;
-      r += h / 6 * (k1r + 2 * k2r + 2 * k3r + k4r);
-      v += h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v);
-      p += h / 6 * (k1p + 2 * k2p + 2 * k3p + k4p);
-    }
-    s.rotation = lie::normalizeRotation(r);
-    s.velocity_map = v;
-    s.position_map = p;
-    s.stamp_s = sample.stamp_s;
-    drive.truth.push_back(s);
-    drive.imu.push_back(sample);
-  }
-  return drive;
-}
-
 TEST(Filters, NoiseFreePropagationReproducesTheDrive) {
   const double dt = 0.1;
   const SimulatedDrive drive = simulateDrive(200, dt);  // 20 s, ~100 m, ~1 rad of turn
@@ -218,14 +167,6 @@ TEST(Filters, PoseCovarianceAgreesAcrossFiltersWithoutUpdates) {
   }
   EXPECT_LT((results[1] - results[0]).norm(), 1e-8 * results[0].norm());
   EXPECT_LT((results[2] - results[0]).norm(), 1e-8 * results[0].norm());
-}
-
-PositionFix fixAt(const Eigen::Vector3d& p, double stamp, double sigma) {
-  PositionFix fix;
-  fix.stamp_s = stamp;
-  fix.position_map = p;
-  fix.covariance_map = Eigen::Matrix3d::Identity() * sigma * sigma;
-  return fix;
 }
 
 TEST(Filters, PositionUpdateMovesTowardTheFixAndShrinksTheCovariance) {
@@ -297,66 +238,21 @@ TEST(Filters, NonFiniteInputIsRejected) {
 
 // Average pose NEES (6 dof) over Monte-Carlo runs of a noisy simulated drive with GPS.
 double averagePoseNees(FilterType type, int runs, int steps) {
-  const double dt = 0.1;
-  ImuNoise noise;
-  noise.gyro_noise_density = 2e-3;
-  noise.accel_noise_density = 3e-2;
-  noise.gyro_bias_random_walk = 1e-4;
-  noise.accel_bias_random_walk = 1e-3;
-  const double gps_sigma = 1.0;
-  Eigen::Matrix<double, 15, 1> sigma;
-  sigma << 0.01, 0.01, 0.05, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0, 2e-3, 2e-3, 2e-3, 0.05, 0.05, 0.05;
-  const ErrorCovariance world = sigma.cwiseAbs2().asDiagonal();
-  const SimulatedDrive drive = simulateDrive(steps, dt);
+  const SimulatedDrive drive = simulateDrive(steps, 0.1);
   std::mt19937 rng(42);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  auto gaussian3 = [&]() { return Eigen::Vector3d(normal(rng), normal(rng), normal(rng)); };
   double nees_sum = 0.0;
   int count = 0;
   for (int run = 0; run < runs; ++run) {
-    // The estimate starts at truth minus a draw from the initial covariance (world frame).
-    Eigen::Matrix<double, 15, 1> e;
-    for (int i = 0; i < 15; ++i) e(i) = sigma(i) * normal(rng);
-    NavState truth = drive.truth[0];
-    truth.gyro_bias = e.segment<3>(9);
-    truth.accel_bias = e.segment<3>(12);
-    NavState start = drive.truth[0];
-    start.rotation = lie::expSO3(-e.head<3>()) * truth.rotation;
-    start.velocity_map = truth.velocity_map - e.segment<3>(3);
-    start.position_map = truth.position_map - e.segment<3>(6);
-    auto filter = makeFilter(type, noise);
-    filter->initialize(start, filter->fromWorldCovariance(start, world));
-    for (int k = 1; k <= steps; ++k) {
-      // The true state follows the noise-free inputs; the filter sees them biased and noisy.
-      ImuSample measured = drive.imu[k];
-      NavState true_next = integrateImu(truth, measured.angular_velocity + truth.gyro_bias,
-                                        measured.specific_force + truth.accel_bias, kGravity, dt);
-      // integrateImu subtracts truth's bias: feed it measured = true + bias, it recovers truth.
-      true_next.rotation = drive.truth[k].rotation;  // exact truth pose of the drive
-      true_next.velocity_map = drive.truth[k].velocity_map;
-      true_next.position_map = drive.truth[k].position_map;
-      measured.angular_velocity +=
-          truth.gyro_bias + noise.gyro_noise_density / std::sqrt(dt) * gaussian3();
-      measured.specific_force +=
-          truth.accel_bias + noise.accel_noise_density / std::sqrt(dt) * gaussian3();
-      true_next.gyro_bias =
-          truth.gyro_bias + noise.gyro_bias_random_walk * std::sqrt(dt) * gaussian3();
-      true_next.accel_bias =
-          truth.accel_bias + noise.accel_bias_random_walk * std::sqrt(dt) * gaussian3();
-      truth = true_next;
-      filter->propagate(measured, dt);
-      if (k % 10 == 0) {
-        filter->correctPosition(
-            fixAt(truth.position_map + gps_sigma * gaussian3(), k * dt, gps_sigma), 1e9);
-      }
-      if (k >= 10) {
-        Eigen::Matrix<double, 6, 1> pose_error;
-        pose_error.head<3>() = truth.position_map - filter->state().position_map;
-        pose_error.tail<3>() = lie::logSO3(filter->state().rotation.transpose() * truth.rotation);
-        nees_sum += pose_error.dot(filter->poseCovariance().ldlt().solve(pose_error));
-        ++count;
-      }
-    }
+    test_drive::simulateNoisyRun(
+        type, drive, test_drive::RunNoise(), &rng, [&](const test_drive::RunStep& step) {
+          if (step.k < 10) return;
+          const NavState& estimate = step.filter->state();
+          Eigen::Matrix<double, 6, 1> pose_error;
+          pose_error.head<3>() = step.truth.position_map - estimate.position_map;
+          pose_error.tail<3>() = lie::logSO3(estimate.rotation.transpose() * step.truth.rotation);
+          nees_sum += pose_error.dot(step.filter->poseCovariance().ldlt().solve(pose_error));
+          ++count;
+        });
   }
   return nees_sum / count;
 }

@@ -116,6 +116,8 @@ class LocalizationSession {
   bool started() const { return localizer_.initialized(); }
   const NavState& state() const { return localizer_.state(); }
   PoseCovariance poseCovariance() const { return localizer_.filter().poseCovariance(); }
+  // The filter's full 15x15 covariance in its own error coordinates (smoothing records it).
+  ErrorCovariance errorCovariance() const { return localizer_.filter().covariance(); }
   // The map frame's origin; nullopt before the first usable fix (without a configured origin).
   const std::optional<kitti::MercatorProjection>& projection() const { return projection_; }
   Statistics statistics() const;

@@ -25,6 +25,9 @@ struct OxtsRunOptions {
   LocalizationSessionConfig config;  // its origin is replaced by frame 0's
   kitti::GpsDegradationOptions gps;
   double init_yaw_error_deg = 0.0;  // added to frame 0's yaw (tests convergence)
+  // After the causal run, a Rauch-Tung-Striebel pass over it (estimation/smoother.h): states and
+  // pose covariances become the smoothed ones. Needs the left-invariant filter.
+  bool smooth = false;
 };
 
 struct OxtsRunResult {
@@ -36,13 +39,15 @@ struct OxtsRunResult {
   // The frame the filter started at (its first fix); earlier frames repeat the start's state
   // and are left out of compareWithTruth. states.size() when it never started.
   int first_estimated_frame = 0;
+  bool smoothed = false;    // the states are the smoother's
+  int smoother_breaks = 0;  // IMU steps the smoother could not reproduce (segments restarted)
 };
 
 // The fix event a receiver reporting `fix` at `stamp_s` gives the session (diagonal ENU
 // covariance from its horizontal and vertical sigmas): what kitti_player/kitti2bag publish.
 GeodeticFixEvent fixEventFromDegraded(const kitti::GeodeticFix& fix, double stamp_s);
 
-// Throws std::invalid_argument on an empty sequence.
+// Throws std::invalid_argument on an empty sequence, or smoothing with another filter than left.
 OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options);
 
