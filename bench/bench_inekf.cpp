@@ -89,6 +89,22 @@ void BM_WholeDriveThroughLocalizer(benchmark::State& state) {
 }
 BENCHMARK(BM_WholeDriveThroughLocalizer)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
+// The same run with the Rauch-Tung-Striebel pass (inekf_offline --smooth): filter + smoother.
+void BM_WholeDriveFilteredAndSmoothed(benchmark::State& state) {
+  static const std::vector<kitti::OxtsFrame> frames = benchmarkDrive();
+  estimation::OxtsRunOptions options;
+  options.gps.every_n_frames = 10;
+  options.gps.sigma_horizontal_m = 1.5;
+  options.gps.sigma_vertical_m = 3.0;
+  options.gps.seed = 1;
+  options.smooth = true;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(estimation::runLocalizerOnOxts(frames, options));
+  }
+  state.SetLabel("left + RTS, " + std::to_string(frames.size()) + " frames");
+}
+BENCHMARK(BM_WholeDriveFilteredAndSmoothed)->Unit(benchmark::kMillisecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();
