@@ -76,6 +76,7 @@ ism_add_ros_executable(semantic_octomap_node
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_grids.test DEPENDENCIES semantic_octomap_node)
 endif()
 
 # Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).
