@@ -145,6 +145,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     } else {
       session->insertScan(points, T_w_velo);
     }
+    if (sequence.on_scan_inserted) sequence.on_scan_inserted(T_w_velo);
     total_points += velodyne.size();
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scan_paths.size() << " ("
@@ -214,6 +215,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
     } else {
       session->insertScan(buffer.topRows<3>(), T_map_velo);
     }
+    if (drive.on_scan_inserted) drive.on_scan_inserted(T_map_velo);
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
                 << velodyne.size() << " points, " << evidence << "), map " << session->tree().size()
