@@ -23,24 +23,25 @@ void require(bool ok, const std::string& key, const std::string& what) {
   if (!ok) throw std::invalid_argument("grid." + key + " " + what);
 }
 
-// The ground raster is this many cells coarser than the grid: the nearest path sample changes
-// slowly, and a fine raster would cost a BFS over millions of cells per display.
+// The ground raster is this many cells coarser than the grid: the ground changes slowly, and a
+// fine raster would cost a BFS over millions of cells per display.
 constexpr int kGroundCellFactor = 8;
+// A coarse cell's drivable voxels define its ground only when they cover this many of its 64
+// columns: a few mislabelled voxels (a car roof called road) do not move the ground.
+constexpr int kMinDrivableColumns = 3;
 
-// Ground height per coarse cell: the height of the nearest sample's cell (multi-source BFS,
-// 8-connected, so "nearest" in the Chebyshev sense), samples in one cell averaged. Samples outside
-// the grid seed the border cell nearest to them.
-std::vector<float> groundRaster(int width, int height, double origin_x, double origin_y,
-                                double resolution, const std::vector<Eigen::Vector3d>& samples,
-                                double ground_z, int* raster_width) {
-  const int gw = (width + kGroundCellFactor - 1) / kGroundCellFactor;
-  const int gh = (height + kGroundCellFactor - 1) / kGroundCellFactor;
-  *raster_width = gw;
+// Ground height per coarse cell. Seeds: the lowest drivable voxel of cells with enough of them
+// (the road itself, also away from the path and in a loaded map), else the mean of the path
+// samples in the cell (samples outside the grid seed the border cell nearest to them). Every other
+// cell takes the height of its nearest seed (multi-source BFS, 8-connected: nearest in the
+// Chebyshev sense); without any seed, the plane ground_z.
+std::vector<float> groundRaster(const std::vector<float>& drivable_min_z,
+                                const std::vector<int>& drivable_columns, int gw, int gh,
+                                double origin_x, double origin_y, double step,
+                                const std::vector<Eigen::Vector3d>& samples, double ground_z) {
   const std::size_t n = static_cast<std::size_t>(gw) * gh;
-  if (samples.empty()) return std::vector<float>(n, static_cast<float>(ground_z));
   std::vector<double> sum(n, 0.0);
   std::vector<int> count(n, 0);
-  const double step = resolution * kGroundCellFactor;
   for (const Eigen::Vector3d& p : samples) {
     const int gx = std::clamp(static_cast<int>(std::floor((p.x() - origin_x) / step)), 0, gw - 1);
     const int gy = std::clamp(static_cast<int>(std::floor((p.y() - origin_y) / step)), 0, gh - 1);
@@ -50,10 +51,16 @@ std::vector<float> groundRaster(int width, int height, double origin_x, double o
   std::vector<float> ground(n, std::numeric_limits<float>::quiet_NaN());
   std::deque<std::size_t> queue;
   for (std::size_t i = 0; i < n; ++i) {
-    if (count[i] == 0) continue;
-    ground[i] = static_cast<float>(sum[i] / count[i]);
+    if (drivable_columns[i] >= kMinDrivableColumns) {
+      ground[i] = drivable_min_z[i];
+    } else if (count[i] > 0) {
+      ground[i] = static_cast<float>(sum[i] / count[i]);
+    } else {
+      continue;
+    }
     queue.push_back(i);
   }
+  if (queue.empty()) return std::vector<float>(n, static_cast<float>(ground_z));
   while (!queue.empty()) {
     const std::size_t i = queue.front();
     queue.pop_front();
@@ -144,7 +151,17 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   grids.occupancy.resolution = grids.drivable.resolution = resolution;
   if (tree.getRoot() == nullptr) return grids;
 
-  // Bounds in key space over every leaf (free ones too: the grid covers the known space).
+  // One walk over the tree (the walk is what costs): each leaf's footprint, height, occupancy
+  // and class, and the bounds in key space over every leaf (free ones too: the grid covers the
+  // known space).
+  struct Leaf {
+    std::uint16_t kx, ky;  // corner key (lowest x and y)
+    std::uint16_t span;    // cells per side (pruned leaves: more than one)
+    bool occupied;
+    ClassIndex cls;  // kNoClass for free leaves
+    float z_low, z_high;
+  };
+  std::vector<Leaf> leaves;
   const unsigned int max_depth = tree.getTreeDepth();
   unsigned int kx_min = std::numeric_limits<unsigned int>::max(), ky_min = kx_min;
   unsigned int kx_max = 0, ky_max = 0;
@@ -155,8 +172,15 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
     ky_min = std::min<unsigned int>(ky_min, corner[1]);
     kx_max = std::max<unsigned int>(kx_max, corner[0] + span - 1);
     ky_max = std::max<unsigned int>(ky_max, corner[1] + span - 1);
+    const bool occupied = tree.isNodeOccupied(*it);
+    const double half = it.getSize() / 2;
+    // A root leaf (span 65536) does not fit: such a map is one uniform block, nothing to show.
+    if (span > 0x8000) continue;
+    leaves.push_back({corner[0], corner[1], static_cast<std::uint16_t>(span), occupied,
+                      occupied ? it->mostLikelyClass() : kNoClass,
+                      static_cast<float>(it.getZ() - half), static_cast<float>(it.getZ() + half)});
   }
-  if (kx_max < kx_min) return grids;  // no leaves
+  if (leaves.empty()) return grids;
   const int width = static_cast<int>(kx_max - kx_min + 1);
   const int height = static_cast<int>(ky_max - ky_min + 1);
   const double origin_x = tree.keyToCoord(static_cast<octomap::key_type>(kx_min)) - resolution / 2;
@@ -169,25 +193,51 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
     grid->cells.assign(static_cast<std::size_t>(width) * height, kGridUnknown);
   }
 
-  int raster_width = 0;
-  const std::vector<float> ground = groundRaster(width, height, origin_x, origin_y, resolution,
-                                                 ground_samples, config.ground_z, &raster_width);
+  // The drivable voxels of each coarse cell: lowest centre and how many columns they cover.
+  const int raster_width = (width + kGroundCellFactor - 1) / kGroundCellFactor;
+  const int raster_height = (height + kGroundCellFactor - 1) / kGroundCellFactor;
+  const std::size_t raster_cells = static_cast<std::size_t>(raster_width) * raster_height;
+  std::vector<float> drivable_min_z(raster_cells, std::numeric_limits<float>::infinity());
+  std::vector<int> drivable_columns(raster_cells, 0);
+  std::vector<std::uint8_t> counted(static_cast<std::size_t>(width) * height, 0);
+  for (const Leaf& leaf : leaves) {
+    if (leaf.cls == kNoClass || !drivable_class[leaf.cls]) continue;
+    const int ix0 = static_cast<int>(leaf.kx - kx_min);
+    const int iy0 = static_cast<int>(leaf.ky - ky_min);
+    const float z = (leaf.z_low + leaf.z_high) / 2;
+    for (int iy = iy0; iy < iy0 + leaf.span; ++iy) {
+      for (int ix = ix0; ix < ix0 + leaf.span; ++ix) {
+        const std::size_t coarse = static_cast<std::size_t>(iy / kGroundCellFactor) * raster_width +
+                                   ix / kGroundCellFactor;
+        drivable_min_z[coarse] = std::min(drivable_min_z[coarse], z);
+        std::uint8_t& column = counted[static_cast<std::size_t>(iy) * width + ix];
+        if (!column) ++drivable_columns[coarse];
+        column = 1;
+      }
+    }
+  }
+  const std::vector<float> ground =
+      groundRaster(drivable_min_z, drivable_columns, raster_width, raster_height, origin_x,
+                   origin_y, resolution * kGroundCellFactor, ground_samples, config.ground_z);
   // Per cell: top of the highest classed voxel in the ground band, and whether it is drivable.
   std::vector<float> surface_top(grids.drivable.cells.size(),
                                  -std::numeric_limits<float>::infinity());
   std::vector<std::uint8_t> surface_drivable(grids.drivable.cells.size(), 0);
   std::vector<std::int8_t>& occupancy = grids.occupancy.cells;
 
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    const bool occupied = tree.isNodeOccupied(*it);
-    const ClassIndex cls = occupied ? it->mostLikelyClass() : kNoClass;
-    const double half = it.getSize() / 2;
-    const double z_low = it.getZ() - half;
-    const double z_high = it.getZ() + half;
-    const octomap::OcTreeKey corner = it.getIndexKey();
-    const int span = 1 << (max_depth - it.getDepth());
-    const int ix0 = static_cast<int>(corner[0] - kx_min);
-    const int iy0 = static_cast<int>(corner[1] - ky_min);
+  // Leaves above or below every band (most of the free space) touch no cell.
+  const auto [ground_low, ground_high] = std::minmax_element(ground.begin(), ground.end());
+  const double lowest_band = *ground_low + std::min(config.ground_min_z, config.min_z);
+  const double highest_band = *ground_high + config.max_z;
+  for (const Leaf& leaf : leaves) {
+    if (leaf.z_high <= lowest_band || leaf.z_low >= highest_band) continue;
+    const bool occupied = leaf.occupied;
+    const ClassIndex cls = leaf.cls;
+    const double z_low = leaf.z_low;
+    const double z_high = leaf.z_high;
+    const int span = leaf.span;
+    const int ix0 = static_cast<int>(leaf.kx - kx_min);
+    const int iy0 = static_cast<int>(leaf.ky - ky_min);
     for (int iy = iy0; iy < iy0 + span; ++iy) {
       for (int ix = ix0; ix < ix0 + span; ++ix) {
         const std::size_t cell = static_cast<std::size_t>(iy) * width + ix;

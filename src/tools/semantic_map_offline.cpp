@@ -210,8 +210,11 @@ int main(int argc, char** argv) {
       std::cerr << "[semantic_map_offline] wrote " << cli.get("--color-ot") << "\n";
     }
     if (cli.has("--grid")) {
-      const mapping::ProjectedGrids grids =
-          mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
+      mapping::ProjectedGrids grids;
+      {
+        ism::ScopedTimer timer("semantic_map/grids");
+        grids = mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
+      }
       for (const auto& [name, grid] :
            {std::pair<const char*, const mapping::Grid2D*>{"projected", &grids.occupancy},
             {"drivable", &grids.drivable}}) {

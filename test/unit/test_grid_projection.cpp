@@ -1,6 +1,6 @@
 // Grid projection (projected map and drivable map) on small hand-made trees: the edges of the
-// height band, pruned (coarser) leaves, unknown vs free, the ground from path samples, the class
-// that names a cell's surface, the config keys and the map_server files.
+// height band, pruned (coarser) leaves, unknown vs free, the ground from path samples and road
+// voxels, the class that names a cell's surface, the config keys and the map_server files.
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
@@ -132,34 +132,36 @@ TEST_F(GridProjectionTest, PrunedLeavesFillEveryCellAndCountWithTheirFullHeight)
 }
 
 TEST_F(GridProjectionTest, DrivableCellsTakeTheClassOfTheTopmostGroundVoxel) {
+  // Columns 2 m apart: each in its own ground raster cell, none with enough drivable columns to
+  // move the ground from the plane z = 0.
   occupied(0, 0, -0.25, cs::kRoad);  // road: drivable
   free(0, 0, 0.5);
-  occupied(1, 0, -0.25, cs::kParking);   // parking: drivable (chosen)
-  occupied(2, 0, -0.25, cs::kSidewalk);  // sidewalk: not chosen -> occupied
-  occupied(3, 0, -0.25, cs::kRoad);      // a car on the road: occupied
-  occupied(3, 0, 0.75, cs::kCar);
-  occupied(4, 0, -0.5, cs::kRoad);  // road under a sidewalk slab (curb edge): the top wins
-  occupied(4, 0, 0.0, cs::kSidewalk);
-  occupied(5, 0, -0.5, cs::kSidewalk);  // and the other way round
-  occupied(5, 0, 0.0, cs::kRoad);
-  occupiedNoClass(6, 0, -0.25);      // a ground voxel without class: unknown
-  free(7, 0, 0.0);                   // free space says nothing about the surface
-  occupied(8, 0, -1.5, cs::kRoad);   // below the ground band: unknown
-  occupied(9, 0, -0.25, cs::kRoad);  // a tree crown above max_z does not block the road
-  occupied(9, 0, 3.0, cs::kVegetation);
+  occupied(2, 0, -0.25, cs::kParking);   // parking: drivable (chosen)
+  occupied(4, 0, -0.25, cs::kSidewalk);  // sidewalk: not chosen -> occupied
+  occupied(6, 0, -0.25, cs::kRoad);      // a car on the road: occupied
+  occupied(6, 0, 0.75, cs::kCar);
+  occupied(8, 0, -0.5, cs::kRoad);  // road under a sidewalk slab (curb edge): the top wins
+  occupied(8, 0, 0.0, cs::kSidewalk);
+  occupied(10, 0, -0.5, cs::kSidewalk);  // and the other way round
+  occupied(10, 0, 0.0, cs::kRoad);
+  occupiedNoClass(12, 0, -0.25);      // a ground voxel without class: unknown
+  free(14, 0, 0.0);                   // free space says nothing about the surface
+  occupied(16, 0, -1.5, cs::kRoad);   // below the ground band: unknown
+  occupied(18, 0, -0.25, cs::kRoad);  // a tree crown above max_z does not block the road
+  occupied(18, 0, 3.0, cs::kVegetation);
   const ProjectedGrids grids = project();
   const Grid2D& d = grids.drivable;
   EXPECT_EQ(cell(d, 0, 0), kGridFree);
-  EXPECT_EQ(cell(d, 1, 0), kGridFree);
-  EXPECT_EQ(cell(d, 2, 0), kGridOccupied);
-  EXPECT_EQ(cell(d, 3, 0), kGridOccupied);
+  EXPECT_EQ(cell(d, 2, 0), kGridFree);
   EXPECT_EQ(cell(d, 4, 0), kGridOccupied);
-  EXPECT_EQ(cell(d, 5, 0), kGridFree);
-  EXPECT_EQ(cell(d, 6, 0), kGridUnknown);
-  EXPECT_EQ(cell(d, 7, 0), kGridUnknown);
-  EXPECT_EQ(cell(d, 8, 0), kGridUnknown);
-  EXPECT_EQ(cell(d, 9, 0), kGridFree);
-  EXPECT_EQ(cell(grids.occupancy, 9, 0), kGridUnknown);
+  EXPECT_EQ(cell(d, 6, 0), kGridOccupied);
+  EXPECT_EQ(cell(d, 8, 0), kGridOccupied);
+  EXPECT_EQ(cell(d, 10, 0), kGridFree);
+  EXPECT_EQ(cell(d, 12, 0), kGridUnknown);
+  EXPECT_EQ(cell(d, 14, 0), kGridUnknown);
+  EXPECT_EQ(cell(d, 16, 0), kGridUnknown);
+  EXPECT_EQ(cell(d, 18, 0), kGridFree);
+  EXPECT_EQ(cell(grids.occupancy, 18, 0), kGridUnknown);
   // Same geometry for both grids.
   EXPECT_EQ(d.width, grids.occupancy.width);
   EXPECT_EQ(d.origin_x, grids.occupancy.origin_x);
@@ -167,9 +169,9 @@ TEST_F(GridProjectionTest, DrivableCellsTakeTheClassOfTheTopmostGroundVoxel) {
   // The classes come from the config.
   config_.drivable_classes = {"road", "sidewalk"};
   const Grid2D with_sidewalk = project().drivable;
-  EXPECT_EQ(cell(with_sidewalk, 1, 0), kGridOccupied);  // parking no longer
-  EXPECT_EQ(cell(with_sidewalk, 2, 0), kGridFree);
+  EXPECT_EQ(cell(with_sidewalk, 2, 0), kGridOccupied);  // parking no longer
   EXPECT_EQ(cell(with_sidewalk, 4, 0), kGridFree);
+  EXPECT_EQ(cell(with_sidewalk, 8, 0), kGridFree);
 }
 
 TEST_F(GridProjectionTest, UnknownDrivableClassIsAnErrorNamingIt) {
@@ -202,6 +204,26 @@ TEST_F(GridProjectionTest, GroundFollowsThePathSamples) {
   const ProjectedGrids flat = project();
   EXPECT_EQ(cell(flat.drivable, 10, 0), kGridUnknown);
   EXPECT_EQ(cell(flat.occupancy, 10, 1), kGridUnknown);
+}
+
+TEST_F(GridProjectionTest, RoadVoxelsDefineTheGroundWhereThereAreEnough) {
+  // A road 4.875 m up (voxel centres), 3 columns of one 2 m raster cell, a car on it; the path
+  // sample beside it (and the plane z = 0) would put both out of their bands.
+  for (double x : {0.0, kRes, 2 * kRes}) occupied(x, 0, 4.75, cs::kRoad);
+  occupied(1.0, 0.25, 5.75, cs::kCar);
+  const std::vector<Eigen::Vector3d> samples = {{1.0, 1.0, 0.0}};
+  for (const auto& ground : {std::vector<Eigen::Vector3d>{}, samples}) {
+    const ProjectedGrids grids = project(ground);
+    EXPECT_EQ(cell(grids.drivable, 0, 0), kGridFree);
+    EXPECT_EQ(cell(grids.occupancy, 1.0, 0.25), kGridOccupied);
+  }
+  // Two columns are not enough (a few mislabelled voxels do not move the ground).
+  tree_.clear();
+  for (double x : {0.0, kRes}) occupied(x, 0, 4.75, cs::kRoad);
+  occupied(1.0, 0.25, 5.75, cs::kCar);
+  const ProjectedGrids few = project(samples);
+  EXPECT_EQ(cell(few.drivable, 0, 0), kGridUnknown);
+  EXPECT_EQ(cell(few.occupancy, 1.0, 0.25), kGridUnknown);
 }
 
 TEST(GroundTrace, OneSamplePerSpacingBelowTheSensor) {

@@ -13,10 +13,13 @@
 //   building) or an obstacle makes it occupied (100); no classed ground voxel leaves it unknown
 //   (-1), also where the map saw free space only (free air says nothing about the surface).
 //
-// The ground: the vehicle's path. Each ground sample is a point on the road under the sensor
-// (sensor origin minus its height above the road); every cell takes the height of its nearest
-// sample (8-connected distance on a coarse raster). Without samples (a map loaded from a file)
-// the ground is the plane z = ground_z of the map frame, octomap_server's convention.
+// The ground, on a raster 8 cells coarse: where a raster cell holds drivable voxels (at least 3
+// of its 64 columns), the lowest of them; elsewhere the vehicle's path (each ground sample is a
+// point on the road under the sensor: sensor origin minus its height above the road); every other
+// cell takes the height of its nearest such cell. The road found in the map carries the ground
+// into side streets that climb away from the path; the path covers what has no road class
+// (lidar-only maps). Without either, the plane z = ground_z of the map frame (octomap_server's
+// convention).
 //
 // Cells are the tree's voxels seen from above (resolution = tree resolution, aligned with its
 // keys) over the bounds of the map's known space. Pruned leaves (coarser than the finest depth)
