@@ -168,14 +168,14 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
     const octomap::OcTreeKey corner = it.getIndexKey();
     const unsigned int span = 1u << (max_depth - it.getDepth());
+    // A root leaf (span 65536) does not fit: such a map is one uniform block, nothing to show.
+    if (span > 0x8000) continue;
     kx_min = std::min<unsigned int>(kx_min, corner[0]);
     ky_min = std::min<unsigned int>(ky_min, corner[1]);
     kx_max = std::max<unsigned int>(kx_max, corner[0] + span - 1);
     ky_max = std::max<unsigned int>(ky_max, corner[1] + span - 1);
     const bool occupied = tree.isNodeOccupied(*it);
     const double half = it.getSize() / 2;
-    // A root leaf (span 65536) does not fit: such a map is one uniform block, nothing to show.
-    if (span > 0x8000) continue;
     leaves.push_back({corner[0], corner[1], static_cast<std::uint16_t>(span), occupied,
                       occupied ? it->mostLikelyClass() : kNoClass,
                       static_cast<float>(it.getZ() - half), static_cast<float>(it.getZ() + half)});
@@ -183,6 +183,13 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   if (leaves.empty()) return grids;
   const int width = static_cast<int>(kx_max - kx_min + 1);
   const int height = static_cast<int>(ky_max - ky_min + 1);
+  // About 8 bytes per cell while projecting: 2^26 cells (a 1.6 km square at 0.2 m) is 0.5 GB.
+  constexpr std::size_t kMaxCells = std::size_t{1} << 26;
+  if (static_cast<std::size_t>(width) * height > kMaxCells) {
+    throw std::runtime_error("grid: the map's known space spans " + std::to_string(width) + " x " +
+                             std::to_string(height) + " cells, more than " +
+                             std::to_string(kMaxCells) + " (a coarser map resolution)");
+  }
   const double origin_x = tree.keyToCoord(static_cast<octomap::key_type>(kx_min)) - resolution / 2;
   const double origin_y = tree.keyToCoord(static_cast<octomap::key_type>(ky_min)) - resolution / 2;
   for (Grid2D* grid : {&grids.occupancy, &grids.drivable}) {

@@ -226,6 +226,15 @@ TEST_F(GridProjectionTest, RoadVoxelsDefineTheGroundWhereThereAreEnough) {
   EXPECT_EQ(cell(few.occupancy, 1.0, 0.25), kGridUnknown);
 }
 
+TEST(GridProjection, TooLargeKnownSpaceIsRefusedBeforeAllocating) {
+  SemanticOcTree tree(0.2, ClassSet::cityscapes(), FusionModel());
+  tree.updateNode(octomap::point3d(0, 0, 0), true);
+  tree.updateNode(octomap::point3d(500, 500, 0), true);  // 2500 x 2500 cells: fine
+  EXPECT_EQ(projectGrids(tree, GridProjectionConfig(), {}).occupancy.width, 2501);
+  tree.updateNode(octomap::point3d(2000, 2000, 0), true);  // 10^8 cells
+  EXPECT_THROW(projectGrids(tree, GridProjectionConfig(), {}), std::runtime_error);
+}
+
 TEST(GroundTrace, OneSamplePerSpacingBelowTheSensor) {
   GroundTrace trace(1.73, 0.5);
   trace.addSensorOrigin({0, 0, 2});

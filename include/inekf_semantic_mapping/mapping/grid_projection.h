@@ -91,8 +91,9 @@ struct ProjectedGrids {
 };
 
 // Both grids from the leaves of `tree` (its inner nodes need not be up to date). ground_samples:
-// points on the ground (map frame), e.g. groundSampleFromSensor() of each inserted scan. Throws
-// std::invalid_argument when a drivable class is not in the tree's class set (naming it).
+// points on the ground (map frame), e.g. a GroundTrace's samples. Throws
+// std::invalid_argument when a drivable class is not in the tree's class set (naming it),
+// std::runtime_error when the known space spans more than 2^26 cells.
 ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConfig& config,
                             const std::vector<Eigen::Vector3d>& ground_samples);
 
