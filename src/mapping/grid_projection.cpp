@@ -151,36 +151,38 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   grids.occupancy.resolution = grids.drivable.resolution = resolution;
   if (tree.getRoot() == nullptr) return grids;
 
-  // One walk over the tree (the walk is what costs): each leaf's footprint, height, occupancy
-  // and class, and the bounds in key space over every leaf (free ones too: the grid covers the
-  // known space).
+  // Each leaf's footprint, height, occupancy and class. The tree is walked three times (bounds,
+  // ground seeds, cells): a walk costs about 15 ns per node, less than keeping the leaves.
   struct Leaf {
-    std::uint16_t kx, ky;  // corner key (lowest x and y)
-    std::uint16_t span;    // cells per side (pruned leaves: more than one)
+    unsigned int kx, ky;  // corner key (lowest x and y)
+    int span;             // cells per side (pruned leaves: more than one)
     bool occupied;
     ClassIndex cls;  // kNoClass for free leaves
-    float z_low, z_high;
+    double z_low, z_high;
   };
-  std::vector<Leaf> leaves;
   const unsigned int max_depth = tree.getTreeDepth();
+  const auto for_each_leaf = [&tree, max_depth](const auto& visit) {
+    for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+      const unsigned int span = 1u << (max_depth - it.getDepth());
+      // A root leaf (span 65536) does not fit: such a map is one uniform block, nothing to show.
+      if (span > 0x8000) continue;
+      const octomap::OcTreeKey corner = it.getIndexKey();
+      const bool occupied = tree.isNodeOccupied(*it);
+      const double half = it.getSize() / 2;
+      visit(Leaf{corner[0], corner[1], static_cast<int>(span), occupied,
+                 occupied ? it->mostLikelyClass() : kNoClass, it.getZ() - half, it.getZ() + half});
+    }
+  };
+  // Bounds in key space over every leaf (free ones too: the grid covers the known space).
   unsigned int kx_min = std::numeric_limits<unsigned int>::max(), ky_min = kx_min;
   unsigned int kx_max = 0, ky_max = 0;
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    const octomap::OcTreeKey corner = it.getIndexKey();
-    const unsigned int span = 1u << (max_depth - it.getDepth());
-    // A root leaf (span 65536) does not fit: such a map is one uniform block, nothing to show.
-    if (span > 0x8000) continue;
-    kx_min = std::min<unsigned int>(kx_min, corner[0]);
-    ky_min = std::min<unsigned int>(ky_min, corner[1]);
-    kx_max = std::max<unsigned int>(kx_max, corner[0] + span - 1);
-    ky_max = std::max<unsigned int>(ky_max, corner[1] + span - 1);
-    const bool occupied = tree.isNodeOccupied(*it);
-    const double half = it.getSize() / 2;
-    leaves.push_back({corner[0], corner[1], static_cast<std::uint16_t>(span), occupied,
-                      occupied ? it->mostLikelyClass() : kNoClass,
-                      static_cast<float>(it.getZ() - half), static_cast<float>(it.getZ() + half)});
-  }
-  if (leaves.empty()) return grids;
+  for_each_leaf([&](const Leaf& leaf) {
+    kx_min = std::min(kx_min, leaf.kx);
+    ky_min = std::min(ky_min, leaf.ky);
+    kx_max = std::max(kx_max, leaf.kx + leaf.span - 1);
+    ky_max = std::max(ky_max, leaf.ky + leaf.span - 1);
+  });
+  if (kx_max < kx_min) return grids;  // no leaves
   const int width = static_cast<int>(kx_max - kx_min + 1);
   const int height = static_cast<int>(ky_max - ky_min + 1);
   // About 8 bytes per cell while projecting: 2^26 cells (a 1.6 km square at 0.2 m) is 0.5 GB.
@@ -207,8 +209,8 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   std::vector<float> drivable_min_z(raster_cells, std::numeric_limits<float>::infinity());
   std::vector<int> drivable_columns(raster_cells, 0);
   std::vector<std::uint8_t> counted(static_cast<std::size_t>(width) * height, 0);
-  for (const Leaf& leaf : leaves) {
-    if (leaf.cls == kNoClass || !drivable_class[leaf.cls]) continue;
+  for_each_leaf([&](const Leaf& leaf) {
+    if (leaf.cls == kNoClass || !drivable_class[leaf.cls]) return;
     const int ix0 = static_cast<int>(leaf.kx - kx_min);
     const int iy0 = static_cast<int>(leaf.ky - ky_min);
     const float z = (leaf.z_low + leaf.z_high) / 2;
@@ -222,7 +224,7 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
         column = 1;
       }
     }
-  }
+  });
   const std::vector<float> ground =
       groundRaster(drivable_min_z, drivable_columns, raster_width, raster_height, origin_x,
                    origin_y, resolution * kGroundCellFactor, ground_samples, config.ground_z);
@@ -236,8 +238,8 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   const auto [ground_low, ground_high] = std::minmax_element(ground.begin(), ground.end());
   const double lowest_band = *ground_low + std::min(config.ground_min_z, config.min_z);
   const double highest_band = *ground_high + config.max_z;
-  for (const Leaf& leaf : leaves) {
-    if (leaf.z_high <= lowest_band || leaf.z_low >= highest_band) continue;
+  for_each_leaf([&](const Leaf& leaf) {
+    if (leaf.z_high <= lowest_band || leaf.z_low >= highest_band) return;
     const bool occupied = leaf.occupied;
     const ClassIndex cls = leaf.cls;
     const double z_low = leaf.z_low;
@@ -267,7 +269,7 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
         }
       }
     }
-  }
+  });
   std::vector<std::int8_t>& drivable = grids.drivable.cells;
   for (std::size_t cell = 0; cell < drivable.size(); ++cell) {
     if (occupancy[cell] == kGridOccupied) {
