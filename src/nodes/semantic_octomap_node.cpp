@@ -280,13 +280,21 @@ class SemanticOctomapNode {
     }
     ScopedTimer stage("semantic_map/markers");
     const ros::Time now = ros::Time::now();
-    if (map_changed_) {
+    // Markers and grids take turns when both are due: one display call blocks the spinner (and
+    // fills the label image queue) half as long.
+    bool do_markers = map_changed_;
+    bool do_grids = want_grids;
+    if (do_markers && do_grids) {
+      (grids_turn_ ? do_markers : do_grids) = false;
+      grids_turn_ = !grids_turn_;
+    }
+    if (do_markers) {
       session_->tree().updateInnerOccupancy();
       markers_pub_.publish(conv::occupiedVoxelMarkers(session_->tree(), options_.marker_depth,
                                                       options_.map_frame, now));
+      map_changed_ = false;
     }
-    if (want_grids) publishGrids(now);
-    map_changed_ = false;
+    if (do_grids) publishGrids(now);
     published_counts_ = counts;
     info_pub_.publish(conv::mapInfoMessage(*session_, options_.map_frame, now));
     last_display_start_ = start;
@@ -401,6 +409,7 @@ class SemanticOctomapNode {
   mapping::GridProjectionConfig grid_config_;
   mapping::GroundTrace ground_trace_{grid_config_.sensor_height};
   bool grids_changed_ = true;
+  bool grids_turn_ = false;
 };
 
 }  // namespace
