@@ -238,6 +238,7 @@ ProjectedGrids projectGrids(const SemanticOcTree& tree, const GridProjectionConf
   const auto [ground_low, ground_high] = std::minmax_element(ground.begin(), ground.end());
   const double lowest_band = *ground_low + std::min(config.ground_min_z, config.min_z);
   const double highest_band = *ground_high + config.max_z;
+  grids.occupancy.origin_z = grids.drivable.origin_z = *ground_low;
   for_each_leaf([&](const Leaf& leaf) {
     if (leaf.z_high <= lowest_band || leaf.z_low >= highest_band) return;
     const bool occupied = leaf.occupied;

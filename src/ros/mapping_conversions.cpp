@@ -172,6 +172,7 @@ nav_msgs::OccupancyGrid occupancyGridMessage(const mapping::Grid2D& grid, const 
   message.info.height = static_cast<std::uint32_t>(grid.height);
   message.info.origin.position.x = grid.origin_x;
   message.info.origin.position.y = grid.origin_y;
+  message.info.origin.position.z = grid.origin_z;
   message.info.origin.orientation.w = 1.0;
   message.data = grid.cells;
   return message;

@@ -163,6 +163,8 @@ class SemanticOctomapGridsTest(unittest.TestCase):
         self.assertEqual(grid.header.frame_id, "map")
         self.assertAlmostEqual(grid.info.resolution, 0.2, places=5)
         self.assertEqual(len(grid.data), grid.info.width * grid.info.height)
+        # Drawn at the ground (the road, 1.73 m below the lidar), not through the map.
+        self.assertAlmostEqual(grid.info.origin.position.z, -SENSOR_HEIGHT, delta=0.15)
         self.assertGreater(fraction(self.wall(grid), 100), 0.9, self.wall(grid))
         # The road is below the band [0.5, 2.0] m above the ground: never occupied; the rays to
         # the wall cross the band over it: free there.

@@ -195,6 +195,7 @@ TEST_F(GridProjectionTest, GroundFollowsThePathSamples) {
   occupied(10, 1, 5.75, cs::kCar);
   const std::vector<Eigen::Vector3d> samples = {{-10, 0.5, 0.0}, {10, 0.5, 5.0}};
   const ProjectedGrids grids = project(samples);
+  EXPECT_DOUBLE_EQ(grids.occupancy.origin_z, 0.0);  // drawn at the lowest ground
   EXPECT_EQ(cell(grids.drivable, -10, 0), kGridFree);
   EXPECT_EQ(cell(grids.occupancy, -10, 1), kGridOccupied);
   EXPECT_EQ(cell(grids.drivable, 10, 0), kGridFree);
@@ -214,6 +215,7 @@ TEST_F(GridProjectionTest, RoadVoxelsDefineTheGroundWhereThereAreEnough) {
   const std::vector<Eigen::Vector3d> samples = {{1.0, 1.0, 0.0}};
   for (const auto& ground : {std::vector<Eigen::Vector3d>{}, samples}) {
     const ProjectedGrids grids = project(ground);
+    EXPECT_DOUBLE_EQ(grids.drivable.origin_z, 4.875);
     EXPECT_EQ(cell(grids.drivable, 0, 0), kGridFree);
     EXPECT_EQ(cell(grids.occupancy, 1.0, 0.25), kGridOccupied);
   }

@@ -71,13 +71,15 @@ constexpr std::int8_t kGridFree = 0;
 constexpr std::int8_t kGridOccupied = 100;
 
 // A row-major grid (cell (ix, iy) at cells[iy * width + ix]), nav_msgs/OccupancyGrid's layout;
-// origin is the corner of cell (0, 0) in the map frame (x, y; z = 0).
+// origin is the corner of cell (0, 0) in the map frame; origin_z, the lowest ground height, is
+// only where a viewer draws the grid (below the map rather than through it).
 struct Grid2D {
   int width = 0;
   int height = 0;
   double resolution = 0.0;
   double origin_x = 0.0;
   double origin_y = 0.0;
+  double origin_z = 0.0;
   std::vector<std::int8_t> cells;
 
   std::int8_t at(int ix, int iy) const { return cells[static_cast<std::size_t>(iy) * width + ix]; }

@@ -48,7 +48,8 @@ visualization_msgs::MarkerArray occupiedVoxelMarkers(const mapping::SemanticOcTr
                                                      const std::string& frame,
                                                      const ros::Time& stamp);
 
-// A projected grid as nav_msgs/OccupancyGrid (same layout; origin at z = 0, no rotation).
+// A projected grid as nav_msgs/OccupancyGrid (same layout; origin at the lowest ground, no
+// rotation).
 nav_msgs::OccupancyGrid occupancyGridMessage(const mapping::Grid2D& grid, const std::string& frame,
                                              const ros::Time& stamp);
 
