@@ -45,23 +45,14 @@ def read_map_server(stem):
     return cells[::-1], resolution, origin[0], origin[1]  # row 0 = smallest y
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--drive", required=True, help="synthetic drive folder (..._sync)")
-    parser.add_argument("--grid", required=True,
-                        help="STEM of STEM_drivable.pgm/.yaml and STEM_projected.pgm/.yaml")
-    parser.add_argument("--drivable-labels", default="%d,%d" % (ROAD, PARKING),
-                        help="Cityscapes labelIds counted as drivable (default road, parking)")
-    parser.add_argument("--json", help="also write the figures here")
-    args = parser.parse_args()
-    drivable_ids = [int(v) for v in args.drivable_labels.split(",")]
-
-    cells, resolution, origin_x, origin_y = read_map_server(args.grid + "_drivable")
-    projected, *_ = read_map_server(args.grid + "_projected")
-    height, width = cells.shape
-    ground_truth = os.path.join(args.drive, "ground_truth")
+def score_grids(drivable, projected, resolution, origin_x, origin_y, ground_truth_dir, poses=None,
+                drivable_ids=(ROAD, PARKING)):
+    """The figures of a drivable and a projected grid (cells[iy, ix], row 0 = smallest y, values
+    -1/0/100) against a synthetic drive's ground truth; poses: T_map_imu per OXTS frame to place
+    the truth with (the poses the map was built with), None for the true ones."""
+    height, width = drivable.shape
     # Voxels of the truth (majority label per voxel, every scan), then columns.
-    keys, labels = metrics.ground_truth_voxels(ground_truth, resolution, scan_step=1)
+    keys, labels = metrics.ground_truth_voxels(ground_truth_dir, resolution, scan_step=1, poses=poses)
     bias = 1 << 20
     ix = ((keys >> 42) & ((1 << 21) - 1)) - bias
     iy = ((keys >> 21) & ((1 << 21) - 1)) - bias
@@ -71,8 +62,8 @@ def main():
     inside = (gx >= 0) & (gx < width) & (gy >= 0) & (gy < height)
     column = gy[inside] * width + gx[inside]
     column_keys, column_labels = metrics._majority_label(column, labels[inside])
-    values = cells.reshape(-1)[column_keys]
-    truth_drivable = np.isin(column_labels, drivable_ids)
+    values = drivable.reshape(-1)[column_keys]
+    truth_drivable = np.isin(column_labels, list(drivable_ids))
     result = {"resolution": resolution, "cells_with_truth": int(len(column_keys))}
     for name, mask in (("truth_drivable", truth_drivable), ("truth_not_drivable", ~truth_drivable)):
         v = values[mask]
@@ -91,6 +82,23 @@ def main():
         v = occupied[(column_labels == label_id) & (occupied != -1)]
         if len(v):
             result["projected_occupied_of_known"][name] = round(float((v == 100).mean()), 3)
+    return result
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--drive", required=True, help="synthetic drive folder (..._sync)")
+    parser.add_argument("--grid", required=True,
+                        help="STEM of STEM_drivable.pgm/.yaml and STEM_projected.pgm/.yaml")
+    parser.add_argument("--drivable-labels", default="%d,%d" % (ROAD, PARKING),
+                        help="Cityscapes labelIds counted as drivable (default road, parking)")
+    parser.add_argument("--json", help="also write the figures here")
+    args = parser.parse_args()
+    drivable, resolution, origin_x, origin_y = read_map_server(args.grid + "_drivable")
+    projected, *_ = read_map_server(args.grid + "_projected")
+    result = score_grids(drivable, projected, resolution, origin_x, origin_y,
+                         os.path.join(args.drive, "ground_truth"),
+                         drivable_ids=[int(v) for v in args.drivable_labels.split(",")])
     print(json.dumps(result, indent=2))
     if args.json:
         with open(args.json, "w") as f:
