@@ -8,12 +8,16 @@ ism_add_core_library(${PROJECT_NAME}_mapping
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
     src/mapping/semantic_mapping_session.cpp
+    src/mapping/grid_projection.cpp
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
        ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
 
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_grid_projection
+  SOURCES test/unit/test_grid_projection.cpp
   LINK ${PROJECT_NAME}_mapping)
 ism_add_gtest(test_semantic_mapping_session
   SOURCES test/unit/test_semantic_mapping_session.cpp
@@ -64,6 +68,7 @@ ism_add_ros_executable(semantic_octomap_node
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_grids.test DEPENDENCIES semantic_octomap_node)
 endif()
 
 # Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).

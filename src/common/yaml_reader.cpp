@@ -95,6 +95,18 @@ void YamlReader::read(const std::string& key, std::string* out) {
   *out = node.Scalar();
 }
 
+void YamlReader::read(const std::string& key, std::vector<std::string>* out) {
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  if (!node.IsSequence()) fail(key, "is not a list of strings");
+  std::vector<std::string> values;
+  for (const YAML::Node& item : node) {
+    if (!item.IsScalar()) fail(key, "is not a list of strings");
+    values.push_back(item.Scalar());
+  }
+  *out = std::move(values);
+}
+
 void YamlReader::allow(const std::string& key) { used_.insert(key); }
 
 void YamlReader::collectKeys(const YAML::Node& node, const std::string& prefix,

@@ -155,6 +155,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
       // A scan far outside the map: its pose (or the calibration) is wrong.
       throw std::runtime_error(sequence.poses_path + ": pose of frame " + stem + ": " + e.what());
     }
+    if (sequence.on_scan_inserted) sequence.on_scan_inserted(T_w_velo);
     total_points += velodyne.size();
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scan_paths.size() << " ("
@@ -231,6 +232,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
           (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) +
           ": pose of frame " + stem + ": " + e.what());
     }
+    if (drive.on_scan_inserted) drive.on_scan_inserted(T_map_velo);
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
                 << velodyne.size() << " points, " << evidence << "), map " << session->tree().size()

@@ -68,7 +68,7 @@ const std::vector<std::string>& semanticMappingNodeKeys() {
       "map_frame",    "marker_rate",   "max_display_cpu_fraction",
       "marker_depth", "calib_dir",     "camera_index",
       "map_file",     "autosave_path", "autosave_period",
-      "log_period"};
+      "log_period",   "grid.*"};  // grid.*: readGridProjectionConfig checks it
   return keys;
 }
 

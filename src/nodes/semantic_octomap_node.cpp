@@ -7,8 +7,10 @@
 // its stamp. Poses come from tf (map_frame -> cloud frame at the scan stamp) when the session
 // inserts a scan: scans queue until their pose is there, nothing blocks the spinner.
 // Publishes /semantic_map/markers, /semantic_map/labeled_cloud, /semantic_map/info
-// (SemanticMapInfo); services ~save_map, ~load_map, ~reset; ~map_file resumes from a saved map,
-// ~autosave_path saves periodically and at shutdown. Parameters: config/semantic_mapping.yaml.
+// (SemanticMapInfo), /semantic_map/projected_map and /semantic_map/drivable_map
+// (nav_msgs/OccupancyGrid, mapping/grid_projection.h); services ~save_map, ~load_map, ~reset;
+// ~map_file resumes from a saved map, ~autosave_path saves periodically and at shutdown.
+// Parameters: config/semantic_mapping.yaml.
 #include <ros/ros.h>
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
@@ -66,11 +68,23 @@ class SemanticOctomapNode {
     reader.read("log_period", &options_.log_period_s);
     session_ = std::make_unique<mapping::SemanticMappingSession>(
         mapping::readSemanticMappingConfig(parameters, source));
+    grid_config_ = mapping::readGridProjectionConfig(parameters, source);
+    ground_trace_ = mapping::GroundTrace(grid_config_.sensor_height);
+    // A drivable class the class set lacks is reported now, not at the first display (the map
+    // is still empty: nothing is projected).
+    try {
+      mapping::projectGrids(session_->tree(), grid_config_, {});
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(source + ": " + e.what() + " (class_set " +
+                                  session_->config().class_set + ")");
+    }
     session_->setPoseLookup([this](double stamp, const std::string& frame) {
       return lookup(options_.map_frame, frame, ros::Time(stamp));
     });
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
       map_changed_ = true;
+      grids_changed_ = true;
+      ground_trace_.addSensorOrigin(scan.sensor_origin_map.cast<double>());
       if (cloud_pub_.getNumSubscribers() == 0) return;
       cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->tree().classSet(),
                                                    options_.map_frame, ros::Time(stamp)));
@@ -87,6 +101,8 @@ class SemanticOctomapNode {
     markers_pub_ = nh_.advertise<visualization_msgs::MarkerArray>(topics::kMapMarkers, 1, true);
     cloud_pub_ = nh_.advertise<sensor_msgs::PointCloud2>(topics::kLabeledCloud, 2);
     info_pub_ = nh_.advertise<SemanticMapInfo>(topics::kMapInfo, 1, true);
+    projected_pub_ = nh_.advertise<nav_msgs::OccupancyGrid>(topics::kProjectedMap, 1, true);
+    drivable_pub_ = nh_.advertise<nav_msgs::OccupancyGrid>(topics::kDrivableMap, 1, true);
     camera_info_sub_ =
         nh_.subscribe(topics::kCameraColorLeftInfo, 1, &SemanticOctomapNode::onCameraInfo, this);
     // Room for the scans that arrive while a label image's batch of waiting scans goes in, and
@@ -249,8 +265,15 @@ class SemanticOctomapNode {
     const mapping::MappingStatistics& s = session_->statistics();
     const std::array<std::size_t, 4> counts{s.scans_received, s.scans_without_pose,
                                             s.label_images_received, s.label_images_unmatched};
-    if (!map_changed_ && counts == published_counts_) return;
-    if (markers_pub_.getNumSubscribers() == 0 && info_pub_.getNumSubscribers() == 0) return;
+    // The grids have their own flag: a subscriber that comes after the markers went out still
+    // gets them once.
+    const bool want_grids = grids_changed_ && (projected_pub_.getNumSubscribers() > 0 ||
+                                               drivable_pub_.getNumSubscribers() > 0);
+    if (!map_changed_ && !want_grids && counts == published_counts_) return;
+    if (markers_pub_.getNumSubscribers() == 0 && info_pub_.getNumSubscribers() == 0 &&
+        !want_grids) {
+      return;
+    }
     // The display walks the whole map on the thread that inserts scans: stretch the period so
     // that it takes at most max_display_cpu_fraction of the time.
     const ros::WallTime start = ros::WallTime::now();
@@ -261,16 +284,40 @@ class SemanticOctomapNode {
     }
     ScopedTimer stage("semantic_map/markers");
     const ros::Time now = ros::Time::now();
-    if (map_changed_) {
+    // Markers and grids take turns when both are due: one display call blocks the spinner (and
+    // fills the label image queue) half as long.
+    bool do_markers = map_changed_;
+    bool do_grids = want_grids;
+    if (do_markers && do_grids) {
+      (grids_turn_ ? do_markers : do_grids) = false;
+      grids_turn_ = !grids_turn_;
+    }
+    if (do_markers) {
       session_->tree().updateInnerOccupancy();
       markers_pub_.publish(conv::occupiedVoxelMarkers(session_->tree(), options_.marker_depth,
                                                       options_.map_frame, now));
+      map_changed_ = false;
     }
-    map_changed_ = false;
+    if (do_grids) publishGrids(now);
     published_counts_ = counts;
     info_pub_.publish(conv::mapInfoMessage(*session_, options_.map_frame, now));
     last_display_start_ = start;
     last_display_cost_s_ = (ros::WallTime::now() - start).toSec();
+  }
+
+  void publishGrids(const ros::Time& now) {
+    ScopedTimer stage("semantic_map/grids");
+    try {
+      const mapping::ProjectedGrids grids =
+          mapping::projectGrids(session_->tree(), grid_config_, ground_trace_.samples());
+      projected_pub_.publish(conv::occupancyGridMessage(grids.occupancy, options_.map_frame, now));
+      drivable_pub_.publish(conv::occupancyGridMessage(grids.drivable, options_.map_frame, now));
+      grids_changed_ = false;
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(10, "semantic_octomap_node: " << topics::kProjectedMap << ", "
+                                                              << topics::kDrivableMap
+                                                              << " not published: " << e.what());
+    }
   }
 
   bool onSaveMap(SaveMap::Request& request, SaveMap::Response& response) {
@@ -295,6 +342,8 @@ class SemanticOctomapNode {
     try {
       session_->load(request.path);
       map_changed_ = true;
+      grids_changed_ = true;
+      ground_trace_.clear();  // the loaded map's path is not known: the plane ground_z
       response.success = true;
       response.nodes = session_->tree().size();
       response.message =
@@ -324,6 +373,8 @@ class SemanticOctomapNode {
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
     session_->reset();
     map_changed_ = true;
+    grids_changed_ = true;
+    ground_trace_.clear();
     ROS_INFO("semantic_octomap_node: map reset");
     return true;
   }
@@ -352,13 +403,17 @@ class SemanticOctomapNode {
   std::deque<sensor_msgs::ImageConstPtr> labels_waiting_;
   std::array<std::size_t, 4> published_counts_{};
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
-  ros::Publisher markers_pub_, cloud_pub_, info_pub_;
+  ros::Publisher markers_pub_, cloud_pub_, info_pub_, projected_pub_, drivable_pub_;
   ros::ServiceServer save_srv_, reset_srv_, load_srv_;
   ros::WallTimer clock_timer_, display_timer_, log_timer_, autosave_timer_;
   ros::WallTime last_display_start_;
   double last_display_cost_s_ = 0.0;
   ros::Time last_clock_;
   bool map_changed_ = true;
+  mapping::GridProjectionConfig grid_config_;
+  mapping::GroundTrace ground_trace_{grid_config_.sensor_height};
+  bool grids_changed_ = true;
+  bool grids_turn_ = false;
 };
 
 }  // namespace

@@ -161,6 +161,23 @@ YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh) {
   return toYaml(all);
 }
 
+nav_msgs::OccupancyGrid occupancyGridMessage(const mapping::Grid2D& grid, const std::string& frame,
+                                             const ros::Time& stamp) {
+  nav_msgs::OccupancyGrid message;
+  message.header.frame_id = frame;
+  message.header.stamp = stamp;
+  message.info.map_load_time = stamp;
+  message.info.resolution = static_cast<float>(grid.resolution);
+  message.info.width = static_cast<std::uint32_t>(grid.width);
+  message.info.height = static_cast<std::uint32_t>(grid.height);
+  message.info.origin.position.x = grid.origin_x;
+  message.info.origin.position.y = grid.origin_y;
+  message.info.origin.position.z = grid.origin_z;
+  message.info.origin.orientation.w = 1.0;
+  message.data = grid.cells;
+  return message;
+}
+
 inekf_semantic_mapping::SemanticMapInfo mapInfoMessage(
     const mapping::SemanticMappingSession& session, const std::string& frame,
     const ros::Time& stamp) {

@@ -10,7 +10,9 @@
 //       [--config semantic_mapping.yaml] [--resolution R] [--max-range M] [--confusion P]
 //       [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes] [--prob-hit P]
 //       [--prob-miss P] [--grazing-truncation VOXELS] [--max-scans N] [--export-ply MAP.ply]
-//       [--color-ot MAP_COLOR.ot] [--threads N]
+//       [--color-ot MAP_COLOR.ot] [--threads N] [--grid STEM]
+#include <yaml-cpp/yaml.h>
+
 #include <iostream>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
@@ -20,6 +22,7 @@
 
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/mapping/grid_projection.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
@@ -40,6 +43,7 @@ constexpr char kUsage[] =
     "         [--confusion P] [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes]\n"
     "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n"
     "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
+    "         [--grid STEM]\n"
     "  --labels   per-point labels DIR/NNNNNN.label (SemanticKITTI ids; default classes\n"
     "             semantickitti)\n"
     "  --images   camera images DIR/NNNNNN.png, segmented with MODEL (Cityscapes labelIds;\n"
@@ -48,7 +52,10 @@ constexpr char kUsage[] =
     "             calibration in its date folder; poses: --poses (IMU in the map frame per frame,\n"
     "             inekf_offline --output-kitti) or the OXTS RTK/INS solution; with --model the\n"
     "             scans are labelled from image_0N\n"
-    "  --config   the node's YAML (config/semantic_mapping.yaml); flags override its values\n";
+    "  --config   the node's YAML (config/semantic_mapping.yaml); flags override its values\n"
+    "  --grid     the node's projected and drivable maps (its grid.* keys, the ground under\n"
+    "             the scans' lidar poses) in map_server's format: STEM_projected.pgm/.yaml and\n"
+    "             STEM_drivable.pgm/.yaml\n";
 
 // The session config: the YAML file if given, then the flags.
 ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& cli) {
@@ -127,7 +134,8 @@ int main(int argc, char** argv) {
                                         "--prob-hit",
                                         "--prob-miss",
                                         "--grazing-truncation",
-                                        "--threads"});
+                                        "--threads",
+                                        "--grid"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const bool raw_drive = cli.has("--drive");
     if (raw_drive == cli.has("--scans")) throw UsageError("give --scans or --drive");
@@ -139,6 +147,15 @@ int main(int argc, char** argv) {
     }
     const std::string output = cli.require("--output");
     mapping::SemanticMappingSession session(configFrom(cli));
+    mapping::GridProjectionConfig grid_config;
+    if (cli.has("--config")) {
+      grid_config = mapping::readGridProjectionConfig(YAML::LoadFile(cli.get("--config")),
+                                                      cli.get("--config"));
+    }
+    mapping::GroundTrace ground_trace(grid_config.sensor_height);
+    const auto on_scan_inserted = [&ground_trace](const Eigen::Isometry3d& T_map_velo) {
+      ground_trace.addSensorOrigin(T_map_velo.translation());
+    };
 
     mapping::CameraLabelSource camera_labels;
     if (cli.has("--model")) {
@@ -164,6 +181,7 @@ int main(int argc, char** argv) {
       drive.poses_path = cli.get("--poses");
       drive.camera_index = cli.getInt("--camera", 2);
       drive.max_scans = cli.getInt("--max-scans", -1);
+      drive.on_scan_inserted = on_scan_inserted;
       mapping::mapRawDrive(drive, &session, labels_source, &std::cerr);
     } else {
       mapping::OfflineSequence sequence;
@@ -172,6 +190,7 @@ int main(int argc, char** argv) {
       sequence.calib_path = cli.require("--calib");
       sequence.labels_dir = cli.get("--labels");
       sequence.max_scans = cli.getInt("--max-scans", -1);
+      sequence.on_scan_inserted = on_scan_inserted;
       mapping::mapSequence(sequence, &session, labels_source, &std::cerr);
     }
 
@@ -200,6 +219,26 @@ int main(int argc, char** argv) {
       if (outputs[i].second == mapping::MapFormat::kPly)
         std::cerr << " (" << counts[i] << " occupied voxels)";
       std::cerr << "\n";
+    }
+    if (cli.has("--grid")) {
+      mapping::ProjectedGrids grids;
+      {
+        ism::ScopedTimer timer("semantic_map/grids");
+        grids = mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
+      }
+      for (const auto& [name, grid] :
+           {std::pair<const char*, const mapping::Grid2D*>{"projected", &grids.occupancy},
+            {"drivable", &grids.drivable}}) {
+        std::size_t counts[3] = {0, 0, 0};  // free, occupied, unknown
+        for (std::int8_t cell : grid->cells) {
+          ++counts[cell == mapping::kGridFree ? 0 : cell == mapping::kGridOccupied ? 1 : 2];
+        }
+        const auto paths =
+            mapping::writeMapServerGrid(*grid, cli.get("--grid") + "_" + std::string(name));
+        std::cerr << "[semantic_map_offline] wrote " << paths[0] << " and " << paths[1] << " ("
+                  << name << ": " << grid->width << " x " << grid->height << " cells, " << counts[0]
+                  << " free, " << counts[1] << " occupied, " << counts[2] << " unknown)\n";
+      }
     }
     std::cerr << ism::TimingRegistry::instance().report();
     return 0;

@@ -4,8 +4,10 @@
 Generates a short synthetic drive, converts it with kitti2bag (GPS degraded as in the issue 3
 protocol), plays it through inekf_node + segmentation_node + semantic_octomap_node, then
 asserts: the odometry follows the ground truth, every stage produced output for most inputs,
-~save_map writes a .ot and a .ply that load back with the expected classes, and the map's mIoU
-against the generator's ground truth is above a margin.
+~save_map writes a .ot and a .ply that load back with the expected classes, the map's mIoU
+against the generator's ground truth is above a margin, and the 2D grids
+(/semantic_map/drivable_map, /semantic_map/projected_map) call the true road drivable and the
+true buildings occupied.
 """
 import json
 import os
@@ -13,10 +15,13 @@ import tempfile
 import time
 import unittest
 
+import numpy as np
 import rospy
 import rostest
+from nav_msgs.msg import OccupancyGrid
 
 import e2e_support as e2e
+import evaluate_grid  # scripts/ (on the path through e2e_support)
 
 NAME = "e2e_synthetic"
 
@@ -39,6 +44,11 @@ class EndToEndSynthetic(unittest.TestCase):
         duration, drive, bag = e2e.synthetic_bag_from_params()
         out_dir = tempfile.mkdtemp(prefix="ism_%s_" % NAME)
         monitor = e2e.pipeline_monitor.PipelineMonitor()
+        # The node builds the grids only while someone subscribes: subscribe before the bag.
+        grids = {}
+        for topic in ("/semantic_map/drivable_map", "/semantic_map/projected_map"):
+            rospy.Subscriber(topic, OccupancyGrid,
+                             lambda msg, topic=topic: grids.__setitem__(topic, msg))
         needed = ["/kitti/oxts/imu", "/kitti/oxts/gps/fix", "/kitti/velo/pointcloud",
                   "/kitti/camera_color_left/image_raw", "/segmentation/labels"]
         if not e2e.wait_for_subscribers(needed, timeout=60):
@@ -71,11 +81,29 @@ class EndToEndSynthetic(unittest.TestCase):
             poses = e2e.metrics.estimated_frame_poses(estimate, truth)
             results["map_miou"] = (e2e.metrics.map_miou(vertices, gt_dir, ply_path=ply, poses=poses)
                                    if gt_dir else None)
+            results["grids"] = cls.score_grids(grids, gt_dir, poses) if gt_dir else None
         with open(os.path.join(out_dir, "results.json"), "w") as f:
             json.dump(results, f, indent=2, default=str)
         rospy.loginfo("%s results: %s", NAME, json.dumps({k: results.get(k) for k in
-                      ("trajectory", "map_miou", "saves", "play_wall_s")}, default=str))
+                      ("trajectory", "map_miou", "grids", "saves", "play_wall_s")}, default=str))
         return results
+
+    @staticmethod
+    def score_grids(grids, gt_dir, poses):
+        """evaluate_grid's figures of the last grids received (None if one never came)."""
+        drivable = grids.get("/semantic_map/drivable_map")
+        projected = grids.get("/semantic_map/projected_map")
+        if drivable is None or projected is None:
+            return None
+
+        def cells(msg):
+            return np.array(msg.data, dtype=np.int8).reshape(msg.info.height, msg.info.width)
+
+        if (drivable.info.width, drivable.info.height) != (projected.info.width, projected.info.height):
+            raise RuntimeError("the two grids differ in size")
+        return evaluate_grid.score_grids(cells(drivable), cells(projected), drivable.info.resolution,
+                                         drivable.info.origin.position.x,
+                                         drivable.info.origin.position.y, gt_dir, poses=poses)
 
     def setUp(self):
         if self.failure:
@@ -131,6 +159,23 @@ class EndToEndSynthetic(unittest.TestCase):
         self.assertGreater(miou["voxel_accuracy"], rospy.get_param("~min_voxel_accuracy", 0.75), miou)
         self.assertGreater(miou["matched_voxels"], 0.5 * miou["map_voxels"],
                            "most map voxels should sit where labeled ground-truth points are: %s" % miou)
+
+
+    def test_grids_call_the_road_drivable_and_the_buildings_occupied(self):
+        if not e2e.ground_truth_dir(self.results["drive"]):
+            self.skipTest("no synthetic ground truth to score the grids")
+        grids = self.results.get("grids")
+        self.assertIsNotNone(grids, "no /semantic_map/drivable_map or /semantic_map/projected_map")
+        road, other = grids["truth_drivable"], grids["truth_not_drivable"]
+        self.assertGreater(road["known"], 1000, grids)
+        self.assertGreater(road["marked_drivable_of_known"], rospy.get_param("~min_road_drivable", 0.5),
+                           grids)
+        self.assertGreater(other["marked_occupied_of_known"],
+                           rospy.get_param("~min_other_not_drivable", 0.85), grids)
+        self.assertGreater(grids["projected_occupied_of_known"].get("building", 0.0),
+                           rospy.get_param("~min_building_occupied", 0.4), grids)
+        self.assertLess(grids["projected_occupied_of_known"].get("road", 1.0),
+                        rospy.get_param("~max_road_occupied", 0.25), grids)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,9 @@
 // written here: the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input
 // errors.
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -157,6 +159,46 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
                               dir_ + "/y.ot 2>/dev/null";
   EXPECT_NE(std::system(bad_dir.c_str()), 0);
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/y.ot"));
+}
+
+// --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.
+TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
+  std::vector<Eigen::Vector3d> origins;
+  OfflineSequence sequence = options();
+  sequence.on_scan_inserted = [&origins](const Eigen::Isometry3d& T_map_velo) {
+    origins.push_back(T_map_velo.translation());
+  };
+  buildMap(sequence);
+  ASSERT_EQ(origins.size(), 2u);
+  EXPECT_GT((origins[1] - origins[0]).norm(), 1.0);  // the second pose moved 3 m
+
+  const std::string command = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
+                              "/velodyne --labels " + dir_ + "/labels --poses " + dir_ +
+                              "/poses.txt --calib " + dir_ +
+                              "/calib.txt --resolution 0.1 --output " + dir_ + "/map.ot --grid " +
+                              dir_ + "/grid 2>/dev/null";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  for (const char* name : {"projected", "drivable"}) {
+    const std::string stem = dir_ + "/grid_" + name;
+    const YAML::Node yaml = YAML::LoadFile(stem + ".yaml");
+    EXPECT_EQ(yaml["image"].as<std::string>(), std::string("grid_") + name + ".pgm");
+    EXPECT_DOUBLE_EQ(yaml["resolution"].as<double>(), 0.1);
+    std::ifstream pgm(stem + ".pgm", std::ios::binary);
+    std::string magic;
+    int width = 0, height = 0, maxval = 0;
+    pgm >> magic >> width >> height >> maxval;
+    pgm.get();
+    ASSERT_EQ(magic, "P5");
+    std::vector<unsigned char> pixels(static_cast<std::size_t>(width) * height);
+    pgm.read(reinterpret_cast<char*>(pixels.data()), static_cast<std::streamsize>(pixels.size()));
+    ASSERT_TRUE(pgm) << stem;
+    // The building point of scan 1 (1.78 m above the ground 1.73 m below its lidar) is an
+    // obstacle in both grids; the image's top row is the largest y.
+    const int ix = static_cast<int>(std::floor((13.05 - yaml["origin"][0].as<double>()) / 0.1));
+    const int iy = static_cast<int>(std::floor((-0.95 - yaml["origin"][1].as<double>()) / 0.1));
+    ASSERT_TRUE(ix >= 0 && ix < width && iy >= 0 && iy < height) << ix << " " << iy;
+    EXPECT_EQ(pixels[static_cast<std::size_t>(height - 1 - iy) * width + ix], 0) << name;
+  }
 }
 
 }  // namespace

@@ -30,6 +30,7 @@ class YamlReader {
   void read(const std::string& key, int* out);     // integers that fit an int
   void read(const std::string& key, bool* out);
   void read(const std::string& key, std::string* out);
+  void read(const std::string& key, std::vector<std::string>* out);  // a list of strings
   // Keys (or whole sections: "name.*") that are valid but read elsewhere.
   void allow(const std::string& key);
   // Throws ConfigError for the first key that was neither read nor allowed.

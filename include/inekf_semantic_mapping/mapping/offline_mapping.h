@@ -29,6 +29,8 @@ struct OfflineSequence {
   std::string calib_path;
   int max_scans = -1;                  // < 0: all
   std::uint32_t ignored_label_id = 0;  // per-point label "unlabeled": occupancy only
+  // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
+  std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
 };
 
 // A label image owned by the caller's callback (row-major, width bytes per row).
@@ -58,6 +60,8 @@ struct OfflineRawDrive {
                            // --output-kitti); "" = the OXTS RTK/INS solution
   int camera_index = 2;
   int max_scans = -1;  // < 0: all
+  // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
+  std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
 };
 
 // Inserts every velodyne frame of the drive at T_map_velo = T_map_imu * inv(T_velo_imu), with

@@ -2,6 +2,7 @@
 // it is read (sizes, steps, field offsets and datatypes), and the errors name the field.
 #pragma once
 
+#include <nav_msgs/OccupancyGrid.h>
 #include <ros/node_handle.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -14,6 +15,7 @@
 #include <string>
 
 #include "inekf_semantic_mapping/SemanticMapInfo.h"
+#include "inekf_semantic_mapping/mapping/grid_projection.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 
 namespace inekf_semantic_mapping {
@@ -45,6 +47,11 @@ inekf_semantic_mapping::SemanticMapInfo mapInfoMessage(
 visualization_msgs::MarkerArray occupiedVoxelMarkers(const mapping::SemanticOcTree& tree, int depth,
                                                      const std::string& frame,
                                                      const ros::Time& stamp);
+
+// A projected grid as nav_msgs/OccupancyGrid (same layout; origin at the lowest ground, no
+// rotation).
+nav_msgs::OccupancyGrid occupancyGridMessage(const mapping::Grid2D& grid, const std::string& frame,
+                                             const ros::Time& stamp);
 
 // x y z rgb label of a labeled scan in the map frame.
 sensor_msgs::PointCloud2 labeledCloudMessage(const mapping::LabeledScan& scan,

@@ -24,6 +24,9 @@ constexpr char kSegmentationOverlay[] = "/segmentation/overlay";  // rgb8
 constexpr char kMapMarkers[] = "/semantic_map/markers";
 constexpr char kLabeledCloud[] = "/semantic_map/labeled_cloud";
 constexpr char kMapInfo[] = "/semantic_map/info";
+// nav_msgs/OccupancyGrid: octomap_server's projected_map, and the drivable surface.
+constexpr char kProjectedMap[] = "/semantic_map/projected_map";
+constexpr char kDrivableMap[] = "/semantic_map/drivable_map";
 }  // namespace topics
 
 namespace frames {
