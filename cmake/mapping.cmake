@@ -1,7 +1,7 @@
 # Component: mapping — lidar-to-camera projection (Eigen only), SemanticOcTree (octomap),
 # semantic_octomap_node, project_cloud, semantic_map_offline.
 ism_add_core_library(${PROJECT_NAME}_projection
-  SOURCES src/perception/projection.cpp)
+  SOURCES src/perception/projection.cpp src/perception/label_geometry.cpp)
 
 ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
@@ -38,6 +38,10 @@ if(TARGET test_projection)
     PROJECT_CLOUD_PATH="$<TARGET_FILE:project_cloud>")
   add_dependencies(test_projection project_cloud)
 endif()
+# The lidar-geometry check on camera labels (ground estimate, flat / raised classes).
+ism_add_gtest(test_label_geometry
+  SOURCES test/unit/test_label_geometry.cpp
+  LINK ${PROJECT_NAME}_projection)
 ism_add_gtest(test_semantic_octree_offline
   SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)
