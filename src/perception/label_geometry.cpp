@@ -67,6 +67,14 @@ void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& op
     if (begin[c + 1] - begin[c] < support) continue;
     float* first = z_by_cell.data() + begin[c];
     float* last = z_by_cell.data() + begin[c + 1];
+    // Usually the lowest point is the ground and has its support: one pass, no sort.
+    const float minimum = *std::min_element(first, last);
+    const auto near_minimum = std::count_if(
+        first, last, [&](float z) { return z <= minimum + options.support_band_m; });
+    if (static_cast<std::size_t>(near_minimum) >= support) {
+      lowest[c] = minimum;
+      continue;
+    }
     std::sort(first, last);
     for (float* z = first; z + (support - 1) < last; ++z) {
       if (z[support - 1] - z[0] <= options.support_band_m) {
