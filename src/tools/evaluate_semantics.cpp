@@ -15,8 +15,8 @@
 //        --geometry off|FLAT:RAISED:SLOPE[:SUPPORT[:VEG]]]
 //       [--map-config YAML: the mapping config of the maps, default the built-in defaults]
 //
-// Variant "raw" (no filter, no occlusion test) is always scored first. The last line printed is
-// `RESULT <json>` (the same JSON --json writes).
+// Variant "raw" (no filter, no occlusion test, no geometry check) is always scored first. The last
+// line printed is `RESULT <json>` (the same JSON --json writes).
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -55,11 +55,12 @@ constexpr char kUsage[] =
     "                     library defaults), scored in every combination besides 'raw'\n"
     "  --occlusion        e.g. 4x1:2:6:0:0.1:0.3 = cells 4x1 px, window 2 cells to each side,\n"
     "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n"
-    "  --geometry         lidar geometry check (perception/label_geometry.h): flat classes\n"
-    "                     more than F m above the local ground and signs/lights less than R m\n"
-    "                     above it lose their label; ground cone slope S (and optionally the\n"
-    "                     points a cell's ground needs, :K; :1 after it: high terrain\n"
-    "                     becomes vegetation); e.g. 0.3:0.2:0 or 0.3:0.2:0:5:1.\n"
+    "  --geometry         lidar geometry check (perception/label_geometry.h; default: the\n"
+    "                     library's, as the session): flat classes more than F m above the\n"
+    "                     local ground and signs/lights less than R m above it lose their\n"
+    "                     label; ground cone slope S (0: none), optionally the points a cell's\n"
+    "                     ground needs (:K) and whether high terrain becomes vegetation (:V,\n"
+    "                     0 or 1); e.g. off, 0.3:0.2:0 or 0.2:0.2:0:5:1.\n"
     "                     Each such variant also prints the labels it rejected\n"
     "  --map-config       semantic mapping YAML (config/semantic_mapping.yaml keys) for the maps\n"
     "  --no-map           skip the maps: by default each sequence is also mapped (ground-truth\n"
@@ -71,11 +72,13 @@ struct Variant {
   perception::PointLabellingOptions options;
 };
 
+// "default" keeps the library defaults (the session's).
 void parseGeometry(const std::string& text, perception::PointLabellingOptions* options) {
+  if (text == "default") return;
   options->check_geometry = text != "off";
   if (!options->check_geometry) return;
   perception::LabelGeometryOptions& g = options->geometry;
-  int vegetation = 0;
+  int vegetation = options->high_terrain_is_vegetation ? 1 : 0;
   const int fields =
       std::sscanf(text.c_str(), "%f:%f:%f:%d:%d", &g.max_flat_height_m, &g.min_raised_height_m,
                   &g.ground.max_slope, &g.ground.min_support, &vegetation);
@@ -129,13 +132,14 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
                                                   : "off");
 
   std::vector<std::string> geometries = cli.getAll("--geometry");
-  if (geometries.empty()) geometries.push_back("off");
+  if (geometries.empty()) geometries.push_back("default");
 
   std::vector<Variant> variants;
   Variant raw;
   raw.name = "raw";
   raw.options.filter = perception::LabelFilterOptions{0.0, 0};
   raw.options.reject_occluded = false;
+  raw.options.check_geometry = false;
   variants.push_back(raw);
   for (double confidence : confidences) {
     for (int radius : radii) {
@@ -148,7 +152,12 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
           std::ostringstream name;
           name << "conf=" << confidence << ",boundary=" << radius << ",occlusion="
                << occlusionName(variant.options.reject_occluded, variant.options.occlusion);
-          if (variant.options.check_geometry) name << ",geometry=" << geometry;
+          if (variant.options.check_geometry) {
+            const perception::LabelGeometryOptions& g = variant.options.geometry;
+            name << ",geometry=" << g.max_flat_height_m << ":" << g.min_raised_height_m << ":"
+                 << g.ground.max_slope << ":" << g.ground.min_support << ":"
+                 << (variant.options.high_terrain_is_vegetation ? 1 : 0);
+          }
           variant.name = name.str();
           variants.push_back(variant);
         }

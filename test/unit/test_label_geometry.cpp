@@ -143,7 +143,7 @@ TEST(LabelGeometryTest, RoadLabelsOnACarAndSignLabelsOnTheRoadAreRejected) {
   const Eigen::VectorXf h = heightsOf(scene, withCone());
   for (std::size_t i = ground_points; i < labels.size(); ++i) {
     labels[i] = cityscapes::kRoad;
-    car_points_high += h(i) > 0.5f;
+    car_points_high += h(i) > LabelGeometryOptions().max_flat_height_m;
   }
   for (std::size_t i = 0; i < ground_points; i += 7) {
     labels[i] = cityscapes::kTrafficSign;

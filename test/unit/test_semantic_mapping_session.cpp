@@ -180,7 +180,7 @@ TEST(SemanticMappingSessionTest, LabelGeometryVetoesTerrainOnAHedge) {
   EXPECT_EQ(labelAt(*on, 12.05, 0.05, -0.45), 999u);  // occupied, no class
   EXPECT_TRUE(on->tree().isNodeOccupied(on->tree().search(12.05, 0.05, -0.45)));
   EXPECT_EQ(labelAt(*vegetation, 12.05, 0.05, -0.45), 21u);
-  EXPECT_EQ(labelAt(*on, 12.05, 0.05, -1.45), 22u);  // its foot, 0.2 m up: could be terrain
+  EXPECT_EQ(labelAt(*on, 12.05, 0.05, -1.55), 22u);  // its foot, 0.1 m up: could be terrain
   for (const auto* session : {off.get(), on.get(), vegetation.get()}) {
     EXPECT_EQ(labelAt(*session, 8.05, 0.05, -1.65), 22u);  // the road in front of it
   }

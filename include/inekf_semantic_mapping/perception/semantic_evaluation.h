@@ -83,9 +83,11 @@ struct PointLabellingOptions {
   LabelFilterOptions filter;
   bool reject_occluded = true;
   OcclusionOptions occlusion;
-  bool check_geometry = false;  // rejectGeometricallyInconsistentLabels (Cityscapes kinds)
+  // rejectGeometricallyInconsistentLabels with the Cityscapes kinds (and, with
+  // high_terrain_is_vegetation, cityscapesHighFlatRelabels): the session's defaults.
+  bool check_geometry = true;
   LabelGeometryOptions geometry;
-  bool high_terrain_is_vegetation = false;  // cityscapesHighFlatRelabels
+  bool high_terrain_is_vegetation = true;
 };
 
 // Per point of the scan: the camera's labelId at its pixel after filterLabels, 0 for points
