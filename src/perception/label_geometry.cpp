@@ -16,6 +16,14 @@ namespace {
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
+// Per-thread buffers kept from scan to scan: fresh ones cost more than the work (a scan's
+// half-megabyte buffers came from the kernel zeroed, page by page, each time).
+struct Scratch {
+  std::vector<int> point_cell;
+  std::vector<std::size_t> begin, next;
+  std::vector<float> z_by_cell, lowest, ground;
+};
+
 }  // namespace
 
 void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& options,
@@ -38,30 +46,38 @@ void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& op
   const float origin = -0.5f * static_cast<float>(size) * cell;  // grid corner (x and y)
   const std::size_t cells = static_cast<std::size_t>(size) * static_cast<std::size_t>(size);
 
+  thread_local Scratch scratch;
   // The cell of each point (-1: none), then the points' z grouped by cell (a counting sort).
-  std::vector<int> point_cell(static_cast<std::size_t>(n), -1);
-  std::vector<std::size_t> begin(cells + 1, 0);
+  std::vector<int>& point_cell = scratch.point_cell;
+  std::vector<std::size_t>& begin = scratch.begin;
+  point_cell.resize(static_cast<std::size_t>(n));
+  begin.assign(cells + 1, 0);
+  const float inverse_cell = 1.0f / cell;
   for (Eigen::Index i = 0; i < n; ++i) {
     const float x = points(0, i), y = points(1, i), z = points(2, i);
+    int& index = point_cell[static_cast<std::size_t>(i)];
+    index = -1;
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
-    const int cx = static_cast<int>(std::floor((x - origin) / cell));
-    const int cy = static_cast<int>(std::floor((y - origin) / cell));
+    const int cx = static_cast<int>(std::floor((x - origin) * inverse_cell));
+    const int cy = static_cast<int>(std::floor((y - origin) * inverse_cell));
     if (cx < 0 || cy < 0 || cx >= size || cy >= size) continue;
-    const int index = cy * size + cx;
-    point_cell[static_cast<std::size_t>(i)] = index;
+    index = cy * size + cx;
     ++begin[static_cast<std::size_t>(index) + 1];
   }
   for (std::size_t c = 0; c < cells; ++c) begin[c + 1] += begin[c];
-  std::vector<float> z_by_cell(begin[cells]);
+  std::vector<float>& z_by_cell = scratch.z_by_cell;
+  z_by_cell.resize(begin[cells]);
   {
-    std::vector<std::size_t> next(begin.begin(), begin.end() - 1);
+    std::vector<std::size_t>& next = scratch.next;
+    next.assign(begin.begin(), begin.end() - 1);
     for (Eigen::Index i = 0; i < n; ++i) {
       const int c = point_cell[static_cast<std::size_t>(i)];
       if (c >= 0) z_by_cell[next[static_cast<std::size_t>(c)]++] = points(2, i);
     }
   }
   // Lowest supported z per cell (inf: none).
-  std::vector<float> lowest(cells, kInf);
+  std::vector<float>& lowest = scratch.lowest;
+  lowest.assign(cells, kInf);
   const std::size_t support = static_cast<std::size_t>(options.min_support);
   for (std::size_t c = 0; c < cells; ++c) {
     if (begin[c + 1] - begin[c] < support) continue;
@@ -69,8 +85,8 @@ void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& op
     float* last = z_by_cell.data() + begin[c + 1];
     // Usually the lowest point is the ground and has its support: one pass, no sort.
     const float minimum = *std::min_element(first, last);
-    const auto near_minimum = std::count_if(
-        first, last, [&](float z) { return z <= minimum + options.support_band_m; });
+    const auto near_minimum =
+        std::count_if(first, last, [&](float z) { return z <= minimum + options.support_band_m; });
     if (static_cast<std::size_t>(near_minimum) >= support) {
       lowest[c] = minimum;
       continue;
@@ -86,7 +102,8 @@ void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& op
 
   // The slope-limited lower envelope (a chamfer distance transform with 8 neighbours: two passes
   // give min over all cells of lowest + slope * path length, within 8 % of the Euclidean cone).
-  std::vector<float> ground = lowest;
+  std::vector<float>& ground = scratch.ground;
+  ground = lowest;
   const float step = options.max_slope * cell;
   const float diagonal = step * std::sqrt(2.0f);
   const auto relax = [&](int x, int y, int dx, int dy, float cost) {
@@ -117,8 +134,8 @@ void heightAboveGround(const PointMatrixRef& points, const GroundGridOptions& op
   for (Eigen::Index i = 0; i < n; ++i) {
     (*heights)(i) = kNaN;
     if (point_cell[static_cast<std::size_t>(i)] < 0) continue;
-    const float fx = (points(0, i) - origin) / cell - 0.5f;
-    const float fy = (points(1, i) - origin) / cell - 0.5f;
+    const float fx = (points(0, i) - origin) * inverse_cell - 0.5f;
+    const float fy = (points(1, i) - origin) * inverse_cell - 0.5f;
     const int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
     const float tx = fx - static_cast<float>(x0), ty = fy - static_cast<float>(y0);
     float sum = 0.0f, weight = 0.0f, nearest = kInf, nearest_weight = -1.0f;
