@@ -19,10 +19,10 @@ namespace perception {
 // over |x|, |y| <= range_m holds the lowest supported z of each cell: the lowest point with at
 // least min_support - 1 others within support_band_m above it (real scans hold clusters of
 // spurious returns metres below the road, reflections that SemanticKITTI labels "outlier"; a
-// single one would sink the ground of its cell and, through the cone below, of its
-// surroundings). Cells whose lowest point is not the ground (a parked car's roof, a facade whose
-// foot a car hides) are capped by a cone from their neighbours: ground(c) = min over cells c' of
-// lowest(c') + max_slope * distance(c, c'). A point's ground is the bilinear blend of the values
+// single one would sink the ground of its cell). Optionally (max_slope > 0), cells whose lowest
+// point is not the ground (a parked car's roof, a facade whose foot a car hides) are capped by a
+// cone from their neighbours: ground(c) = min over cells c' of lowest(c') + max_slope *
+// distance(c, c'). A point's ground is the bilinear blend of the values
 // of the supported cells around it, so a steady grade (a ramp) is followed rather than seen as
 // steps; a point with no supported cell around it gets no estimate.
 struct GroundGridOptions {
