@@ -40,6 +40,10 @@ if(TARGET test_projection)
     PROJECT_CLOUD_PATH="$<TARGET_FILE:project_cloud>")
   add_dependencies(test_projection project_cloud)
 endif()
+# The lidar-geometry check on camera labels (ground estimate, flat / raised classes).
+ism_add_gtest(test_label_geometry
+  SOURCES test/unit/test_label_geometry.cpp
+  LINK ${PROJECT_NAME}_projection)
 ism_add_gtest(test_semantic_octree_offline
   SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)

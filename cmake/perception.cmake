@@ -1,7 +1,7 @@
-# Component: perception — lidar-to-camera projection (Eigen only), Segmenter (OpenCV dnn) and
-# model cards; segmentation_node, segment_image.
+# Component: perception — lidar-to-camera projection and the lidar geometry check on camera labels
+# (Eigen only), Segmenter (OpenCV dnn) and model cards; segmentation_node, segment_image.
 ism_add_core_library(${PROJECT_NAME}_projection
-  SOURCES src/perception/projection.cpp)
+  SOURCES src/perception/projection.cpp src/perception/label_geometry.cpp)
 
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp

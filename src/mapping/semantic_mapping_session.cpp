@@ -7,6 +7,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/label_geometry.h"
 #include "inekf_semantic_mapping/perception/projection.h"
 
 namespace inekf_semantic_mapping {
@@ -57,6 +58,10 @@ void SemanticMappingConfig::validate() const {
   require(grazing_ray_truncation_voxels >= 0, "grazing_ray_truncation_voxels", "must be >= 0");
   require(ray_casting_threads >= 1 && ray_casting_threads <= 64, "ray_casting_threads",
           "must be in [1, 64]");
+  require(label_geometry_max_flat_height_m > 0 && label_geometry_max_flat_height_m <= 10,
+          "label_geometry.max_flat_height", "must be in (0, 10] m");
+  require(label_geometry_min_raised_height_m >= 0 && label_geometry_min_raised_height_m <= 10,
+          "label_geometry.min_raised_height", "must be in [0, 10] m");
   require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance",
           "must be in [0, 1] s");
   require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait", "must be in [0, 30] s");
@@ -97,6 +102,11 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("ray_casting_threads", &config.ray_casting_threads);
   reader.read("insert_points_outside_image", &config.insert_points_outside_image);
   reader.read("reject_occluded_points", &config.reject_occluded_points);
+  reader.read("label_geometry.enabled", &config.label_geometry_check);
+  reader.read("label_geometry.max_flat_height", &config.label_geometry_max_flat_height_m);
+  reader.read("label_geometry.min_raised_height", &config.label_geometry_min_raised_height_m);
+  reader.read("label_geometry.high_terrain_is_vegetation",
+              &config.label_geometry_high_terrain_is_vegetation);
   reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
   reader.read("label_wait", &config.label_wait_s);
   reader.read("pose_wait", &config.pose_wait_s);
@@ -172,6 +182,19 @@ std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
   if (config_.reject_occluded_points) {
     perception::rejectOccludedPoints(projected, labels.width, labels.height,
                                      perception::OcclusionOptions(), kNoLabel, &label_ids);
+  }
+  if (config_.label_geometry_check && config_.class_set == "cityscapes") {
+    ScopedTimer geometry_timer("semantic_map/label_geometry");
+    perception::LabelGeometryOptions options;
+    options.max_flat_height_m = static_cast<float>(config_.label_geometry_max_flat_height_m);
+    options.min_raised_height_m = static_cast<float>(config_.label_geometry_min_raised_height_m);
+    Eigen::VectorXf heights;
+    perception::heightAboveGround(points_sensor, options.ground, &heights);
+    perception::rejectGeometricallyInconsistentLabels(
+        heights, perception::cityscapesSurfaceKinds(), options, kNoLabel, &label_ids, nullptr,
+        config_.label_geometry_high_terrain_is_vegetation
+            ? &perception::cityscapesHighFlatRelabels()
+            : nullptr);
   }
   for (std::uint32_t& id : label_ids) {
     if (id != kNoLabel) id = evidenceLabel(id);

@@ -205,17 +205,23 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
     rejectOccludedPoints(*projected, projector.width(), projector.height(), options.occlusion,
                          cityscapes::kUnlabeled, &labels);
   }
+  if (options.check_geometry) {
+    ScopedTimer timer("labelling/label_geometry");
+    Eigen::VectorXf heights;
+    heightAboveGround(xyzi.topRows<3>(), options.geometry.ground, &heights);
+    rejectGeometricallyInconsistentLabels(
+        heights, cityscapesSurfaceKinds(), options.geometry, cityscapes::kUnlabeled, &labels,
+        nullptr, options.high_terrain_is_vegetation ? &cityscapesHighFlatRelabels() : nullptr);
+  }
   return labels;
 }
 
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
-                                    int max_frames, double resolution_m) {
+                                    int max_frames, const mapping::SemanticMappingConfig& config) {
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
   if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
   const std::vector<Eigen::Isometry3d> poses =
       mapping::readOdometryPoses(sequence_dir + "/poses.txt");
-  mapping::SemanticMappingConfig config;
-  config.resolution_m = resolution_m;
   mapping::SemanticMappingSession camera_map(config);
   mapping::SemanticMappingSession human_map(config);
   struct Kept {

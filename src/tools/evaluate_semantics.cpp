@@ -11,10 +11,12 @@
 //       --flip 0|1 --suppress-unlabeled 0|1
 //        --color none|standardize --no-focal]
 //       [labelling variants, each repeatable, scored in every combination:
-//        --min-confidence C --boundary-radius PX --occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]
+//        --min-confidence C --boundary-radius PX --occlusion off|CWxCH:RX:UP:DOWN:REL:ABS
+//        --geometry off|FLAT:RAISED:SLOPE[:SUPPORT[:VEG]]]
+//       [--map-config YAML: the mapping config of the maps, default the built-in defaults]
 //
-// Variant "raw" (no filter, no occlusion test) is always scored first. The last line printed is
-// `RESULT <json>` (the same JSON --json writes).
+// Variant "raw" (no filter, no occlusion test, no geometry check) is always scored first. The last
+// line printed is `RESULT <json>` (the same JSON --json writes).
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -45,13 +47,22 @@ constexpr char kUsage[] =
     "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
-    "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]... [--no-map]\n"
+    "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]... [--geometry off|F:R:S[:K[:V]]]...\n"
+    "         [--map-config YAML] [--no-map]\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
     "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
     "                     library defaults), scored in every combination besides 'raw'\n"
     "  --occlusion        e.g. 4x1:2:6:0:0.1:0.3 = cells 4x1 px, window 2 cells to each side,\n"
     "                     6 up, 0 down, margins 10 % + 0.3 m (the default)\n"
+    "  --geometry         lidar geometry check (perception/label_geometry.h; default: the\n"
+    "                     library's, as the session): flat classes more than F m above the\n"
+    "                     local ground and signs/lights less than R m above it lose their\n"
+    "                     label; ground cone slope S (0: none), optionally the points a cell's\n"
+    "                     ground needs (:K) and whether high terrain becomes vegetation (:V,\n"
+    "                     0 or 1); e.g. off, 0.3:0.2:0 or 0.2:0.2:0:5:1.\n"
+    "                     Each such variant also prints the labels it rejected\n"
+    "  --map-config       semantic mapping YAML (config/semantic_mapping.yaml keys) for the maps\n"
     "  --no-map           skip the maps: by default each sequence is also mapped (ground-truth\n"
     "                     poses, 0.2 m, the node's labelling path) from the camera labels and\n"
     "                     from the human labels (the ceiling), scored at the lidar points\n";
@@ -60,6 +71,22 @@ struct Variant {
   std::string name;
   perception::PointLabellingOptions options;
 };
+
+// "default" keeps the library defaults (the session's).
+void parseGeometry(const std::string& text, perception::PointLabellingOptions* options) {
+  if (text == "default") return;
+  options->check_geometry = text != "off";
+  if (!options->check_geometry) return;
+  perception::LabelGeometryOptions& g = options->geometry;
+  int vegetation = options->high_terrain_is_vegetation ? 1 : 0;
+  const int fields =
+      std::sscanf(text.c_str(), "%f:%f:%f:%d:%d", &g.max_flat_height_m, &g.min_raised_height_m,
+                  &g.ground.max_slope, &g.ground.min_support, &vegetation);
+  options->high_terrain_is_vegetation = vegetation != 0;
+  if (fields < 3)
+    throw UsageError("--geometry expects off or FLAT:RAISED:SLOPE[:SUPPORT[:VEG]], got '" + text +
+                     "'");
+}
 
 perception::OcclusionOptions parseOcclusion(const std::string& text, bool* enabled) {
   perception::OcclusionOptions options;
@@ -104,23 +131,36 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
     occlusions.push_back(defaults.reject_occluded ? occlusionName(true, defaults.occlusion)
                                                   : "off");
 
+  std::vector<std::string> geometries = cli.getAll("--geometry");
+  if (geometries.empty()) geometries.push_back("default");
+
   std::vector<Variant> variants;
   Variant raw;
   raw.name = "raw";
   raw.options.filter = perception::LabelFilterOptions{0.0, 0};
   raw.options.reject_occluded = false;
+  raw.options.check_geometry = false;
   variants.push_back(raw);
   for (double confidence : confidences) {
     for (int radius : radii) {
       for (const std::string& occlusion : occlusions) {
-        Variant variant;
-        variant.options.filter = perception::LabelFilterOptions{confidence, radius};
-        variant.options.occlusion = parseOcclusion(occlusion, &variant.options.reject_occluded);
-        std::ostringstream name;
-        name << "conf=" << confidence << ",boundary=" << radius << ",occlusion="
-             << occlusionName(variant.options.reject_occluded, variant.options.occlusion);
-        variant.name = name.str();
-        variants.push_back(variant);
+        for (const std::string& geometry : geometries) {
+          Variant variant;
+          variant.options.filter = perception::LabelFilterOptions{confidence, radius};
+          variant.options.occlusion = parseOcclusion(occlusion, &variant.options.reject_occluded);
+          parseGeometry(geometry, &variant.options);
+          std::ostringstream name;
+          name << "conf=" << confidence << ",boundary=" << radius << ",occlusion="
+               << occlusionName(variant.options.reject_occluded, variant.options.occlusion);
+          if (variant.options.check_geometry) {
+            const perception::LabelGeometryOptions& g = variant.options.geometry;
+            name << ",geometry=" << g.max_flat_height_m << ":" << g.min_raised_height_m << ":"
+                 << g.ground.max_slope << ":" << g.ground.min_support << ":"
+                 << (variant.options.high_terrain_is_vegetation ? 1 : 0);
+          }
+          variant.name = name.str();
+          variants.push_back(variant);
+        }
       }
     }
   }
@@ -247,9 +287,9 @@ int main(int argc, char** argv) {
         argc, argv,
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
          "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
-         "--color-std", "--suppress-unlabeled", "--bottom-margin"},
+         "--color-std", "--suppress-unlabeled", "--bottom-margin", "--map-config"},
         {"--no-focal", "--no-map"},
-        {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion"});
+        {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const std::vector<std::string> sequences = cli.getAll("--sequence");
     if (sequences.empty()) throw UsageError("--sequence is required");
@@ -261,6 +301,18 @@ int main(int argc, char** argv) {
                                                : perception::defaultModelCardFor(model),
                        cli);
     const std::vector<Variant> variants = makeVariants(cli);
+    const ism::mapping::SemanticMappingConfig map_config =
+        cli.has("--map-config") ? ism::mapping::loadSemanticMappingConfig(cli.get("--map-config"))
+                                : ism::mapping::SemanticMappingConfig();
+    if (!cli.has("--no-map")) {
+      std::printf(
+          "maps: label_geometry %s (max flat %.2f m, min raised %.2f m, high terrain is "
+          "vegetation %d)\n",
+          map_config.label_geometry_check ? "on" : "off",
+          map_config.label_geometry_max_flat_height_m,
+          map_config.label_geometry_min_raised_height_m,
+          map_config.label_geometry_high_terrain_is_vegetation ? 1 : 0);
+    }
 
     perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));
     std::printf(
@@ -283,6 +335,8 @@ int main(int argc, char** argv) {
       std::vector<std::string> frames = perception::listSemanticKittiFrames(dir);
       if (max_frames > 0 && static_cast<int>(frames.size()) > max_frames) frames.resize(max_frames);
       std::vector<perception::PointLabelScore> scores(variants.size());
+      // Per geometry variant: the labels the geometry check took away (truth vs the label).
+      std::vector<perception::PointLabelScore> rejected(variants.size());
       double sequence_ms = 0.0;
       double scale = 1.0;
       for (const std::string& name : frames) {
@@ -305,6 +359,16 @@ int main(int argc, char** argv) {
           for (std::size_t i = 0; i < labels.size(); ++i) {
             if (projected.valid[i]) scores[v].add(frame.truth[i], labels[i]);
           }
+          if (variants[v].options.check_geometry) {
+            perception::PointLabellingOptions unchecked = variants[v].options;
+            unchecked.check_geometry = false;
+            const std::vector<std::uint32_t> before = perception::labelScanPoints(
+                segmentation, projector, frame.scan, unchecked, &projected);
+            for (std::size_t i = 0; i < labels.size(); ++i) {
+              if (projected.valid[i] && before[i] != labels[i])
+                rejected[v].add(frame.truth[i], before[i]);
+            }
+          }
         }
       }
       const double ms_per_image = sequence_ms / frames.size();
@@ -316,6 +380,8 @@ int main(int argc, char** argv) {
            << ",\"ms_per_image\":" << ms_per_image << ",\"variants\":{";
       for (std::size_t v = 0; v < variants.size(); ++v) {
         printScore(variants[v].name, scores[v], v <= 1);
+        if (variants[v].options.check_geometry)
+          printScore("  labels it rejected (acc: share that was right)", rejected[v], true);
         totals[v].merge(scores[v]);
         json << (v ? "," : "") << "\"" << variants[v].name << "\":" << scores[v].toJson();
       }
@@ -323,7 +389,7 @@ int main(int argc, char** argv) {
       if (!cli.has("--no-map")) {
         // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
         const perception::SequenceMapScores maps =
-            perception::scoreSequenceMaps(dir, &segmenter, max_frames);
+            perception::scoreSequenceMaps(dir, &segmenter, max_frames, map_config);
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);
         std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",

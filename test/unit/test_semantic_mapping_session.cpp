@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <sstream>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
@@ -90,6 +91,13 @@ TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
   EXPECT_EQ(from_yaml.ray_casting_threads, defaults.ray_casting_threads);
   EXPECT_EQ(from_yaml.insert_points_outside_image, defaults.insert_points_outside_image);
   EXPECT_EQ(from_yaml.reject_occluded_points, defaults.reject_occluded_points);
+  EXPECT_EQ(from_yaml.label_geometry_check, defaults.label_geometry_check);
+  EXPECT_DOUBLE_EQ(from_yaml.label_geometry_max_flat_height_m,
+                   defaults.label_geometry_max_flat_height_m);
+  EXPECT_DOUBLE_EQ(from_yaml.label_geometry_min_raised_height_m,
+                   defaults.label_geometry_min_raised_height_m);
+  EXPECT_EQ(from_yaml.label_geometry_high_terrain_is_vegetation,
+            defaults.label_geometry_high_terrain_is_vegetation);
   EXPECT_EQ(from_yaml.label_stamp_tolerance_s, defaults.label_stamp_tolerance_s);
   EXPECT_EQ(from_yaml.label_wait_s, defaults.label_wait_s);
   EXPECT_EQ(from_yaml.pose_wait_s, defaults.pose_wait_s);
@@ -135,6 +143,47 @@ TEST(SemanticMappingSessionTest, LabelledScansCarryClassesAndStayInTheCameraView
   SemanticMappingSession everything(whole);
   everything.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
   EXPECT_EQ(labelAt(everything, 0.05, 0.05, -8.05), 999u);  // occupancy only
+}
+
+// label_geometry: a lidar z-up scan (road 1.65 m below the sensor, a 1.65 m hedge across it 12 m
+// ahead) seen by a camera whose every pixel says terrain. The hedge's terrain is impossible and
+// gives no class (or vegetation, with high_terrain_is_vegetation); the road keeps it.
+TEST(SemanticMappingSessionTest, LabelGeometryVetoesTerrainOnAHedge) {
+  std::vector<Eigen::Vector3f> points;
+  for (float x = 4.05f; x < 20.f; x += 0.1f)
+    for (float y = -2.95f; y < 3.f; y += 0.1f) points.emplace_back(x, y, -1.65f);
+  for (float y = -2.95f; y < 3.f; y += 0.1f)
+    for (float z = -1.65f; z < 0.f; z += 0.1f) points.emplace_back(12.05f, y, z);
+  Eigen::Matrix3Xf scan(3, static_cast<Eigen::Index>(points.size()));
+  for (std::size_t i = 0; i < points.size(); ++i)
+    scan.col(static_cast<Eigen::Index>(i)) = points[i];
+  CameraModel camera = testCamera();
+  // Lidar x forward, y left, z up -> camera x right, y down, z forward.
+  Eigen::Matrix3d R;
+  R << 0, -1, 0, 0, 0, -1, 1, 0, 0;
+  camera.T_camera_sensor.linear() = R;
+  const std::vector<std::uint8_t> terrain(100 * 100, 22);
+  const LabelImageView view{terrain.data(), 100, 100, 100};
+
+  const auto mapWith = [&](bool check, bool vegetation) {
+    SemanticMappingConfig config = testConfig();
+    config.label_geometry_check = check;
+    config.label_geometry_high_terrain_is_vegetation = vegetation;
+    auto session = std::make_unique<SemanticMappingSession>(config);
+    session->insertScan(scan, Eigen::Isometry3d::Identity(), &view, &camera);
+    return session;
+  };
+  const auto off = mapWith(false, false);
+  const auto on = mapWith(true, false);
+  const auto vegetation = mapWith(true, true);
+  EXPECT_EQ(labelAt(*off, 12.05, 0.05, -0.45), 22u);  // the hedge, 1.2 m up
+  EXPECT_EQ(labelAt(*on, 12.05, 0.05, -0.45), 999u);  // occupied, no class
+  EXPECT_TRUE(on->tree().isNodeOccupied(on->tree().search(12.05, 0.05, -0.45)));
+  EXPECT_EQ(labelAt(*vegetation, 12.05, 0.05, -0.45), 21u);
+  EXPECT_EQ(labelAt(*on, 12.05, 0.05, -1.55), 22u);  // its foot, 0.1 m up: could be terrain
+  for (const auto* session : {off.get(), on.get(), vegetation.get()}) {
+    EXPECT_EQ(labelAt(*session, 8.05, 0.05, -1.65), 22u);  // the road in front of it
+  }
 }
 
 // The streaming face (scans and labels in mixed order, late poses) builds the map the direct

@@ -10,6 +10,8 @@
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "inekf_semantic_mapping/perception/label_geometry.h"
 #include "inekf_semantic_mapping/perception/projection.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
 
@@ -81,11 +83,16 @@ struct PointLabellingOptions {
   LabelFilterOptions filter;
   bool reject_occluded = true;
   OcclusionOptions occlusion;
+  // rejectGeometricallyInconsistentLabels with the Cityscapes kinds (and, with
+  // high_terrain_is_vegetation, cityscapesHighFlatRelabels): the session's defaults.
+  bool check_geometry = true;
+  LabelGeometryOptions geometry;
+  bool high_terrain_is_vegetation = true;
 };
 
 // Per point of the scan: the camera's labelId at its pixel after filterLabels, 0 for points
-// outside the image, hidden from the camera (when reject_occluded) or filtered. projected:
-// filled with the scan's projection.
+// outside the image, hidden from the camera (when reject_occluded), filtered or ruled out by the
+// lidar geometry (when check_geometry). projected: filled with the scan's projection.
 std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
                                            const PointProjector& projector,
                                            const kitti::VelodyneScan& scan,
@@ -97,14 +104,16 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
 // once with the camera's label images (the node's path: the card's label filter, the session's
 // occlusion test) and once with the human labels of the points in the camera's view (the
 // ceiling of the same map). Then every scored point in the camera's view takes the most likely
-// class of its voxel (none: a free or classless voxel, counted as not covered).
+// class of its voxel (none: a free or classless voxel, counted as not covered). `config` is the
+// mapping config of both maps (its defaults: the node's).
 struct SequenceMapScores {
   PointLabelScore camera;   // map built from the camera labels
   PointLabelScore ceiling;  // map built from the human labels
   std::size_t map_voxels = 0;
 };
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
-                                    int max_frames = -1, double resolution_m = 0.2);
+                                    int max_frames = -1,
+                                    const mapping::SemanticMappingConfig& config = {});
 
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

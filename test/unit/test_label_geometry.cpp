@@ -1,0 +1,294 @@
+// Lidar geometry as a check on camera labels: the ground estimate on synthetic scans (a flat
+// road, a car-sized box with no ground visible under its roof, a 10 % grade, an embankment) and
+// the labels it rejects or keeps.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/label_geometry.h"
+
+namespace inekf_semantic_mapping {
+namespace perception {
+namespace {
+
+constexpr float kSensorHeight = 1.73f;  // HDL-64 on the KITTI car
+constexpr std::uint32_t kNone = 0xFFFFFFFF;
+
+struct Scene {
+  std::vector<Eigen::Vector3f> points;
+  std::vector<std::uint32_t> labels;
+  void add(float x, float y, float z, std::uint32_t label) {
+    points.emplace_back(x, y, z);
+    labels.push_back(label);
+  }
+  Eigen::Matrix3Xf matrix() const {
+    Eigen::Matrix3Xf m(3, static_cast<Eigen::Index>(points.size()));
+    for (std::size_t i = 0; i < points.size(); ++i) m.col(static_cast<Eigen::Index>(i)) = points[i];
+    return m;
+  }
+};
+
+// Ground of height z(x, y) sampled every 0.25 m over [x0, x1] x [y0, y1], labelled `label`.
+template <typename Height>
+void addGround(Scene* scene, float x0, float x1, float y0, float y1, Height z,
+               std::uint32_t label) {
+  for (float x = x0; x <= x1; x += 0.25f)
+    for (float y = y0; y <= y1; y += 0.25f) scene->add(x, y, z(x, y), label);
+}
+
+// A car-sized box (4 x 2 m, 1.5 m tall) standing on z = ground, its roof and four sides
+// sampled every 0.1 m, labelled `label`. Its footprint has no ground points: the lidar cannot see
+// under a car.
+void addBox(Scene* scene, float cx, float cy, float ground, std::uint32_t label) {
+  const float hx = 2.0f, hy = 1.0f, top = ground + 1.5f;
+  for (float x = cx - hx; x <= cx + hx; x += 0.1f) {
+    for (float y = cy - hy; y <= cy + hy; y += 0.1f) scene->add(x, y, top, label);
+    for (float z = ground + 0.3f; z <= top; z += 0.1f) {
+      scene->add(x, cy - hy, z, label);
+      scene->add(x, cy + hy, z, label);
+    }
+  }
+  for (float y = cy - hy; y <= cy + hy; y += 0.1f) {
+    for (float z = ground + 0.3f; z <= top; z += 0.1f) {
+      scene->add(cx - hx, y, z, label);
+      scene->add(cx + hx, y, z, label);
+    }
+  }
+}
+
+// Removes from `scene` the ground points inside the box footprint (they would be hidden).
+void clearFootprint(Scene* scene, float cx, float cy, float ground) {
+  Scene kept;
+  for (std::size_t i = 0; i < scene->points.size(); ++i) {
+    const Eigen::Vector3f& p = scene->points[i];
+    const bool under = std::abs(p.x() - cx) < 2.0f && std::abs(p.y() - cy) < 1.0f &&
+                       std::abs(p.z() - ground) < 0.01f;
+    if (!under) kept.add(p.x(), p.y(), p.z(), scene->labels[i]);
+  }
+  *scene = kept;
+}
+
+Eigen::VectorXf heightsOf(const Scene& scene, const GroundGridOptions& options = {}) {
+  const Eigen::Matrix3Xf points = scene.matrix();
+  Eigen::VectorXf heights;
+  heightAboveGround(points, options, &heights);
+  return heights;
+}
+
+std::size_t reject(const Scene& scene, std::vector<std::uint32_t>* labels,
+                   const LabelGeometryOptions& options = {}) {
+  std::size_t rejected = 0;
+  rejectGeometricallyInconsistentLabels(heightsOf(scene, options.ground), cityscapesSurfaceKinds(),
+                                        options, kNone, labels, &rejected);
+  return rejected;
+}
+
+// The cone (max_slope 0.5) caps the cells under a car's roof, where the lidar sees no ground.
+GroundGridOptions withCone() {
+  GroundGridOptions options;
+  options.max_slope = 0.5f;
+  return options;
+}
+
+LabelGeometryOptions checkWithCone() {
+  LabelGeometryOptions options;
+  options.ground = withCone();
+  return options;
+}
+
+TEST(LabelGeometryTest, FlatRoadIsAtZeroAndACarRoofWellAboveIt) {
+  Scene scene;
+  const auto flat = [](float, float) { return -kSensorHeight; };
+  addGround(&scene, 3, 30, -10, 10, flat, cityscapes::kRoad);
+  clearFootprint(&scene, 12, 2, -kSensorHeight);
+  const std::size_t ground_points = scene.points.size();
+  addBox(&scene, 12, 2, -kSensorHeight, cityscapes::kCar);
+  const Eigen::VectorXf h = heightsOf(scene, withCone());
+  // Away from the car the road is at 0. Next to it the blend takes in the car's cells, whose
+  // envelope (0.5 m: one cell at the 0.5 slope) is an upper bound of the ground there: the road
+  // reads a little low, never high (a flat label is never rejected for it).
+  for (std::size_t i = 0; i < ground_points; ++i) {
+    const Eigen::Vector3f& p = scene.points[i];
+    const bool near_car = std::abs(p.x() - 12) < 3.5f && std::abs(p.y() - 2) < 2.5f;
+    if (near_car) {
+      ASSERT_GT(h(i), -0.3f) << i;
+      ASSERT_LT(h(i), 0.02f) << i;
+    } else {
+      ASSERT_NEAR(h(i), 0.0f, 0.02f) << i;
+    }
+  }
+  // The roof: no ground under it, yet the neighbours' ground caps its cells (the cell minimum
+  // alone would be the roof and give 0).
+  for (std::size_t i = ground_points; i < scene.points.size(); ++i) {
+    if (std::abs(scene.points[i].z() - (-kSensorHeight + 1.5f)) < 1e-3f) {
+      ASSERT_GT(h(i), 0.9f) << "roof point " << i;
+    }
+  }
+}
+
+TEST(LabelGeometryTest, RoadLabelsOnACarAndSignLabelsOnTheRoadAreRejected) {
+  Scene scene;
+  const auto flat = [](float, float) { return -kSensorHeight; };
+  addGround(&scene, 3, 30, -10, 10, flat, cityscapes::kRoad);
+  clearFootprint(&scene, 12, 2, -kSensorHeight);
+  const std::size_t ground_points = scene.points.size();
+  addBox(&scene, 12, 2, -kSensorHeight, cityscapes::kCar);
+
+  // The camera called the whole car road (label bleeding), and a stretch of road a sign.
+  std::vector<std::uint32_t> labels = scene.labels;
+  std::size_t car_points_high = 0, sign_on_road = 0;
+  const Eigen::VectorXf h = heightsOf(scene, withCone());
+  for (std::size_t i = ground_points; i < labels.size(); ++i) {
+    labels[i] = cityscapes::kRoad;
+    car_points_high += h(i) > LabelGeometryOptions().max_flat_height_m;
+  }
+  for (std::size_t i = 0; i < ground_points; i += 7) {
+    labels[i] = cityscapes::kTrafficSign;
+    ++sign_on_road;
+  }
+  const std::size_t rejected = reject(scene, &labels, checkWithCone());
+  EXPECT_EQ(rejected, car_points_high + sign_on_road);
+  ASSERT_GT(car_points_high, 1000u);
+  for (std::size_t i = 0; i < ground_points; ++i) {
+    if (i % 7 == 0) {
+      EXPECT_EQ(labels[i], kNone) << "sign on the road kept at " << i;
+    } else {
+      ASSERT_EQ(labels[i], cityscapes::kRoad) << "road on the road rejected at " << i;
+    }
+  }
+  // The car's own label and a sign above the roof are what the geometry allows.
+  std::vector<std::uint32_t> right = scene.labels;
+  for (std::size_t i = ground_points; i < right.size(); ++i) {
+    if (h(i) > 1.0f) right[i] = cityscapes::kTrafficSign;
+  }
+  EXPECT_EQ(reject(scene, &right, checkWithCone()), 0u);
+  // Without the cone (the default) the roof cells keep the roof as their ground: fewer of the
+  // car's road labels go, never a label the geometry allows.
+  std::vector<std::uint32_t> without_cone = labels;
+  for (std::size_t i = ground_points; i < without_cone.size(); ++i)
+    without_cone[i] = cityscapes::kRoad;
+  const std::size_t rejected_without = reject(scene, &without_cone);
+  EXPECT_GT(rejected_without, 100u);
+  EXPECT_LT(rejected_without, rejected);
+}
+
+TEST(LabelGeometryTest, SpuriousReturnsBelowTheRoadSinkOnlyTheirOwnNeighbourhood) {
+  // Real scans hold clusters of reflections metres below the road (SemanticKITTI "outlier").
+  Scene scene;
+  const auto flat = [](float, float) { return -kSensorHeight; };
+  addGround(&scene, 3, 30, -10, 10, flat, cityscapes::kRoad);
+  const std::size_t ground_points = scene.points.size();
+  for (int k = 0; k < 8; ++k) scene.add(20.2f + 0.05f * k, 0.3f, -11.0f + 0.02f * k, 0);
+  scene.add(10.5f, 5.5f, -9.0f, 0);  // a lone one: below min_support, ignored altogether
+  const Eigen::VectorXf h = heightsOf(scene);
+  for (std::size_t i = 0; i < ground_points; ++i) {
+    const Eigen::Vector3f& p = scene.points[i];
+    if (std::abs(p.x() - 20.5f) > 1.5f || std::abs(p.y() - 0.5f) > 1.5f) {
+      ASSERT_NEAR(h(i), 0.0f, 0.02f) << "x " << p.x() << " y " << p.y();
+    }
+  }
+}
+
+TEST(LabelGeometryTest, ATenPercentGradeKeepsItsRoadLabels) {
+  // A hill ahead (10 % up along x) with a 3 % cross fall, in the sensor frame of a car standing
+  // on level ground at its foot: the ground rises 3.3 m over the 33 m ahead.
+  Scene scene;
+  const auto hill = [](float x, float y) {
+    return -kSensorHeight + 0.1f * std::max(0.0f, x - 5.0f) + 0.03f * y;
+  };
+  addGround(&scene, 2, 38, -8, 8, hill, cityscapes::kRoad);
+  const Eigen::VectorXf h = heightsOf(scene);
+  // Half a cell of grade and cross fall at most: the lowest point of a cell is on its low side.
+  for (Eigen::Index i = 0; i < h.size(); ++i) ASSERT_LT(std::abs(h(i)), 0.15f) << i;
+  std::vector<std::uint32_t> labels = scene.labels;
+  EXPECT_EQ(reject(scene, &labels), 0u);
+  // The same hill sloping down (the car at its top) too.
+  Scene down;
+  const auto valley = [](float x, float y) {
+    return -kSensorHeight - 0.1f * std::max(0.0f, x - 5.0f) + 0.03f * y;
+  };
+  addGround(&down, 2, 38, -8, 8, valley, cityscapes::kRoad);
+  labels = down.labels;
+  EXPECT_EQ(reject(down, &labels), 0u);
+}
+
+TEST(LabelGeometryTest, AnEmbankmentKeepsItsTerrainLabelsButAHedgeOnItLosesThem) {
+  // Road to |y| < 4, then grass rising at 20 deg (tan = 0.36) to 3 m above the road.
+  Scene scene;
+  const auto bank = [](float, float y) {
+    const float d = std::max(0.0f, std::abs(y) - 4.0f);
+    return -kSensorHeight + std::min(3.0f, 0.364f * d);
+  };
+  addGround(&scene, 3, 30, -14, 14, bank, cityscapes::kTerrain);
+  std::vector<std::uint32_t> labels = scene.labels;
+  EXPECT_EQ(reject(scene, &labels), 0u);
+  // A 1.2 m hedge on the flat top at y = 13, labelled terrain by the camera: rejected.
+  const std::size_t ground_points = scene.points.size();
+  for (float x = 3; x <= 30; x += 0.1f)
+    for (float z = 0.7f; z <= 1.2f; z += 0.1f)
+      scene.add(x, 13.0f, -kSensorHeight + 3.0f + z, cityscapes::kTerrain);
+  labels = scene.labels;
+  const std::size_t rejected = reject(scene, &labels);
+  EXPECT_EQ(rejected, scene.points.size() - ground_points);
+  for (std::size_t i = ground_points; i < labels.size(); ++i) ASSERT_EQ(labels[i], kNone);
+
+  // With the Cityscapes relabel table the hedge's terrain becomes vegetation; a road label up
+  // there has no such reading and goes.
+  labels = scene.labels;
+  for (std::size_t i = ground_points; i < labels.size(); i += 2) labels[i] = cityscapes::kRoad;
+  std::size_t changed = 0;
+  rejectGeometricallyInconsistentLabels(heightsOf(scene), cityscapesSurfaceKinds(),
+                                        LabelGeometryOptions(), kNone, &labels, &changed,
+                                        &cityscapesHighFlatRelabels());
+  EXPECT_EQ(changed, scene.points.size() - ground_points);
+  for (std::size_t i = ground_points; i < labels.size(); ++i) {
+    ASSERT_EQ(labels[i], (i - ground_points) % 2 == 0 ? kNone : cityscapes::kVegetation) << i;
+  }
+  for (std::size_t i = 0; i < ground_points; ++i) ASSERT_EQ(labels[i], cityscapes::kTerrain);
+}
+
+TEST(LabelGeometryTest, PointsOutOfRangeOrNotFiniteAreLeftAlone) {
+  Scene scene;
+  const auto flat = [](float, float) { return -kSensorHeight; };
+  addGround(&scene, 3, 10, -3, 3, flat, cityscapes::kRoad);
+  scene.add(60.0f, 0.0f, 5.0f, cityscapes::kRoad);  // beyond the 40 m grid
+  scene.add(std::numeric_limits<float>::quiet_NaN(), 0.0f, 0.0f, cityscapes::kRoad);
+  const Eigen::VectorXf h = heightsOf(scene);
+  EXPECT_TRUE(std::isnan(h(h.size() - 1)));
+  EXPECT_TRUE(std::isnan(h(h.size() - 2)));
+  std::vector<std::uint32_t> labels = scene.labels;
+  EXPECT_EQ(reject(scene, &labels), 0u);
+  EXPECT_EQ(labels, scene.labels);
+}
+
+TEST(LabelGeometryTest, ClassesWithoutAKindAreNeverRejected) {
+  const SurfaceKindTable& kinds = cityscapesSurfaceKinds();
+  for (int id : {cityscapes::kRoad, cityscapes::kSidewalk, cityscapes::kParking,
+                 cityscapes::kTerrain, cityscapes::kGround})
+    EXPECT_EQ(kinds[id], SurfaceKind::kFlat) << id;
+  for (int id : {cityscapes::kTrafficSign, cityscapes::kTrafficLight})
+    EXPECT_EQ(kinds[id], SurfaceKind::kRaised) << id;
+  for (int id : {cityscapes::kCar, cityscapes::kBuilding, cityscapes::kVegetation,
+                 cityscapes::kPole, cityscapes::kPerson})
+    EXPECT_EQ(kinds[id], SurfaceKind::kAny) << id;
+}
+
+TEST(LabelGeometryTest, BadInputsThrow) {
+  Eigen::Matrix3Xf points = Eigen::Matrix3Xf::Zero(3, 4);
+  Eigen::VectorXf heights;
+  GroundGridOptions bad;
+  bad.cell_size_m = 0.0f;
+  EXPECT_THROW(heightAboveGround(points, bad, &heights), std::invalid_argument);
+  heightAboveGround(points, GroundGridOptions(), &heights);
+  std::vector<std::uint32_t> labels(3, cityscapes::kRoad);
+  EXPECT_THROW(rejectGeometricallyInconsistentLabels(heights, cityscapesSurfaceKinds(),
+                                                     LabelGeometryOptions(), kNone, &labels),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace perception
+}  // namespace inekf_semantic_mapping
