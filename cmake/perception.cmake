@@ -53,5 +53,5 @@ ism_add_tool(evaluate_semantics
 
 # The default ENet labelling path scored on the real SemanticKITTI frames of ../shared.
 ism_add_gtest(test_real_semantics
-  SOURCES test/unit/test_real_semantics.cpp
+  SOURCES test/accuracy/test_real_semantics.cpp
   LINK ${PROJECT_NAME}_semantic_evaluation)
