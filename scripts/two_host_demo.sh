@@ -221,6 +221,11 @@ read -r bag_end < <(/usr/bin/python3 -c "import rosbag,sys; print('%.6f' % rosba
 "${as_robot[@]}" /usr/bin/python3 "$ISM_ROOT/scripts/clock_after_bag.py" _start:="$bag_end" >"$out/clock.log" 2>&1 &
 pids+=($!)
 sleep 4
+# A node that died (its error is in launch.log) would otherwise show as a missing /semantic_map/info.
+if grep -q "process has died" "$out/launch.log"; then
+  grep -E "FATAL|ERROR|process has died" "$out/launch.log" | head -n 5 >&2
+  die "a node of the robot side died (see $out/launch.log)"
+fi
 stop_pid "$gpu_probe_pid" INT 10
 log "reading /semantic_map/info and the image sizes"
 on_robot /usr/bin/python3 "$probe" info "$out/map_info.json" 30 >"$out/probe_info.log" 2>&1 ||
