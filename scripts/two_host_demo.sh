@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Segmentation on a second host, tried on one machine: two network namespaces joined by a veth
 # pair stand for the robot and a GPU host.
-#   ism_robot  10.77.0.1/24: roscore, rosbag play, inekf_node, semantic_octomap_node
-#              (launch/kitti_bag.launch run_segmentation:=false)
+#   ism_robot  10.77.0.1/24: roscore, inekf_node, semantic_octomap_node
+#              (launch/include/pipeline.launch run_segmentation:=false), rosbag play
 #   ism_gpu    10.77.0.2/24: segmentation_node alone (ROS_MASTER_URI=http://10.77.0.1:11311)
 # Every ROS connection between the two (images out, label images back, the master's XML-RPC)
 # crosses the veth, whose byte counters give the bandwidth.
@@ -68,7 +68,9 @@ done
 probe=$ISM_ROOT/scripts/two_host_probe.py
 mkdir -p "$out"
 out=$(realpath "$out")
-rm -f "$out"/*.json "$out"/*.log "$out"/veth_bytes.txt
+# Only what this script writes (an --out folder may hold other files).
+rm -f "$out"/{summary,labels_published,map_info,image_encodings}.json "$out"/veth_bytes.txt \
+  "$out"/{generate,kitti2bag,netns,roscore,segmentation_node,probe_gpu,launch,play,clock,probe_info,probe_encodings}.log
 
 # --- data: a bag (kitti2bag) from a synthetic or real drive, unless one was given ---
 origin_args=()
@@ -193,27 +195,31 @@ ip netns exec "$ns_robot" bash -c "while :; do echo \$(date +%s.%N) \$(cat $stat
   >"$out/veth_bytes.txt" 2>/dev/null &
 sampler_pid=$!
 
-# --- robot: the pipeline without segmentation, and the bag ---
-log "playing $(basename "$bag") at rate $rate in $ns_robot (kitti_bag.launch run_segmentation:=false)"
-"${as_robot[@]}" roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$bag" rate:="$rate" model:="$model" \
-  run_segmentation:=false rviz:=false play_delay:=3 "${origin_args[@]}" >"$out/launch.log" 2>&1 &
+# --- robot: the pipeline without segmentation (the nodes of kitti_bag.launch), then the bag ---
+# The bag starts once the nodes have subscribed (the e2e tests' pattern): a fixed play delay
+# loses the first scans and labels of a node that starts late on a loaded machine.
+pipeline=$(on_robot rospack find inekf_semantic_mapping)/launch/include/pipeline.launch
+log "starting inekf_node and semantic_octomap_node in $ns_robot (pipeline.launch run_segmentation:=false)"
+"${as_robot[@]}" roslaunch -p "$port" "$pipeline" model:="$model" run_segmentation:=false rviz:=false \
+  "${origin_args[@]}" >"$out/launch.log" 2>&1 &
 launch_pid=$!
 pids+=($launch_pid)
-for ((try = 0; try < 120; try++)); do
-  on_robot rosnode list 2>/dev/null | grep -q /rosbag_play && break
+subscribed() {  # TOPIC NODE
+  on_robot rostopic info "$1" 2>/dev/null | sed -n '/Subscribers:/,$p' | grep -q "$2"
+}
+for ((try = 0; try < 240; try++)); do
+  subscribed /kitti/oxts/imu /inekf_node && subscribed /kitti/velo/pointcloud /semantic_octomap_node &&
+    subscribed /segmentation/labels /semantic_octomap_node && break
   kill -0 "$launch_pid" 2>/dev/null || { tail -n 30 "$out/launch.log"; die "roslaunch ended early"; }
   sleep 0.5
 done
-((try < 120)) || { tail -n 30 "$out/launch.log"; die "rosbag play did not start"; }
+((try < 240)) || { tail -n 30 "$out/launch.log"; die "the robot's nodes did not subscribe within 120 s"; }
+log "playing $(basename "$bag") at rate $rate in $ns_robot"
 play_start=$(date +%s.%N)
-# True while rosbag_play is registered; a failed listing (busy master) counts as still running.
-bag_running() {
-  local nodes
-  nodes=$(on_robot rosnode list 2>/dev/null) || return 0
-  [[ $nodes == */rosout* ]] || return 0
-  grep -q /rosbag_play <<<"$nodes"
-}
-while bag_running; do sleep 1; done
+"${as_robot[@]}" rosbag play --clock --quiet --rate="$rate" "$bag" >"$out/play.log" 2>&1 &
+play_pid=$!
+pids+=($play_pid)
+wait "$play_pid" || die "rosbag play failed ($(tail -n 3 "$out/play.log"))"
 play_end=$(date +%s.%N)
 log "bag finished; letting the last labels arrive"
 read -r bag_end < <(/usr/bin/python3 -c "import rosbag,sys; print('%.6f' % rosbag.Bag(sys.argv[1]).get_end_time())" "$bag")
