@@ -141,6 +141,8 @@ sampler_pid=""
 for ns in "$ns_robot" "$ns_gpu"; do
   ip netns add "$ns" 2>"$out/netns.log" || skip "ip netns add $ns failed ($(cat "$out/netns.log")): no CAP_SYS_ADMIN in this container?"
   netns_made+=("$ns")
+  # exec needs to mount /sys for the namespace (CAP_SYS_ADMIN): a container may allow add, not exec.
+  ip netns exec "$ns" true 2>"$out/netns.log" || skip "ip netns exec $ns failed ($(cat "$out/netns.log"))"
   ip -n "$ns" link set lo up
 done
 ip link add "$veth_robot" type veth peer name "$veth_gpu" || skip "cannot create a veth pair"

@@ -10,6 +10,7 @@ or no CAP_SYS_ADMIN in a container).
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import unittest
 
@@ -42,7 +43,7 @@ class TwoHost(unittest.TestCase):
         if result.returncode == SKIP_EXIT:
             message = "SKIPPED: two-namespace test not run: " + output.strip().splitlines()[-1]
             rospy.logwarn(message)
-            print(message)
+            sys.stderr.write("\n*** %s ***\n" % message)
             self.skipTest(message)
         self.assertEqual(result.returncode, 0, "two_host_demo.sh exited %d:\n%s" % (result.returncode, output[-3000:]))
         with open(os.path.join(out_dir, "run", "summary.json")) as f:
