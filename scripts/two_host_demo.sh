@@ -181,7 +181,7 @@ pids+=($!)
 "${as_gpu[@]}" /usr/bin/python3 "$probe" count /segmentation/labels "$out/labels_published.json" --png \
   >"$out/probe_gpu.log" 2>&1 &
 gpu_probe_pid=$!
-pids+=($gpu_probe_pid)
+pids+=("$gpu_probe_pid")
 # segmentation_node subscribed (it loads the model first) before the bag starts
 for ((try = 0; try < 120; try++)); do
   on_robot rostopic info "$image_topic" 2>/dev/null | grep -q /segmentation_node && break
@@ -205,7 +205,7 @@ log "starting inekf_node and semantic_octomap_node in $ns_robot (pipeline.launch
 "${as_robot[@]}" roslaunch -p "$port" "$pipeline" model:="$model" run_segmentation:=false rviz:=false \
   "${origin_args[@]}" >"$out/launch.log" 2>&1 &
 launch_pid=$!
-pids+=($launch_pid)
+pids+=("$launch_pid")
 subscribed() {  # TOPIC NODE
   on_robot rostopic info "$1" 2>/dev/null | sed -n '/Subscribers:/,$p' | grep -q "$2"
 }
@@ -220,7 +220,7 @@ log "playing $(basename "$bag") at rate $rate in $ns_robot"
 play_start=$(date +%s.%N)
 "${as_robot[@]}" rosbag play --clock --quiet --rate="$rate" "$bag" >"$out/play.log" 2>&1 &
 play_pid=$!
-pids+=($play_pid)
+pids+=("$play_pid")
 wait "$play_pid" || die "rosbag play failed ($(tail -n 3 "$out/play.log"))"
 play_end=$(date +%s.%N)
 log "bag finished; letting the last labels arrive"
