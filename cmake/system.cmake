@@ -43,6 +43,10 @@ if(CATKIN_ENABLE_TESTING)
     NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
   ism_add_system_rostest(test/ros/robustness_node_restart.test
     NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
+  # Segmentation on a second host: two network namespaces (scripts/two_host_demo.sh; skips
+  # loudly without root / ip netns).
+  ism_add_system_rostest(test/ros/two_host.test
+    NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES} scripts/two_host_demo.sh)
 endif()
 
 # Header-only helpers the tools share (include/inekf_semantic_mapping/common/).

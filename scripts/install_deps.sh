@@ -29,6 +29,8 @@ PACKAGES=(
   # tests, benchmarks, scripts, headless rviz
   libgtest-dev libbenchmark-dev python3-numpy python3-matplotlib python3-yaml
   rviz xvfb imagemagick
+  # network namespaces of scripts/two_host_demo.sh (segmentation on a second host)
+  iproute2
   # fuzz harnesses (libFuzzer with clang) run by scripts/fuzz.sh
   clang-14 libfuzzer-14-dev
 )
