@@ -61,6 +61,27 @@ def fixture_bag(drive, calib_dir, own_bag):
     return bag
 
 
+def quaternion_matrix(q):
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def imu_trajectory(tum, lever):
+    """TUM poses of base_link moved to imu_link through tf base_link -> imu_link: the frame the
+    filter estimates and the OXTS truth is of. Compared there, the estimate's rotation error does
+    not reach the position through the lever arm (0.8 deg x 1.4 m = 2 cm on the synthetic drive),
+    so the two bags are compared like for like. Rotation of base_link -> imu_link is identity in
+    both conventions (asserted): the quaternions stay."""
+    translation, rotation = lever
+    np.testing.assert_allclose(abs(rotation[3]), 1.0, atol=1e-9)
+    out = tum.copy()
+    for row in out:
+        row[1:4] += quaternion_matrix(row[4:8]) @ translation
+    return out
+
+
 def node_running(name):
     try:
         rosgraph.Master("/" + NAME).lookupNode(name)
@@ -95,16 +116,13 @@ class KittiBagConventions(unittest.TestCase):
         monitor = e2e.pipeline_monitor.PipelineMonitor()
         run_dir = os.path.join(out_dir, tag)
         os.makedirs(run_dir)
-        # inekf_node's private parameters for both runs (~inekf_params, e.g. the fix sigmas).
-        for name, value in e2e.param("inekf_params", {}).items():
-            rospy.set_param("/inekf_node/" + name, value)
         log_path = os.path.join(run_dir, "launch.log")
         launch_log = open(log_path, "w")
         launch = subprocess.Popen(
             ["roslaunch", os.path.join(e2e.REPO_ROOT, "launch", "kitti_bag.launch"), "bag:=" + bag,
              "model:=none", "rviz:=false", "output:=screen", "required:=true",
-             "rate:=%g" % e2e.param("rate", 1.0),
-             "play_delay:=%g" % e2e.param("play_delay_s", 3.0)],
+             "rate:=%g" % e2e.param("rate", 1.0), "play_delay:=%g" % e2e.param("play_delay_s", 3.0)]
+            + e2e.param("launch_args", "").split(),
             stdout=launch_log, stderr=subprocess.STDOUT)
 
         def launch_text():
@@ -161,12 +179,16 @@ class KittiBagConventions(unittest.TestCase):
         self.assertTrue(alive, "%s: a node died; launch log:\n%s" % (tag, text[-3000:]))
         estimate = e2e.metrics.read_tum(os.path.join(run_dir, "estimate_tum.txt"))
         truth = e2e.metrics.read_tum(os.path.join(run_dir, "truth_tum.txt"))
+        lever = statics[("base_link", "imu_link")]
+        self.assertNotIsInstance(lever, str, "%s: no tf base_link -> imu_link: %s" % (tag, lever))
         warnings = self.tf_warnings + [line[:300] for line in text.splitlines() if TF_WARNING.search(line)]
         convention = re.search(r"kitti_bag_adapter: .*: convention (\S+)", text)
         return {
             "tag": tag, "scans_played": scans, "oxts_frames": counts.get("/kitti/oxts/imu", 0),
             "play_wall_s": round(play_wall_s, 1), "info": summary["map_info"],
             "trajectory": e2e.metrics.trajectory_errors(estimate, truth),
+            "imu_trajectory": e2e.metrics.trajectory_errors(imu_trajectory(estimate, lever),
+                                                            imu_trajectory(truth, lever)),
             "truth_poses": len(truth), "tf_warnings": warnings,
             "convention": convention.group(1) if convention else None,
             "camera_info": self.camera_info, "statics": statics, "out_dir": run_dir,
@@ -200,6 +222,7 @@ class KittiBagConventions(unittest.TestCase):
         figures = {r["tag"]: {"convention": r["convention"], "scans_played": r["scans_played"],
                               "scans_inserted": (r["info"] or {}).get("scans_inserted"),
                               "trajectory": r["trajectory"], "truth_poses": r["truth_poses"],
+                              "imu_ate_rmse_m": r["imu_trajectory"].get("ate_rmse_m"),
                               "tf_warnings": len(r["tf_warnings"]), "play_wall_s": r["play_wall_s"]}
                    for r in (own, python)}
         rospy.loginfo("%s figures: %s", NAME, figures)
@@ -218,12 +241,14 @@ class KittiBagConventions(unittest.TestCase):
             self.assertGreaterEqual(run["truth_poses"], 0.9 * run["oxts_frames"], record)
             self.assertGreater(trajectory["matched_poses"], 0.8 * run["oxts_frames"], record)
 
-        # The same localization as with the own bag.
-        own_ate, python_ate = own["trajectory"]["ate_rmse_m"], python["trajectory"]["ate_rmse_m"]
+        # The same localization as with the own bag, compared where the filter estimates (imu_link).
+        own_ate = own["imu_trajectory"]["ate_rmse_m"]
+        python_ate = python["imu_trajectory"]["ate_rmse_m"]
         self.assertLessEqual(python_ate, p("max_ate_ratio", 1.10) * own_ate + p("ate_slack_m", 0.0),
                              "ATE %.3f m vs the own bag's %.3f m: %s" % (python_ate, own_ate, figures))
         if p("max_ate_m", 0.0) > 0:
             self.assertLessEqual(python_ate, p("max_ate_m", 0.0), figures)
+            self.assertLessEqual(python["trajectory"]["ate_rmse_m"], p("max_ate_m", 0.0), figures)
         if p("max_rotation_rmse_deg", 0.0) > 0:
             self.assertLessEqual(python["trajectory"]["rotation_rmse_deg"],
                                  p("max_rotation_rmse_deg", 0.0), figures)
