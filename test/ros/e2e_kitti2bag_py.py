@@ -120,7 +120,7 @@ class KittiBagConventions(unittest.TestCase):
         launch_log = open(log_path, "w")
         launch = subprocess.Popen(
             ["roslaunch", os.path.join(e2e.REPO_ROOT, "launch", "kitti_bag.launch"), "bag:=" + bag,
-             "model:=none", "rviz:=false", "output:=screen", "required:=true",
+             "model:=" + self.model, "rviz:=false", "output:=screen", "required:=true",
              "rate:=%g" % e2e.param("rate", 1.0), "play_delay:=%g" % e2e.param("play_delay_s", 3.0)]
             + e2e.param("launch_args", "").split(),
             stdout=launch_log, stderr=subprocess.STDOUT)
@@ -198,6 +198,11 @@ class KittiBagConventions(unittest.TestCase):
         rospy.init_node(NAME + "_test")
         p = e2e.param
         drive_name = p("drive", "synthetic")
+        # none: no segmentation (the map's occupancy, the bag's conventions); a model (absolute or
+        # under ../shared) adds segmentation_node, for a manual check of the labels' projection.
+        self.model = p("model", "none")
+        if self.model != "none" and not os.path.isabs(self.model):
+            self.model = os.path.join(e2e.shared_dir(), self.model)
         if drive_name == "synthetic":
             e2e.require_executables(self, "generate_synthetic_drive")
             drive = e2e.synthetic_drive(p("duration", 10.0), seed=p("seed", 7),
@@ -223,7 +228,9 @@ class KittiBagConventions(unittest.TestCase):
                               "scans_inserted": (r["info"] or {}).get("scans_inserted"),
                               "trajectory": r["trajectory"], "truth_poses": r["truth_poses"],
                               "imu_ate_rmse_m": r["imu_trajectory"].get("ate_rmse_m"),
-                              "tf_warnings": len(r["tf_warnings"]), "play_wall_s": r["play_wall_s"]}
+                              "tf_warnings": len(r["tf_warnings"]), "play_wall_s": r["play_wall_s"],
+                              "scans_with_labels": (r["info"] or {}).get("scans_with_labels"),
+                              "class_voxels": (r["info"] or {}).get("class_voxels")}
                    for r in (own, python)}
         rospy.loginfo("%s figures: %s", NAME, figures)
         sys.stderr.write("\n%s figures (%s): %s\n" % (NAME, drive_name, figures))
