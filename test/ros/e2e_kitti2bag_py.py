@@ -121,7 +121,7 @@ class KittiBagConventions(unittest.TestCase):
         launch = subprocess.Popen(
             ["roslaunch", os.path.join(e2e.REPO_ROOT, "launch", "kitti_bag.launch"), "bag:=" + bag,
              "model:=" + self.model, "rviz:=false", "output:=screen", "required:=true",
-             "rate:=%g" % e2e.param("rate", 1.0), "play_delay:=%g" % e2e.param("play_delay_s", 3.0)]
+             "rate:=%g" % e2e.param("rate", 1.0), "play_delay:=%g" % e2e.param("play_delay_s", 5.0)]
             + e2e.param("launch_args", "").split(),
             stdout=launch_log, stderr=subprocess.STDOUT)
 
