@@ -2,9 +2,9 @@
 # scripts/compare_filters.py) and inekf_node (ROS face of the estimation library's Localizer).
 
 # Message <-> session conversions of inekf_node (ROS-facing, not core): one library for the node
-# and its test.
+# and its test; with the bag conventions kitti_bag_adapter turns into the nodes' one.
 ism_add_ros_library(${PROJECT_NAME}_localization_ros
-  SOURCES src/ros/localization_conversions.cpp
+  SOURCES src/ros/localization_conversions.cpp src/ros/kitti_bag_conventions.cpp
   LINK ${PROJECT_NAME}_localization_session)
 
 ism_add_ros_executable(inekf_node
@@ -15,6 +15,17 @@ ism_add_gtest(test_localization_conversions
   LINK ${PROJECT_NAME}_localization_ros)
 if(TARGET test_localization_conversions)
   target_include_directories(test_localization_conversions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+endif()
+# kitti_bag.launch's adapter: plays bags of this package's kitti2bag or of the Python kitti2bag
+# (tomas789/kitti2bag) into the nodes in one convention.
+ism_add_ros_executable(kitti_bag_adapter
+  SOURCES src/nodes/kitti_bag_adapter.cpp
+  LINK ${PROJECT_NAME}_localization_ros)
+ism_add_gtest(test_kitti_bag_conventions
+  SOURCES test/unit/test_kitti_bag_conventions.cpp
+  LINK ${PROJECT_NAME}_localization_ros ${PROJECT_NAME}_kitti)
+if(TARGET test_kitti_bag_conventions)
+  target_include_directories(test_kitti_bag_conventions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
 endif()
 if(CATKIN_ENABLE_TESTING)
   # A real OXTS drive from ../shared played into inekf_node (skips without ../shared).

@@ -37,6 +37,12 @@ if(CATKIN_ENABLE_TESTING)
   # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
   ism_add_system_rostest(test/ros/e2e_real_drive.test
     NEEDS kitti2bag inekf_node segmentation_node semantic_octomap_node)
+  # Bags in the Python kitti2bag's conventions (test/ros/kitti2bag_py_fixture.py writes them)
+  # through kitti_bag.launch, against this package's own bag of the same drive.
+  set(ISM_KITTI_BAG_TARGETS
+    generate_synthetic_drive kitti2bag kitti_bag_adapter inekf_node semantic_octomap_node)
+  ism_add_system_rostest(test/ros/e2e_kitti2bag_py_synthetic.test NEEDS ${ISM_KITTI_BAG_TARGETS})
+  ism_add_system_rostest(test/ros/e2e_kitti2bag_py_real.test NEEDS ${ISM_KITTI_BAG_TARGETS})
   ism_add_system_rostest(test/ros/robustness_gps_outage.test
     NEEDS generate_synthetic_drive kitti2bag inekf_node)
   ism_add_system_rostest(test/ros/robustness_bag_loop.test

@@ -13,6 +13,9 @@
 //   default_fix_sigma_horizontal_m, default_fix_sigma_vertical_m, time_jump_back_s (override the
 //     config's session.*); min_fix_sigma_m (overrides gps.min_sigma_m, the one fix floor)
 //   publish_tf (true), map_frame (map), base_frame (base_link)
+//   imu_frame (string, default: the IMU messages' frame_id): the filter estimates this frame's
+//     pose; odometry and tf are of base_frame, through the static base_frame -> imu_frame of tf
+//     (identity, with one warning, while tf has none: a bag whose IMU is the body)
 //   max_path_length (5000 poses), path_publish_period_s (1.0)
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
@@ -21,15 +24,19 @@
 #include <ros/ros.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
+#include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
 
 #include <algorithm>
 #include <functional>
+#include <optional>
 #include <string>
 
 #include "inekf_semantic_mapping/FilterStatus.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/estimation/localization_session.h"
+#include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
 
@@ -47,6 +54,7 @@ class InekfNode {
     private_nh.param("publish_tf", publish_tf_, true);
     private_nh.param<std::string>("map_frame", path_.header.frame_id, frames::kMap);
     private_nh.param<std::string>("base_frame", base_frame_, frames::kBaseLink);
+    private_nh.param<std::string>("imu_frame", imu_frame_, "");
     private_nh.param("max_path_length", max_path_length_, 5000);
     private_nh.param("path_publish_period_s", path_publish_period_s_, 1.0);
     max_path_length_ = std::max(max_path_length_, 1);
@@ -99,11 +107,26 @@ class InekfNode {
   }
 
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
+    if (imu_frame_.empty() && !message->header.frame_id.empty()) {
+      imu_frame_ = message->header.frame_id;
+    }
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(ros_conversions::imuEvent(*message)); });
   }
 
   void onFix(const sensor_msgs::NavSatFix::ConstPtr& message) {
+    if (!logged_unknown_fix_covariance_ && ros_conversions::isUsableFix(*message) &&
+        !ros_conversions::fixCovarianceEnu(*message)) {
+      // E.g. the Python kitti2bag writes position_covariance_type 0 on every fix.
+      logged_unknown_fix_covariance_ = true;
+      ROS_INFO_STREAM("inekf_node: fixes on "
+                      << fix_subscriber_.getTopic() << " without a usable covariance (type "
+                      << int(message->position_covariance_type)
+                      << "): using the configured sigmas, horizontal "
+                      << session_.config().default_fix_sigma_horizontal_m << " m, vertical "
+                      << session_.config().default_fix_sigma_vertical_m
+                      << " m (session.default_fix_sigma_*)");
+    }
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(ros_conversions::fixEvent(*message)); });
   }
@@ -124,6 +147,9 @@ class InekfNode {
     odometry.child_frame_id = base_frame_;
     ros_conversions::fillOdometry(session_.state(), session_.poseCovariance(),
                                   session_.latestAngularVelocity(), &odometry);
+    if (const auto T_base_imu = baseFromImu()) {
+      odometry = ros_conversions::odometryOfBase(odometry, *T_base_imu, base_frame_);
+    }
     odometry_publisher_.publish(odometry);
     if (publish_tf_) tf_broadcaster_.sendTransform(ros_conversions::transformOfOdometry(odometry));
     ros_conversions::appendToPath(odometry, static_cast<std::size_t>(max_path_length_), &path_);
@@ -134,6 +160,33 @@ class InekfNode {
       last_path_publish_ = stamp;
     }
     ROS_INFO_STREAM_THROTTLE(10.0, "inekf_node: " << session_.summary());
+  }
+
+  // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
+  // pose) when the IMU is the base or tf has no such transform (warned once). Looked up on
+  // every estimate: it is cheap, and a transform that arrives late is picked up.
+  std::optional<Eigen::Isometry3d> baseFromImu() {
+    if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
+    try {
+      const geometry_msgs::TransformStamped T =
+          tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0));
+      if (!found_base_imu_) {
+        found_base_imu_ = true;
+        ROS_INFO_STREAM("inekf_node: the filter estimates " << imu_frame_ << "; publishing "
+                                                            << base_frame_ << " through tf "
+                                                            << base_frame_ << " -> " << imu_frame_);
+      }
+      return ros_conversions::toIsometry(T.transform);
+    } catch (const tf2::TransformException& error) {
+      if (!warned_no_base_imu_) {
+        warned_no_base_imu_ = true;
+        ROS_WARN_STREAM("inekf_node: no tf " << base_frame_ << " -> " << imu_frame_ << " yet ("
+                                             << error.what() << "): publishing the pose of "
+                                             << imu_frame_ << " as " << base_frame_
+                                             << " until it comes");
+      }
+      return std::nullopt;
+    }
   }
 
   FilterStatus filterStatus() const { return ros_conversions::filterStatus(session_); }
@@ -150,7 +203,10 @@ class InekfNode {
   bool publish_tf_ = true;
   int max_path_length_ = 5000;
   double path_publish_period_s_ = 1.0;
-  std::string base_frame_;
+  std::string base_frame_, imu_frame_;
+  bool found_base_imu_ = false, warned_no_base_imu_ = false, logged_unknown_fix_covariance_ = false;
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_{tf_buffer_};
   ros::Time last_path_publish_;
   nav_msgs::Path path_;
   ros::Publisher odometry_publisher_, path_publisher_, status_publisher_;

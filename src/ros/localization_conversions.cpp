@@ -170,6 +170,58 @@ void appendToPath(const nav_msgs::Odometry& odometry, std::size_t max_length,
   }
 }
 
+nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
+                                  const Eigen::Isometry3d& T_base_imu,
+                                  const std::string& base_frame) {
+  nav_msgs::Odometry out = imu_odometry;
+  out.child_frame_id = base_frame;
+  const geometry_msgs::Pose& pose = imu_odometry.pose.pose;
+  Eigen::Isometry3d T_map_imu = Eigen::Isometry3d::Identity();
+  T_map_imu.linear() = Eigen::Quaterniond(pose.orientation.w, pose.orientation.x,
+                                          pose.orientation.y, pose.orientation.z)
+                           .normalized()
+                           .toRotationMatrix();
+  T_map_imu.translation() = Eigen::Vector3d(pose.position.x, pose.position.y, pose.position.z);
+  const Eigen::Isometry3d T_imu_base = T_base_imu.inverse();
+  const Eigen::Isometry3d T_map_base = T_map_imu * T_imu_base;
+  out.pose.pose.position.x = T_map_base.translation().x();
+  out.pose.pose.position.y = T_map_base.translation().y();
+  out.pose.pose.position.z = T_map_base.translation().z();
+  const Eigen::Quaterniond q(T_map_base.linear());
+  out.pose.pose.orientation.w = q.w();
+  out.pose.pose.orientation.x = q.x();
+  out.pose.pose.orientation.y = q.y();
+  out.pose.pose.orientation.z = q.z();
+
+  // Twist: the base point moves with v_imu + w x r (r: base origin in imu axes).
+  const Eigen::Vector3d r = T_imu_base.translation();
+  const Eigen::Matrix3d R_base_imu = T_base_imu.linear();
+  const Eigen::Vector3d w = toEigen(imu_odometry.twist.twist.angular);
+  const Eigen::Vector3d v = toEigen(imu_odometry.twist.twist.linear);
+  const Eigen::Vector3d v_base = R_base_imu * (v + w.cross(r));
+  const Eigen::Vector3d w_base = R_base_imu * w;
+  out.twist.twist.linear.x = v_base.x();
+  out.twist.twist.linear.y = v_base.y();
+  out.twist.twist.linear.z = v_base.z();
+  out.twist.twist.angular.x = w_base.x();
+  out.twist.twist.angular.y = w_base.y();
+  out.twist.twist.angular.z = w_base.z();
+
+  // p_base = p_imu + R r: a rotation error dtheta about the map axes moves it by
+  // dtheta x (R r) = -[R r]x dtheta.
+  const Eigen::Vector3d lever = T_map_imu.linear() * r;
+  Eigen::Matrix3d skew;
+  skew << 0, -lever.z(), lever.y(), lever.z(), 0, -lever.x(), -lever.y(), lever.x(), 0;
+  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+  J.topRightCorner<3, 3>() = -skew;
+  Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> C(
+      imu_odometry.pose.covariance.data());
+  Eigen::Matrix<double, 6, 6> moved = J * C * J.transpose();
+  moved = 0.5 * (moved + moved.transpose()).eval();
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(out.pose.covariance.data()) = moved;
+  return out;
+}
+
 geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry) {
   geometry_msgs::TransformStamped transform;
   transform.header = odometry.header;

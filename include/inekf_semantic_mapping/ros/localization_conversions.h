@@ -11,6 +11,7 @@
 #include <sensor_msgs/NavSatFix.h>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <cstddef>
 #include <optional>
@@ -73,6 +74,16 @@ void fillOdometry(const estimation::NavState& state,
 // Appends the odometry's pose to the path, keeping the newest max_length poses (trimmed in
 // chunks: a long drive does not pay an O(n) erase on every sample).
 void appendToPath(const nav_msgs::Odometry& odometry, std::size_t max_length, nav_msgs::Path* path);
+
+// The odometry of base_frame from that of the IMU (the filter's body) and the static
+// T_base_imu (tf base_link -> imu_link): pose T_map_imu * T_base_imu^-1; twist of the base
+// point in base axes, R_bi (v_imu + w x r) with r the base origin in imu axes, rate R_bi w;
+// pose covariance carried through the lever arm (position + rotation x R r, rotation blocks
+// unchanged: they are about the fixed map axes). With T_base_imu identity, the input unchanged
+// but for child_frame_id.
+nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
+                                  const Eigen::Isometry3d& T_base_imu,
+                                  const std::string& base_frame);
 
 // The map -> base transform of an odometry message (its header and child frame, its pose).
 geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry);

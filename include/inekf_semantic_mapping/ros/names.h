@@ -32,7 +32,8 @@ constexpr char kDrivableMap[] = "/semantic_map/drivable_map";
 namespace frames {
 // REP-105: map is the KITTI devkit Mercator frame at the first fix (x east, y north, z up).
 constexpr char kMap[] = "map";
-// REP-103 body frame; for KITTI it coincides with the OXTS unit.
+// REP-103 body frame. In this package's bags it coincides with the OXTS unit (imu_link); the
+// Python kitti2bag puts imu_link 1.7 m away: inekf_node goes through tf base_link -> imu_link.
 constexpr char kBaseLink[] = "base_link";
 constexpr char kImu[] = "imu_link";
 constexpr char kVelodyne[] = "velo_link";
