@@ -182,13 +182,11 @@ pids+=($!)
   >"$out/probe_gpu.log" 2>&1 &
 gpu_probe_pid=$!
 pids+=("$gpu_probe_pid")
-# segmentation_node subscribed (it loads the model first) before the bag starts
-for ((try = 0; try < 120; try++)); do
-  on_robot rostopic info "$image_topic" 2>/dev/null | grep -q /segmentation_node && break
-  kill -0 "${pids[1]}" 2>/dev/null || { tail -n 20 "$out/segmentation_node.log"; die "segmentation_node died"; }
-  sleep 0.5
-done
-((try < 120)) || { tail -n 20 "$out/segmentation_node.log"; die "segmentation_node did not subscribe"; }
+# segmentation_node subscribed (it loads the model first) before the bag starts. One master
+# query per poll: `rostopic info | grep -q` under pipefail can fail on a match (SIGPIPE), and
+# once kept a CI run waiting until its time ran out with every node subscribed.
+on_robot /usr/bin/python3 "$probe" subscribed 60 "$image_topic=/segmentation_node" ||
+  { tail -n 20 "$out/segmentation_node.log"; die "segmentation_node did not subscribe"; }
 log "segmentation_node runs in $ns_gpu and subscribes to $image_topic across the veth"
 
 # --- veth byte counters once a second (robot side: tx = towards the GPU host) ---
@@ -206,16 +204,9 @@ log "starting inekf_node and semantic_octomap_node in $ns_robot (pipeline.launch
   "${origin_args[@]}" >"$out/launch.log" 2>&1 &
 launch_pid=$!
 pids+=("$launch_pid")
-subscribed() {  # TOPIC NODE
-  on_robot rostopic info "$1" 2>/dev/null | sed -n '/Subscribers:/,$p' | grep -q "$2"
-}
-for ((try = 0; try < 240; try++)); do
-  subscribed /kitti/oxts/imu /inekf_node && subscribed /kitti/velo/pointcloud /semantic_octomap_node &&
-    subscribed /segmentation/labels /semantic_octomap_node && break
-  kill -0 "$launch_pid" 2>/dev/null || { tail -n 30 "$out/launch.log"; die "roslaunch ended early"; }
-  sleep 0.5
-done
-((try < 240)) || { tail -n 30 "$out/launch.log"; die "the robot's nodes did not subscribe within 120 s"; }
+on_robot /usr/bin/python3 "$probe" subscribed 120 /kitti/oxts/imu=/inekf_node \
+  /kitti/velo/pointcloud=/semantic_octomap_node /segmentation/labels=/semantic_octomap_node ||
+  { tail -n 30 "$out/launch.log"; die "the robot's nodes did not subscribe within 120 s"; }
 log "playing $(basename "$bag") at rate $rate in $ns_robot"
 play_start=$(date +%s.%N)
 "${as_robot[@]}" rosbag play --clock --quiet --rate="$rate" "$bag" >"$out/play.log" 2>&1 &

@@ -8,6 +8,9 @@ namespaces). Three modes:
       encoded sizes: what a PNG (lossless) transport would send instead.
   two_host_probe.py info OUT.json [TIMEOUT_S]
       Waits for /semantic_map/info (SemanticMapInfo, latched) and writes its counts to OUT.json.
+  two_host_probe.py subscribed TIMEOUT_S TOPIC=NODE...
+      Waits until every NODE subscribes to its TOPIC (one master query a poll, no CLI tools in a
+      pipeline); exit 0, or 1 with the master's subscriber lists when TIMEOUT_S passes.
   two_host_probe.py encodings BAG TOPIC OUT.json [SAMPLES]
       Offline: the raw size of the bag's images on TOPIC and, for SAMPLES of them spread over
       the bag, their size as JPEG (quality 80, compressed_image_transport's default) and as PNG
@@ -103,11 +106,33 @@ def encodings(bag_path, topic, out_path, samples):
         json.dump(result, f, indent=1)
 
 
+def subscribed(timeout_s, pairs):
+    import rosgraph
+    master = rosgraph.Master("/two_host_wait")
+    wanted = [pair.split("=", 1) for pair in pairs]
+    deadline = time.time() + timeout_s
+    state = None
+    while time.time() < deadline:
+        try:
+            subscribers = dict(master.getSystemState()[1])
+            state = {topic: subscribers.get(topic, []) for topic, _ in wanted}
+            if all(node in state[topic] for topic, node in wanted):
+                return 0
+        except Exception as error:  # the master not up yet: try again
+            state = {"master": str(error)}
+        time.sleep(0.25)
+    sys.stderr.write("[two_host] not subscribed within %.0f s: wanted %s, master has %s\n" %
+                     (timeout_s, wanted, state))
+    return 1
+
+
 def main(argv):
     if len(argv) >= 4 and argv[1] == "count":
         count(argv[2], argv[3], "--png" in argv[4:])
     elif len(argv) >= 3 and argv[1] == "info":
         info(argv[2], float(argv[3]) if len(argv) > 3 else 30.0)
+    elif len(argv) >= 4 and argv[1] == "subscribed":
+        return subscribed(float(argv[2]), argv[3:])
     elif len(argv) >= 5 and argv[1] == "encodings":
         encodings(argv[2], argv[3], argv[4], int(argv[5]) if len(argv) > 5 else 20)
     else:

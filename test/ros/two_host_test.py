@@ -9,6 +9,7 @@ or no CAP_SYS_ADMIN in a container).
 """
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -35,8 +36,23 @@ class TwoHost(unittest.TestCase):
         self.assertIsNotNone(node, "inekf_node is not built")
         env = dict(os.environ, ISM_WS=os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(node)))))
         with open(log_path, "w") as log:
-            result = subprocess.run([script, "--bag", bag, "--model", model, "--out", os.path.join(out_dir, "run"), "--check"],
-                                    stdout=log, stderr=subprocess.STDOUT, timeout=200, env=env)
+            # Its own process group: on a timeout the script gets SIGTERM (its trap removes the
+            # namespaces and stops every node it started), not a SIGKILL that leaves them behind.
+            process = subprocess.Popen([script, "--bag", bag, "--model", model, "--out",
+                                        os.path.join(out_dir, "run"), "--check"],
+                                       stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+            try:
+                process.wait(timeout=200)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGTERM)
+                try:
+                    process.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
+                    process.wait()
+                with open(log_path) as partial:
+                    self.fail("two_host_demo.sh did not finish within 200 s:\n" + partial.read()[-3000:])
+        result = process
         with open(log_path) as log:
             output = log.read()
         print(output)  # the measured figures go into the test log
