@@ -1,5 +1,7 @@
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 
+#include <tf2_eigen/tf2_eigen.h>
+
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -181,14 +183,7 @@ nav_msgs::Odometry groundTruthOfBase(const geometry_msgs::TransformStamped& worl
   odometry.header.stamp = world_oxts.header.stamp;
   odometry.header.frame_id = map_frame;
   odometry.child_frame_id = base_frame;
-  odometry.pose.pose.position.x = T_map_base.translation().x();
-  odometry.pose.pose.position.y = T_map_base.translation().y();
-  odometry.pose.pose.position.z = T_map_base.translation().z();
-  const Eigen::Quaterniond q(T_map_base.linear());
-  odometry.pose.pose.orientation.w = q.w();
-  odometry.pose.pose.orientation.x = q.x();
-  odometry.pose.pose.orientation.y = q.y();
-  odometry.pose.pose.orientation.z = q.z();
+  odometry.pose.pose = tf2::toMsg(T_map_base);
   return odometry;
 }
 

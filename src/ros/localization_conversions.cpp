@@ -1,5 +1,7 @@
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 
+#include <tf2_eigen/tf2_eigen.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -184,14 +186,7 @@ nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
   T_map_imu.translation() = Eigen::Vector3d(pose.position.x, pose.position.y, pose.position.z);
   const Eigen::Isometry3d T_imu_base = T_base_imu.inverse();
   const Eigen::Isometry3d T_map_base = T_map_imu * T_imu_base;
-  out.pose.pose.position.x = T_map_base.translation().x();
-  out.pose.pose.position.y = T_map_base.translation().y();
-  out.pose.pose.position.z = T_map_base.translation().z();
-  const Eigen::Quaterniond q(T_map_base.linear());
-  out.pose.pose.orientation.w = q.w();
-  out.pose.pose.orientation.x = q.x();
-  out.pose.pose.orientation.y = q.y();
-  out.pose.pose.orientation.z = q.z();
+  out.pose.pose = tf2::toMsg(T_map_base);
 
   // Twist: the base point moves with v_imu + w x r (r: base origin in imu axes).
   const Eigen::Vector3d r = T_imu_base.translation();

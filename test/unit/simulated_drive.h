@@ -18,6 +18,18 @@ namespace test_drive {
 
 constexpr double kGravity = 9.81;
 
+// A state away from every special value (turned, moving, biased), for single-step checks.
+inline NavState someState() {
+  NavState s;
+  s.stamp_s = 10.0;
+  s.rotation = lie::expSO3(Eigen::Vector3d(0.1, -0.2, 2.0));
+  s.velocity_map = Eigen::Vector3d(8.0, -3.0, 0.2);
+  s.position_map = Eigen::Vector3d(120.0, -45.0, 3.0);
+  s.gyro_bias = Eigen::Vector3d(0.002, -0.001, 0.003);
+  s.accel_bias = Eigen::Vector3d(0.05, -0.02, 0.1);
+  return s;
+}
+
 // A drive with piecewise-constant body rates (turning and accelerating), integrated
 // independently by RK4 with fine substeps.
 struct SimulatedDrive {

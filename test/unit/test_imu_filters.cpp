@@ -10,6 +10,7 @@
 
 #include "inekf_semantic_mapping/estimation/error_dynamics.h"
 #include "inekf_semantic_mapping/estimation/imu_filters.h"
+#include "inekf_semantic_mapping/estimation/smoother.h"
 #include "inekf_semantic_mapping/lie/se23.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 #include "simulated_drive.h"
@@ -25,19 +26,9 @@ using test_drive::fixAt;
 using test_drive::kGravity;
 using test_drive::SimulatedDrive;
 using test_drive::simulateDrive;
+using test_drive::someState;
 const FilterType kAllFilters[] = {FilterType::kLeftInvariant, FilterType::kRightInvariant,
                                   FilterType::kQuaternionEskf};
-
-NavState someState() {
-  NavState s;
-  s.stamp_s = 10.0;
-  s.rotation = lie::expSO3(Eigen::Vector3d(0.1, -0.2, 2.0));
-  s.velocity_map = Eigen::Vector3d(8.0, -3.0, 0.2);
-  s.position_map = Eigen::Vector3d(120.0, -45.0, 3.0);
-  s.gyro_bias = Eigen::Vector3d(0.002, -0.001, 0.003);
-  s.accel_bias = Eigen::Vector3d(0.05, -0.02, 0.1);
-  return s;
-}
 
 ExtendedPose poseOf(const NavState& s) {
   ExtendedPose x;
@@ -47,23 +38,10 @@ ExtendedPose poseOf(const NavState& s) {
   return x;
 }
 
-NavState perturbLeft(const NavState& s, const Vector15d& xi) {
-  NavState t = s;
-  const ExtendedPose x = poseOf(s) * lie::expSE23(xi.head<9>());
-  t.rotation = x.rotation;
-  t.velocity_map = x.velocity;
-  t.position_map = x.position;
-  t.gyro_bias += xi.segment<3>(9);
-  t.accel_bias += xi.segment<3>(12);
-  return t;
-}
-
+// The left-invariant difference and its inverse are the smoother's (one definition).
+NavState perturbLeft(const NavState& s, const Vector15d& xi) { return applyLeftInvariant(s, xi); }
 Vector15d leftError(const NavState& estimate, const NavState& truth) {
-  Vector15d xi;
-  xi.head<9>() = lie::logSE23(poseOf(estimate).inverse() * poseOf(truth));
-  xi.segment<3>(9) = truth.gyro_bias - estimate.gyro_bias;
-  xi.segment<3>(12) = truth.accel_bias - estimate.accel_bias;
-  return xi;
+  return leftInvariantDifference(estimate, truth);
 }
 
 TEST(ErrorDynamics, TransitionMatchesNumericalLinearization) {

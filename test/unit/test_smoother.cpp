@@ -19,6 +19,7 @@ namespace estimation {
 namespace {
 
 using Vector15d = Eigen::Matrix<double, 15, 1>;
+using test_drive::someState;
 
 // The forward record of one run of the left-invariant filter, and the truth at each epoch.
 struct RecordedRun {
@@ -48,16 +49,6 @@ RecordedRun recordRun(const test_drive::SimulatedDrive& drive, const test_drive:
         run.truth.push_back(step.truth);
       });
   return run;
-}
-
-NavState someState() {
-  NavState s;
-  s.rotation = lie::expSO3(Eigen::Vector3d(0.1, -0.2, 2.0));
-  s.velocity_map = Eigen::Vector3d(8.0, -3.0, 0.2);
-  s.position_map = Eigen::Vector3d(120.0, -45.0, 3.0);
-  s.gyro_bias = Eigen::Vector3d(0.002, -0.001, 0.003);
-  s.accel_bias = Eigen::Vector3d(0.05, -0.02, 0.1);
-  return s;
 }
 
 TEST(Smoother, LeftInvariantDifferenceInvertsApply) {
