@@ -132,15 +132,7 @@ class KittiBagConventions(unittest.TestCase):
                 return f.read()
 
         def stop_launch():
-            if launch.poll() is None:
-                launch.send_signal(2)
-                try:
-                    launch.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    launch.kill()
-                    launch.wait()
-            if not launch_log.closed:
-                launch_log.close()
+            e2e.stop_process(launch, launch_log)
         self.addCleanup(stop_launch)
 
         tf_buffer = tf2_ros.Buffer()

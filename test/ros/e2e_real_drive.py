@@ -95,15 +95,7 @@ class EndToEndRealDrive(unittest.TestCase):
              "origin_lat:=" + lat, "origin_lon:=" + lon, "origin_alt:=" + alt],
             stdout=launch_log, stderr=subprocess.STDOUT)
 
-        def stop_launch():
-            if launch.poll() is None:
-                launch.send_signal(2)
-                try:
-                    launch.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    launch.kill()
-            launch_log.close()
-        self.addCleanup(stop_launch)
+        self.addCleanup(e2e.stop_process, launch, launch_log)
 
         def launch_tail():
             launch_log.flush()

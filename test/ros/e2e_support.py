@@ -142,6 +142,20 @@ def kitti2bag(drive_dir, bag_args=()):
     return bag
 
 
+def stop_process(process, log_file=None, timeout=20):
+    """Stops a roslaunch (or any child) the way Ctrl-C does, killing it if it hangs, then closes
+    its log file."""
+    if process.poll() is None:
+        process.send_signal(2)  # SIGINT: roslaunch shuts its nodes down
+        try:
+            process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    if log_file is not None and not log_file.closed:
+        log_file.close()
+
+
 def play_bag(bag, rate=1.0, extra_args=(), timeout=300):
     """Plays a bag with /clock and waits for the end."""
     command = ["rosbag", "play", "--clock", "--quiet", "--rate=%g" % rate] + list(extra_args) + [bag]
