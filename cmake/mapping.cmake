@@ -63,7 +63,8 @@ endif()
 
 # Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_mapping_ros
-  SOURCES src/ros/mapping_conversions.cpp
+  SOURCES src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
+    src/ros/label_input.cpp
   LINK ${PROJECT_NAME}_mapping yaml-cpp)
 
 ism_add_ros_executable(semantic_octomap_node

@@ -18,27 +18,20 @@
 //     (identity, with one warning, while tf has none: a bag whose IMU is the body)
 //   max_path_length (5000 poses), path_publish_period_s (1.0)
 #include <geometry_msgs/TwistStamped.h>
-#include <nav_msgs/Odometry.h>
-#include <nav_msgs/Path.h>
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
-#include <tf2_ros/buffer.h>
-#include <tf2_ros/transform_broadcaster.h>
-#include <tf2_ros/transform_listener.h>
 
-#include <algorithm>
 #include <functional>
-#include <optional>
 #include <string>
 
 #include "inekf_semantic_mapping/FilterStatus.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/estimation/localization_session.h"
-#include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/odometry_output.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -50,16 +43,8 @@ class InekfNode {
   InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
       : session_(ros_conversions::sessionConfigFromParameters(
             private_nh, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
-            &config_file_)) {
-    private_nh.param("publish_tf", publish_tf_, true);
-    private_nh.param<std::string>("map_frame", path_.header.frame_id, frames::kMap);
-    private_nh.param<std::string>("base_frame", base_frame_, frames::kBaseLink);
-    private_nh.param<std::string>("imu_frame", imu_frame_, "");
-    private_nh.param("max_path_length", max_path_length_, 5000);
-    private_nh.param("path_publish_period_s", path_publish_period_s_, 1.0);
-    max_path_length_ = std::max(max_path_length_, 1);
-    odometry_publisher_ = nh.advertise<nav_msgs::Odometry>(topics::kOdometry, 50);
-    path_publisher_ = nh.advertise<nav_msgs::Path>(topics::kPath, 1, /*latch=*/true);
+            &config_file_)),
+        output_(nh, private_nh) {
     status_publisher_ = nh.advertise<FilterStatus>(topics::kFilterStatus, 10);
     imu_subscriber_ = nh.subscribe(topics::kImu, 400, &InekfNode::onImu, this,
                                    ros::TransportHints().tcpNoDelay());
@@ -96,9 +81,7 @@ class InekfNode {
   void report(const LocalizationSession::Update& update) {
     if (update.reset) {
       ROS_WARN_STREAM("inekf_node: " << update.note << ": filter and path reset (bag loop?)");
-      path_.poses.clear();
-      path_publisher_.publish(path_);
-      last_path_publish_ = ros::Time();
+      output_.clearPath();
     } else if (update.started) {
       ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " " << update.note);
     } else if (!update.note.empty()) {
@@ -107,9 +90,7 @@ class InekfNode {
   }
 
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
-    if (imu_frame_.empty() && !message->header.frame_id.empty()) {
-      imu_frame_ = message->header.frame_id;
-    }
+    output_.noteImuFrame(message->header.frame_id);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(ros_conversions::imuEvent(*message)); });
   }
@@ -138,55 +119,10 @@ class InekfNode {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
-  // Stamped with the message's own stamp, not ros::Time(state.stamp_s): a double loses the
-  // nanoseconds, and consumers match our poses to their data by exact stamp.
   void publishState(const ros::Time& stamp) {
-    nav_msgs::Odometry odometry;
-    odometry.header.stamp = stamp;
-    odometry.header.frame_id = path_.header.frame_id;
-    odometry.child_frame_id = base_frame_;
-    ros_conversions::fillOdometry(session_.state(), session_.poseCovariance(),
-                                  session_.latestAngularVelocity(), &odometry);
-    if (const auto T_base_imu = baseFromImu()) {
-      odometry = ros_conversions::odometryOfBase(odometry, *T_base_imu, base_frame_);
-    }
-    odometry_publisher_.publish(odometry);
-    if (publish_tf_) tf_broadcaster_.sendTransform(ros_conversions::transformOfOdometry(odometry));
-    ros_conversions::appendToPath(odometry, static_cast<std::size_t>(max_path_length_), &path_);
-    if (last_path_publish_.isZero() || stamp < last_path_publish_ ||
-        (stamp - last_path_publish_).toSec() >= path_publish_period_s_) {
-      path_.header.stamp = stamp;
-      path_publisher_.publish(path_);
-      last_path_publish_ = stamp;
-    }
+    output_.publish(stamp, session_.state(), session_.poseCovariance(),
+                    session_.latestAngularVelocity());
     ROS_INFO_STREAM_THROTTLE(10.0, "inekf_node: " << session_.summary());
-  }
-
-  // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
-  // pose) when the IMU is the base or tf has no such transform (warned once). Looked up on
-  // every estimate: it is cheap, and a transform that arrives late is picked up.
-  std::optional<Eigen::Isometry3d> baseFromImu() {
-    if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
-    try {
-      const geometry_msgs::TransformStamped T =
-          tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0));
-      if (!found_base_imu_) {
-        found_base_imu_ = true;
-        ROS_INFO_STREAM("inekf_node: the filter estimates " << imu_frame_ << "; publishing "
-                                                            << base_frame_ << " through tf "
-                                                            << base_frame_ << " -> " << imu_frame_);
-      }
-      return ros_conversions::toIsometry(T.transform);
-    } catch (const tf2::TransformException& error) {
-      if (!warned_no_base_imu_) {
-        warned_no_base_imu_ = true;
-        ROS_WARN_STREAM("inekf_node: no tf " << base_frame_ << " -> " << imu_frame_ << " yet ("
-                                             << error.what() << "): publishing the pose of "
-                                             << imu_frame_ << " as " << base_frame_
-                                             << " until it comes");
-      }
-      return std::nullopt;
-    }
   }
 
   FilterStatus filterStatus() const { return ros_conversions::filterStatus(session_); }
@@ -194,24 +130,16 @@ class InekfNode {
   void publishStatus(const ros::Time& stamp) {
     FilterStatus status = filterStatus();
     status.header.stamp = stamp;
-    status.header.frame_id = base_frame_;
+    status.header.frame_id = output_.baseFrame();
     status_publisher_.publish(status);
   }
 
   std::string config_file_;
   LocalizationSession session_;
-  bool publish_tf_ = true;
-  int max_path_length_ = 5000;
-  double path_publish_period_s_ = 1.0;
-  std::string base_frame_, imu_frame_;
-  bool found_base_imu_ = false, warned_no_base_imu_ = false, logged_unknown_fix_covariance_ = false;
-  tf2_ros::Buffer tf_buffer_;
-  tf2_ros::TransformListener tf_listener_{tf_buffer_};
-  ros::Time last_path_publish_;
-  nav_msgs::Path path_;
-  ros::Publisher odometry_publisher_, path_publisher_, status_publisher_;
+  ros_conversions::OdometryOutput output_;
+  bool logged_unknown_fix_covariance_ = false;
+  ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
-  tf2_ros::TransformBroadcaster tf_broadcaster_;
 };
 
 }  // namespace

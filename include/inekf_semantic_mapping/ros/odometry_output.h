@@ -1,0 +1,65 @@
+// What inekf_node publishes for each estimate: nav_msgs/Odometry and tf map -> base_frame, and
+// the nav_msgs/Path of them. The filter estimates the IMU's pose; the base pose goes through the
+// static base_frame -> imu_frame of tf, so nothing assumes base_link = imu_link.
+// ROS-facing (src/ros): only nodes include this header.
+#pragma once
+
+#include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <ros/node_handle.h>
+#include <ros/publisher.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+
+#include "inekf_semantic_mapping/estimation/types.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+
+class OdometryOutput {
+ public:
+  // Reads the private parameters publish_tf (true), map_frame (map), base_frame (base_link),
+  // imu_frame (default: the IMU messages' frame_id, see noteImuFrame), max_path_length (5000
+  // poses) and path_publish_period_s (1.0), and advertises the odometry and path topics on nh.
+  OdometryOutput(ros::NodeHandle& nh, const ros::NodeHandle& private_nh);
+
+  // The frame the filter estimates, from the first IMU message that names one (unless the
+  // imu_frame parameter set it).
+  void noteImuFrame(const std::string& frame_id);
+  const std::string& baseFrame() const { return base_frame_; }
+
+  // One estimate, stamped with the message's own stamp: a double stamp loses the nanoseconds,
+  // and consumers match our poses to their data by exact stamp.
+  void publish(const ros::Time& stamp, const estimation::NavState& state,
+               const estimation::PoseCovariance& pose_covariance,
+               const Eigen::Vector3d& angular_velocity);
+
+  // Empties the path and publishes the empty path (the filter was reset).
+  void clearPath();
+
+ private:
+  // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
+  // pose) when the IMU is the base or tf has no such transform (warned once). Looked up for
+  // every estimate: it is cheap, and a transform that arrives late is picked up.
+  std::optional<Eigen::Isometry3d> baseFromImu();
+
+  bool publish_tf_ = true;
+  std::string base_frame_, imu_frame_;
+  int max_path_length_ = 5000;
+  double path_publish_period_s_ = 1.0;
+  bool found_base_imu_ = false, warned_no_base_imu_ = false;
+  nav_msgs::Path path_;
+  ros::Time last_path_publish_;
+  ros::Publisher odometry_publisher_, path_publisher_;
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_{tf_buffer_};
+  tf2_ros::TransformBroadcaster tf_broadcaster_;
+};
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping

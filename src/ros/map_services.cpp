@@ -1,0 +1,94 @@
+#include "inekf_semantic_mapping/ros/map_services.h"
+
+#include <ros/console.h>
+
+#include <cstdio>
+#include <utility>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/mapping/map_io.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+
+MapServices::MapServices(ros::NodeHandle& nh, ros::NodeHandle& private_nh,
+                         mapping::SemanticMappingSession& session, MapDisplay& display,
+                         std::string autosave_path, double autosave_period_s)
+    : session_(session), display_(display), autosave_path_(std::move(autosave_path)) {
+  save_srv_ = private_nh.advertiseService("save_map", &MapServices::onSave, this);
+  load_srv_ = private_nh.advertiseService("load_map", &MapServices::onLoad, this);
+  reset_srv_ = private_nh.advertiseService("reset", &MapServices::onReset, this);
+  if (!autosave_path_.empty() && autosave_period_s > 0) {
+    autosave_timer_ = nh.createWallTimer(ros::WallDuration(autosave_period_s),
+                                         [this](const ros::WallTimerEvent&) { autosave(); });
+  }
+}
+
+void MapServices::autosave() {
+  if (autosave_path_.empty() || session_.statistics().scans_inserted == 0) return;
+  try {
+    session_.save(autosave_path_, mapping::MapFormat::kSemanticOt);
+  } catch (const std::exception& e) {
+    ROS_ERROR_STREAM_THROTTLE(60, "semantic_octomap_node: autosave failed: " << e.what());
+  }
+}
+
+bool MapServices::onSave(SaveMap::Request& request, SaveMap::Response& response) {
+  try {
+    const mapping::MapFormat format = mapping::parseMapFormat(request.format, request.path);
+    response.voxel_count = session_.save(request.path, format);
+    response.success = true;
+    response.message = "wrote " + request.path + " (" + std::to_string(response.voxel_count) +
+                       " occupied voxels, " + std::to_string(session_.statistics().scans_inserted) +
+                       " scans)";
+    ROS_INFO_STREAM("semantic_octomap_node: " << response.message);
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.voxel_count = 0;
+    response.message = e.what();
+    ROS_ERROR_STREAM("semantic_octomap_node: save_map failed: " << e.what());
+  }
+  return true;  // the failure is in the response, the node keeps running
+}
+
+bool MapServices::onLoad(LoadMap::Request& request, LoadMap::Response& response) {
+  try {
+    session_.load(request.path);
+    display_.mapReplaced();
+    response.success = true;
+    response.nodes = session_.tree().size();
+    response.message = "loaded " + request.path + " (" + std::to_string(response.nodes) + " nodes)";
+    ROS_INFO_STREAM("semantic_octomap_node: " << response.message);
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.message = e.what();
+    ROS_ERROR_STREAM(
+        "semantic_octomap_node: load_map failed, the current map is kept: " << e.what());
+  }
+  return true;
+}
+
+bool MapServices::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  session_.reset();
+  display_.mapReplaced();
+  ROS_INFO("semantic_octomap_node: map reset");
+  return true;
+}
+
+std::string mappingStatusLine(const mapping::SemanticMappingSession& session) {
+  const mapping::MappingStatistics& s = session.statistics();
+  const auto stats = TimingRegistry::instance().snapshot();
+  const auto insert = stats.find("semantic_map/insert");
+  char line[400];
+  std::snprintf(line, sizeof(line),
+                "%zu of %zu scans in the map (%zu with labels, %zu pending, %zu without pose), "
+                "%zu of %zu label images used (%zu late), %zu nodes, insert %.1f ms",
+                s.scans_inserted, s.scans_received, s.scans_with_labels, session.pendingScans(),
+                s.scans_without_pose, s.label_images_used, s.label_images_received,
+                s.label_images_late, session.tree().size(),
+                insert == stats.end() ? 0.0 : 1e3 * insert->second.meanSeconds());
+  return line;
+}
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping

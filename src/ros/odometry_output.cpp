@@ -1,0 +1,83 @@
+#include "inekf_semantic_mapping/ros/odometry_output.h"
+
+#include <ros/console.h>
+
+#include <algorithm>
+
+#include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
+#include "inekf_semantic_mapping/ros/localization_conversions.h"
+#include "inekf_semantic_mapping/ros/names.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+
+OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const ros::NodeHandle& private_nh) {
+  private_nh.param("publish_tf", publish_tf_, true);
+  private_nh.param<std::string>("map_frame", path_.header.frame_id, frames::kMap);
+  private_nh.param<std::string>("base_frame", base_frame_, frames::kBaseLink);
+  private_nh.param<std::string>("imu_frame", imu_frame_, "");
+  private_nh.param("max_path_length", max_path_length_, 5000);
+  private_nh.param("path_publish_period_s", path_publish_period_s_, 1.0);
+  max_path_length_ = std::max(max_path_length_, 1);
+  odometry_publisher_ = nh.advertise<nav_msgs::Odometry>(topics::kOdometry, 50);
+  path_publisher_ = nh.advertise<nav_msgs::Path>(topics::kPath, 1, /*latch=*/true);
+}
+
+void OdometryOutput::noteImuFrame(const std::string& frame_id) {
+  if (imu_frame_.empty() && !frame_id.empty()) imu_frame_ = frame_id;
+}
+
+void OdometryOutput::publish(const ros::Time& stamp, const estimation::NavState& state,
+                             const estimation::PoseCovariance& pose_covariance,
+                             const Eigen::Vector3d& angular_velocity) {
+  nav_msgs::Odometry odometry;
+  odometry.header.stamp = stamp;
+  odometry.header.frame_id = path_.header.frame_id;
+  odometry.child_frame_id = base_frame_;
+  fillOdometry(state, pose_covariance, angular_velocity, &odometry);
+  if (const auto T_base_imu = baseFromImu()) {
+    odometry = odometryOfBase(odometry, *T_base_imu, base_frame_);
+  }
+  odometry_publisher_.publish(odometry);
+  if (publish_tf_) tf_broadcaster_.sendTransform(transformOfOdometry(odometry));
+  appendToPath(odometry, static_cast<std::size_t>(max_path_length_), &path_);
+  if (last_path_publish_.isZero() || stamp < last_path_publish_ ||
+      (stamp - last_path_publish_).toSec() >= path_publish_period_s_) {
+    path_.header.stamp = stamp;
+    path_publisher_.publish(path_);
+    last_path_publish_ = stamp;
+  }
+}
+
+void OdometryOutput::clearPath() {
+  path_.poses.clear();
+  path_publisher_.publish(path_);
+  last_path_publish_ = ros::Time();
+}
+
+std::optional<Eigen::Isometry3d> OdometryOutput::baseFromImu() {
+  if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
+  try {
+    const geometry_msgs::TransformStamped T =
+        tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0));
+    if (!found_base_imu_) {
+      found_base_imu_ = true;
+      ROS_INFO_STREAM("inekf_node: the filter estimates " << imu_frame_ << "; publishing "
+                                                          << base_frame_ << " through tf "
+                                                          << base_frame_ << " -> " << imu_frame_);
+    }
+    return toIsometry(T.transform);
+  } catch (const tf2::TransformException& error) {
+    if (!warned_no_base_imu_) {
+      warned_no_base_imu_ = true;
+      ROS_WARN_STREAM("inekf_node: no tf " << base_frame_ << " -> " << imu_frame_ << " yet ("
+                                           << error.what() << "): publishing the pose of "
+                                           << imu_frame_ << " as " << base_frame_
+                                           << " until it comes");
+    }
+    return std::nullopt;
+  }
+}
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping
