@@ -50,6 +50,18 @@ ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
 ism_add_tool(evaluate_semantics
   SOURCES src/tools/evaluate_semantics.cpp
   LINK ${PROJECT_NAME}_semantic_evaluation)
+# The same map metric on any drive with labelled scans (the synthetic drives: demo, e2e tests).
+ism_add_tool(evaluate_map
+  SOURCES src/tools/evaluate_map.cpp
+  LINK ${PROJECT_NAME}_semantic_evaluation)
+ism_add_gtest(test_evaluate_map
+  SOURCES test/unit/test_evaluate_map.cpp
+  LINK ${PROJECT_NAME}_semantic_evaluation ${PROJECT_NAME}_synthetic)
+if(TARGET test_evaluate_map)
+  target_compile_definitions(test_evaluate_map PRIVATE
+    EVALUATE_MAP_PATH="$<TARGET_FILE:evaluate_map>")
+  add_dependencies(test_evaluate_map evaluate_map)
+endif()
 
 # The default ENet labelling path scored on the real SemanticKITTI frames of ../shared.
 ism_add_gtest(test_real_semantics

@@ -8,7 +8,7 @@ ism_add_core_library(${PROJECT_NAME}_synthetic
     src/synthetic/route.cpp
     src/synthetic/sensors.cpp
     src/synthetic/drive_generator.cpp
-    src/synthetic/map_evaluation.cpp
+    src/synthetic/label_iou.cpp
   LINK ${PROJECT_NAME}_kitti opencv_core opencv_imgcodecs Threads::Threads
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 

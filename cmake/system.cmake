@@ -31,8 +31,9 @@ if(CATKIN_ENABLE_TESTING)
     generate_synthetic_drive kitti2bag inekf_node segmentation_node semantic_octomap_node)
   # The pipeline runs the default segmentation model (models/unet_synthetic.onnx).
   set(ISM_PIPELINE_FILES models/unet_synthetic.onnx)
+  # The map is scored with evaluate_map (the package's one map metric).
   ism_add_system_rostest(test/ros/e2e_synthetic.test
-    NEEDS ${ISM_PIPELINE_TARGETS} NEEDS_FILES ${ISM_PIPELINE_FILES})
+    NEEDS ${ISM_PIPELINE_TARGETS} evaluate_map NEEDS_FILES ${ISM_PIPELINE_FILES})
   ism_add_system_rostest(test/ros/e2e_real_oxts.test NEEDS kitti2bag inekf_node)
   # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
   ism_add_system_rostest(test/ros/e2e_real_drive.test

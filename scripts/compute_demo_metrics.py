@@ -299,41 +299,64 @@ def ground_truth_voxels(ground_truth_dir, resolution, scan_step=2, max_range_m=N
     return _majority_label(np.concatenate(all_keys), np.concatenate(all_labels))
 
 
-def map_miou(vertices, ground_truth_dir, resolution=None, ply_path=None, scan_step=2, max_range_m=None,
-             poses=None):
-    """Semantic accuracy of the map's occupied voxels: on the voxels that are both occupied in the
-    map and hit by labeled ground-truth lidar points, the IoU of each class between the map's
-    label and the ground-truth majority label; mIoU over the classes present in the ground
-    truth. Also coverage (ground-truth voxels the map has) and how many map voxels are matched."""
-    if resolution is None and ply_path:
-        resolution = ply_resolution(ply_path)
-    if not resolution:
-        raise ValueError("map resolution unknown (no 'resolution' comment in the PLY)")
-    gt_keys, gt_labels = ground_truth_voxels(ground_truth_dir, resolution, scan_step, max_range_m, poses)
-    points = np.stack([vertices["x"], vertices["y"], vertices["z"]], axis=1).astype(float)
-    map_keys = _voxel_keys(points, resolution)
-    map_labels = vertices["label"].astype(np.int64)
-    _, gt_index, map_index = np.intersect1d(gt_keys, map_keys, return_indices=True)
-    truth, predicted = gt_labels[gt_index], map_labels[map_index]
-    per_class = {}
-    for label in np.unique(gt_labels):
-        tp = int(np.sum((truth == label) & (predicted == label)))
-        fp = int(np.sum((truth != label) & (predicted == label)))
-        fn = int(np.sum((truth == label) & (predicted != label)))
-        if tp + fn < 20:  # too few matched voxels of this class to judge
-            continue
-        per_class[int(label)] = {"iou": tp / float(tp + fp + fn), "voxels": tp + fn}
-    ious = [c["iou"] for c in per_class.values()]
-    return {
-        "miou": float(np.mean(ious)) if ious else 0.0,
-        "per_class": per_class,
-        "voxel_accuracy": float(np.mean(truth == predicted)) if len(truth) else 0.0,
-        "matched_voxels": int(len(truth)),
-        "ground_truth_voxels": int(len(gt_keys)),
-        "map_voxels": int(len(map_keys)),
-        "coverage": float(len(truth)) / max(1, len(gt_keys)),
-        "resolution_m": resolution,
-    }
+def find_tool(name):
+    """A C++ tool of the package: $ISM_BIN/NAME, else lib/inekf_semantic_mapping/NAME under each
+    CMAKE_PREFIX_PATH entry (a sourced workspace, rostest), else NAME on PATH."""
+    candidates = []
+    if os.environ.get("ISM_BIN"):
+        candidates.append(os.path.join(os.environ["ISM_BIN"], name))
+    for prefix in os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            candidates.append(os.path.join(prefix, "lib", "inekf_semantic_mapping", name))
+    for path in candidates:
+        if os.access(path, os.X_OK):
+            return path
+    import shutil
+    found = shutil.which(name)
+    if not found:
+        raise OSError("%s not found (build the package and source its workspace, or set ISM_BIN)" % name)
+    return found
+
+
+def map_miou(map_ot, ground_truth_dir, poses=None, scan_step=2):
+    """The package's one map metric, computed by the evaluate_map tool (the C++ function
+    evaluate_semantics scores SemanticKITTI maps with): every labelled ground-truth lidar point of
+    every scan_step-th frame, placed in the map with the poses the map was built with, takes the
+    most likely class of its voxel; accuracy and IoU per class over the covered points (a point
+    whose voxel is missing, free or classless is not covered), mIoU over the scored classes present
+    in the truth. Returns evaluate_map's JSON (miou, accuracy, coverage, classes, map_voxels,
+    map_voxels_hit...).
+
+    poses: T_map_imu per OXTS frame (None entries: frame skipped), e.g. the estimate the map was
+    built with; None: the drive's true poses."""
+    import subprocess
+    import tempfile
+    drive_dir = os.path.dirname(os.path.abspath(ground_truth_dir))
+    command = [find_tool("evaluate_map"), "--map", map_ot, "--drive", drive_dir,
+               "--labels", os.path.join(ground_truth_dir, "velodyne_labels"),
+               "--scan-step", str(scan_step)]
+    with tempfile.TemporaryDirectory(prefix="ism_map_miou_") as work:
+        if poses is not None:
+            frames = [i for i, pose in enumerate(poses) if pose is not None]
+            if not frames:
+                raise ValueError("no frame has a pose to place its scan with")
+            with open(os.path.join(work, "poses.txt"), "w") as f:
+                for i in frames:
+                    f.write(" ".join("%.9g" % v for v in poses[i][:3, :].reshape(-1)) + "\n")
+            with open(os.path.join(work, "frames.txt"), "w") as f:
+                f.write("".join("%d\n" % i for i in frames))
+            command += ["--poses", os.path.join(work, "poses.txt"),
+                        "--frames", os.path.join(work, "frames.txt")]
+        else:
+            command += ["--poses", os.path.join(ground_truth_dir, "poses_imu_map.txt")]
+        run = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             universal_newlines=True)
+    if run.returncode != 0:
+        raise ValueError("evaluate_map failed (%d): %s" % (run.returncode, run.stderr.strip()))
+    result_lines = [l for l in run.stdout.splitlines() if l.startswith("RESULT ")]
+    if not result_lines:
+        raise ValueError("evaluate_map printed no RESULT line: %s" % run.stdout[-500:])
+    return json.loads(result_lines[-1][len("RESULT "):])
 
 
 def estimated_frame_poses(estimate, truth, max_dt=0.02):
@@ -395,6 +418,7 @@ def main():
     parser.add_argument("--monitor-dir", required=True, help="pipeline_monitor.py output folder")
     parser.add_argument("--bag", help="the input bag (for message counts)")
     parser.add_argument("--map-ply", help="the saved semantic map PLY")
+    parser.add_argument("--map-ot", help="the saved semantic map .ot (map mIoU with --ground-truth)")
     parser.add_argument("--ground-truth", help="synthetic drive ground_truth/ folder (map mIoU)")
     parser.add_argument("--map-poses", choices=("estimate", "truth"), default="estimate",
                         help="the poses the map was built with (use_ground_truth_pose: truth)")
@@ -418,11 +442,10 @@ def main():
     if args.map_ply and os.path.exists(args.map_ply):
         vertices = read_ply_vertices(args.map_ply)
         metrics["map"] = {"occupied_voxels": int(len(vertices)), "classes": map_class_histogram(vertices)}
-        if args.ground_truth:
+        if args.ground_truth and args.map_ot:
             try:
                 poses = (estimated_frame_poses(estimate, truth) if args.map_poses == "estimate" else None)
-                metrics["map"]["semantic"] = map_miou(vertices, args.ground_truth, ply_path=args.map_ply,
-                                                      poses=poses)
+                metrics["map"]["semantic"] = map_miou(args.map_ot, args.ground_truth, poses=poses)
                 metrics["map"]["semantic"]["scans_placed_with"] = args.map_poses
             except (OSError, ValueError) as error:
                 metrics["map"]["semantic"] = {"error": str(error)}

@@ -206,7 +206,7 @@ cleanup
 trap - EXIT
 
 log "computing metrics"
-metrics_args=(--monitor-dir "$out" --bag "$out/drive.bag" --map-ply "$out/semantic_map.ply"
+metrics_args=(--monitor-dir "$out" --bag "$out/drive.bag" --map-ply "$out/semantic_map.ply" --map-ot "$out/semantic_map.ot"
   --output "$out/metrics.json" --plot "$out/trajectory.png"
   --extra "timing_s={\"generate\": $generate_s, \"kitti2bag\": $convert_s, \"playback_wall\": $play_wall_s, \"bag_duration\": $bag_duration}")
 [[ -n $ground_truth ]] && metrics_args+=(--ground-truth "$ground_truth")

@@ -216,6 +216,13 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
   return labels;
 }
 
+std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vector3f& point_map) {
+  const mapping::SemanticOcTreeNode* node =
+      tree.search(point_map.x(), point_map.y(), point_map.z());
+  if (!node || !tree.isNodeOccupied(node)) return cityscapes::kUnlabeled;
+  return tree.mostLikelyLabel(*node, cityscapes::kUnlabeled);
+}
+
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
                                     int max_frames, const mapping::SemanticMappingConfig& config) {
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
@@ -274,19 +281,14 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
   camera_map.tree().updateInnerOccupancy();
   human_map.tree().updateInnerOccupancy();
   scores.map_voxels = mapping::countOccupiedFinestVoxels(camera_map.tree());
-  const auto voxelLabel = [](const mapping::SemanticOcTree& tree, const Eigen::Vector3f& p) {
-    const mapping::SemanticOcTreeNode* node = tree.search(p.x(), p.y(), p.z());
-    if (!node || !tree.isNodeOccupied(node)) return std::uint32_t{cityscapes::kUnlabeled};
-    return tree.mostLikelyLabel(*node, cityscapes::kUnlabeled);
-  };
   for (const Kept& k : kept) {
     const Eigen::Matrix3Xf points_map =
         (k.T_w_velo.linear().cast<float>() * k.points_in_view).colwise() +
         k.T_w_velo.translation().cast<float>();
     for (Eigen::Index i = 0; i < points_map.cols(); ++i) {
       const std::uint8_t truth = k.truth_in_view[static_cast<std::size_t>(i)];
-      scores.camera.add(truth, voxelLabel(camera_map.tree(), points_map.col(i)));
-      scores.ceiling.add(truth, voxelLabel(human_map.tree(), points_map.col(i)));
+      scores.camera.add(truth, mapLabelAt(camera_map.tree(), points_map.col(i)));
+      scores.ceiling.add(truth, mapLabelAt(human_map.tree(), points_map.col(i)));
     }
   }
   return scores;

@@ -14,7 +14,7 @@
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
-#include "inekf_semantic_mapping/synthetic/map_evaluation.h"
+#include "inekf_semantic_mapping/synthetic/label_iou.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {

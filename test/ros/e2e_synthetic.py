@@ -79,8 +79,8 @@ class EndToEndSynthetic(unittest.TestCase):
             gt_dir = e2e.ground_truth_dir(drive)
             # Ground-truth points placed with the poses the map was built with (the estimate).
             poses = e2e.metrics.estimated_frame_poses(estimate, truth)
-            results["map_miou"] = (e2e.metrics.map_miou(vertices, gt_dir, ply_path=ply, poses=poses)
-                                   if gt_dir else None)
+            results["map_miou"] = (e2e.metrics.map_miou(results["saves"]["ot"]["path"], gt_dir,
+                                                        poses=poses) if gt_dir else None)
             results["grids"] = cls.score_grids(grids, gt_dir, poses) if gt_dir else None
         with open(os.path.join(out_dir, "results.json"), "w") as f:
             json.dump(results, f, indent=2, default=str)
@@ -156,8 +156,10 @@ class EndToEndSynthetic(unittest.TestCase):
         if miou is None:
             self.skipTest("no synthetic ground truth to compute map mIoU")
         self.assertGreater(miou["miou"], rospy.get_param("~min_miou", 0.35), miou)
-        self.assertGreater(miou["voxel_accuracy"], rospy.get_param("~min_voxel_accuracy", 0.75), miou)
-        self.assertGreater(miou["matched_voxels"], 0.5 * miou["map_voxels"],
+        self.assertGreater(miou["accuracy"], rospy.get_param("~min_accuracy", 0.75), miou)
+        # Scans that went in without labels leave their voxels classless: fewer points covered.
+        self.assertGreater(miou["coverage"], rospy.get_param("~min_coverage", 0.3), miou)
+        self.assertGreater(miou["map_voxels_hit"], 0.4 * miou["map_voxels"],
                            "most map voxels should sit where labeled ground-truth points are: %s" % miou)
 
 

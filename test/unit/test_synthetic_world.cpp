@@ -12,7 +12,7 @@
 #include <tuple>
 
 #include "inekf_semantic_mapping/perception/cityscapes.h"
-#include "inekf_semantic_mapping/synthetic/map_evaluation.h"
+#include "inekf_semantic_mapping/synthetic/label_iou.h"
 #include "inekf_semantic_mapping/synthetic/route.h"
 #include "inekf_semantic_mapping/synthetic/sensors.h"
 #include "inekf_semantic_mapping/synthetic/world.h"
@@ -247,77 +247,6 @@ TEST(LabelIouCounter, CountsPerClassIouOverTheClassesInTheTruth) {
   EXPECT_DOUBLE_EQ(counter.meanIou(), (3.0 / 4.0 + 1.0 / 3.0) / 2.0);
   EXPECT_EQ(counter.pairs(), 6u);
   EXPECT_EQ(counter.correct(), 4u);
-}
-
-TEST(SemanticMapIou, PerfectMapScoresOneAndConfusionsCountPerClass) {
-  // A "map": the voxels a lidar scan hits (0.2 m), labelled with their true surfaces.
-  const SyntheticWorld& world = town();
-  const SyntheticRoute route = SyntheticRoute::forWorld(world);
-  const VehicleState state = route.poseAt(6.0);
-  Eigen::Isometry3d T_map_velo = Eigen::Isometry3d::Identity();
-  T_map_velo.linear() = state.rotation;
-  T_map_velo.translation() = state.position + Eigen::Vector3d(0, 0, 0.8);
-  LidarModel model;
-  model.azimuth_step_deg = 1.0;
-  model.range_noise_std_m = 0;
-  model.max_range_m = 40;
-  const LidarScan scan = simulateLidarScan(world, T_map_velo, model, 1);
-  constexpr double kResolution = 0.2;
-  std::set<std::tuple<long, long, long>> keys;
-  std::vector<Eigen::Vector3d> centres;
-  std::vector<std::uint8_t> labels;
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    const Eigen::Vector3d p =
-        T_map_velo * Eigen::Vector3d(scan.xyzi[4 * i], scan.xyzi[4 * i + 1], scan.xyzi[4 * i + 2]);
-    const auto key = std::make_tuple(std::lround(std::floor(p.x() / kResolution)),
-                                     std::lround(std::floor(p.y() / kResolution)),
-                                     std::lround(std::floor(p.z() / kResolution)));
-    if (!keys.insert(key).second) continue;
-    const Eigen::Vector3d centre =
-        (Eigen::Vector3d(std::get<0>(key), std::get<1>(key), std::get<2>(key)) +
-         Eigen::Vector3d::Constant(0.5)) *
-        kResolution;
-    centres.push_back(centre);
-    labels.push_back(world.labelAt(centre, kResolution * 0.87));
-  }
-  ASSERT_GT(centres.size(), 1000u);
-  const SemanticMapIou perfect = semanticMapIou(world, centres, labels, kResolution);
-  EXPECT_EQ(perfect.voxels_without_truth, 0u);  // every hit voxel touches its surface
-  EXPECT_DOUBLE_EQ(perfect.mean_iou, 1.0);
-  ASSERT_GE(perfect.classes.size(), 3u);
-
-  // Call every car voxel "building": car IoU 0, building IoU = buildings / (buildings + cars).
-  std::size_t cars = 0, buildings = 0;
-  std::vector<std::uint8_t> confused = labels;
-  for (std::uint8_t& l : confused) {
-    if (l == cs::kCar) {
-      l = cs::kBuilding;
-      ++cars;
-    } else if (l == cs::kBuilding) {
-      ++buildings;
-    }
-  }
-  ASSERT_GT(cars, 0u);
-  ASSERT_GT(buildings, 0u);
-  const SemanticMapIou result = semanticMapIou(world, centres, confused, kResolution);
-  for (const ClassIou& c : result.classes) {
-    if (c.label_id == cs::kCar) {
-      EXPECT_EQ(c.iou(), 0.0);
-    }
-    if (c.label_id == cs::kBuilding) {
-      EXPECT_NEAR(c.iou(), static_cast<double>(buildings) / (buildings + cars), 1e-12);
-    }
-  }
-  EXPECT_NEAR(result.mean_iou,
-              (perfect.classes.size() - 2 + static_cast<double>(buildings) / (buildings + cars)) /
-                  perfect.classes.size(),
-              1e-12);
-  EXPECT_NE(result.toJson().find("\"car\": 0.000000"), std::string::npos) << result.toJson();
-  // A voxel floating in the air has no truth and is reported, not scored.
-  centres.push_back(T_map_velo.translation() + Eigen::Vector3d(0, 0, 5));
-  labels.push_back(cs::kRoad);
-  EXPECT_EQ(semanticMapIou(world, centres, labels, kResolution).voxels_without_truth, 1u);
-  EXPECT_THROW(semanticMapIou(world, centres, {}, kResolution), std::invalid_argument);
 }
 
 TEST(SyntheticRoute, StartsAtTheOriginAtRestAndLoopsBack) {

@@ -99,6 +99,14 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
                                            const PointLabellingOptions& options,
                                            ProjectedPoints* projected);
 
+// The package's one map metric, "the map at the lidar points": each labelled lidar point (map
+// frame) takes the most likely class of its voxel; cityscapes::kUnlabeled (the point is not
+// covered) when there is no voxel, it is free, or it has no class evidence. Accuracy and IoU per
+// class are over the covered points, mIoU over the scored classes present in the truth
+// (PointLabelScore). scoreSequenceMaps (SemanticKITTI) and the evaluate_map tool (any drive with
+// labelled scans: the synthetic drives of the demo and the e2e tests) score maps with it.
+std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vector3f& point_map);
+
 // The map at the lidar points (issue 12's map mIoU): the sequence's scans go through a
 // mapping::SemanticMappingSession with the poses of poses.txt (T_w_velo = inv(Tr) P Tr) twice,
 // once with the camera's label images (the node's path: the card's label filter, the session's

@@ -1,0 +1,186 @@
+// The package's one map metric: perception::mapLabelAt and the evaluate_map tool, on a short
+// synthetic drive mapped from its own true point labels (the score must be near perfect) and
+// from poses shifted by a metre (it must drop), and the tool's errors on bad inputs.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/offline_mapping.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
+#include "inekf_semantic_mapping/synthetic/drive_generator.h"
+
+namespace fs = std::filesystem;
+namespace ism = inekf_semantic_mapping;
+namespace cs = ism::cityscapes;
+
+namespace {
+
+// Runs a command; returns its exit status and stdout.
+std::pair<int, std::string> run(const std::string& command) {
+  std::string output;
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return {-1, ""};
+  char buffer[4096];
+  while (std::fgets(buffer, sizeof(buffer), pipe)) output += buffer;
+  const int status = pclose(pipe);
+  return {WEXITSTATUS(status), output};
+}
+
+double jsonNumber(const std::string& json, const std::string& key) {
+  const std::size_t at = json.find("\"" + key + "\":");
+  if (at == std::string::npos) return -1;
+  return std::stod(json.substr(at + key.size() + 3));
+}
+
+class EvaluateMapTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ =
+        (fs::temp_directory_path() / ("ism_evaluate_map_" + std::to_string(::getpid()))).string();
+    ism::synthetic::DriveOptions options;
+    options.output_dir = dir_;
+    options.seed = 5;
+    options.duration_s = 3.0;
+    options.write_images = false;
+    options.lidar.beams = 16;
+    options.lidar.azimuth_step_deg = 0.8;
+    drive_ = ism::synthetic::generateSyntheticDrive(options).sync_dir;
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+
+  // A map of every other scan from the true per-point labels, placed with `poses` (T_map_imu).
+  static std::string buildMap(const std::vector<Eigen::Isometry3d>& poses,
+                              const std::string& name) {
+    const Eigen::Isometry3d T_imu_velo =
+        ism::kitti::readRawCalibration(fs::path(drive_).parent_path().string())
+            .T_velo_imu.inverse();
+    ism::mapping::SemanticMappingSession session{ism::mapping::SemanticMappingConfig{}};
+    for (std::size_t frame = 0; frame < poses.size(); frame += 2) {
+      char stem[16];
+      std::snprintf(stem, sizeof(stem), "%010zu", frame);
+      const auto scan =
+          ism::kitti::readVelodyneBin(drive_ + "/velodyne_points/data/" + stem + ".bin");
+      std::vector<std::uint32_t> labels =
+          ism::kitti::readLabelFile(drive_ + "/ground_truth/velodyne_labels/" + stem + ".label");
+      for (std::uint32_t& l : labels) l = ism::kitti::semanticClass(l);
+      Eigen::Matrix3Xf points(3, static_cast<Eigen::Index>(scan.size()));
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        points.col(static_cast<Eigen::Index>(i)) << scan.point(i)[0], scan.point(i)[1],
+            scan.point(i)[2];
+      }
+      session.insertScanWithPointLabels(points, poses[frame] * T_imu_velo, labels, cs::kUnlabeled);
+    }
+    const std::string path = dir_ + "/" + name + ".ot";
+    session.save(path, ism::mapping::MapFormat::kSemanticOt);
+    return path;
+  }
+
+  static std::string truePoses() { return drive_ + "/ground_truth/poses_imu_map.txt"; }
+
+  static std::string dir_, drive_;
+};
+std::string EvaluateMapTest::dir_, EvaluateMapTest::drive_;
+
+TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
+  ism::mapping::SemanticMappingSession session{ism::mapping::SemanticMappingConfig{}};
+  // A wall of "building" points 5 m ahead, seen from the origin.
+  Eigen::Matrix3Xf wall(3, 121);
+  for (int i = 0; i < 121; ++i)
+    wall.col(i) << 5.0f, -1.0f + 0.2f * (i % 11), -1.0f + 0.2f * (i / 11);
+  session.insertScanWithPointLabels(wall, Eigen::Isometry3d::Identity(),
+                                    std::vector<std::uint32_t>(121, cs::kBuilding), cs::kUnlabeled);
+  const auto& tree = session.tree();
+  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(5.0f, 0.0f, 0.0f)), cs::kBuilding);
+  // Free space in front of the wall, unknown space behind it: no label.
+  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(2.5f, 0.0f, 0.0f)), cs::kUnlabeled);
+  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(9.0f, 0.0f, 0.0f)), cs::kUnlabeled);
+  // An occupied voxel without class evidence covers nothing either.
+  Eigen::Matrix3Xf post(3, 1);
+  post << 0.0f, 6.0f, 0.0f;
+  session.insertScanWithPointLabels(post, Eigen::Isometry3d::Identity(), {cs::kUnlabeled},
+                                    cs::kUnlabeled);
+  ASSERT_NE(tree.search(0.0, 6.0, 0.0), nullptr);
+  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(0.0f, 6.0f, 0.0f)), cs::kUnlabeled);
+}
+
+TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
+  const std::vector<Eigen::Isometry3d> poses = ism::mapping::readOdometryPoses(truePoses());
+  ASSERT_GE(poses.size(), 20u);
+  const std::string exact = buildMap(poses, "exact");
+  const auto [status, output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_);
+  ASSERT_EQ(status, 0) << output;
+  const std::string result = output.substr(output.rfind("RESULT "));
+  EXPECT_GT(jsonNumber(result, "miou"), 0.9) << result;
+  EXPECT_GT(jsonNumber(result, "accuracy"), 0.97) << result;
+  EXPECT_GT(jsonNumber(result, "coverage"), 0.8) << result;
+  EXPECT_GT(jsonNumber(result, "scans"), 9) << result;
+
+  // Scored with poses 1 m off to the side, points land in the wrong voxels: narrow classes
+  // (sidewalk, terrain, poles) are missed and fewer points find an occupied voxel.
+  std::vector<Eigen::Isometry3d> shifted = poses;
+  for (Eigen::Isometry3d& pose : shifted) pose.translation().y() += 1.0;
+  const std::string shifted_poses = dir_ + "/shifted_poses.txt";
+  {
+    std::ofstream out(shifted_poses);
+    for (const Eigen::Isometry3d& pose : shifted) {
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 4; ++c) out << pose.matrix()(r, c) << (r == 2 && c == 3 ? "\n" : " ");
+      }
+    }
+  }
+  const auto [shifted_status, shifted_output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
+          shifted_poses);
+  ASSERT_EQ(shifted_status, 0) << shifted_output;
+  const std::string shifted_result = shifted_output.substr(shifted_output.rfind("RESULT "));
+  EXPECT_LT(jsonNumber(shifted_result, "miou"), jsonNumber(result, "miou") - 0.1)
+      << shifted_result << "\nexact: " << result;
+  EXPECT_LT(jsonNumber(shifted_result, "coverage"), jsonNumber(result, "coverage") - 0.1)
+      << shifted_result << "\nexact: " << result;
+
+  // --frames names the frame of each pose line: the first half of the poses, relabelled as the
+  // second half's frames, place the scans wrongly too; a count that does not match is refused.
+  const std::string frames = dir_ + "/frames.txt";
+  {
+    std::ofstream out(frames);
+    for (std::size_t i = 0; i < poses.size(); ++i) out << i << "\n";
+  }
+  const auto [frames_status, frames_output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
+          truePoses() + " --frames " + frames);
+  ASSERT_EQ(frames_status, 0) << frames_output;
+  EXPECT_EQ(frames_output.substr(frames_output.rfind("RESULT ")), result);
+  {
+    std::ofstream out(frames, std::ios::app);
+    out << poses.size() << "\n";
+  }
+  const auto [bad_status, bad_output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
+          truePoses() + " --frames " + frames);
+  EXPECT_NE(bad_status, 0);
+  EXPECT_NE(bad_output.find(frames), std::string::npos) << bad_output;
+}
+
+TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
+  const auto [status, output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --map " + dir_ + "/missing.ot --drive " + drive_);
+  EXPECT_NE(status, 0);
+  EXPECT_NE(output.find("missing.ot"), std::string::npos) << output;
+  const auto [usage_status, usage_output] =
+      run(std::string(EVALUATE_MAP_PATH) + " --drive " + drive_);
+  EXPECT_NE(usage_status, 0);
+  EXPECT_NE(usage_output.find("--map"), std::string::npos) << usage_output;
+}
+
+}  // namespace
