@@ -6,6 +6,7 @@ ism_add_core_library(${PROJECT_NAME}_kitti
     src/kitti/gps_degradation.cpp
     src/kitti/mercator.cpp
     src/kitti/oxts.cpp
+    src/kitti/poses.cpp
     src/kitti/raw_drive.cpp
     src/kitti/timestamps.cpp
     src/kitti/velodyne.cpp)

@@ -11,6 +11,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 
@@ -18,46 +19,6 @@ namespace inekf_semantic_mapping {
 namespace mapping {
 
 namespace fs = std::filesystem;
-
-std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open poses file");
-  std::vector<Eigen::Isometry3d> poses;
-  std::string line;
-  int line_number = 0;
-  while (std::getline(in, line)) {
-    ++line_number;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    std::istringstream values(line);
-    Eigen::Matrix<double, 3, 4> pose;
-    for (int i = 0; i < 12; ++i) {
-      if (!(values >> pose(i / 4, i % 4))) {
-        throw std::runtime_error(path + ":" + std::to_string(line_number) +
-                                 ": expected 12 numbers (3x4 row-major pose), got " +
-                                 std::to_string(i));
-      }
-    }
-    std::string extra;
-    if (values >> extra) {
-      throw std::runtime_error(path + ":" + std::to_string(line_number) +
-                               ": more than 12 numbers (3x4 row-major pose), extra '" + extra +
-                               "'");
-    }
-    if (!pose.allFinite()) {
-      throw std::runtime_error(path + ":" + std::to_string(line_number) + ": non-finite pose");
-    }
-    const Eigen::Matrix3d R = pose.leftCols<3>();
-    if (!((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-3) ||
-        !(R.determinant() > 0)) {
-      throw std::runtime_error(path + ":" + std::to_string(line_number) +
-                               ": the 3x3 part is not a rotation");
-    }
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    T.matrix().topRows<3>() = pose;
-    poses.push_back(T);
-  }
-  return poses;
-}
 
 std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans) {
   if (!fs::is_directory(scans_dir)) {
@@ -89,7 +50,7 @@ CameraModel odometryColorCamera(const std::string& calib_path, int width, int he
 void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress) {
   const std::vector<std::string> scan_paths = listScanFiles(sequence.scans_dir, sequence.max_scans);
-  const std::vector<Eigen::Isometry3d> poses = readOdometryPoses(sequence.poses_path);
+  const std::vector<Eigen::Isometry3d> poses = kitti::readKittiPoses(sequence.poses_path);
   const Eigen::Isometry3d T_cam0_velo =
       kitti::readObjectCalibration(sequence.calib_path).Tr_velo_to_cam;
   const Eigen::Isometry3d T_velo_cam0 = T_cam0_velo.inverse();
@@ -184,7 +145,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
   const Eigen::Isometry3d T_imu_velo = calibration.T_velo_imu.inverse();
   std::vector<Eigen::Isometry3d> T_map_imu;
   if (!drive.poses_path.empty()) {
-    T_map_imu = readOdometryPoses(drive.poses_path);
+    T_map_imu = kitti::readKittiPoses(drive.poses_path);
   } else {
     const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
     if (oxts.empty()) throw std::runtime_error(drive.drive_dir + ": oxts/ has no frames");

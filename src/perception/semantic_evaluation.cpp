@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
@@ -227,8 +228,7 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
                                     int max_frames, const mapping::SemanticMappingConfig& config) {
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
   if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
-  const std::vector<Eigen::Isometry3d> poses =
-      mapping::readOdometryPoses(sequence_dir + "/poses.txt");
+  const std::vector<Eigen::Isometry3d> poses = kitti::readKittiPoses(sequence_dir + "/poses.txt");
   mapping::SemanticMappingSession camera_map(config);
   mapping::SemanticMappingSession human_map(config);
   struct Kept {

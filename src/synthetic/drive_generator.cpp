@@ -18,6 +18,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/synthetic/route.h"
 #include "inekf_semantic_mapping/synthetic/world.h"
@@ -78,15 +79,6 @@ std::string frameName(std::size_t index, const char* extension) {
   char name[32];
   std::snprintf(name, sizeof(name), "%010zu%s", index, extension);
   return name;
-}
-
-std::string poseLine(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
-  char line[512];
-  std::snprintf(line, sizeof(line),
-                "%.12e %.12e %.12e %.12e %.12e %.12e %.12e %.12e %.12e %.12e %.12e %.12e\n",
-                R(0, 0), R(0, 1), R(0, 2), t.x(), R(1, 0), R(1, 1), R(1, 2), t.y(), R(2, 0),
-                R(2, 1), R(2, 2), t.z());
-  return line;
 }
 
 std::string timestampsText(const std::vector<std::int64_t>& stamps) {
@@ -263,7 +255,7 @@ DriveSummary generateInto(const DriveOptions& options) {
       writeTextAtomically(summary.extract_dir + "/oxts/data/" + frameName(i, ".txt"),
                           extract_lines[i]);
       stamps.push_back(stamp(extract_times[i]));
-      poses += poseLine(extract_states[i].rotation, extract_states[i].position);
+      poses += kitti::kittiPoseLine(extract_states[i].rotation, extract_states[i].position);
     }
     writeTextAtomically(summary.extract_dir + "/oxts/timestamps.txt", timestampsText(stamps));
     writeTextAtomically(summary.extract_dir + "/oxts/dataformat.txt", kDataFormat);
@@ -293,7 +285,7 @@ DriveSummary generateInto(const DriveOptions& options) {
       writeTextAtomically(summary.sync_dir + "/oxts/data/" + frameName(k, ".txt"),
                           extract_lines[j]);
       stamps.push_back(stamp(extract_times[j]));
-      poses += poseLine(extract_states[j].rotation, extract_states[j].position);
+      poses += kitti::kittiPoseLine(extract_states[j].rotation, extract_states[j].position);
     }
     writeTextAtomically(summary.sync_dir + "/oxts/timestamps.txt", timestampsText(stamps));
     writeTextAtomically(summary.sync_dir + "/oxts/dataformat.txt", kDataFormat);
@@ -381,13 +373,13 @@ DriveSummary generateInto(const DriveOptions& options) {
     for (double t : sweep_times) {
       const VehicleState state = route.poseAt(t);
       const Eigen::Isometry3d T = isometry(state.rotation, state.position) * T_imu_velo;
-      velo_poses += poseLine(T.linear(), T.translation());
+      velo_poses += kitti::kittiPoseLine(T.linear(), T.translation());
     }
     for (double t : image_times) {
       const VehicleState state = route.poseAt(t);
       const Eigen::Isometry3d T =
           isometry(state.rotation, state.position) * T_imu_velo * T_velo_camera;
-      camera_poses += poseLine(T.linear(), T.translation());
+      camera_poses += kitti::kittiPoseLine(T.linear(), T.translation());
     }
     if (options.write_lidar) writeTextAtomically(gt_dir + "/poses_velodyne_map.txt", velo_poses);
     if (options.write_images) writeTextAtomically(gt_dir + "/poses_image_02_map.txt", camera_poses);

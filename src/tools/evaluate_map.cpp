@@ -24,9 +24,9 @@
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
-#include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
@@ -105,7 +105,7 @@ int run(const ism::common::CommandLine& cli) {
 
   const std::unique_ptr<ism::mapping::SemanticOcTree> tree =
       ism::mapping::loadSemanticOcTree(map_path);
-  const std::vector<Eigen::Isometry3d> poses = ism::mapping::readOdometryPoses(poses_path);
+  const std::vector<Eigen::Isometry3d> poses = ism::kitti::readKittiPoses(poses_path);
   std::vector<int> frames(poses.size());
   for (std::size_t i = 0; i < frames.size(); ++i) frames[i] = static_cast<int>(i);
   if (cli.has("--frames")) frames = readFrameIndices(cli.get("--frames"), poses.size());

@@ -19,6 +19,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/estimation/oxts_run.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 
 namespace ism = inekf_semantic_mapping;
 namespace estimation = inekf_semantic_mapping::estimation;
@@ -54,13 +55,6 @@ void addOutput(ism::common::AtomicFileSet* outputs, const std::string& path,
     out.precision(9);
     body(out);
   });
-}
-
-void writeKittiPose(std::ostream& out, const Eigen::Matrix3d& r, const Eigen::Vector3d& t) {
-  for (int row = 0; row < 3; ++row) {
-    out << r(row, 0) << ' ' << r(row, 1) << ' ' << r(row, 2) << ' ' << t(row)
-        << (row < 2 ? ' ' : '\n');
-  }
 }
 
 }  // namespace
@@ -120,11 +114,11 @@ int main(int argc, char** argv) {
     ism::ScopedTimer write_timer("write_outputs");
     ism::common::AtomicFileSet outputs;
     addOutput(&outputs, cli.get("--output-kitti"), [&](std::ostream& out) {
-      for (const auto& s : run.states) writeKittiPose(out, s.rotation, s.position_map);
+      for (const auto& s : run.states) out << ism::kitti::kittiPoseLine(s.rotation, s.position_map);
     });
     if (cli.has("--output-truth")) {
       addOutput(&outputs, cli.get("--output-truth"), [&](std::ostream& out) {
-        for (const auto& t : run.truth) writeKittiPose(out, t.linear(), t.translation());
+        for (const auto& t : run.truth) out << ism::kitti::kittiPoseLine(t);
       });
     }
     if (cli.has("--output-tum")) {

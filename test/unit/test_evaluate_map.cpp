@@ -11,9 +11,9 @@
 #include <string>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
-#include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/semantic_evaluation.h"
@@ -114,7 +114,7 @@ TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
 }
 
 TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
-  const std::vector<Eigen::Isometry3d> poses = ism::mapping::readOdometryPoses(truePoses());
+  const std::vector<Eigen::Isometry3d> poses = ism::kitti::readKittiPoses(truePoses());
   ASSERT_GE(poses.size(), 20u);
   const std::string exact = buildMap(poses, "exact");
   const auto [status, output] =

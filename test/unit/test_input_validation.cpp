@@ -11,6 +11,7 @@
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "test_data.h"
@@ -108,13 +109,12 @@ TEST_F(CalibrationFiles, RectifiedImageSizeMustBeAnImageSize) {
 }
 
 TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
-  EXPECT_EQ(mapping::readOdometryPoses(write("ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n")).size(), 1u);
+  EXPECT_EQ(kitti::readKittiPoses(write("ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n")).size(), 1u);
+  expectMentions(
+      errorOf([&] { kitti::readKittiPoses(write("extra.txt", "1 0 0 0 0 1 0 0 0 0 1 0 7\n")); }),
+      {"extra.txt:1", "more than 12"});
   expectMentions(errorOf([&] {
-                   mapping::readOdometryPoses(write("extra.txt", "1 0 0 0 0 1 0 0 0 0 1 0 7\n"));
-                 }),
-                 {"extra.txt:1", "more than 12"});
-  expectMentions(errorOf([&] {
-                   mapping::readOdometryPoses(
+                   kitti::readKittiPoses(
                        write("zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n"));
                  }),
                  {"zero.txt:2", "not a rotation"});

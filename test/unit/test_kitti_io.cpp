@@ -12,6 +12,7 @@
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
@@ -299,6 +300,32 @@ TEST(KittiCalibration, OdometryCalibTxtAndErrors) {
 }
 
 // ---------------------------------------------------------------------------- velodyne
+TEST(KittiPoses, WrittenPosesReadBackExactlyAndBadLinesNameTheLine) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("ism_poses_" + std::to_string(::getpid())))
+          .string();
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  pose.translation() << 4123.456789012345, -0.000123456789, 98.7654321;
+  {
+    std::ofstream(path) << kittiPoseLine(Eigen::Isometry3d::Identity()) << "\n"
+                        << kittiPoseLine(pose);
+  }
+  const std::vector<Eigen::Isometry3d> poses = readKittiPoses(path);
+  ASSERT_EQ(poses.size(), 2u);  // the blank line is skipped
+  EXPECT_TRUE(poses[0].isApprox(Eigen::Isometry3d::Identity(), 1e-15));
+  EXPECT_LT((poses[1].matrix() - pose.matrix()).cwiseAbs().maxCoeff(), 1e-8);
+  std::ofstream(path, std::ios::app) << "1 0 0 0 0 1 0 0 0 0 1\n";
+  try {
+    readKittiPoses(path);
+    FAIL() << "a line of 11 numbers was accepted";
+  } catch (const KittiFormatError& e) {
+    EXPECT_EQ(e.lineNumber(), 4);
+    EXPECT_NE(std::string(e.what()).find(path + ":4"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove(path);
+}
+
 TEST(KittiVelodyne, ReadsRealScanAndRecoversRings) {
   const std::string path = "data/kitti_object/training/velodyne/000000.bin";
   ISM_REQUIRE_SHARED(path);

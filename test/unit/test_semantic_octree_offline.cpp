@@ -12,6 +12,7 @@
 
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
@@ -125,7 +126,7 @@ TEST_F(OfflineMappingTest, BadInputsNameTheFile) {
   }
   std::ofstream(dir_ + "/poses.txt") << "1 0 0 0 0 1 0 0 0 0 1\n";
   try {
-    readOdometryPoses(dir_ + "/poses.txt");
+    kitti::readKittiPoses(dir_ + "/poses.txt");
     FAIL() << "expected an error";
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("poses.txt:1"), std::string::npos) << e.what();

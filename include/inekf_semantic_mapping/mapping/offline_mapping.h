@@ -42,9 +42,6 @@ struct OwnedLabelImage {
 // Fills `out` with the label image of the scan named `stem` (e.g. "000042"); false: none.
 using CameraLabelSource = std::function<bool(const std::string& stem, OwnedLabelImage* out)>;
 
-// KITTI odometry poses file. Throws std::runtime_error naming file:line on a malformed line.
-std::vector<Eigen::Isometry3d> readOdometryPoses(const std::string& path);
-
 // The scans of a sequence directory in frame order (NNNNNN.bin), at most max_scans (< 0: all).
 std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans);
 
