@@ -198,13 +198,23 @@ def read_timestamps(path):
     return np.array(stamps)
 
 
+def kitti_timestamp_parts(text):
+    """(UNIX seconds, nanoseconds), UTC, of a KITTI raw timestamp "2011-09-26 13:02:25.964389445"
+    (the Python side's one parser of the format; exact to the nanosecond, for ROS stamps).
+    Raises ValueError when the text is not one."""
+    day, clock = text.split()
+    whole, _, fraction = clock.partition(".")
+    if not fraction.isdigit() and fraction:
+        raise ValueError("bad fraction %r" % fraction)
+    moment = datetime.datetime.strptime(day + " " + whole, "%Y-%m-%d %H:%M:%S")
+    return calendar.timegm(moment.timetuple()), int((fraction + "000000000")[:9])
+
+
 def _kitti_datetime_seconds(text, path, line_number):
     """UNIX seconds (UTC, as inekf_offline's stamps) of a KITTI raw timestamp."""
     try:
-        day, clock = text.split()
-        whole, _, fraction = clock.partition(".")
-        moment = datetime.datetime.strptime(day + " " + whole, "%Y-%m-%d %H:%M:%S")
-        return calendar.timegm(moment.timetuple()) + float("0." + (fraction or "0"))
+        seconds, nanoseconds = kitti_timestamp_parts(text)
+        return seconds + nanoseconds * 1e-9
     except ValueError:
         raise TrajectoryFormatError("%s:%d: not a KITTI timestamp: %r" % (path, line_number, text))
 

@@ -18,8 +18,6 @@ Parameters (private): source (self | kitti_player), drive, first_frame, frames, 
 gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames.
 """
 
-import calendar
-import datetime
 import math
 import os
 import sys
@@ -38,18 +36,13 @@ from inekf_semantic_mapping.msg import FilterStatus
 
 PACKAGE = "inekf_semantic_mapping"
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+sys.path.insert(0, os.path.join(REPO_ROOT, "scripts"))
+from evaluate_trajectory import kitti_timestamp_parts  # noqa: E402  (the one KITTI stamp parser)
 EARTH_RADIUS_M = 6378137.0  # the KITTI devkit's er
 
 
 def shared_dir():
     return os.environ.get("ISM_SHARED_DIR") or os.path.join(os.path.dirname(REPO_ROOT), "shared")
-
-
-def read_kitti_stamp(text):
-    day, clock = text.strip().split()
-    seconds_part, _, fraction = clock.partition(".")
-    moment = datetime.datetime.strptime(day + " " + seconds_part, "%Y-%m-%d %H:%M:%S")
-    return calendar.timegm(moment.timetuple()), int((fraction + "000000000")[:9])
 
 
 def rotation_rpy(roll, pitch, yaw):
@@ -76,7 +69,7 @@ class OxtsDrive:
 
     def __init__(self, oxts_dir, first_frame, frames):
         with open(os.path.join(oxts_dir, "timestamps.txt")) as stream:
-            stamps = [read_kitti_stamp(line) for line in stream if line.strip()]
+            stamps = [kitti_timestamp_parts(line) for line in stream if line.strip()]
         last = min(len(stamps), first_frame + frames)
         self.records, self.stamps = [], []
         for index in range(first_frame, last):
