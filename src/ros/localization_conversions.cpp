@@ -228,22 +228,10 @@ geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& od
   return transform;
 }
 
-std::string filterStatusName(estimation::FilterType type) {
-  switch (type) {
-    case estimation::FilterType::kLeftInvariant:
-      return "left_inekf";
-    case estimation::FilterType::kRightInvariant:
-      return "right_inekf";
-    case estimation::FilterType::kQuaternionEskf:
-      return "quaternion_eskf";
-  }
-  return "unknown";
-}
-
 FilterStatus filterStatus(const estimation::LocalizationSession& session) {
   const estimation::LocalizationSession::Statistics statistics = session.statistics();
   FilterStatus status;
-  status.filter_type = filterStatusName(session.config().localizer.filter_type);
+  status.filter_type = estimation::toString(session.config().localizer.filter_type);
   if (session.started()) {
     const estimation::NavState& state = session.state();
     status.gyro_bias.x = state.gyro_bias.x();

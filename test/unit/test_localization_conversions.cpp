@@ -212,7 +212,7 @@ TEST(FilterStatus, CountsTheSessionsDropsWithTheFiltersOwn) {
   no_fix.has_solution = false;
   session.addFix(no_fix);
   const FilterStatus status = filterStatus(session);
-  EXPECT_EQ(status.filter_type, "left_inekf");
+  EXPECT_EQ(status.filter_type, "left");  // the name of the filter parameter and config key
   EXPECT_EQ(status.imu_samples_dropped, 1u);
   EXPECT_EQ(status.gps_fixes_rejected, 1u);
   EXPECT_EQ(status.gps_fixes_used, 0u);

@@ -88,9 +88,6 @@ nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
 // The map -> base transform of an odometry message (its header and child frame, its pose).
 geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry);
 
-// "left_inekf" | "right_inekf" | "quaternion_eskf": FilterStatus.filter_type.
-std::string filterStatusName(estimation::FilterType type);
-
 // The session's FilterStatus (biases once started, counts, last innovation); stamp and frame
 // are set by the caller.
 FilterStatus filterStatus(const estimation::LocalizationSession& session);
