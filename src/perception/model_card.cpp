@@ -84,8 +84,8 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
       path, root,
       {"name", "input", "resize_policy", "pad_multiple", "resize_factor", "mean", "scale",
        "swap_rb", "tile_scale", "network_focal_px", "tile_overlap", "tile_bottom_margin",
-       "flip_average", "suppress_unlabeled", "label_filter", "color_normalization", "color_mean",
-       "color_std", "output_label_ids", "num_output_channels",
+       "tile_max_width", "flip_average", "suppress_unlabeled", "label_filter",
+       "color_normalization", "color_mean", "color_std", "output_label_ids", "num_output_channels",
        // Informational (scripts/train_unet.py records the network's validation score).
        "validation_miou"},
       "");
@@ -123,6 +123,9 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
        (2 * card.tile_overlap >= card.input_width || 2 * card.tile_overlap >= card.input_height)))
     fail(path, root["tile_overlap"],
          "tile_overlap must be >= 0 and less than half the input width and height");
+  if (card.tile_max_width != 0 &&
+      (card.tile_max_width < card.input_width || card.tile_max_width > kMaxInputSide))
+    fail(path, root["tile_max_width"], "tile_max_width must be 0 or in [input width, 16384]");
   if (card.tile_bottom_margin < 0 || (card.resize_policy == ResizePolicy::kTiles &&
                                       2 * card.tile_bottom_margin >= card.input_height))
     fail(path, root["tile_bottom_margin"],
@@ -208,6 +211,7 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
   card.network_focal_px = readOr<double>(yaml_path, root, "network_focal_px", 0.0);
   card.tile_overlap = readOr<int>(yaml_path, root, "tile_overlap", 0);
   card.tile_bottom_margin = readOr<int>(yaml_path, root, "tile_bottom_margin", 0);
+  card.tile_max_width = readOr<int>(yaml_path, root, "tile_max_width", 0);
   card.flip_average = readOr<bool>(yaml_path, root, "flip_average", false);
   card.suppress_unlabeled = readOr<bool>(yaml_path, root, "suppress_unlabeled", false);
   if (root["label_filter"]) {
@@ -266,6 +270,7 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
   out << YAML::Key << "network_focal_px" << YAML::Value << card.network_focal_px;
   out << YAML::Key << "tile_overlap" << YAML::Value << card.tile_overlap;
   out << YAML::Key << "tile_bottom_margin" << YAML::Value << card.tile_bottom_margin;
+  out << YAML::Key << "tile_max_width" << YAML::Value << card.tile_max_width;
   out << YAML::Key << "flip_average" << YAML::Value << card.flip_average;
   out << YAML::Key << "suppress_unlabeled" << YAML::Value << card.suppress_unlabeled;
   out << YAML::Key << "label_filter" << YAML::Value << YAML::BeginMap << YAML::Key
@@ -308,6 +313,9 @@ ModelCard builtinEnetCityscapesCard() {
   // About the bottom fifth of a Cityscapes frame shows the ego car's bonnet, which the network
   // learned to call "unlabeled": KITTI's near road must not land there.
   card.tile_bottom_margin = 96;
+  // KITTI's wide frame (1378 x 416 after scaling) in one 1392 x 512 pass instead of two
+  // overlapping 1024 x 512 tiles: the same labels (README) for about 0.6 of the time.
+  card.tile_max_width = 2048;
   card.flip_average = false;  // twice the cost for little gain
   // The network is trained on 1/255 pixels of Cityscapes' cameras: other cameras' exposure and
   // white balance confuse it far more than their geometry, so each image is standardized to

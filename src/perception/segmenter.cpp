@@ -235,8 +235,24 @@ void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
 
 struct Segmenter::Network {
   cv::dnn::Net net;
-  cv::Mat label_lut;  // 1x256 CV_8U: channel index -> labelId
+  cv::Mat label_lut;    // 1x256 CV_8U: channel index -> labelId
+  cv::Size input_size;  // of the last forward pass
 };
+
+namespace {
+
+// OpenCV 4.6 keeps some layer shapes from a network's first forward pass: ENet (Torch
+// importer, MaxUnpool) run at 1024x512 and then at 1392x512 labels 1 % of KITTI's lidar points
+// right, the same network read afresh for 1392x512 80 %. A network is therefore read again
+// whenever the input size changes (once per camera in practice; tiles keep one size).
+cv::dnn::Net readNetworkForCpu(const std::string& model_path) {
+  cv::dnn::Net net = readNetwork(model_path);
+  net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
+  net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+  return net;
+}
+
+}  // namespace
 
 Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int num_threads)
     : model_path_(model_path), card_(card), network_(std::make_unique<Network>()) {
@@ -245,9 +261,7 @@ Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int n
   if (card_.numOutputChannels() > 256)
     throw SegmentationError("model card " + card_.source + ": more than 256 output channels");
   cv::setNumThreads(num_threads);
-  network_->net = readNetwork(model_path);
-  network_->net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
-  network_->net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
+  network_->net = readNetworkForCpu(model_path);
   network_->label_lut = cv::Mat::zeros(1, 256, CV_8U);
   for (int i = 0; i < card_.numOutputChannels(); ++i)
     network_->label_lut.at<std::uint8_t>(i) = card_.output_label_ids[i];
@@ -271,6 +285,12 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
   const cv::Mat blob = cv::dnn::blobFromImage(network_image, card_.scale, cv::Size(), mean,
                                               card_.swap_rb, false, CV_32F);
   try {
+    const cv::Size input_size(blob.size[3], blob.size[2]);
+    if (!network_->input_size.empty() && input_size != network_->input_size) {
+      ScopedTimer timer("segmentation/reload");
+      network_->net = readNetworkForCpu(model_path_);
+    }
+    network_->input_size = input_size;
     network_->net.setInput(blob);
     output = network_->net.forward();
   } catch (const cv::Exception& e) {
@@ -306,7 +326,7 @@ bool Segmenter::skipsInArgmax(int channel) const {
 
 Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px) {
   const double scale = tileScaleFor(bgr.size(), camera_focal_px);
-  const cv::Size tile_size(card_.input_width, card_.input_height);
+  cv::Size tile_size(card_.input_width, card_.input_height);
   cv::Mat canvas;
   std::vector<cv::Rect> tiles;
   cv::Rect valid;
@@ -316,6 +336,11 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
                           std::max(1, static_cast<int>(std::lround(bgr.rows * scale))));
     cv::resize(bgr, canvas, scaled, 0, 0, scale < 1.0 ? cv::INTER_AREA : cv::INTER_LINEAR);
     valid = cv::Rect(cv::Point(0, 0), scaled);
+    if (card_.tile_max_width > 0 && scaled.width > tile_size.width) {
+      const int multiple = card_.pad_multiple > 1 ? card_.pad_multiple : 16;
+      const int wide = (scaled.width + multiple - 1) / multiple * multiple;
+      tile_size.width = std::min(card_.tile_max_width, wide);
+    }
     // Smaller than a tile: reflect-pad (the scale stays), the padding is cropped afterwards.
     // The bottom margin is padding too: the image's bottom stays out of the rows where the
     // training images showed the ego vehicle.

@@ -8,6 +8,7 @@
 //   evaluate_semantics --sequence DIR [--sequence DIR ...] --model MODEL [--model-card CARD]
 //       [--max-frames N] [--threads 2] [--json FILE]
 //       [card overrides: --policy P --input WxH --tile-scale S --network-focal F --tile-overlap PX
+//        --tile-max-width PX (0: tiles input-wide)
 //       --flip 0|1 --suppress-unlabeled 0|1
 //        --color none|standardize --no-focal]
 //       [labelling variants, each repeatable, scored in every combination:
@@ -43,7 +44,8 @@ constexpr char kUsage[] =
     "usage: evaluate_semantics --sequence DIR [--sequence DIR ...] --model MODEL\n"
     "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
     "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
-    "         [--network-focal F] [--tile-overlap PX] [--bottom-margin PX] [--flip 0|1]\n"
+    "         [--network-focal F] [--tile-overlap PX] [--tile-max-width PX]\n"
+    "         [--bottom-margin PX] [--flip 0|1]\n"
     "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
@@ -192,6 +194,7 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_scale = cli.getDouble("--tile-scale", card.tile_scale);
   card.network_focal_px = cli.getDouble("--network-focal", card.network_focal_px);
   card.tile_overlap = cli.getInt("--tile-overlap", card.tile_overlap);
+  card.tile_max_width = cli.getInt("--tile-max-width", card.tile_max_width);
   card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
   card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
   card.suppress_unlabeled =
@@ -286,8 +289,9 @@ int main(int argc, char** argv) {
     const ism::common::CommandLine cli(
         argc, argv,
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
-         "--tile-scale", "--network-focal", "--tile-overlap", "--flip", "--color", "--color-mean",
-         "--color-std", "--suppress-unlabeled", "--bottom-margin", "--map-config"},
+         "--tile-scale", "--network-focal", "--tile-overlap", "--tile-max-width", "--flip",
+         "--color", "--color-mean", "--color-std", "--suppress-unlabeled", "--bottom-margin",
+         "--map-config"},
         {"--no-focal", "--no-map"},
         {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
@@ -317,10 +321,12 @@ int main(int argc, char** argv) {
     perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));
     std::printf(
         "model %s, card %s: policy %s, tile_scale %g, network_focal_px %g, overlap %d, "
-        "bottom margin %d, flip %d, color %s, suppress unlabeled %d, focal given %d\n",
+        "max width %d, bottom margin %d, flip %d, color %s, suppress unlabeled %d, focal given "
+        "%d\n",
         model.c_str(), card.source.c_str(), perception::resizePolicyName(card.resize_policy),
-        card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_bottom_margin,
-        card.flip_average ? 1 : 0, perception::colorNormalizationName(card.color_normalization),
+        card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_max_width,
+        card.tile_bottom_margin, card.flip_average ? 1 : 0,
+        perception::colorNormalizationName(card.color_normalization),
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures

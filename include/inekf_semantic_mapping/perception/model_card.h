@@ -73,6 +73,13 @@ struct ModelCard {
   // images whose bottom rows show the ego vehicle calls whatever it sees there "unlabeled".
   // The fitted scale leaves them free.
   int tile_bottom_margin = 0;
+  // kTiles: an image wider than input_width after scaling goes through in one pass up to this
+  // many network input pixels wide (its width rounded up to a multiple of pad_multiple, or of 16
+  // when that is 1: ENet's labels are garbage at 1384 = 8 x 173 and right at 1392 = 16 x 87);
+  // wider ones are cut into tiles of this width. 0: tiles are input_width wide. A fully
+  // convolutional network takes such widths, and one wide pass costs less than overlapping
+  // tiles.
+  int tile_max_width = 0;
   // Average the probabilities with those of the horizontally mirrored image (kTiles only).
   bool flip_average = false;
   // true: channels mapped to labelId 0 ("unlabeled") never win the argmax; their probability
