@@ -2,7 +2,7 @@
 // drives: start, map origin, fix policy, time-jump reset and statistics live there). Subscribes
 // the IMU, the GPS fix and the GPS velocity (kitti_player / kitti2bag topics by default,
 // remappable), and publishes nav_msgs/Odometry, nav_msgs/Path, tf map -> base_link and
-// FilterStatus.
+// FilterStatus. Poses: the start's at the first used fix's stamp, then one per IMU sample.
 //
 // Parameters (private):
 //   config_file (string, default $(find inekf_semantic_mapping)/config/inekf.yaml)
@@ -29,6 +29,8 @@
 #include <tf2_ros/transform_listener.h>
 
 #include <algorithm>
+#include <cmath>
+#include <deque>
 #include <functional>
 #include <optional>
 #include <string>
@@ -85,7 +87,14 @@ class InekfNode {
       if (!now.isZero()) report(session_.addClock(now.toSec()));
       const LocalizationSession::Update update = event();
       report(update);
-      if (update.new_estimate) publishState(stamp);
+      // The start's pose at the first fix's stamp, whichever message completed the start: a scan
+      // between it and the next IMU sample has a pose (issue 13: before, the first pose came with
+      // the next IMU sample, 0.1 s later on KITTI, and such scans stayed out of the map).
+      if (update.start_estimate) {
+        publishState(startStamp(update.start_estimate->state.stamp_s), update.start_estimate->state,
+                     update.start_estimate->pose_covariance);
+      }
+      if (update.new_estimate) publishState(stamp, session_.state(), session_.poseCovariance());
       if (update.new_estimate || update.correction || update.started) publishStatus(stamp);
     } catch (const std::exception& error) {
       ROS_ERROR_STREAM_THROTTLE(
@@ -127,6 +136,8 @@ class InekfNode {
                       << session_.config().default_fix_sigma_vertical_m
                       << " m (session.default_fix_sigma_*)");
     }
+    recent_fix_stamps_.push_back(message->header.stamp);
+    while (recent_fix_stamps_.size() > kRecentFixStamps) recent_fix_stamps_.pop_front();
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(ros_conversions::fixEvent(*message)); });
   }
@@ -138,15 +149,27 @@ class InekfNode {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
+  // The start fix's own message stamp (the start is at a fix's stamp): exact, as every other
+  // estimate's. ros::Time(stamp_s) only if that fix is not among the recent ones.
+  ros::Time startStamp(double stamp_s) const {
+    for (const ros::Time& fix_stamp : recent_fix_stamps_) {
+      if (std::abs(fix_stamp.toSec() - stamp_s) < estimation::Localizer::kDuplicateStampS) {
+        return fix_stamp;
+      }
+    }
+    return ros::Time(stamp_s);
+  }
+
   // Stamped with the message's own stamp, not ros::Time(state.stamp_s): a double loses the
   // nanoseconds, and consumers match our poses to their data by exact stamp.
-  void publishState(const ros::Time& stamp) {
+  void publishState(const ros::Time& stamp, const estimation::NavState& state,
+                    const estimation::PoseCovariance& pose_covariance) {
     nav_msgs::Odometry odometry;
     odometry.header.stamp = stamp;
     odometry.header.frame_id = path_.header.frame_id;
     odometry.child_frame_id = base_frame_;
-    ros_conversions::fillOdometry(session_.state(), session_.poseCovariance(),
-                                  session_.latestAngularVelocity(), &odometry);
+    ros_conversions::fillOdometry(state, pose_covariance, session_.latestAngularVelocity(),
+                                  &odometry);
     if (const auto T_base_imu = baseFromImu()) {
       odometry = ros_conversions::odometryOfBase(odometry, *T_base_imu, base_frame_);
     }
@@ -198,6 +221,8 @@ class InekfNode {
     status_publisher_.publish(status);
   }
 
+  static constexpr std::size_t kRecentFixStamps = 20;
+  std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received (startStamp)
   std::string config_file_;
   LocalizationSession session_;
   bool publish_tf_ = true;
