@@ -43,6 +43,8 @@ if(CATKIN_ENABLE_TESTING)
     generate_synthetic_drive kitti2bag kitti_bag_adapter inekf_node semantic_octomap_node)
   ism_add_system_rostest(test/ros/e2e_kitti2bag_py_synthetic.test NEEDS ${ISM_KITTI_BAG_TARGETS})
   ism_add_system_rostest(test/ros/e2e_kitti2bag_py_real.test NEEDS ${ISM_KITTI_BAG_TARGETS})
+  # The adapter alone: a velocity before its instant's IMU message (either order of arrival).
+  ism_add_system_rostest(test/ros/kitti_bag_adapter.test NEEDS kitti_bag_adapter)
   ism_add_system_rostest(test/ros/robustness_gps_outage.test
     NEEDS generate_synthetic_drive kitti2bag inekf_node)
   ism_add_system_rostest(test/ros/robustness_bag_loop.test
