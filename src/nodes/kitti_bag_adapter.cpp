@@ -12,7 +12,8 @@
 //   /kitti_bag/oxts/imu  -> /kitti/oxts/imu (kitti2bag_py: levelled vectors into the body frame)
 //   /kitti_bag/oxts/gps/vel -> /kitti/oxts/gps/vel (kitti2bag_py: levelled (vf, vl, vu) -> map
 //       with the heading of the IMU message of the same stamp: a velocity that arrives before
-//       that message (a separate connection) waits for it, never longer, and is never dropped)
+//       that message (a separate connection) waits for it, no longer; dropped only while no IMU
+//       message comes at all, beyond 50 waiting)
 //   /kitti_bag/camera_color_left/camera_info -> /kitti/camera_color_left/camera_info
 //       (kitti2bag_py: the rectified camera, baseline once)
 //
