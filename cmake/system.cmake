@@ -19,6 +19,8 @@ if(CATKIN_ENABLE_TESTING)
     generate_synthetic_drive kitti2bag kitti_bag_adapter inekf_node semantic_octomap_node)
   add_rostest(test/ros/e2e_kitti2bag_py_synthetic.test DEPENDENCIES ${ISM_KITTI_BAG_TARGETS})
   add_rostest(test/ros/e2e_kitti2bag_py_real.test DEPENDENCIES ${ISM_KITTI_BAG_TARGETS})
+  # The adapter alone: a velocity before its instant's IMU message (either order of arrival).
+  add_rostest(test/ros/kitti_bag_adapter.test DEPENDENCIES kitti_bag_adapter)
   add_rostest(test/ros/robustness_gps_outage.test
     DEPENDENCIES generate_synthetic_drive kitti2bag inekf_node)
   add_rostest(test/ros/robustness_bag_loop.test

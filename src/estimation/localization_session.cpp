@@ -146,6 +146,12 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
     const double ahead_s = sample.stamp_s - state().stamp_s;
     if (ahead_s >= Localizer::kDuplicateStampS) status = localizer_.addImu(sample);
     update.new_estimate = std::abs(sample.stamp_s - state().stamp_s) < Localizer::kDuplicateStampS;
+    // A sample at the fix's stamp makes the start estimate new_estimate itself: not twice.
+    if (update.new_estimate && update.start_estimate &&
+        std::abs(update.start_estimate->state.stamp_s - state().stamp_s) <
+            Localizer::kDuplicateStampS) {
+      update.start_estimate.reset();
+    }
   } else {
     update.new_estimate =
         status == Localizer::ImuStatus::kUsed || status == Localizer::ImuStatus::kGap;
@@ -262,6 +268,10 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
   }
   ++statistics_.starts;
   update->started = true;
+  // The filter's estimate at the start fix's instant: the fix's position, the orientation and
+  // velocity of that instant's IMU message and GPS velocity. A node publishes it whichever of
+  // the three messages completed the start.
+  update->start_estimate = Estimate{state(), poseCovariance()};
   const double yaw_deg = std::atan2(state().rotation(1, 0), state().rotation(0, 0)) * 180.0 / M_PI;
   note << "started at t=" << state().stamp_s << " s, position " << state().position_map.transpose()
        << " m, yaw " << std::setprecision(1) << yaw_deg << " deg (";

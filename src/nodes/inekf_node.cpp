@@ -2,7 +2,7 @@
 // drives: start, map origin, fix policy, time-jump reset and statistics live there). Subscribes
 // the IMU, the GPS fix and the GPS velocity (kitti_player / kitti2bag topics by default,
 // remappable), and publishes nav_msgs/Odometry, nav_msgs/Path, tf map -> base_link and
-// FilterStatus.
+// FilterStatus. Poses: the start's at the first used fix's stamp, then one per IMU sample.
 //
 // Parameters (private):
 //   config_file (string, default $(find inekf_semantic_mapping)/config/inekf.yaml)
@@ -23,6 +23,8 @@
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
 
+#include <cmath>
+#include <deque>
 #include <functional>
 #include <string>
 
@@ -70,6 +72,13 @@ class InekfNode {
       if (!now.isZero()) report(session_.addClock(now.toSec()));
       const LocalizationSession::Update update = event();
       report(update);
+      // The start's pose at the first fix's stamp, whichever message completed the start: a scan
+      // between it and the next IMU sample has a pose (issue 13: before, the first pose came with
+      // the next IMU sample, 0.1 s later on KITTI, and such scans stayed out of the map).
+      if (const auto& start = update.start_estimate) {
+        output_.publish(startStamp(start->state.stamp_s), start->state, start->pose_covariance,
+                        session_.latestAngularVelocity());
+      }
       if (update.new_estimate) publishState(stamp);
       if (update.new_estimate || update.correction || update.started) publishStatus(stamp);
     } catch (const std::exception& error) {
@@ -108,6 +117,8 @@ class InekfNode {
                       << session_.config().default_fix_sigma_vertical_m
                       << " m (session.default_fix_sigma_*)");
     }
+    recent_fix_stamps_.push_back(message->header.stamp);
+    while (recent_fix_stamps_.size() > kRecentFixStamps) recent_fix_stamps_.pop_front();
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(ros_conversions::fixEvent(*message)); });
   }
@@ -119,6 +130,19 @@ class InekfNode {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
+  // The start fix's own message stamp (the start is at a fix's stamp): exact, as every other
+  // estimate's. ros::Time(stamp_s) only if that fix is not among the recent ones.
+  ros::Time startStamp(double stamp_s) const {
+    for (const ros::Time& fix_stamp : recent_fix_stamps_) {
+      if (std::abs(fix_stamp.toSec() - stamp_s) < estimation::Localizer::kDuplicateStampS) {
+        return fix_stamp;
+      }
+    }
+    return ros::Time(stamp_s);
+  }
+
+  // Stamped with the message's own stamp, not ros::Time(state.stamp_s): a double loses the
+  // nanoseconds, and consumers match our poses to their data by exact stamp.
   void publishState(const ros::Time& stamp) {
     output_.publish(stamp, session_.state(), session_.poseCovariance(),
                     session_.latestAngularVelocity());
@@ -138,6 +162,8 @@ class InekfNode {
   LocalizationSession session_;
   ros_conversions::OdometryOutput output_;
   bool logged_unknown_fix_covariance_ = false;
+  static constexpr std::size_t kRecentFixStamps = 20;
+  std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received (startStamp)
   ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
 };

@@ -10,7 +10,10 @@
 //       becomes /kitti/oxts/ground_truth (nav_msgs/Odometry of base_link in map): never a second
 //       parent of base_link next to inekf_node's map
 //   /kitti_bag/oxts/imu  -> /kitti/oxts/imu (kitti2bag_py: levelled vectors into the body frame)
-//   /kitti_bag/oxts/gps/vel -> /kitti/oxts/gps/vel (kitti2bag_py: levelled (vf, vl, vu) -> map)
+//   /kitti_bag/oxts/gps/vel -> /kitti/oxts/gps/vel (kitti2bag_py: levelled (vf, vl, vu) -> map
+//       with the heading of the IMU message of the same stamp: a velocity that arrives before
+//       that message (a separate connection) waits for it, no longer; dropped only while no IMU
+//       message comes at all, beyond 50 waiting)
 //   /kitti_bag/camera_color_left/camera_info -> /kitti/camera_color_left/camera_info
 //       (kitti2bag_py: the rectified camera, baseline once)
 //
@@ -27,7 +30,9 @@
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
 
+#include <cmath>
 #include <deque>
+#include <limits>
 #include <map>
 #include <string>
 #include <utility>
@@ -186,9 +191,19 @@ class KittiBagAdapter {
                                                              "into the body frame, dropped");
       return;
     }
+    if (!orientations_.empty() && message.header.stamp < orientations_.back().first) {
+      // The bag looped (or the player restarted): the old orientations are of another time, and
+      // velocities waiting from before the jump will never be reached.
+      orientations_.clear();
+      while (!pending_velocities_.empty() && pending_velocities_.front().header.stamp >
+                                                 message.header.stamp + ros::Duration(kLoopJumpS)) {
+        pending_velocities_.pop_front();
+      }
+    }
     orientations_.emplace_back(message.header.stamp, *conv::imuOrientation(message));
     while (orientations_.size() > 200) orientations_.pop_front();
     imu_publisher_.publish(*body);
+    releaseVelocities();
   }
 
   void onVelocity(const geometry_msgs::TwistStamped& message) {
@@ -196,20 +211,43 @@ class KittiBagAdapter {
       velocity_publisher_.publish(message);
       return;
     }
-    // The orientation of the same instant (the bag writes IMU and gps/vel with equal stamps),
-    // else the newest.
-    if (orientations_.empty()) {
-      ROS_WARN_STREAM_THROTTLE(
-          5.0, "kitti_bag_adapter: " << kRawGpsVelocity << " at " << message.header.stamp
-                                     << " before any IMU orientation: dropped (its levelled "
-                                        "velocity needs the heading)");
-      return;
+    // Its levelled vector needs the heading of its instant (the bag writes IMU and gps/vel with
+    // equal stamps), which travels on the IMU's connection: rosbag play's messages of one
+    // instant can arrive in either order. Dropping a velocity that came first (as before) could
+    // lose the first frame's, and inekf_node's start waits for it: the start came a frame later.
+    if (!pending_velocities_.empty() &&
+        message.header.stamp < pending_velocities_.back().header.stamp) {
+      pending_velocities_.clear();  // the bag looped: those wait for an IMU of another time
     }
-    const Eigen::Matrix3d* R_map_body = &orientations_.back().second;
-    for (const auto& [stamp, rotation] : orientations_) {
-      if (stamp == message.header.stamp) R_map_body = &rotation;
+    pending_velocities_.push_back(message);
+    releaseVelocities();
+    while (pending_velocities_.size() > kMaxPendingVelocities) {
+      ROS_WARN_STREAM_THROTTLE(5.0, "kitti_bag_adapter: no IMU orientation on "
+                                        << kRawImu << " up to the stamp of " << kRawGpsVelocity
+                                        << " at " << pending_velocities_.front().header.stamp
+                                        << ": dropped (its levelled velocity needs the heading)");
+      pending_velocities_.pop_front();
     }
-    velocity_publisher_.publish(conv::velocityLevelledToMap(message, *R_map_body, frames::kMap));
+  }
+
+  // Publishes the waiting velocities the IMU has reached (an orientation at or after their
+  // stamp), each with the orientation nearest to its stamp (the same stamp on KITTI).
+  void releaseVelocities() {
+    while (!pending_velocities_.empty() && !orientations_.empty() &&
+           pending_velocities_.front().header.stamp <= orientations_.back().first) {
+      const geometry_msgs::TwistStamped& velocity = pending_velocities_.front();
+      const Eigen::Matrix3d* R_map_body = &orientations_.back().second;
+      double nearest_s = std::numeric_limits<double>::infinity();
+      for (const auto& [stamp, rotation] : orientations_) {
+        const double gap_s = std::abs((stamp - velocity.header.stamp).toSec());
+        if (gap_s < nearest_s) {
+          nearest_s = gap_s;
+          R_map_body = &rotation;
+        }
+      }
+      velocity_publisher_.publish(conv::velocityLevelledToMap(velocity, *R_map_body, frames::kMap));
+      pending_velocities_.pop_front();
+    }
   }
 
   void onCameraInfo(const sensor_msgs::CameraInfo& message) {
@@ -229,6 +267,10 @@ class KittiBagAdapter {
   Eigen::Isometry3d T_imu_base_ = Eigen::Isometry3d::Identity();
   std::map<std::pair<std::string, std::string>, geometry_msgs::TransformStamped> static_;
   std::deque<std::pair<ros::Time, Eigen::Matrix3d>> orientations_;
+  // Levelled velocities waiting for the IMU orientation of their stamp (releaseVelocities).
+  static constexpr std::size_t kMaxPendingVelocities = 50;
+  static constexpr double kLoopJumpS = 1.0;  // waiting velocities this much newer: another loop
+  std::deque<geometry_msgs::TwistStamped> pending_velocities_;
   ros::Publisher imu_publisher_, velocity_publisher_, camera_info_publisher_,
       ground_truth_publisher_;
   std::vector<ros::Subscriber> subscribers_;

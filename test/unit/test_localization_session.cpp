@@ -67,6 +67,13 @@ TEST(LocalizationSession, AFixBeforeItsImuWaitsForTheOrientationAndVelocity) {
   EXPECT_TRUE(session.state().rotation.isApprox(kHeading, 1e-12));
   EXPECT_NEAR(session.state().stamp_s, 10.0, 1e-12);
   EXPECT_NE(update.note.find("orientation from the IMU"), std::string::npos) << update.note;
+  // The start is an estimate to publish, at the fix's stamp, although the velocity completed it
+  // (issue 13: a scan between the fix and the next sample had no pose).
+  ASSERT_TRUE(update.start_estimate.has_value());
+  EXPECT_FALSE(update.new_estimate);
+  EXPECT_NEAR(update.start_estimate->state.stamp_s, 10.0, 1e-12);
+  EXPECT_TRUE(update.start_estimate->state.position_map.isApprox(session.state().position_map));
+  EXPECT_TRUE(update.start_estimate->pose_covariance.isApprox(session.poseCovariance()));
   // The next sample carries the state on and is an estimate to publish.
   EXPECT_TRUE(session.addImu(restingImu(10.1)).new_estimate);
   EXPECT_NEAR(session.state().stamp_s, 10.1, 1e-12);
@@ -80,8 +87,10 @@ TEST(LocalizationSession, AStartOnAnImuSampleAfterTheFixCarriesOnToTheSample) {
   session.addFix(fixAt(10.0));  // waits for an orientation
   const LocalizationSession::Update update = session.addImu(restingImu(10.05));
   ASSERT_TRUE(update.started);
-  EXPECT_TRUE(update.new_estimate);  // at the sample's stamp, not the fix's
+  EXPECT_TRUE(update.new_estimate);  // at the sample's stamp, ...
   EXPECT_NEAR(session.state().stamp_s, 10.05, 1e-12);
+  ASSERT_TRUE(update.start_estimate.has_value());  // ... after the start's at the fix's
+  EXPECT_NEAR(update.start_estimate->state.stamp_s, 10.0, 1e-12);
   EXPECT_EQ(session.statistics().filter.imu_dropped, 0);  // no duplicate at the start
 }
 
@@ -92,8 +101,23 @@ TEST(LocalizationSession, AStartOnASampleAtTheFixStampIsAnEstimateNotADrop) {
   const LocalizationSession::Update update = session.addImu(restingImu(10.0));
   ASSERT_TRUE(update.started);
   EXPECT_TRUE(update.new_estimate);
+  EXPECT_FALSE(update.start_estimate.has_value());  // new_estimate is the start: not twice
   EXPECT_EQ(update.note.find("dropped"), std::string::npos) << update.note;
   EXPECT_EQ(session.statistics().filter.imu_dropped, 0);
+}
+
+TEST(LocalizationSession, AStartMadeByTheFixIsAnEstimateAtTheFixStamp) {
+  LocalizationSession session(originConfig());
+  EXPECT_FALSE(session.addImu(restingImu(10.0)).started);
+  EXPECT_FALSE(session.addGpsVelocity(stillAt(10.0)).started);
+  const LocalizationSession::Update update = session.addFix(fixAt(10.0));
+  ASSERT_TRUE(update.started) << update.note;
+  EXPECT_FALSE(update.new_estimate);
+  ASSERT_TRUE(update.start_estimate.has_value());
+  EXPECT_NEAR(update.start_estimate->state.stamp_s, 10.0, 1e-12);
+  // Only the start carries one.
+  EXPECT_FALSE(session.addImu(restingImu(10.1)).start_estimate.has_value());
+  EXPECT_FALSE(session.addFix(fixAt(10.1)).start_estimate.has_value());
 }
 
 TEST(LocalizationSession, WithoutOrientationTheStartLevelsAfterMaxWait) {

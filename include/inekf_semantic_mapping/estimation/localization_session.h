@@ -17,7 +17,11 @@
 //    the session resets instead;
 //  - statistics.
 // Estimates are made at IMU stamps: an IMU event whose Update says `new_estimate` leaves state()
-// at that sample's stamp (a node publishes it then). A fix corrects the current estimate.
+// at that sample's stamp (a node publishes it then). A fix corrects the current estimate. The
+// start is an estimate too, at the start fix's stamp: whichever event completes it (the fix, its
+// IMU sample or its GPS velocity, in whatever order they arrive), the Update carries it, so that
+// a node publishes a pose from the first fix's instant on and not only from the next IMU sample
+// (a map node looking up a scan between the two would find no pose).
 #pragma once
 
 #include <Eigen/Core>
@@ -91,11 +95,21 @@ class LocalizationSession {
     std::int64_t resets = 0;  // time jumps back and non-finite states
   };
 
+  // A state and its pose covariance, e.g. the start's.
+  struct Estimate {
+    NavState state;
+    PoseCovariance pose_covariance = PoseCovariance::Zero();
+  };
+
   // What one event did.
   struct Update {
     bool new_estimate = false;  // state() is a fresh estimate at this IMU event's stamp
     bool started = false;       // the filter started during this event
-    bool reset = false;         // the session started over during this event
+    // With `started`: the estimate at the start fix's stamp (start_estimate->state.stamp_s), to
+    // publish before new_estimate's. Absent when new_estimate is that very estimate (a start on
+    // the IMU sample of the fix's stamp).
+    std::optional<Estimate> start_estimate;
+    bool reset = false;                              // the session started over during this event
     std::optional<Localizer::ImuStatus> imu_status;  // IMU events that reached the filter
     std::optional<CorrectionResult> correction;      // fixes (and starts) that reached it
     // For the log, "" when all went as expected: why it reset, how it started, or why a sample
