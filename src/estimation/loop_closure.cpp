@@ -423,6 +423,10 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
     }
   }
 
+  // Without a loop the graph would only re-fit the fixes the smoother already used (counted twice:
+  // measured on drive 0013, 50 frames, ATE 1.37 -> 1.93 m): the smoothed run stands.
+  if (result.accepted == 0) return result;
+
   // The keyframe corrections (body-frame rotation, map-frame translation), interpolated in time
   // onto every frame; frames outside the keyframes take the nearest one's.
   std::vector<Eigen::Vector3d> rotation_correction(nodes), translation_correction(nodes);

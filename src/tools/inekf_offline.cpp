@@ -55,8 +55,8 @@ constexpr char kUsage[] =
     "                    with odometry, GPS and robust loop factors); every --output-* holds\n"
     "                    the loop-closed poses (the covariance columns stay the smoother's)\n"
     "  --scans           the scans, DIR/%010d.bin (or .txt) per OXTS frame (default: the\n"
-    "                    drive's velodyne_points/data); the IMU-to-lidar calibration is the\n"
-    "                    drive's date folder's calib_imu_to_velo.txt\n"
+    "                    drive's velodyne_points/data); the IMU-to-lidar calibration is\n"
+    "                    calib_imu_to_velo.txt of the date folder (else of the drive folder)\n"
     "  --loop-config     YAML as config/loop_closure.yaml (default: built-in defaults)\n"
     "  --output-loops    CSV: one line per loop candidate, accepted or rejected and why\n";
 
@@ -184,14 +184,21 @@ int main(int argc, char** argv) {
                                         ? cli.get("--scans")
                                         : (drive_dir / "velodyne_points" / "data").string();
       scan_paths = scanPaths(scans_dir, frames.size());
-      const std::string date_dir = drive_dir.parent_path().string();
-      if (!ism::kitti::hasRawCalibration(date_dir)) {
+      // The raw calibration: the date folder's (KITTI's layout), else the drive folder's.
+      std::string calib_dir;
+      for (const fs::path& dir : {drive_dir.parent_path(), drive_dir}) {
+        if (ism::kitti::hasRawCalibration(dir.string())) {
+          calib_dir = dir.string();
+          break;
+        }
+      }
+      if (calib_dir.empty()) {
         throw std::runtime_error(
             "--loop-closure: no calib_imu_to_velo.txt (with the other raw "
             "calib_*.txt) in " +
-            date_dir);
+            drive_dir.parent_path().string() + " or " + drive_dir.string());
       }
-      T_imu_velo = ism::kitti::readRawCalibration(date_dir).T_velo_imu.inverse();
+      T_imu_velo = ism::kitti::readRawCalibration(calib_dir).T_velo_imu.inverse();
     }
     estimation::OxtsRunResult run;
     {

@@ -238,6 +238,18 @@ TEST_F(LoopClosureTest, AFalseLoopIsRejected) {
   EXPECT_LT(robust_error, honest_error + 0.3);
 }
 
+// No revisit (the time gap longer than the drive): nothing to close, the smoothed run stands.
+TEST_F(LoopClosureTest, WithoutLoopsTheSmoothedRunStands) {
+  LoopClosureOptions options = testOptions();
+  options.min_time_gap_s = 1000.0;
+  const LoopClosureResult result = closeLoops(run(), {}, g_drive->T_imu_velo, matcher(), options);
+  EXPECT_TRUE(result.loops.empty());
+  ASSERT_EQ(result.states.size(), run().states.size());
+  for (std::size_t k = 0; k < result.states.size(); ++k) {
+    ASSERT_EQ(result.states[k].position_map, run().states[k].position_map) << k;
+  }
+}
+
 TEST_F(LoopClosureTest, AMissingOrBrokenScanIsAnErrorNamingTheFile) {
   const std::string missing = g_drive->root + "/no_such_scan.bin";
   const std::string broken = g_drive->root + "/broken.bin";

@@ -24,7 +24,8 @@
 // gate (squared Mahalanobis distance of measured vs estimated relative pose under the
 // smoothed relative covariance plus the loop's <= gate_chi2), the optimization with the robust
 // kernel, and the residual check after it (chi2 <= outlier_chi2, else removed and the graph
-// solved again). Every candidate is logged with its fate and reason.
+// solved again). Every candidate is logged with its fate and reason. Without an accepted loop
+// the result is the smoothed run unchanged (the graph would only count the fixes twice).
 #pragma once
 
 #include <Eigen/Geometry>
