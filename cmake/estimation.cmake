@@ -4,7 +4,7 @@ ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cp
 ism_add_core_library(${PROJECT_NAME}_estimation
   SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
           src/estimation/localizer.cpp src/estimation/lazy_start.cpp
-          src/estimation/smoother.cpp
+          src/estimation/smoother.cpp src/estimation/pose_graph.cpp
   LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)
 
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
@@ -18,12 +18,22 @@ ism_add_core_library(${PROJECT_NAME}_localization_session
   LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti ${PROJECT_NAME}_common)
 # Runs the session over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
 ism_add_core_library(${PROJECT_NAME}_estimation_oxts
-  SOURCES src/estimation/oxts_run.cpp
+  SOURCES src/estimation/oxts_run.cpp src/estimation/loop_closure.cpp
   LINK ${PROJECT_NAME}_localization_session)
+# Lidar scan registration for the loop closure (PCL GICP): the one library that sees PCL.
+ism_add_core_library(${PROJECT_NAME}_registration
+  SOURCES src/registration/icp_registration.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts ${PROJECT_NAME}_kitti ${PCL_LIBRARIES}
+  SYSTEM_INCLUDES ${PCL_INCLUDE_DIRS})
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
-  LINK ${PROJECT_NAME}_estimation_oxts)
+  LINK ${PROJECT_NAME}_estimation_oxts ${PROJECT_NAME}_registration)
 ism_add_gtest(test_smoother SOURCES test/unit/test_smoother.cpp
   LINK ${PROJECT_NAME}_estimation)
+ism_add_gtest(test_pose_graph SOURCES test/unit/test_pose_graph.cpp
+  LINK ${PROJECT_NAME}_estimation)
+# Loop closure end to end on a synthetic drive it generates (lidar, 30 s GPS outage).
+ism_add_gtest(test_loop_closure SOURCES test/unit/test_loop_closure.cpp
+  LINK ${PROJECT_NAME}_registration ${PROJECT_NAME}_synthetic)
 ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp

@@ -26,6 +26,7 @@ PACKAGES=(
   libpcl-ros-dev libpcl-conversions-dev
   # core libraries
   libeigen3-dev libopencv-dev liboctomap-dev octomap-tools octovis libyaml-cpp-dev
+  libpcl-dev  # registration for the loop closure (PCL GICP)
   # tests, benchmarks, scripts, headless rviz
   libgtest-dev libbenchmark-dev python3-numpy python3-matplotlib python3-yaml
   rviz xvfb imagemagick

@@ -123,7 +123,17 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
             degrader.degrade(k, stamp_s - t0, record)) {
       ScopedTimer timer("oxts_run.correct");
       ++run.fixes_offered;
-      session.addFix(fixEventFromDegraded(*geodetic, stamp_s));
+      const GeodeticFixEvent event = fixEventFromDegraded(*geodetic, stamp_s);
+      const bool was_started = session.started();
+      const LocalizationSession::Update update = session.addFix(event);
+      if (was_started && (!update.correction || update.correction->accepted)) {
+        OxtsRunResult::Fix fix;  // the session's conversion, for the loop closure's GPS factors
+        fix.frame = static_cast<int>(k);
+        fix.fix.stamp_s = stamp_s;
+        fix.fix.position_map = projection.toMap(event.lat_deg, event.lon_deg, event.alt_m);
+        fix.fix.covariance_map = *event.covariance_enu;
+        run.fixes.push_back(fix);
+      }
     }
     if (!session.started()) continue;
     if (run.states.empty()) {
@@ -147,10 +157,14 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
     const std::unique_ptr<NavigationFilter> reporter =
         makeFilter(FilterType::kLeftInvariant, config.localizer.imu_noise);
     const std::size_t first = static_cast<std::size_t>(run.first_estimated_frame);
+    run.smoothed_covariances.assign(run.states.size(), smoothed.front().covariance);
+    run.smoother_gains.assign(run.states.size(), Matrix15d::Zero());
     for (std::size_t i = 0; i < smoothed.size(); ++i) {
       reporter->initialize(smoothed[i].state, smoothed[i].covariance);
       run.states[first + i] = smoothed[i].state;
       run.pose_covariances[first + i] = reporter->poseCovariance();
+      run.smoothed_covariances[first + i] = smoothed[i].covariance;
+      run.smoother_gains[first + i] = smoothed[i].gain;
     }
     for (std::size_t k = 0; k < first; ++k) {  // frames before the start repeat it
       run.states[k] = run.states[first];

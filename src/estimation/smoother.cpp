@@ -69,9 +69,10 @@ std::vector<SmoothedEpoch> smoothLeftInvariant(const std::vector<ForwardEpoch>& 
         now.filtered_covariance +
         gain * (smoothed[k + 1].covariance - next.predicted_covariance) * gain.transpose();
     out.covariance = 0.5 * (out.covariance + out.covariance.transpose());
+    out.gain = gain;
     if (!out.state.rotation.allFinite() || !out.state.position_map.allFinite() ||
         !out.covariance.allFinite()) {
-      out = {now.filtered, now.filtered_covariance};  // never let a NaN out: keep the filter's
+      out = {now.filtered, now.filtered_covariance, Matrix15d::Zero()};  // never let a NaN out
     }
   }
   return smoothed;

@@ -17,9 +17,13 @@
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/estimation/loop_closure.h"
 #include "inekf_semantic_mapping/estimation/oxts_run.h"
+#include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
+#include "inekf_semantic_mapping/registration/icp_registration.h"
 
 namespace ism = inekf_semantic_mapping;
 namespace estimation = inekf_semantic_mapping::estimation;
@@ -32,7 +36,8 @@ constexpr char kUsage[] =
     "                     [--gps-every N] [--filter left|right|ekf] [--config FILE]\n"
     "                     [--init-yaw-sigma-deg DEG] [--init-yaw-error-deg DEG]\n"
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
-    "                     [--seed S] [--smooth]\n"
+    "                     [--seed S] [--smooth] [--loop-closure [--scans DIR]\n"
+    "                     [--loop-config FILE] [--output-loops LOOPS.csv]]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
     "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major "
     "3x4);\n"
@@ -45,7 +50,16 @@ constexpr char kUsage[] =
     "  --filter          overrides the config's filter\n"
     "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n"
     "  --smooth          after the causal run, a Rauch-Tung-Striebel pass on the left-invariant\n"
-    "                    error (filter left): every --output-* holds the smoothed estimate\n";
+    "                    error (filter left): every --output-* holds the smoothed estimate\n"
+    "  --loop-closure    after --smooth: lidar loop closures (revisits by the smoothed estimate\n"
+    "                    and its covariance, GICP of the two scans, a pose graph over keyframes\n"
+    "                    with odometry, GPS and robust loop factors); every --output-* holds\n"
+    "                    the loop-closed poses (the covariance columns stay the smoother's)\n"
+    "  --scans           the scans, DIR/%010d.bin (or .txt) per OXTS frame (default: the\n"
+    "                    drive's velodyne_points/data); the IMU-to-lidar calibration is\n"
+    "                    calib_imu_to_velo.txt of the date folder (else of the drive folder)\n"
+    "  --loop-config     YAML as config/loop_closure.yaml (default: built-in defaults)\n"
+    "  --output-loops    CSV: one line per loop candidate, accepted or rejected and why\n";
 
 // Adds one output to the run's set: written through a temporary file, and only renamed into
 // place with the others once all are written (a reader never sees half a file or half a set).
@@ -57,6 +71,34 @@ void addOutput(ism::common::AtomicFileSet* outputs, const std::string& path,
   });
 }
 
+// The scan file of each OXTS frame in dir (%010d.bin, else .txt); a missing one is an error
+// naming it.
+std::vector<std::string> scanPaths(const std::string& dir, std::size_t frames) {
+  namespace fs = std::filesystem;
+  if (!fs::is_directory(dir)) {
+    throw ism::common::UsageError("--loop-closure: the scan folder " + dir +
+                                  " does not exist (give --scans DIR)");
+  }
+  std::vector<std::string> paths(frames);
+  for (std::size_t k = 0; k < frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%010zu", k);
+    const fs::path base = fs::path(dir) / name;
+    for (const char* extension : {".bin", ".txt"}) {
+      const fs::path candidate = base.string() + extension;
+      if (fs::exists(candidate)) {
+        paths[k] = candidate.string();
+        break;
+      }
+    }
+    if (paths[k].empty()) {
+      throw std::runtime_error("--loop-closure: no scan for OXTS frame " + std::to_string(k) +
+                               ": " + base.string() + ".bin is missing");
+    }
+  }
+  return paths;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -66,15 +108,33 @@ int main(int argc, char** argv) {
         argc, argv,
         ism::tools::withGpsValueFlags({"--oxts", "--output-kitti", "--output-tum", "--output-truth",
                                        "--output-states", "--filter", "--config",
-                                       "--init-yaw-sigma-deg", "--init-yaw-error-deg"}),
-        {"--smooth"}, ism::tools::kGpsRepeatableFlags);
+                                       "--init-yaw-sigma-deg", "--init-yaw-error-deg", "--scans",
+                                       "--loop-config", "--output-loops"}),
+        {"--smooth", "--loop-closure"}, ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
     }
 
     estimation::OxtsRunOptions options;
+    const bool loop_closure = cli.has("--loop-closure");
+    estimation::LoopClosureOptions loop_options;
+    ism::registration::IcpOptions icp_options;
+    if (!loop_closure &&
+        (cli.has("--scans") || cli.has("--loop-config") || cli.has("--output-loops"))) {
+      throw UsageError("--scans, --loop-config and --output-loops need --loop-closure");
+    }
+    if (loop_closure && !cli.has("--smooth")) {
+      throw UsageError("--loop-closure runs on the smoothed estimate: add --smooth");
+    }
     try {
+      if (cli.has("--loop-config")) {
+        ism::common::YamlReader reader =
+            ism::common::YamlReader::fromFile(cli.get("--loop-config"));
+        loop_options.read(&reader);
+        icp_options.read(&reader);
+        reader.rejectUnknown();
+      }
       if (cli.has("--config")) {
         options.config = estimation::LocalizationSessionConfig::fromYamlFile(cli.get("--config"));
       }
@@ -106,10 +166,56 @@ int main(int argc, char** argv) {
       ism::ScopedTimer timer("read_oxts");
       frames = ism::kitti::readOxtsFolder(cli.get("--oxts"));
     }
+    // The loop closure's inputs are checked before the (long) run.
+    std::vector<std::string> scan_paths;
+    Eigen::Isometry3d T_imu_velo = Eigen::Isometry3d::Identity();
+    if (loop_closure) {
+      namespace fs = std::filesystem;
+      fs::path oxts_dir = fs::path(cli.get("--oxts"));
+      if (!oxts_dir.has_filename()) oxts_dir = oxts_dir.parent_path();  // a trailing slash
+      const fs::path drive_dir = oxts_dir.parent_path();
+      const std::string scans_dir = cli.has("--scans")
+                                        ? cli.get("--scans")
+                                        : (drive_dir / "velodyne_points" / "data").string();
+      scan_paths = scanPaths(scans_dir, frames.size());
+      // The raw calibration: the date folder's (KITTI's layout), else the drive folder's.
+      std::string calib_dir;
+      for (const fs::path& dir : {drive_dir.parent_path(), drive_dir}) {
+        if (ism::kitti::hasRawCalibration(dir.string())) {
+          calib_dir = dir.string();
+          break;
+        }
+      }
+      if (calib_dir.empty()) {
+        throw std::runtime_error(
+            "--loop-closure: no calib_imu_to_velo.txt (with the other raw "
+            "calib_*.txt) in " +
+            drive_dir.parent_path().string() + " or " + drive_dir.string());
+      }
+      T_imu_velo = ism::kitti::readRawCalibration(calib_dir).T_velo_imu.inverse();
+    }
     estimation::OxtsRunResult run;
     {
       ism::ScopedTimer timer("filter_total");
       run = estimation::runLocalizerOnOxts(frames, options);
+    }
+    estimation::TrajectoryErrors smoothed_errors;
+    estimation::LoopClosureResult loops;
+    if (loop_closure) {
+      smoothed_errors = estimation::compareWithTruth(run);
+      ism::ScopedTimer timer("loop_closure");
+      const ism::registration::IcpScanMatcher matcher(
+          [&scan_paths](int frame) { return scan_paths.at(frame); }, icp_options);
+      loops = estimation::closeLoops(run, {}, T_imu_velo, matcher, loop_options);
+      run.states = loops.states;
+      for (const estimation::LoopRecord& loop : loops.loops) {
+        std::printf(
+            "inekf_offline: loop %d -> %d (%.1f s apart, %.2f m +- %.2f): %s, fitness "
+            "%.4f m^2, correction %.2f m %.2f deg, chi2 %.1f / %.1f\n",
+            loop.query_frame, loop.match_frame, loop.time_gap_s, loop.distance_m,
+            loop.distance_sigma_m, loop.reason.c_str(), loop.fitness_m2, loop.correction_m,
+            loop.correction_deg, loop.chi2_estimate, loop.chi2_final);
+      }
     }
     ism::ScopedTimer write_timer("write_outputs");
     ism::common::AtomicFileSet outputs;
@@ -158,6 +264,12 @@ int main(int argc, char** argv) {
         }
       });
     }
+    if (cli.has("--output-loops")) {
+      addOutput(&outputs, cli.get("--output-loops"), [&](std::ostream& out) {
+        out << estimation::loopCsvHeader() << '\n';
+        for (const auto& loop : loops.loops) out << estimation::loopCsvLine(loop) << '\n';
+      });
+    }
     outputs.commit();
     const estimation::TrajectoryErrors errors = estimation::compareWithTruth(run);
     std::cout << ism::TimingRegistry::instance().report();
@@ -165,12 +277,21 @@ int main(int argc, char** argv) {
         "inekf_offline: filter %s%s, %zu frames, imu used %lld dropped %lld, gps offered %d used "
         "%lld rejected %lld, ATE %.3f m, rotation RMSE %.3f deg, yaw RMSE %.3f deg\n",
         estimation::toString(options.config.localizer.filter_type).c_str(),
-        run.smoothed ? " + RTS smoother" : "", frames.size(),
-        static_cast<long long>(run.statistics.filter.imu_used),
+        run.smoothed ? (loop_closure ? " + RTS smoother + loop closure" : " + RTS smoother") : "",
+        frames.size(), static_cast<long long>(run.statistics.filter.imu_used),
         static_cast<long long>(run.statistics.filter.imu_dropped), run.fixes_offered,
         static_cast<long long>(run.statistics.filter.gps_used),
         static_cast<long long>(run.statistics.filter.gps_rejected), errors.ate_m,
         errors.rotation_rmse_deg, errors.yaw_rmse_deg);
+    if (loop_closure) {
+      std::printf(
+          "inekf_offline: loop closure: %zu keyframes, %d GPS factors, %zu candidates, %d "
+          "accepted, %d rejected; registration %.2f s, graph %.2f s (%d iterations); ATE %.3f m "
+          "-> %.3f m (smoothed -> loop-closed)\n",
+          loops.keyframes.size(), loops.gps_factors, loops.loops.size(), loops.accepted,
+          loops.rejected, loops.seconds_registration, loops.seconds_optimization,
+          loops.summary.iterations, smoothed_errors.ate_m, errors.ate_m);
+    }
     if (run.smoother_breaks > 0) {
       std::printf("inekf_offline: the smoother restarted at %d IMU steps it could not reproduce\n",
                   run.smoother_breaks);

@@ -14,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <vector>
 
+#include "inekf_semantic_mapping/estimation/error_dynamics.h"
 #include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/kitti/gps_degradation.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
@@ -41,6 +42,18 @@ struct OxtsRunResult {
   int first_estimated_frame = 0;
   bool smoothed = false;    // the states are the smoother's
   int smoother_breaks = 0;  // IMU steps the smoother could not reproduce (segments restarted)
+  // With smoothing, one per OXTS frame (frames before the start repeat it, with a zero gain):
+  // the smoothed 15x15 left-invariant covariance and the RTS gain G_k to the next frame, from
+  // which the loop closure takes relative-pose covariances (estimation/smoother.h).
+  std::vector<Matrix15d> smoothed_covariances;
+  std::vector<Matrix15d> smoother_gains;
+  // The fixes the filter was given after its start, in the map frame (the GPS factors of a pose
+  // graph), with the OXTS frame each belongs to.
+  struct Fix {
+    int frame = 0;
+    PositionFix fix;
+  };
+  std::vector<Fix> fixes;
 };
 
 // The fix event a receiver reporting `fix` at `stamp_s` gives the session (diagonal ENU

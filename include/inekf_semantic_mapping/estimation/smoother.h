@@ -37,6 +37,10 @@ struct ForwardEpoch {
 struct SmoothedEpoch {
   NavState state;
   Matrix15d covariance;
+  // G_k, linking this epoch to the next (zero where a segment ends): the smoothed
+  // cross-covariance is Cov(xi_k, xi_k+1 | N) = G_k P_k+1|N, and over a lag
+  // Cov(xi_k, xi_k+m | N) = G_k ... G_k+m-1 P_k+m|N (relative-pose covariances, loop closure).
+  Matrix15d gain = Matrix15d::Zero();
 };
 
 // Throws std::invalid_argument when a predicted covariance is not positive definite (a broken
