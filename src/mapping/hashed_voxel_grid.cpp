@@ -116,7 +116,7 @@ void HashedVoxelGrid::clear() {
 
 void HashedVoxelGrid::rehash(std::size_t capacity) {
   table_keys_.assign(capacity, 0);
-  table_values_.assign(capacity, 0);
+  table_values_.assign(capacity, nullptr);
   table_mask_ = capacity - 1;
   table_shift_ = 64;
   for (std::size_t c = capacity; c > 1; c >>= 1) --table_shift_;
@@ -126,7 +126,7 @@ void HashedVoxelGrid::rehash(std::size_t capacity) {
     std::size_t i = static_cast<std::size_t>((stored * 0x9E3779B97F4A7C15ULL) >> table_shift_);
     while (table_keys_[i] != 0) i = (i + 1) & table_mask_;
     table_keys_[i] = stored;
-    table_values_[i] = static_cast<std::uint32_t>(b);
+    table_values_[i] = blocks_[b].get();
   }
 }
 
@@ -134,7 +134,7 @@ HashedVoxelGrid::Block* HashedVoxelGrid::findBlock(std::uint64_t block_key) cons
   const std::uint64_t stored = block_key + 1;
   std::size_t i = static_cast<std::size_t>((stored * 0x9E3779B97F4A7C15ULL) >> table_shift_);
   while (table_keys_[i] != 0) {
-    if (table_keys_[i] == stored) return blocks_[table_values_[i]].get();
+    if (table_keys_[i] == stored) return table_values_[i];
     i = (i + 1) & table_mask_;
   }
   return nullptr;
@@ -147,7 +147,7 @@ HashedVoxelGrid::Block* HashedVoxelGrid::findOrCreateBlock(std::uint64_t block_k
   while (table_keys_[i] != 0) {
     if (table_keys_[i] == stored) {
       cached_key_ = block_key;
-      cached_block_ = blocks_[table_values_[i]].get();
+      cached_block_ = table_values_[i];
       return cached_block_;
     }
     i = (i + 1) & table_mask_;
@@ -164,7 +164,7 @@ HashedVoxelGrid::Block* HashedVoxelGrid::findOrCreateBlock(std::uint64_t block_k
     rehash(table_keys_.size() * 2);
   } else {
     table_keys_[i] = stored;
-    table_values_[i] = static_cast<std::uint32_t>(blocks_.size() - 1);
+    table_values_[i] = raw;
   }
   cached_key_ = block_key;
   cached_block_ = raw;
@@ -179,12 +179,12 @@ void HashedVoxelGrid::markDirty(Block* block) {
 }
 
 void HashedVoxelGrid::nextStamp() {
-  hit_stamp_ = static_cast<std::uint16_t>(hit_stamp_ + 2);
-  if (hit_stamp_ == 0) {  // wrapped: 32767 scans; old stamps must not look current
+  hit_stamp_ = static_cast<std::uint8_t>(hit_stamp_ + 2);
+  if (hit_stamp_ == 0) {  // wrapped after 127 scans: old stamps must not look current
     for (auto& block : blocks_) block->stamp.fill(0);
     hit_stamp_ = 2;
   }
-  free_stamp_ = static_cast<std::uint16_t>(hit_stamp_ + 1);
+  free_stamp_ = static_cast<std::uint8_t>(hit_stamp_ + 1);
 }
 
 ClassSlotIndices* HashedVoxelGrid::slotsOf(Block* block, int index, ClassSlotCounts** counts) {
@@ -366,7 +366,7 @@ void HashedVoxelGrid::castRay(const double origin[3], const std::uint16_t origin
     ++visits;
     Block* block = findOrCreateBlock(packBlockKey(k[0] >> 3, k[1] >> 3, k[2] >> 3));
     const int v = voxelIndex(k[0], k[1], k[2]);
-    const std::uint16_t stamp = block->stamp[v];
+    const std::uint8_t stamp = block->stamp[v];
     if (stamp == free_stamp_) {
       if (stop_after > 0 && ++cleared_run >= stop_after) break;
       continue;
@@ -517,7 +517,7 @@ std::size_t HashedVoxelGrid::occupiedVoxels() const {
 
 std::size_t HashedVoxelGrid::memoryUsage() const {
   std::size_t bytes = sizeof(*this) + table_keys_.capacity() * sizeof(std::uint64_t) +
-                      table_values_.capacity() * sizeof(std::uint32_t) +
+                      table_values_.capacity() * sizeof(Block*) +
                       blocks_.capacity() * sizeof(void*) + dirty_blocks_.capacity() * sizeof(void*);
   for (const auto& block : blocks_) {
     bytes += sizeof(Block);

@@ -273,7 +273,7 @@ TEST(HashedVoxelGrid, EachVoxelIsUpdatedOncePerScan) {
   });
   EXPECT_GT(free_voxels, 500u);
   EXPECT_GT(occupied, 50u);
-  EXPECT_EQ(evidence, 2000u);                               // one class observation per point
+  EXPECT_EQ(evidence, 2000u);                              // one class observation per point
   EXPECT_GT(grid.lastRayVisits(), 3 * grid.lastMisses());  // the repetition the stamps absorb
   // A second scan: one more miss / hit each.
   grid.insertLabeledScan(scan, 0.0, classes);
@@ -299,6 +299,22 @@ TEST(HashedVoxelGrid, EndpointsAreNeverFreedBySameScan) {
   EXPECT_EQ(log_odds, octomap::logodds(0.4));
   ASSERT_TRUE(grid.voxel(32768, 32768, 32768, &log_odds));        // the sensor's voxel is free
   EXPECT_FALSE(grid.voxel(32768 + 61, 32768, 32768, &log_odds));  // beyond: unknown
+}
+
+TEST(HashedVoxelGrid, ScanStampsWrapWithoutChangingTheMap) {
+  // 300 small scans: the 8-bit stamps wrap twice (every 127 scans).
+  HashedVoxelGrid grid(gridOptions(0.2, 1.0, 0));
+  SemanticOcTree tree(0.2);
+  tree.setGrazingRayTruncation(1.0);
+  for (int s = 0; s < 300; ++s) {
+    const LabeledScan scan = syntheticScan(100 + s, {0.05f * (s % 40), 0.f, 1.7f}, 200);
+    grid.insertLabeledScan(scan, 20.0, tree.classSet());
+    tree.insertLabeledScan(scan, 20.0);
+  }
+  const Agreement agreement = compare(voxelsOf(grid), voxelsOf(tree));
+  EXPECT_GT(agreement.union_voxels, 10000u);
+  EXPECT_LT(agreement.stateFraction(), 0.001);
+  EXPECT_EQ(agreement.class_differs, 0u);
 }
 
 TEST(HashedVoxelGrid, EarlyRayTerminationCutsVisitsAndKeepsTheMap) {
@@ -329,6 +345,22 @@ TEST(HashedVoxelGrid, EarlyRayTerminationCutsVisitsAndKeepsTheMap) {
       100.0 * (1.0 - double(visits[1]) / visits[0]), misses[0], misses[1],
       100.0 * (1.0 - double(misses[1]) / misses[0]));
   agreement.print("early termination 10 vs none");
+  // The effect of other values on the same scans (printed for the config's comment).
+  for (const int n : {3, 20, 40}) {
+    HashedVoxelGrid grid(gridOptions(0.2, 1.0, n));
+    std::size_t v = 0, m = 0;
+    for (const LabeledScan& scan : scans) {
+      grid.insertLabeledScan(scan, 50.0, ClassSet::cityscapes());
+      v += grid.lastRayVisits();
+      m += grid.lastMisses();
+    }
+    const Agreement sweep = compare(maps[0], voxelsOf(grid));
+    std::printf(
+        "[ EARLY    ] termination after %d: visits -%.1f %%, misses -%.2f %%, occupancy state "
+        "differs in %.3f %% of voxels, class in %.3f %%\n",
+        n, 100.0 * (1.0 - double(v) / visits[0]), 100.0 * (1.0 - double(m) / misses[0]),
+        100.0 * sweep.stateFraction(), 100.0 * sweep.classFraction());
+  }
   EXPECT_LT(visits[1], visits[0] * 0.7);
   EXPECT_GT(misses[1], misses[0] * 0.9);
   EXPECT_LT(agreement.stateFraction(), 0.05);
@@ -352,6 +384,7 @@ TEST(HashedVoxelGrid, LoadFromATreeExpandsPrunedLeaves) {
 SemanticMappingConfig sessionConfig(const std::string& insertion) {
   SemanticMappingConfig config;
   config.insertion = insertion;
+  config.early_ray_termination_voxels = 0;  // the octree's exact meaning
   config.max_range_m = 30.0;
   config.label_geometry_check = false;
   return config;
@@ -405,6 +438,12 @@ TEST(HashedVoxelGridSession, SameMapAsTheOctreeSessionThroughSaveAndLoad) {
 }
 
 TEST(HashedVoxelGridSession, ConfigKeys) {
+  // The defaults are the YAML's (hashed grid, early termination after 20 cleared voxels).
+  const SemanticMappingConfig from_file =
+      loadSemanticMappingConfig(test::repoPath("config/semantic_mapping.yaml"));
+  EXPECT_EQ(from_file.insertion, SemanticMappingConfig().insertion);
+  EXPECT_EQ(from_file.early_ray_termination_voxels,
+            SemanticMappingConfig().early_ray_termination_voxels);
   YAML::Node root = YAML::Load("insertion: hashed_grid\nearly_ray_termination_voxels: 10\n");
   const SemanticMappingConfig config = readSemanticMappingConfig(root, "test");
   EXPECT_EQ(config.insertion, "hashed_grid");

@@ -106,14 +106,16 @@ class HashedVoxelGrid {
   HashedVoxelGridOptions options_;
   float hit_log_, miss_log_, min_log_, max_log_, occupied_log_;
   double resolution_factor_;
-  // Open addressing: packed block key + 1 (0 = empty slot) -> index into blocks_.
+  // Open addressing: packed block key + 1 (0 = empty slot) -> its block (owned by blocks_).
   std::vector<std::uint64_t> table_keys_;
-  std::vector<std::uint32_t> table_values_;
+  std::vector<Block*> table_values_;
   std::size_t table_mask_ = 0;
   int table_shift_ = 64;
   std::vector<std::unique_ptr<Block>> blocks_;
   std::vector<Block*> dirty_blocks_;
-  std::uint16_t hit_stamp_ = 0, free_stamp_ = 1;
+  // Scan stamps (hit: even, free: odd; 0 and 1 never current); they wrap every 127 scans, when
+  // all stamps are cleared (a memset of 512 bytes per block).
+  std::uint8_t hit_stamp_ = 0, free_stamp_ = 1;
   // Cache of the last block a ray walk touched.
   std::uint64_t cached_key_ = ~std::uint64_t{0};
   Block* cached_block_ = nullptr;
@@ -122,7 +124,7 @@ class HashedVoxelGrid {
 
 struct HashedVoxelGrid::Block {
   std::array<float, kBlockVoxels> log_odds;
-  std::array<std::uint16_t, kBlockVoxels> stamp;
+  std::array<std::uint8_t, kBlockVoxels> stamp;
   std::array<std::uint64_t, kBlockVoxels / 64> known;
   // Class evidence, only for blocks that have any: slot index + 1 per voxel (0: none).
   std::unique_ptr<std::uint16_t[]> slot_of;
