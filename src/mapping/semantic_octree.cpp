@@ -405,8 +405,10 @@ void SemanticOcTree::setLeavesRecurs(SemanticOcTreeNode* node, bool node_just_cr
   const unsigned int shift = 3 * (tree_depth - 1 - depth);
   for (const LeafState* run = begin; run != end;) {
     const unsigned int pos = static_cast<unsigned int>((run->morton >> shift) & 7);
-    const LeafState* run_end = run + 1;
-    while (run_end != end && ((run_end->morton >> shift) & 7) == pos) ++run_end;
+    // The child's leaves: a binary search (the child index is non-decreasing in the range), not a
+    // scan per level — most of a dense range goes to one child at the upper levels.
+    const LeafState* run_end = std::partition_point(
+        run + 1, end, [&](const LeafState& leaf) { return ((leaf.morton >> shift) & 7) == pos; });
     bool created_node = false;
     if (!nodeChildExists(node, pos)) {
       if (!nodeHasChildren(node) && !node_just_created) {
