@@ -268,6 +268,7 @@ BENCHMARK(BM_HashedGridInsertLabeledScan)
     ->ArgName("early_termination")
     ->Arg(0)
     ->Arg(10)
+    ->Arg(20)
     ->Unit(benchmark::kMillisecond);
 
 // The grid path plus the conversion of the scan's blocks into a SemanticOcTree (what a save or
@@ -294,6 +295,7 @@ BENCHMARK(BM_HashedGridInsertAndSyncTree)
     ->ArgName("early_termination")
     ->Arg(0)
     ->Arg(10)
+    ->Arg(20)
     ->Unit(benchmark::kMillisecond);
 
 // Steady state: a scan into a grid that already holds the other scans.
@@ -312,6 +314,7 @@ BENCHMARK(BM_HashedGridInsertIntoExistingMap)
     ->ArgName("early_termination")
     ->Arg(0)
     ->Arg(10)
+    ->Arg(20)
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace
