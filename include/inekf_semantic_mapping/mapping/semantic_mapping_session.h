@@ -44,12 +44,13 @@ struct SemanticMappingConfig {
   FusionModel fusion;
   double grazing_ray_truncation_voxels = 1.0;
   int ray_casting_threads = 1;
-  // Insertion structure: "octree" (SemanticOcTree::insertLabeledScan) or "hashed_grid"
-  // (HashedVoxelGrid, synced into the tree when the tree is asked for: save, publish).
-  std::string insertion = "octree";
+  // Insertion structure: "hashed_grid" (HashedVoxelGrid, synced into the tree when the tree is
+  // asked for: save, publish) or "octree" (SemanticOcTree::insertLabeledScan). The same map
+  // (test_hashed_voxel_grid); hashed_grid is several times faster.
+  std::string insertion = "hashed_grid";
   // hashed_grid: a free ray stops after this many consecutive voxels that the same scan already
-  // cleared (0: never).
-  int early_ray_termination_voxels = 0;
+  // cleared (0: never; 20: occupancy state of 0.3 % of the voxels differs, 41 % fewer visits).
+  int early_ray_termination_voxels = 20;
   // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
   // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
   bool insert_points_outside_image = false;
