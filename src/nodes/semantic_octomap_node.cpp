@@ -86,8 +86,8 @@ class SemanticOctomapNode {
       grids_changed_ = true;
       ground_trace_.addSensorOrigin(scan.sensor_origin_map.cast<double>());
       if (cloud_pub_.getNumSubscribers() == 0) return;
-      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->tree().classSet(),
-                                                   options_.map_frame, ros::Time(stamp)));
+      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->classSet(), options_.map_frame,
+                                                   ros::Time(stamp)));
     });
     if (!options_.map_file.empty()) {
       session_->load(options_.map_file);

@@ -174,6 +174,8 @@ class SemanticMappingSession {
     syncTree();
     return *tree_;
   }
+  // The map's class set (no sync: cheap per scan).
+  const ClassSet& classSet() const { return tree_->classSet(); }
   // The hashed grid (insertion: hashed_grid), else null.
   const HashedVoxelGrid* grid() const { return grid_.get(); }
   // "N nodes" (octree) or "N blocks" (hashed grid): the map's size without a sync, for progress.
