@@ -5,6 +5,7 @@ ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
     src/mapping/semantic_classes.cpp
     src/mapping/semantic_octree.cpp
+    src/mapping/hashed_voxel_grid.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
     src/mapping/semantic_mapping_session.cpp
@@ -16,6 +17,10 @@ ism_add_core_library(${PROJECT_NAME}_mapping
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
   LINK ${PROJECT_NAME}_mapping)
+# Issue 16: the hashed-grid insertion against the octree's (synthetic and real scans).
+ism_add_gtest(test_hashed_voxel_grid
+  SOURCES test/unit/test_hashed_voxel_grid.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_grid_projection
   SOURCES test/unit/test_grid_projection.cpp
   LINK ${PROJECT_NAME}_mapping)

@@ -121,7 +121,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scan_paths.size() << " ("
                 << scan_path.filename().string() << ", " << velodyne.size() << " points, "
-                << evidence << "), map " << session->tree().size() << " nodes\n";
+                << evidence << "), map " << session->mapSizeText() << "\n";
     }
   }
   {
@@ -196,8 +196,8 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
     if (drive.on_scan_inserted) drive.on_scan_inserted(T_map_velo);
     if (progress) {
       *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
-                << velodyne.size() << " points, " << evidence << "), map " << session->tree().size()
-                << " nodes\n";
+                << velodyne.size() << " points, " << evidence << "), map " << session->mapSizeText()
+                << "\n";
     }
   }
   session->tree().updateInnerOccupancy();

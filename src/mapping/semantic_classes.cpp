@@ -1,6 +1,8 @@
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
+#include <algorithm>
 #include <stdexcept>
+#include <utility>
 
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 
@@ -100,6 +102,51 @@ FusionRule parseFusionRule(const std::string& name) {
   if (name == "bayes") return FusionRule::kBayesConfusion;
   if (name == "dirichlet") return FusionRule::kDirichlet;
   throw std::invalid_argument("unknown fusion rule '" + name + "' (expected bayes or dirichlet)");
+}
+
+void addClassCount(ClassIndex index, std::uint32_t count, ClassSlotIndices* classes,
+                   ClassSlotCounts* counts) {
+  if (index == kNoClass || count == 0) return;
+  int slot = -1;
+  for (int i = 0; i < kClassSlots; ++i) {
+    if ((*classes)[i] == index || (*classes)[i] == kNoClass) {
+      slot = i;
+      break;
+    }
+  }
+  if (slot < 0) {
+    // All slots hold other classes: the least observed one gives way.
+    slot = static_cast<int>(std::min_element(counts->begin(), counts->end()) - counts->begin());
+    (*counts)[slot] = 0;
+  }
+  (*classes)[slot] = index;
+  std::uint32_t total = (*counts)[slot] + std::min<std::uint32_t>(count, kMaxClassCount);
+  while (total > kMaxClassCount) {
+    // Halving every count keeps the ratios (Dirichlet) and the differences stay huge (Bayes).
+    for (auto& c : *counts) c = static_cast<std::uint16_t>((c + 1) / 2);
+    total = (total + 1) / 2;
+  }
+  (*counts)[slot] = static_cast<std::uint16_t>(total);
+  // Canonical order (by class index, empty slots last) so equal evidence compares equal.
+  for (int i = 1; i < kClassSlots; ++i) {
+    for (int j = i; j > 0 && (*classes)[j] < (*classes)[j - 1]; --j) {
+      std::swap((*classes)[j], (*classes)[j - 1]);
+      std::swap((*counts)[j], (*counts)[j - 1]);
+    }
+  }
+}
+
+ClassIndex mostObservedClass(const ClassSlotIndices& classes, const ClassSlotCounts& counts) {
+  ClassIndex best = kNoClass;
+  std::uint16_t best_count = 0;
+  for (int i = 0; i < kClassSlots; ++i) {
+    // Slots are sorted by index, so '>' keeps the lower index on ties.
+    if (classes[i] != kNoClass && counts[i] > best_count) {
+      best = classes[i];
+      best_count = counts[i];
+    }
+  }
+  return best;
 }
 
 }  // namespace mapping

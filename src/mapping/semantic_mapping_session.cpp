@@ -58,6 +58,9 @@ void SemanticMappingConfig::validate() const {
   require(grazing_ray_truncation_voxels >= 0, "grazing_ray_truncation_voxels", "must be >= 0");
   require(ray_casting_threads >= 1 && ray_casting_threads <= 64, "ray_casting_threads",
           "must be in [1, 64]");
+  require(insertion == "octree" || insertion == "hashed_grid", "insertion",
+          "must be octree or hashed_grid, got '" + insertion + "'");
+  require(early_ray_termination_voxels >= 0, "early_ray_termination_voxels", "must be >= 0");
   require(label_geometry_max_flat_height_m > 0 && label_geometry_max_flat_height_m <= 10,
           "label_geometry.max_flat_height", "must be in (0, 10] m");
   require(label_geometry_min_raised_height_m >= 0 && label_geometry_min_raised_height_m <= 10,
@@ -100,6 +103,8 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("dirichlet_prior", &config.fusion.dirichlet_prior);
   reader.read("grazing_ray_truncation_voxels", &config.grazing_ray_truncation_voxels);
   reader.read("ray_casting_threads", &config.ray_casting_threads);
+  reader.read("insertion", &config.insertion);
+  reader.read("early_ray_termination_voxels", &config.early_ray_termination_voxels);
   reader.read("insert_points_outside_image", &config.insert_points_outside_image);
   reader.read("reject_occluded_points", &config.reject_occluded_points);
   reader.read("label_geometry.enabled", &config.label_geometry_check);
@@ -134,6 +139,7 @@ SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& conf
     : config_(config) {
   config_.validate();
   tree_ = makeTree();
+  grid_ = makeGrid();
   // Cityscapes ids without a trainId (unlabeled, ego vehicle, ...) are what a network says when
   // it has nothing to say: they carry no class evidence. So does SemanticKITTI's unlabeled (0).
   ignored_label_.assign(256, 0);
@@ -158,6 +164,32 @@ std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   return tree;
+}
+
+std::unique_ptr<HashedVoxelGrid> SemanticMappingSession::makeGrid() const {
+  if (config_.insertion != "hashed_grid") return nullptr;
+  HashedVoxelGridOptions options;
+  options.resolution_m = config_.resolution_m;
+  options.prob_hit = config_.prob_hit;
+  options.prob_miss = config_.prob_miss;
+  options.clamping_min = config_.clamping_min;
+  options.clamping_max = config_.clamping_max;
+  options.occupancy_threshold = tree_->getOccupancyThres();
+  options.grazing_truncation_voxels = config_.grazing_ray_truncation_voxels;
+  options.early_termination_voxels = config_.early_ray_termination_voxels;
+  return std::make_unique<HashedVoxelGrid>(options);
+}
+
+void SemanticMappingSession::syncTree() const {
+  if (grid_ && grid_->dirty()) {
+    ScopedTimer timer("semantic_map/grid_to_tree");
+    grid_->syncTo(tree_.get());
+  }
+}
+
+std::string SemanticMappingSession::mapSizeText() const {
+  return grid_ ? std::to_string(grid_->blockCount()) + " blocks"
+               : std::to_string(tree_->size()) + " nodes";
 }
 
 std::uint32_t SemanticMappingSession::evidenceLabel(std::uint32_t label_id) const {
@@ -244,7 +276,9 @@ void SemanticMappingSession::insertIntoTree(const Eigen::Matrix3Xf& points_senso
   std::size_t with_class = 0;
   {
     ScopedTimer timer("semantic_map/insert");
-    with_class = tree_->insertLabeledScan(last_scan_, config_.max_range_m);
+    with_class = grid_
+                     ? grid_->insertLabeledScan(last_scan_, config_.max_range_m, tree_->classSet())
+                     : tree_->insertLabeledScan(last_scan_, config_.max_range_m);
   }
   ++statistics_.scans_inserted;
   statistics_.points_inserted += static_cast<std::size_t>(points_sensor.cols());
@@ -417,7 +451,8 @@ bool SemanticMappingSession::applyLateLabels(double stamp, const LabelImageView&
   unlabelled_scans_.erase(best);
   {
     ScopedTimer timer("semantic_map/late_labels");
-    statistics_.points_with_class += tree_->addClassEvidence(scan);
+    statistics_.points_with_class +=
+        grid_ ? grid_->addClassEvidence(scan, tree_->classSet()) : tree_->addClassEvidence(scan);
   }
   ++statistics_.label_images_used;
   ++statistics_.label_images_late;
@@ -487,6 +522,7 @@ std::size_t SemanticMappingSession::flush() {
 // Map files
 
 std::size_t SemanticMappingSession::save(const std::string& path, MapFormat format) {
+  syncTree();
   ScopedTimer timer("semantic_map/save");
   return saveMap(*tree_, path, format);
 }
@@ -505,12 +541,18 @@ void SemanticMappingSession::load(const std::string& path) {
   loaded->setRayCastingThreads(config_.ray_casting_threads);
   loaded->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   loaded->setFusionModel(config_.fusion);
+  if (grid_) {
+    std::unique_ptr<HashedVoxelGrid> grid = makeGrid();
+    grid->loadFrom(*loaded);
+    grid_ = std::move(grid);
+  }
   tree_ = std::move(loaded);
   statistics_ = MappingStatistics();
 }
 
 void SemanticMappingSession::reset() {
   tree_ = makeTree();
+  grid_ = makeGrid();
   pending_scans_.clear();
   pending_labels_.clear();
   unlabelled_scans_.clear();

@@ -39,9 +39,6 @@ std::uint64_t spreadBits(std::uint64_t v) {
   v = (v | (v << 2)) & 0x249249249249ULL;
   return v;
 }
-std::uint64_t mortonCode(const octomap::OcTreeKey& key) {
-  return spreadBits(key[0]) | (spreadBits(key[1]) << 1) | (spreadBits(key[2]) << 2);
-}
 // Open-addressing hash set of packed keys (48 bits, stored +1 so that 0 marks an empty slot).
 class FlatKeySet {
  public:
@@ -204,34 +201,7 @@ FlatKeySet castFreeRays(const SemanticOcTree& tree, const octomap::point3d& orig
 static_assert(sizeof(SemanticOcTreeNode) <= 24, "SemanticOcTreeNode grew past 24 bytes");
 
 void SemanticOcTreeNode::addClassEvidence(ClassIndex index, std::uint32_t count) {
-  if (index == kNoClass || count == 0) return;
-  int slot = -1;
-  for (int i = 0; i < kSlots; ++i) {
-    if (classes_[i] == index || classes_[i] == kNoClass) {
-      slot = i;
-      break;
-    }
-  }
-  if (slot < 0) {
-    // All slots hold other classes: the least observed one gives way.
-    slot = static_cast<int>(std::min_element(counts_.begin(), counts_.end()) - counts_.begin());
-    counts_[slot] = 0;
-  }
-  classes_[slot] = index;
-  std::uint32_t total = counts_[slot] + std::min<std::uint32_t>(count, kMaxCount);
-  while (total > kMaxCount) {
-    // Halving every count keeps the ratios (Dirichlet) and the differences stay huge (Bayes).
-    for (auto& c : counts_) c = static_cast<std::uint16_t>((c + 1) / 2);
-    total = (total + 1) / 2;
-  }
-  counts_[slot] = static_cast<std::uint16_t>(total);
-  // Canonical order (by class index, empty slots last) so equal evidence compares equal.
-  for (int i = 1; i < kSlots; ++i) {
-    for (int j = i; j > 0 && classes_[j] < classes_[j - 1]; --j) {
-      std::swap(classes_[j], classes_[j - 1]);
-      std::swap(counts_[j], counts_[j - 1]);
-    }
-  }
+  addClassCount(index, count, &classes_, &counts_);
 }
 
 void SemanticOcTreeNode::mergeClassEvidence(const SemanticOcTreeNode& other) {
@@ -245,16 +215,7 @@ std::uint32_t SemanticOcTreeNode::totalCount() const {
 }
 
 ClassIndex SemanticOcTreeNode::mostLikelyClass() const {
-  ClassIndex best = kNoClass;
-  std::uint16_t best_count = 0;
-  for (int i = 0; i < kSlots; ++i) {
-    // Slots are sorted by index, so '>' keeps the lower index on ties.
-    if (classes_[i] != kNoClass && counts_[i] > best_count) {
-      best = classes_[i];
-      best_count = counts_[i];
-    }
-  }
-  return best;
+  return mostObservedClass(classes_, counts_);
 }
 
 double SemanticOcTreeNode::classProbability(ClassIndex index, const FusionModel& model,
@@ -408,6 +369,56 @@ void SemanticOcTree::updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_
       }
     }
     updateBatchRecurs(getNodeChild(node, pos), created_node, depth + 1, run, run_end);
+    run = run_end;
+  }
+  if (!pruneNode(node)) node->updateOccupancyChildren();
+}
+
+std::uint64_t SemanticOcTree::mortonCode(const octomap::OcTreeKey& key) {
+  return spreadBits(key[0]) | (spreadBits(key[1]) << 1) | (spreadBits(key[2]) << 2);
+}
+
+void SemanticOcTree::setLeaves(std::vector<LeafState>* leaves) {
+  const auto by_morton = [](const LeafState& a, const LeafState& b) { return a.morton < b.morton; };
+  if (!std::is_sorted(leaves->begin(), leaves->end(), by_morton)) {
+    std::sort(leaves->begin(), leaves->end(), by_morton);
+  }
+  if (leaves->empty()) return;
+  bool created_root = false;
+  if (root == nullptr) {
+    root = new SemanticOcTreeNode();
+    ++tree_size;
+    created_root = true;
+  }
+  setLeavesRecurs(root, created_root, 0, leaves->data(), leaves->data() + leaves->size());
+}
+
+// updateBatchRecurs with states instead of sensor updates; always down to the finest level.
+void SemanticOcTree::setLeavesRecurs(SemanticOcTreeNode* node, bool node_just_created,
+                                     unsigned int depth, const LeafState* begin,
+                                     const LeafState* end) {
+  if (depth == tree_depth) {
+    node->setLogOdds(begin->log_odds);
+    node->setSemantics(begin->classes, begin->counts);
+    return;
+  }
+  const unsigned int shift = 3 * (tree_depth - 1 - depth);
+  for (const LeafState* run = begin; run != end;) {
+    const unsigned int pos = static_cast<unsigned int>((run->morton >> shift) & 7);
+    // The child's leaves: a binary search (the child index is non-decreasing in the range), not a
+    // scan per level — most of a dense range goes to one child at the upper levels.
+    const LeafState* run_end = std::partition_point(
+        run + 1, end, [&](const LeafState& leaf) { return ((leaf.morton >> shift) & 7) == pos; });
+    bool created_node = false;
+    if (!nodeChildExists(node, pos)) {
+      if (!nodeHasChildren(node) && !node_just_created) {
+        expandNode(node);
+      } else {
+        createNodeChild(node, pos);
+        created_node = true;
+      }
+    }
+    setLeavesRecurs(getNodeChild(node, pos), created_node, depth + 1, run, run_end);
     run = run_end;
   }
   if (!pruneNode(node)) node->updateOccupancyChildren();

@@ -76,7 +76,7 @@ class SemanticOctomapNode {
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
       display_->scanInserted(scan);
       if (cloud_pub_.getNumSubscribers() == 0) return;
-      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->tree().classSet(),
+      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->classSet(),
                                                    options_.display.map_frame, ros::Time(stamp)));
     });
     if (!options_.map_file.empty()) {

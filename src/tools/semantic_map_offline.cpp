@@ -11,8 +11,11 @@
 //       [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes] [--prob-hit P]
 //       [--prob-miss P] [--grazing-truncation VOXELS] [--max-scans N] [--export-ply MAP.ply]
 //       [--color-ot MAP_COLOR.ot] [--threads N] [--grid STEM]
+#include <octomap/OcTree.h>
+#include <time.h>
 #include <yaml-cpp/yaml.h>
 
+#include <chrono>
 #include <iostream>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
@@ -43,7 +46,8 @@ constexpr char kUsage[] =
     "         [--confusion P] [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes]\n"
     "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n"
     "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
-    "         [--grid STEM]\n"
+    "         [--grid STEM] [--insertion octree|hashed_grid] [--early-termination N]\n"
+    "         [--octomap-reference]\n"
     "  --labels   per-point labels DIR/NNNNNN.label (SemanticKITTI ids; default classes\n"
     "             semantickitti)\n"
     "  --images   camera images DIR/NNNNNN.png, segmented with MODEL (Cityscapes labelIds;\n"
@@ -55,7 +59,13 @@ constexpr char kUsage[] =
     "  --config   the node's YAML (config/semantic_mapping.yaml); flags override its values\n"
     "  --grid     the node's projected and drivable maps (its grid.* keys, the ground under\n"
     "             the scans' lidar poses) in map_server's format: STEM_projected.pgm/.yaml and\n"
-    "             STEM_drivable.pgm/.yaml\n";
+    "             STEM_drivable.pgm/.yaml\n"
+    "  --insertion, --early-termination  the config's insertion and\n"
+    "             early_ray_termination_voxels\n"
+    "  --octomap-reference  after the run, inserts every scan as inserted (map frame, same\n"
+    "             origin, max range and resolution) into a plain octomap::OcTree with\n"
+    "             insertPointCloud and prints the whole run's time against that reference's\n"
+    "             (issue 16's ratio; the scans are kept in memory meanwhile)\n";
 
 // The session config: the YAML file if given, then the flags.
 ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& cli) {
@@ -74,6 +84,9 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   config.prob_miss = cli.getDouble("--prob-miss", config.prob_miss);
   config.grazing_ray_truncation_voxels =
       cli.getDouble("--grazing-truncation", config.grazing_ray_truncation_voxels);
+  if (cli.has("--insertion")) config.insertion = cli.get("--insertion");
+  config.early_ray_termination_voxels =
+      cli.getInt("--early-termination", config.early_ray_termination_voxels);
   try {
     if (cli.has("--fusion")) config.fusion.rule = mapping::parseFusionRule(cli.get("--fusion"));
     config.validate();
@@ -135,7 +148,10 @@ int main(int argc, char** argv) {
                                         "--prob-miss",
                                         "--grazing-truncation",
                                         "--threads",
-                                        "--grid"});
+                                        "--grid",
+                                        "--insertion",
+                                        "--early-termination"},
+                                       {"--octomap-reference"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const bool raw_drive = cli.has("--drive");
     if (raw_drive == cli.has("--scans")) throw UsageError("give --scans or --drive");
@@ -153,8 +169,34 @@ int main(int argc, char** argv) {
                                                       cli.get("--config"));
     }
     mapping::GroundTrace ground_trace(grid_config.sensor_height);
-    const auto on_scan_inserted = [&ground_trace](const Eigen::Isometry3d& T_map_velo) {
+    // --octomap-reference: the scans as inserted (map frame) are kept and go into a plain
+    // octomap::OcTree after the run, timed apart (not interleaved: each run keeps its caches).
+    const bool octomap_reference = cli.has("--octomap-reference");
+    std::vector<std::pair<octomap::Pointcloud, octomap::point3d>> reference_scans;
+    const auto thread_cpu_s = [] {
+      timespec ts{};
+      clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+      return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+    };
+    double keep_wall_s = 0, keep_cpu_s = 0;  // copying the scans: not the run's time
+    const auto run_start = std::chrono::steady_clock::now();
+    const double run_cpu_start = thread_cpu_s();
+    const auto on_scan_inserted = [&](const Eigen::Isometry3d& T_map_velo) {
       ground_trace.addSensorOrigin(T_map_velo.translation());
+      if (!octomap_reference) return;
+      const auto start = std::chrono::steady_clock::now();
+      const double cpu_start = thread_cpu_s();
+      const mapping::LabeledScan& scan = session.lastInsertedScan();
+      octomap::Pointcloud cloud;
+      cloud.reserve(static_cast<std::size_t>(scan.points_map.cols()));
+      for (Eigen::Index i = 0; i < scan.points_map.cols(); ++i) {
+        cloud.push_back(scan.points_map(0, i), scan.points_map(1, i), scan.points_map(2, i));
+      }
+      const Eigen::Vector3f& o = scan.sensor_origin_map;
+      reference_scans.emplace_back(std::move(cloud), octomap::point3d(o.x(), o.y(), o.z()));
+      keep_wall_s +=
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      keep_cpu_s += thread_cpu_s() - cpu_start;
     };
 
     mapping::CameraLabelSource camera_labels;
@@ -214,6 +256,11 @@ int main(int argc, char** argv) {
     std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
               << " nodes, " << counts[0] << " occupied leaves, " << session.tree().classSet().size()
               << " classes, " << session.tree().memoryUsage() / 1e6 << " MB in memory)\n";
+    if (const mapping::HashedVoxelGrid* grid = session.grid()) {
+      std::cerr << "[semantic_map_offline] insertion grid: " << grid->blockCount() << " blocks, "
+                << grid->knownVoxels() << " known voxels, " << grid->occupiedVoxels()
+                << " occupied, " << grid->memoryUsage() / 1e6 << " MB in memory\n";
+    }
     for (std::size_t i = 1; i < outputs.size(); ++i) {
       std::cerr << "[semantic_map_offline] wrote " << outputs[i].first;
       if (outputs[i].second == mapping::MapFormat::kPly)
@@ -239,6 +286,30 @@ int main(int argc, char** argv) {
                   << name << ": " << grid->width << " x " << grid->height << " cells, " << counts[0]
                   << " free, " << counts[1] << " occupied, " << counts[2] << " unknown)\n";
       }
+    }
+    if (octomap_reference) {
+      const double wall_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count() -
+          keep_wall_s;
+      const double cpu_s = thread_cpu_s() - run_cpu_start - keep_cpu_s;
+      octomap::OcTree reference(session.config().resolution_m);
+      const auto start = std::chrono::steady_clock::now();
+      const double cpu_start = thread_cpu_s();
+      for (const auto& [cloud, origin] : reference_scans) {
+        reference.insertPointCloud(
+            cloud, origin, session.config().max_range_m > 0 ? session.config().max_range_m : -1.0);
+      }
+      const double reference_wall_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      const double reference_cpu_s = thread_cpu_s() - cpu_start;
+      const double scans = static_cast<double>(std::max<std::size_t>(1, stats.scans_inserted));
+      std::cerr << "[semantic_map_offline] whole run (" << session.config().insertion
+                << " insertion, reading, mapping, save) per scan: wall " << 1e3 * wall_s / scans
+                << " ms, CPU " << 1e3 * cpu_s / scans
+                << " ms; octomap insertPointCloud of the same scans per scan: wall "
+                << 1e3 * reference_wall_s / scans << " ms, CPU " << 1e3 * reference_cpu_s / scans
+                << " ms; ratio wall " << wall_s / reference_wall_s << "x, CPU "
+                << cpu_s / reference_cpu_s << "x (octomap map: " << reference.size() << " nodes)\n";
     }
     std::cerr << ism::TimingRegistry::instance().report();
     return 0;

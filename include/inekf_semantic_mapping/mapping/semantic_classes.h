@@ -18,6 +18,19 @@ using ClassIndex = std::uint8_t;
 constexpr ClassIndex kNoClass = 255;
 constexpr int kMaxClasses = 255;  // indices 0..254
 
+// Class evidence of one voxel: the kClassSlots most observed classes and how often, in canonical
+// order (by class index, empty slots last). SemanticOcTreeNode and HashedVoxelGrid share it.
+constexpr int kClassSlots = 4;
+constexpr std::uint16_t kMaxClassCount = 0xFFFF;
+using ClassSlotIndices = std::array<ClassIndex, kClassSlots>;
+using ClassSlotCounts = std::array<std::uint16_t, kClassSlots>;
+// Adds `count` observations of class `index` (saturating; all counts are halved when one would
+// overflow, which keeps their ratios); a (kClassSlots+1)-th class replaces the least observed.
+void addClassCount(ClassIndex index, std::uint32_t count, ClassSlotIndices* classes,
+                   ClassSlotCounts* counts);
+// The class with most evidence (kNoClass if none). Ties: the lower index.
+ClassIndex mostObservedClass(const ClassSlotIndices& classes, const ClassSlotCounts& counts);
+
 struct ClassInfo {
   std::uint32_t label_id = 0;
   std::string name;

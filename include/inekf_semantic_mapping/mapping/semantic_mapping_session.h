@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/hashed_voxel_grid.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
@@ -43,6 +44,13 @@ struct SemanticMappingConfig {
   FusionModel fusion;
   double grazing_ray_truncation_voxels = 1.0;
   int ray_casting_threads = 1;
+  // Insertion structure: "hashed_grid" (HashedVoxelGrid, synced into the tree when the tree is
+  // asked for: save, publish) or "octree" (SemanticOcTree::insertLabeledScan). The same map
+  // (test_hashed_voxel_grid); hashed_grid is several times faster.
+  std::string insertion = "hashed_grid";
+  // hashed_grid: a free ray stops after this many consecutive voxels that the same scan already
+  // cleared (0: never; 20: occupancy state of 0.3 % of the voxels differs, 41 % fewer visits).
+  int early_ray_termination_voxels = 20;
   // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
   // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
   bool insert_points_outside_image = false;
@@ -155,8 +163,23 @@ class SemanticMappingSession {
   const LabeledScan& lastInsertedScan() const { return last_scan_; }
   static constexpr std::uint32_t kNoLabel = 0xFFFFFFFF;
 
-  SemanticOcTree& tree() { return *tree_; }
-  const SemanticOcTree& tree() const { return *tree_; }
+  // The map. With insertion: hashed_grid the grid's changes are written into the tree first (a
+  // cost proportional to what changed since the last call): the tree's leaves belong to the grid,
+  // so change the map through the session, not through the tree.
+  SemanticOcTree& tree() {
+    syncTree();
+    return *tree_;
+  }
+  const SemanticOcTree& tree() const {
+    syncTree();
+    return *tree_;
+  }
+  // The map's class set (no sync: cheap per scan).
+  const ClassSet& classSet() const { return tree_->classSet(); }
+  // The hashed grid (insertion: hashed_grid), else null.
+  const HashedVoxelGrid* grid() const { return grid_.get(); }
+  // "N nodes" (octree) or "N blocks" (hashed grid): the map's size without a sync, for progress.
+  std::string mapSizeText() const;
   const MappingStatistics& statistics() const { return statistics_; }
 
   // Atomic save (map_io); returns the number of occupied leaves written.
@@ -188,6 +211,8 @@ class SemanticMappingSession {
   };
 
   std::unique_ptr<SemanticOcTree> makeTree() const;
+  std::unique_ptr<HashedVoxelGrid> makeGrid() const;
+  void syncTree() const;
   // Class evidence per label id (kNoLabel for ids that carry none: unknown or "ignored" ids).
   std::uint32_t evidenceLabel(std::uint32_t label_id) const;
 
@@ -215,6 +240,7 @@ class SemanticMappingSession {
 
   SemanticMappingConfig config_;
   std::unique_ptr<SemanticOcTree> tree_;
+  std::unique_ptr<HashedVoxelGrid> grid_;    // insertion: hashed_grid
   std::vector<std::uint8_t> ignored_label_;  // per label id < 256: 1 = no class evidence
   MappingStatistics statistics_;
   LabeledScan last_scan_;

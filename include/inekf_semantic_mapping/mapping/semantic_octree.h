@@ -31,8 +31,8 @@ class SemanticOcTree;
 
 class SemanticOcTreeNode : public octomap::OcTreeNode {
  public:
-  static constexpr int kSlots = 4;
-  static constexpr std::uint16_t kMaxCount = 0xFFFF;
+  static constexpr int kSlots = kClassSlots;
+  static constexpr std::uint16_t kMaxCount = kMaxClassCount;
 
   SemanticOcTreeNode() : OcTreeNode() { clearSemantics(); }
   SemanticOcTreeNode(const SemanticOcTreeNode& rhs) = default;
@@ -59,6 +59,13 @@ class SemanticOcTreeNode : public octomap::OcTreeNode {
     counts_.fill(0);
   }
 
+  // Replaces the class evidence (slots in canonical order, see addClassCount).
+  void setSemantics(const ClassSlotIndices& classes, const ClassSlotCounts& counts) {
+    classes_ = classes;
+    counts_ = counts;
+  }
+  const ClassSlotIndices& slotClasses() const { return classes_; }
+  const ClassSlotCounts& slotCounts() const { return counts_; }
   // Slot accessors (unused slots: class kNoClass, count 0).
   ClassIndex slotClass(int slot) const { return classes_[slot]; }
   std::uint16_t slotCount(int slot) const { return counts_[slot]; }
@@ -73,8 +80,8 @@ class SemanticOcTreeNode : public octomap::OcTreeNode {
   std::ostream& writeData(std::ostream& s) const;
 
  protected:
-  std::array<ClassIndex, kSlots> classes_;
-  std::array<std::uint16_t, kSlots> counts_;
+  ClassSlotIndices classes_;
+  ClassSlotCounts counts_;
   friend class SemanticOcTree;
 };
 
@@ -130,6 +137,21 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   SemanticOcTreeNode* updateOccupiedVoxel(const octomap::OcTreeKey& key, ClassIndex index,
                                           std::uint32_t class_count);
 
+  // A finest-level voxel's whole state (HashedVoxelGrid -> tree). morton: mortonCode(key).
+  struct LeafState {
+    std::uint64_t morton;
+    float log_odds;
+    ClassSlotIndices classes;
+    ClassSlotCounts counts;
+  };
+  // Interleaved key bits (x lowest): the order of a depth-first walk of the tree.
+  static std::uint64_t mortonCode(const octomap::OcTreeKey& key);
+  // Sets finest-level voxels to the given states (pruned nodes expanded, missing ones created):
+  // no sensor model, the states replace what was there. Inner occupancy is refreshed and nodes
+  // pruned along the way (inner class evidence: updateInnerOccupancy()). One key at most once;
+  // sorted here unless already in Morton order.
+  void setLeaves(std::vector<LeafState>* leaves);
+
   // Recomputes all inner nodes: occupancy = max of children, class evidence = merged children.
   void updateInnerOccupancy();
 
@@ -162,6 +184,8 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   void applyVoxelUpdates(std::vector<VoxelUpdate>* updates);
   void updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
                          const VoxelUpdate* begin, const VoxelUpdate* end);
+  void setLeavesRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
+                       const LeafState* begin, const LeafState* end);
   SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
                                                  const SemanticOcTreeNode& evidence);
   SemanticOcTreeNode* updateOccupiedRecurs(SemanticOcTreeNode* node, bool node_just_created,
