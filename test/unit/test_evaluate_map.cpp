@@ -99,7 +99,7 @@ TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
     wall.col(i) << 5.0f, -1.0f + 0.2f * (i % 11), -1.0f + 0.2f * (i / 11);
   session.insertScanWithPointLabels(wall, Eigen::Isometry3d::Identity(),
                                     std::vector<std::uint32_t>(121, cs::kBuilding), cs::kUnlabeled);
-  const auto& tree = session.tree();
+  const auto& tree = session.tree();  // synced from the insertion grid when asked for
   EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(5.0f, 0.0f, 0.0f)), cs::kBuilding);
   // Free space in front of the wall, unknown space behind it: no label.
   EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(2.5f, 0.0f, 0.0f)), cs::kUnlabeled);
@@ -109,8 +109,10 @@ TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
   post << 0.0f, 6.0f, 0.0f;
   session.insertScanWithPointLabels(post, Eigen::Isometry3d::Identity(), {cs::kUnlabeled},
                                     cs::kUnlabeled);
-  ASSERT_NE(tree.search(0.0, 6.0, 0.0), nullptr);
-  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(0.0f, 6.0f, 0.0f)), cs::kUnlabeled);
+  const auto& updated = session.tree();
+  ASSERT_NE(updated.search(0.0, 6.0, 0.0), nullptr);
+  EXPECT_EQ(ism::perception::mapLabelAt(updated, Eigen::Vector3f(0.0f, 6.0f, 0.0f)),
+            cs::kUnlabeled);
 }
 
 TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
