@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "flat_key_set.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
@@ -49,44 +50,6 @@ const std::array<std::uint16_t, HashedVoxelGrid::kBlockVoxels>& mortonToIndex() 
   }();
   return table;
 }
-
-// Small open-addressing set of packed voxel keys (clipped ray ends of one scan).
-class KeySet {
- public:
-  explicit KeySet(std::size_t expected) {
-    std::size_t capacity = 256;
-    while (capacity < 2 * expected) capacity *= 2;
-    slots_.assign(capacity, 0);
-    mask_ = capacity - 1;
-  }
-  bool insert(std::uint64_t key) {
-    if (2 * (size_ + 1) > slots_.size()) grow();
-    const std::uint64_t stored = key + 1;
-    std::size_t i = (stored * 0x9E3779B97F4A7C15ULL >> 20) & mask_;
-    while (slots_[i] != 0) {
-      if (slots_[i] == stored) return false;
-      i = (i + 1) & mask_;
-    }
-    slots_[i] = stored;
-    ++size_;
-    return true;
-  }
-
- private:
-  void grow() {
-    std::vector<std::uint64_t> old;
-    old.swap(slots_);
-    slots_.assign(old.size() * 2, 0);
-    mask_ = slots_.size() - 1;
-    size_ = 0;
-    for (std::uint64_t stored : old) {
-      if (stored != 0) insert(stored - 1);
-    }
-  }
-  std::vector<std::uint64_t> slots_;
-  std::size_t mask_ = 0;
-  std::size_t size_ = 0;
-};
 
 }  // namespace
 
@@ -171,6 +134,15 @@ HashedVoxelGrid::Block* HashedVoxelGrid::findOrCreateBlock(std::uint64_t block_k
   return raw;
 }
 
+// octomap's update of one voxel: an unknown voxel starts at log-odds 0, the sum is clamped.
+void HashedVoxelGrid::updateLogOdds(Block* block, int v, float delta) {
+  float value = block->isKnown(v) ? block->log_odds[v] : 0.f;
+  value = std::min(std::max(value + delta, min_log_), max_log_);
+  block->log_odds[v] = value;
+  block->setKnown(v);
+  markDirty(block);
+}
+
 void HashedVoxelGrid::markDirty(Block* block) {
   if (!block->dirty) {
     block->dirty = true;
@@ -247,7 +219,7 @@ std::size_t HashedVoxelGrid::insertLabeledScan(const LabeledScan& scan, double m
   // one free ray per endpoint voxel (from its first point) or per clipped ray end voxel.
   std::vector<std::array<double, 3>> ray_ends;
   ray_ends.reserve(num_points / 2 + 16);
-  KeySet clipped_keys(1024);
+  FlatKeySet clipped_keys;  // clipped ray ends of this scan
   std::size_t labeled_points = 0;
   for (std::size_t i = 0; i < num_points; ++i) {
     const float p[3] = {scan.points_map(0, static_cast<Eigen::Index>(i)),
@@ -274,13 +246,7 @@ std::size_t HashedVoxelGrid::insertLabeledScan(const LabeledScan& scan, double m
     const int v = voxelIndex(key[0], key[1], key[2]);
     if (block->stamp[v] != hit_stamp_) {
       block->stamp[v] = hit_stamp_;
-      float value = block->isKnown(v) ? block->log_odds[v] : 0.f;
-      value += hit_log_;
-      if (value < min_log_) value = min_log_;
-      if (value > max_log_) value = max_log_;
-      block->log_odds[v] = value;
-      block->setKnown(v);
-      markDirty(block);
+      updateLogOdds(block, v, hit_log_);
       if (truncation_m > 0.0 && ray[2] < 0.f) {
         // Only rays that go down can graze the road (see SemanticOcTree::setGrazingRayTruncation).
         const double sin_elevation = -ray[2] / range;
@@ -374,13 +340,7 @@ void HashedVoxelGrid::castRay(const double origin[3], const std::uint16_t origin
     cleared_run = 0;
     if (stamp == hit_stamp_) continue;  // an endpoint of this scan: never free in the same scan
     block->stamp[v] = free_stamp_;
-    float value = block->isKnown(v) ? block->log_odds[v] : 0.f;
-    value += miss_log_;
-    if (value < min_log_) value = min_log_;
-    if (value > max_log_) value = max_log_;
-    block->log_odds[v] = value;
-    block->setKnown(v);
-    markDirty(block);
+    updateLogOdds(block, v, miss_log_);
     ++misses;
   }
   last_ray_visits_ += visits;

@@ -99,6 +99,7 @@ class HashedVoxelGrid {
   Block* findOrCreateBlock(std::uint64_t block_key);
   void rehash(std::size_t capacity);
   void markDirty(Block* block);
+  void updateLogOdds(Block* block, int voxel, float delta);
   void nextStamp();
   void castRay(const double origin[3], const std::uint16_t origin_key[3], const double end[3]);
   ClassSlotIndices* slotsOf(Block* block, int index, ClassSlotCounts** counts);
