@@ -16,6 +16,9 @@ namespace {
 
 // Label images are kept this long past the newest scan for a scan that may still come (s).
 constexpr double kLabelKeepMargin_s = 1.0;
+// ... and at most this long past the clock (data time, s) when no newer scan comes at all (lidar
+// stopped): it bounds the memory of the label images waiting, not the lag of the scan queue.
+constexpr double kLabelKeepMax_s = 30.0;
 // Scans that went in without labels are kept this long (data time) for a late label image.
 constexpr double kLateLabelWindow_s = 10.0;
 // A stamp this much older than the newest one means the clock went back (a bag loop).
@@ -341,7 +344,9 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
                                             Eigen::Matrix3Xf points_sensor) {
   if (!std::isfinite(stamp)) throw std::invalid_argument("addScan: stamp is not finite");
   ++statistics_.scans_received;
-  if (stamp + kTimeJump_s < newest_stamp_) restartClock();
+  // Against the newest scan, not the clock: a scan that sat in a busy subscriber queue is older
+  // than the clock by the queue's lag, and that is no bag loop.
+  if (stamp + kTimeJump_s < newest_scan_stamp_) restartClock();
   PendingScan scan{stamp, frame, std::move(points_sensor), nullptr};
   // A label image that came first (segmentation can beat the pose or the cloud's transport).
   const auto best = nearestInTime(pending_labels_, stamp, config_.label_stamp_tolerance_s, kAny);
@@ -351,6 +356,7 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
   }
   pending_scans_.push_back(std::move(scan));
   newest_stamp_ = std::max(newest_stamp_, stamp);
+  newest_scan_stamp_ = std::max(newest_scan_stamp_, stamp);
   first_stamp_ = std::min(first_stamp_, stamp);
   return insertReadyScans(newest_stamp_);
 }
@@ -368,9 +374,14 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
   ++statistics_.label_images_received;
-  // A label image comes one segmentation latency after its stamp, so an old stamp is no time
-  // jump (scans show those); one older than any scan that may still wait for it is too late.
-  if (stamp + config_.label_wait_s + config_.label_stamp_tolerance_s < newest_stamp_) {
+  // Its scan, in this order: still pending (waiting for labels or its pose), already in the map
+  // without labels (the labels add class evidence), or not here yet. The scans' own stamps decide
+  // the last case, not the clock: under load the scan queue can lag the clock by more than
+  // label_wait, and the scan still comes.
+  auto pending = nearestInTime(pending_scans_, stamp, config_.label_stamp_tolerance_s,
+                               [](const PendingScan& scan) { return !scan.labels; });
+  const bool scan_may_come = stamp + config_.label_stamp_tolerance_s >= newest_scan_stamp_;
+  if (pending == pending_scans_.end() && !scan_may_come) {
     if (!applyLateLabels(stamp, labels, camera)) ++statistics_.label_images_unmatched;
     return insertReadyScans(newest_stamp_);
   }
@@ -390,10 +401,8 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   first_stamp_ = std::min(first_stamp_, stamp);
   last_label_arrival_ = newest_stamp_;
 
-  const auto best = nearestInTime(pending_scans_, stamp, config_.label_stamp_tolerance_s,
-                                  [](const PendingScan& scan) { return !scan.labels; });
-  if (best != pending_scans_.end()) {
-    best->labels = std::move(copy);
+  if (pending != pending_scans_.end()) {
+    pending->labels = std::move(copy);
   } else if (!applyLateLabels(stamp, copy->view, copy->camera)) {
     pending_labels_.push_back(std::move(*copy));
   }
@@ -484,11 +493,15 @@ std::size_t SemanticMappingSession::insertReadyScans(double now) {
     ++inserted;
     it = pending_scans_.erase(it);
   }
-  // Label images no scan will claim any more.
-  while (!pending_labels_.empty() &&
-         pending_labels_.front().stamp < now - config_.label_wait_s - kLabelKeepMargin_s) {
-    ++statistics_.label_images_unmatched;
-    pending_labels_.pop_front();
+  // Label images no scan will claim any more: newer scans have come (scans arrive in stamp
+  // order), or none has for a long time.
+  for (auto it = pending_labels_.begin(); it != pending_labels_.end();) {
+    if (it->stamp + kLabelKeepMargin_s < newest_scan_stamp_ || it->stamp + kLabelKeepMax_s < now) {
+      ++statistics_.label_images_unmatched;
+      it = pending_labels_.erase(it);
+    } else {
+      ++it;
+    }
   }
   return inserted;
 }
@@ -496,7 +509,7 @@ std::size_t SemanticMappingSession::insertReadyScans(double now) {
 void SemanticMappingSession::restartClock() {
   flush();
   unlabelled_scans_.clear();
-  newest_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
+  newest_stamp_ = newest_scan_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
   first_stamp_ = 1e300;
 }
 
@@ -558,7 +571,7 @@ void SemanticMappingSession::reset() {
   unlabelled_scans_.clear();
   statistics_ = MappingStatistics();
   last_scan_ = LabeledScan();
-  newest_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
+  newest_stamp_ = newest_scan_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
   first_stamp_ = 1e300;
 }
 

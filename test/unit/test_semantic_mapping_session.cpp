@@ -322,6 +322,56 @@ TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
   EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
 }
 
+// A busy node: the scans sit in their subscriber queue 3 s behind the clock (longer than
+// label_wait), while label images come before their scans. No label image is lost, and a lagging
+// scan is no bag loop.
+TEST(SemanticMappingSessionTest, AScanQueueLaggingTheClockLosesNoLabelImage) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 1.0;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  constexpr double kQueueLag_s = 3.0;
+  std::size_t labels_sent = 0;
+  for (int k = 0; k < 60; ++k) {
+    const double stamp = 0.1 * k;
+    session.advanceTo(stamp + kQueueLag_s);  // the node's timer runs on the clock
+    if (k % 5 == 0) {
+      session.addLabelImage(stamp + 0.01, view, testCamera());
+      ++labels_sent;
+    }
+    session.addScan(stamp, "velo", testScan());
+  }
+  session.advanceTo(20.0);
+  const MappingStatistics& stats = session.statistics();
+  EXPECT_EQ(stats.scans_inserted, 60u);
+  EXPECT_EQ(stats.label_images_used, labels_sent);
+  EXPECT_EQ(stats.scans_with_labels, labels_sent);
+  EXPECT_EQ(stats.label_images_late, 0u);  // each found its scan before that went in
+  EXPECT_EQ(stats.label_images_unmatched, 0u);
+}
+
+// Label images whose scans never come (the lidar stopped) do not pile up: once newer scans have
+// come, or after a long time on the clock, they are counted unmatched and freed.
+TEST(SemanticMappingSessionTest, LabelImagesWithoutScansAreReleased) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingSession session(testConfig());
+  session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  session.addScan(0.0, "velo", testScan());
+  session.addLabelImage(0.5, view, testCamera());  // no scan of 0.5: the next is 2.0
+  session.addLabelImage(3.0, view, testCamera());  // the lidar stops after 2.0
+  session.advanceTo(1.0);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
+  session.addScan(2.0, "velo", testScan());
+  EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
+  session.advanceTo(20.0);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 1u);  // 3.0 may still find its scan
+  session.advanceTo(40.0);
+  EXPECT_EQ(session.statistics().label_images_unmatched, 2u);
+}
+
 TEST(SemanticMappingSessionTest, ScansWithoutPoseAreDroppedAfterTheWaitAndTimeJumpsFlush) {
   SemanticMappingConfig config = testConfig();
   config.label_wait_s = 0.5;

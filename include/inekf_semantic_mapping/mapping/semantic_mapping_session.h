@@ -250,7 +250,10 @@ class SemanticMappingSession {
   std::deque<PendingLabels> pending_labels_;
   std::deque<InsertedScan> unlabelled_scans_;
   std::optional<CameraModel> last_camera_;
-  double newest_stamp_ = -1e300;        // newest scan or label stamp, or clock (data time)
+  double newest_stamp_ = -1e300;  // newest scan or label stamp, or clock (data time)
+  // Newest scan stamp: scans arrive in stamp order, so once it has passed a label image's stamp
+  // no scan of that stamp will come, however far the clock is ahead (a lagging scan queue).
+  double newest_scan_stamp_ = -1e300;
   double newest_label_stamp_ = -1e300;  // newest label image
   double first_stamp_ = 1e300;          // first scan or label image of this timeline
   double last_label_arrival_ = -1e300;  // data time when the newest label image arrived
