@@ -288,11 +288,17 @@ def trajectory_distances(positions):
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
-def kitti_odometry_errors(truth_poses, estimate_poses, frame_period_s=0.1):
+def overlaps_excluded(first, last, excluded):
+    """True if frames first..last (inclusive) touch one of the excluded (a, b) ranges."""
+    return any(first <= b and a <= last for a, b in excluded or ())
+
+
+def kitti_odometry_errors(truth_poses, estimate_poses, frame_period_s=0.1, excluded=None):
     """Segment errors exactly as the KITTI devkit's calcSequenceErrors: per first frame (every
     10th) and segment length, the relative-pose error over the first frame whose truth path
     length exceeds the start's by the segment length. Returns t_err (%), r_err (deg/m) and a
-    per-length breakdown; lengths longer than the drive are skipped."""
+    per-length breakdown; lengths longer than the drive are skipped, and so are segments that
+    touch an `excluded` frame range (truth known to be wrong there)."""
     distances = trajectory_distances(truth_poses[:, :3, 3])
     segments = []
     for first_frame in range(0, len(truth_poses), KITTI_FIRST_FRAME_STEP):
@@ -301,6 +307,8 @@ def kitti_odometry_errors(truth_poses, estimate_poses, frame_period_s=0.1):
             if beyond.size == 0:
                 continue
             last_frame = first_frame + int(beyond[0])
+            if overlaps_excluded(first_frame, last_frame, excluded):
+                continue
             delta_truth = np.linalg.inv(truth_poses[first_frame]) @ truth_poses[last_frame]
             delta_estimate = np.linalg.inv(estimate_poses[first_frame]) @ estimate_poses[last_frame]
             error = np.linalg.inv(delta_estimate) @ delta_truth
@@ -322,10 +330,12 @@ def kitti_odometry_errors(truth_poses, estimate_poses, frame_period_s=0.1):
             "segments": int(len(segments)), "per_length": per_length}
 
 
-def relative_pose_errors(truth_poses, estimate_poses, frame_delta):
+def relative_pose_errors(truth_poses, estimate_poses, frame_delta, excluded=None):
     """RMS translation (m) and rotation (deg) error of the motion over frame_delta frames."""
     translation_errors, rotation_errors = [], []
     for first in range(0, len(truth_poses) - frame_delta):
+        if overlaps_excluded(first, first + frame_delta, excluded):
+            continue
         delta_truth = np.linalg.inv(truth_poses[first]) @ truth_poses[first + frame_delta]
         delta_estimate = np.linalg.inv(estimate_poses[first]) @ estimate_poses[first + frame_delta]
         error = np.linalg.inv(delta_estimate) @ delta_truth
@@ -402,15 +412,25 @@ def compute_nees(states, truth, truth_stamps, states_path):
     return np.array(nees6), np.array(nees3), np.array(times)
 
 
-def evaluate(estimate, truth, stamps=None, states=None, states_path=""):
-    """All metrics as a dict (JSON-ready) plus per-frame series for the plot."""
+def evaluate(estimate, truth, stamps=None, states=None, states_path="", excluded=None):
+    """All metrics as a dict (JSON-ready) plus per-frame series for the plot. Frames in the
+    `excluded` (first, last) ranges count in no metric (the plot still shows them)."""
     if len(estimate) != len(truth):
         raise TrajectoryFormatError("%s has %d poses but %s has %d: one pose per frame expected" %
                                     (estimate.source, len(estimate), truth.source, len(truth)))
     if stamps is not None and len(stamps) != len(truth):
         raise TrajectoryFormatError("timestamps: %d stamps for %d poses" % (len(stamps), len(truth)))
+    kept = np.ones(len(truth), dtype=bool)
+    for first, last in excluded or ():
+        if first < 0 or last < first or last >= len(truth):
+            raise TrajectoryFormatError("excluded frames %d:%d are outside the %d poses" %
+                                        (first, last, len(truth)))
+        kept[first:last + 1] = False
+    if not kept.any():
+        raise TrajectoryFormatError("every frame is excluded")
     position_errors = np.linalg.norm(estimate.positions - truth.positions, axis=1)
-    alignment_rotation, alignment_translation = umeyama_alignment(estimate.positions, truth.positions)
+    alignment_rotation, alignment_translation = umeyama_alignment(estimate.positions[kept],
+                                                                  truth.positions[kept])
     aligned_positions = estimate.positions @ alignment_rotation.T + alignment_translation
     aligned_errors = np.linalg.norm(aligned_positions - truth.positions, axis=1)
     rotation_errors_deg = np.array([math.degrees(rotation_angle(e.T @ t))
@@ -419,22 +439,24 @@ def evaluate(estimate, truth, stamps=None, states=None, states_path=""):
                                for e, t in zip(estimate.rotations, truth.rotations)])
     truth_poses, estimate_poses = truth.matrices(), estimate.matrices()
     path_length = float(trajectory_distances(truth.positions)[-1])
+    offsets = (estimate.positions - truth.positions)[kept]
     result = {
-        "poses": len(truth),
+        "poses": int(kept.sum()),
+        "excluded_frames": [[int(a), int(b)] for a, b in excluded or ()],
         "path_length_m": path_length,
-        "ate_unaligned_rmse_m": rms(position_errors),
-        "ate_unaligned_max_m": float(position_errors.max()),
-        "ate_aligned_rmse_m": rms(aligned_errors),
+        "ate_unaligned_rmse_m": rms(position_errors[kept]),
+        "ate_unaligned_max_m": float(position_errors[kept].max()),
+        "ate_aligned_rmse_m": rms(aligned_errors[kept]),
         "alignment_rotation_deg": math.degrees(rotation_angle(alignment_rotation)),
         "alignment_translation_m": [float(v) for v in alignment_translation],
-        "horizontal_rmse_m": rms(np.linalg.norm((estimate.positions - truth.positions)[:, :2], axis=1)),
-        "vertical_rmse_m": rms((estimate.positions - truth.positions)[:, 2]),
-        "rotation_rmse_deg": rms(rotation_errors_deg),
-        "rotation_max_deg": float(rotation_errors_deg.max()),
-        "yaw_rmse_deg": rms(yaw_errors_deg),
-        "kitti": kitti_odometry_errors(truth_poses, estimate_poses),
-        "rpe": [r for r in (relative_pose_errors(truth_poses, estimate_poses, 1),
-                            relative_pose_errors(truth_poses, estimate_poses, 10)) if r],
+        "horizontal_rmse_m": rms(np.linalg.norm(offsets[:, :2], axis=1)),
+        "vertical_rmse_m": rms(offsets[:, 2]),
+        "rotation_rmse_deg": rms(rotation_errors_deg[kept]),
+        "rotation_max_deg": float(rotation_errors_deg[kept].max()),
+        "yaw_rmse_deg": rms(yaw_errors_deg[kept]),
+        "kitti": kitti_odometry_errors(truth_poses, estimate_poses, excluded=excluded),
+        "rpe": [r for r in (relative_pose_errors(truth_poses, estimate_poses, 1, excluded),
+                            relative_pose_errors(truth_poses, estimate_poses, 10, excluded)) if r],
     }
     times = stamps - stamps[0] if stamps is not None else np.arange(len(truth), dtype=float)
     series = {"times": times, "time_unit": "s" if stamps is not None else "frame",
@@ -545,6 +567,17 @@ def load_inputs(estimate_path, truth_path, timestamps_path=None, states_path=Non
     return estimate, truth, stamps, states
 
 
+def frame_range(text):
+    """FIRST:LAST for --exclude-frames."""
+    first, sep, last = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return int(first), int(last)
+    except ValueError:
+        raise argparse.ArgumentTypeError("'%s' is no FIRST:LAST frame range" % text)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--estimate", required=True, help="estimated poses (KITTI or TUM)")
@@ -554,12 +587,19 @@ def main(argv=None):
     parser.add_argument("--json", help="write the metrics here")
     parser.add_argument("--plot", help="write a PNG plot here")
     parser.add_argument("--label", help="name of the run (default: the estimate's file name)")
+    parser.add_argument("--exclude-frames", action="append", default=[], metavar="FIRST:LAST",
+                        type=frame_range,
+                        help="leave frames FIRST..LAST (0-based, inclusive) out of every metric, "
+                             "e.g. 860:1080 on 2011_09_30_drive_0028, where the OXTS truth is "
+                             "wrong; KITTI segments and RPE pairs that touch them are skipped; "
+                             "repeatable")
     args = parser.parse_args(argv)
     label = args.label or os.path.basename(args.estimate)
     try:
         estimate, truth, stamps, states = load_inputs(args.estimate, args.truth, args.timestamps,
                                                       args.states)
-        result, series = evaluate(estimate, truth, stamps, states, args.states or "")
+        result, series = evaluate(estimate, truth, stamps, states, args.states or "",
+                                  args.exclude_frames)
     except TrajectoryFormatError as error:
         print("evaluate_trajectory: error: %s" % error, file=sys.stderr)
         return 2

@@ -193,6 +193,28 @@ class TrajectoryMetricsTest(unittest.TestCase):
         self.assertEqual(one_frame["pairs"], 100)
         self.assertAlmostEqual(one_frame["translation_rmse_m"], math.sqrt(0.25 / 100), places=9)
 
+    def test_excluded_frames_leave_every_metric(self):
+        # The truth climbs 10 m over frames 300..399 (as the OXTS truth of 0028 does); the
+        # estimate does not. Left out, that stretch costs nothing; counted, it dominates.
+        estimate = straight_line(1000.0)
+        positions = estimate.positions.copy()
+        positions[300:400, 2] += 10.0
+        truth = et.Trajectory(positions, estimate.rotations)
+        counted = et.evaluate(estimate, truth)[0]
+        self.assertGreater(counted["ate_unaligned_rmse_m"], 2.0)
+        self.assertGreater(counted["kitti"]["t_err_percent"], 0.5)
+        excluded, _ = et.evaluate(estimate, truth, excluded=[(300, 399)])
+        self.assertEqual(excluded["poses"], len(truth) - 100)
+        self.assertLess(excluded["ate_unaligned_rmse_m"], 1e-9)
+        self.assertLess(excluded["ate_aligned_rmse_m"], 1e-6)
+        self.assertLess(excluded["kitti"]["t_err_percent"], 1e-9)
+        self.assertLess(excluded["rpe"][1]["translation_rmse_m"], 1e-9)
+        # A segment that merely starts before the stretch and ends after it is skipped too.
+        self.assertLess(excluded["kitti"]["segments"], counted["kitti"]["segments"] - 10)
+        with self.assertRaises(et.TrajectoryFormatError):
+            et.evaluate(estimate, truth, excluded=[(900, 1200)])
+        self.assertEqual(et.frame_range("860:1080"), (860, 1080))
+
 
 class NeesTest(unittest.TestCase):
     def setUp(self):
