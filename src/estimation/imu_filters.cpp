@@ -71,6 +71,19 @@ Eigen::Matrix<double, 3, 15> positionJacobian() {
 
 }  // namespace
 
+namespace {
+CorrectionResult rejectNonFinite(CorrectionResult result) {
+  result.accepted = false;
+  result.reason = "update would produce a non-finite state";
+  return result;
+}
+CorrectionResult rejectBadFix() {
+  CorrectionResult result;
+  result.reason = "non-finite fix";
+  return result;
+}
+}  // namespace
+
 // ---------------------------------------------------------------------------------------------
 // ImuFilterBase
 
@@ -131,15 +144,16 @@ ErrorCovariance ImuFilterBase::fromWorldCovariance(const NavState& state,
   return symmetrized(world_to_error * world * world_to_error.transpose());
 }
 
-CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Vector3d& innovation,
-                                             const Eigen::Matrix<double, 3, 15>& h,
-                                             const Eigen::Matrix3d& noise, double gate,
+template <int M>
+CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Matrix<double, M, 1>& innovation,
+                                             const Eigen::Matrix<double, M, 15>& h,
+                                             const Eigen::Matrix<double, M, M>& noise, double gate,
                                              Eigen::Matrix<double, 15, 1>* correction,
                                              ErrorCovariance* updated) const {
   CorrectionResult result;
-  const Eigen::Matrix<double, 15, 3> pht = covariance_ * h.transpose();
-  const Eigen::Matrix3d s = h * pht + noise;
-  Eigen::LLT<Eigen::Matrix3d> llt(s);
+  const Eigen::Matrix<double, 15, M> pht = covariance_ * h.transpose();
+  const Eigen::Matrix<double, M, M> s = h * pht + noise;
+  Eigen::LLT<Eigen::Matrix<double, M, M>> llt(s);
   if (!s.allFinite() || !innovation.allFinite() || llt.info() != Eigen::Success) {
     result.reason = "innovation covariance not positive definite or not finite";
     return result;
@@ -152,34 +166,47 @@ CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Vector3d& innovation,
     result.reason = text;
     return result;
   }
-  const Eigen::Matrix<double, 15, 3> gain = llt.solve(pht.transpose()).transpose();
+  const Eigen::Matrix<double, 15, M> gain = llt.solve(pht.transpose()).transpose();
   *correction = gain * innovation;
-  // Joseph form (I - KH) P (I - KH)^T + K N K^T, expanded so that it costs O(15^2 3) instead of
+  // Joseph form (I - KH) P (I - KH)^T + K N K^T, expanded so that it costs O(15^2 M) instead of
   // two 15x15 products: P - K (PH^T)^T - (PH^T) K^T + K S K^T. Same algebra for any gain.
-  const Eigen::Matrix<double, 15, 3> k_s = gain * s;
+  const Eigen::Matrix<double, 15, M> k_s = gain * s;
   *updated = symmetrized(covariance_ - gain * pht.transpose() - pht * gain.transpose() +
                          k_s * gain.transpose());
   result.accepted = true;
   return result;
 }
 
+CorrectionResult ImuFilterBase::correctNonholonomic(double lateral_sigma_mps,
+                                                    double vertical_sigma_mps, double gate) {
+  CorrectionResult result;
+  if (!(lateral_sigma_mps > 0.0) || !(vertical_sigma_mps > 0.0) ||
+      !std::isfinite(lateral_sigma_mps) || !std::isfinite(vertical_sigma_mps)) {
+    result.reason = "non-holonomic sigmas must be positive and finite";
+    return result;
+  }
+  // Left-invariant error xi (X_true = X exp(xi)): R_true = R (I + xi_R^), v_true = v + R xi_v,
+  // so the body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R to first order.
+  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
+  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
+  h_left.block<3, 3>(0, 0) = lie::hat(body_velocity);
+  h_left.block<3, 3>(0, 3).setIdentity();
+  const Eigen::Matrix<double, 2, 15> h = h_left.bottomRows<2>() * leftFromError(state_);
+  const Eigen::Vector2d innovation = -body_velocity.tail<2>();  // measured: 0 lateral, 0 vertical
+  const Eigen::Matrix2d noise = Eigen::Vector2d(lateral_sigma_mps * lateral_sigma_mps,
+                                                vertical_sigma_mps * vertical_sigma_mps)
+                                    .asDiagonal();
+  Vector15d delta;
+  ErrorCovariance updated;
+  result = kalmanUpdate<2>(innovation, h, noise, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
 bool ImuFilterBase::finiteFix(const PositionFix& fix) {
   return std::isfinite(fix.stamp_s) && fix.position_map.allFinite() &&
          fix.covariance_map.allFinite();
 }
-
-namespace {
-CorrectionResult rejectNonFinite(CorrectionResult result) {
-  result.accepted = false;
-  result.reason = "update would produce a non-finite state";
-  return result;
-}
-CorrectionResult rejectBadFix() {
-  CorrectionResult result;
-  result.reason = "non-finite fix";
-  return result;
-}
-}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // LeftInvariantEkf
@@ -192,13 +219,17 @@ CorrectionResult LeftInvariantEkf::correctPosition(const PositionFix& fix, doubl
   Vector15d delta;
   ErrorCovariance updated;
   CorrectionResult result =
-      kalmanUpdate(innovation, positionJacobian(), noise, gate, &delta, &updated);
+      kalmanUpdate<3>(innovation, positionJacobian(), noise, gate, &delta, &updated);
   if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
+bool LeftInvariantEkf::applyCorrection(const Vector15d& delta, const ErrorCovariance& covariance) {
   NavState next = state_;
   setExtendedPose(extendedPose(state_) * lie::expSE23(delta.head<9>()), &next);
   next.gyro_bias += delta.segment<3>(9);
   next.accel_bias += delta.segment<3>(12);
-  return commit(next, updated) ? result : rejectNonFinite(result);
+  return commit(next, covariance);
 }
 
 Matrix15d LeftInvariantEkf::errorFromLeft(const NavState&) const { return Matrix15d::Identity(); }
@@ -214,13 +245,18 @@ CorrectionResult RightInvariantEkf::correctPosition(const PositionFix& fix, doub
   h.block<3, 3>(0, 0) = -lie::hat(state_.position_map);
   Vector15d delta;
   ErrorCovariance updated;
-  CorrectionResult result = kalmanUpdate(innovation, h, fix.covariance_map, gate, &delta, &updated);
+  CorrectionResult result =
+      kalmanUpdate<3>(innovation, h, fix.covariance_map, gate, &delta, &updated);
   if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
+bool RightInvariantEkf::applyCorrection(const Vector15d& delta, const ErrorCovariance& covariance) {
   NavState next = state_;
   setExtendedPose(lie::expSE23(delta.head<9>()) * extendedPose(state_), &next);
   next.gyro_bias += delta.segment<3>(9);
   next.accel_bias += delta.segment<3>(12);
-  return commit(next, updated) ? result : rejectNonFinite(result);
+  return commit(next, covariance);
 }
 
 Matrix15d RightInvariantEkf::errorFromLeft(const NavState& state) const {
@@ -254,8 +290,12 @@ CorrectionResult QuaternionEskf::correctPosition(const PositionFix& fix, double 
   Vector15d delta;
   ErrorCovariance updated;
   CorrectionResult result =
-      kalmanUpdate(innovation, positionJacobian(), fix.covariance_map, gate, &delta, &updated);
+      kalmanUpdate<3>(innovation, positionJacobian(), fix.covariance_map, gate, &delta, &updated);
   if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
+bool QuaternionEskf::applyCorrection(const Vector15d& delta, const ErrorCovariance& covariance) {
   NavState next = state_;
   const Eigen::Vector3d dtheta = delta.head<3>();
   const double angle = dtheta.norm();
@@ -268,9 +308,9 @@ CorrectionResult QuaternionEskf::correctPosition(const PositionFix& fix, double 
   next.position_map += delta.segment<3>(6);
   next.gyro_bias += delta.segment<3>(9);
   next.accel_bias += delta.segment<3>(12);
-  if (!commit(next, updated)) return rejectNonFinite(result);
+  if (!commit(next, covariance)) return false;
   attitude_ = attitude;
-  return result;
+  return true;
 }
 
 Matrix15d QuaternionEskf::errorFromLeft(const NavState& state) const {

@@ -78,7 +78,14 @@ std::string LocalizationSession::summary() const {
   line << "IMU " << s.filter.imu_used << " used / " << s.filter.imu_dropped + s.imu_invalid
        << " dropped / " << s.filter.imu_gaps << " gaps; GPS " << s.filter.gps_used << " used ("
        << s.filter.gps_applied_late << " late) / " << s.filter.gps_rejected << " rejected / "
-       << s.fixes_ignored << " ignored; " << s.resets << " resets";
+       << s.fixes_ignored << " ignored; ";
+  if (s.filter.nonholonomic_used + s.filter.nonholonomic_rejected + s.filter.nonholonomic_skipped >
+      0) {
+    line << "vehicle constraint " << s.filter.nonholonomic_used << " used / "
+         << s.filter.nonholonomic_rejected << " rejected / " << s.filter.nonholonomic_skipped
+         << " waiting for the heading; ";
+  }
+  line << s.resets << " resets";
   return line.str();
 }
 

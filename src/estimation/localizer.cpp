@@ -82,6 +82,11 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   non_negative("imu.interpolated_gyro_noise_scale_per_s",
                &config.interpolated_gyro_noise_scale_per_s);
   positive("imu.interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale);
+  reader->read("nonholonomic.enabled", &config.nonholonomic);
+  positive("nonholonomic.lateral_sigma_mps", &config.nonholonomic_lateral_sigma_mps);
+  positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
+  positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
+  positive("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   return config;
 }
@@ -107,6 +112,8 @@ void Localizer::initialize(const NavState& initial) {
 void Localizer::initialize(const NavState& initial, const ErrorCovariance& world_covariance) {
   filter_->initialize(initial, filter_->fromWorldCovariance(initial, world_covariance));
   filter_->setProcessNoiseScale(1.0, 1.0);
+  predicted_state_ = filter_->state();
+  predicted_covariance_ = filter_->covariance();
   initialized_ = true;
   consecutive_rejected_fixes_ = 0;
   last_accepted_fix_s_ = initial.stamp_s;
@@ -119,6 +126,21 @@ void Localizer::propagate(const ImuStep& step) {
   filter_->setProcessNoiseScale(step.gyro_noise_scale, step.accel_noise_scale);
   filter_->propagate(step.sample, step.dt);
   filter_->setProcessNoiseScale(1.0, 1.0);
+  // The smoother needs the pure prediction; the constraint is a measurement of this epoch. Here,
+  // not in addImu, so that a late fix's replay of the history applies it again.
+  predicted_state_ = filter_->state();
+  predicted_covariance_ = filter_->covariance();
+  if (config_.nonholonomic && step.dt > 0.0) {
+    const double heading_sigma_rad = std::sqrt(filter_->poseCovariance()(5, 5));
+    if (!(heading_sigma_rad <= config_.nonholonomic_max_heading_sigma_deg * kDegToRad)) {
+      ++statistics_.nonholonomic_skipped;
+      return;
+    }
+    const CorrectionResult result = filter_->correctNonholonomic(
+        config_.nonholonomic_lateral_sigma_mps, config_.nonholonomic_vertical_sigma_mps,
+        config_.nonholonomic_gate_mahalanobis_squared);
+    ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
+  }
 }
 
 void Localizer::recordStep(const ImuStep& step) {

@@ -34,7 +34,7 @@ double headingDeg(const Eigen::Matrix3d& r) { return std::atan2(r(1, 0), r(0, 0)
 ForwardEpoch recordStep(const NavState& previous, const ImuSample& sample,
                         const LocalizationSession& session, double gravity_mps2) {
   ForwardEpoch epoch;
-  const NavState& predicted = session.state();
+  const NavState& predicted = session.predictedState();
   const double dt = predicted.stamp_s - previous.stamp_s;
   if (!(dt > 0.0)) return epoch;
   const NavState replay =
@@ -45,7 +45,7 @@ ForwardEpoch recordStep(const NavState& previous, const ImuSample& sample,
   }
   epoch.has_step = true;
   epoch.predicted = predicted;
-  epoch.predicted_covariance = session.errorCovariance();
+  epoch.predicted_covariance = session.predictedErrorCovariance();
   epoch.transition = leftErrorTransition(sample.angular_velocity - previous.gyro_bias,
                                          sample.specific_force - previous.accel_bias, dt);
   return epoch;

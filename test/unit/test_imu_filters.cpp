@@ -172,6 +172,44 @@ TEST(Filters, PositionUpdateMovesTowardTheFixAndShrinksTheCovariance) {
   }
 }
 
+// The land-vehicle constraint on a car whose estimated heading is 3 deg off its velocity (known
+// well): the heading turns to the velocity, the same in all three filters (one Jacobian, mapped
+// into each filter's error coordinates), and the covariance stays symmetric positive definite.
+TEST(Filters, NonholonomicUpdateTurnsTheHeadingToTheVelocity) {
+  const double yaw = 0.8, offset = 3.0 * M_PI / 180.0;
+  NavState estimate;
+  estimate.stamp_s = 5.0;
+  estimate.rotation = lie::expSO3(Eigen::Vector3d(0.0, 0.0, yaw + offset));
+  estimate.velocity_map = 12.0 * Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.0);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 0.01, 0.01, 5.0 * M_PI / 180.0, 0.02, 0.02, 0.02, 1.0, 1.0, 1.0, 1e-4, 1e-4, 1e-4, 0.01,
+      0.01, 0.01;
+  std::vector<double> yaw_errors;
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(estimate,
+                       filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
+    const double heading_variance_before = filter->poseCovariance()(5, 5);
+    const CorrectionResult result = filter->correctNonholonomic(0.05, 0.05, 100.0);
+    ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+    const Eigen::Vector3d body_velocity =
+        filter->state().rotation.transpose() * filter->state().velocity_map;
+    EXPECT_LT(std::abs(body_velocity.y()), 0.05 * body_velocity.x()) << toString(type);
+    const double yaw_error =
+        lie::logSO3(lie::expSO3(Eigen::Vector3d(0, 0, -yaw)) * filter->state().rotation).z();
+    EXPECT_LT(std::abs(yaw_error), 0.1 * offset) << toString(type);
+    yaw_errors.push_back(yaw_error);
+    EXPECT_LT(filter->poseCovariance()(5, 5), 0.1 * heading_variance_before) << toString(type);
+    Eigen::LLT<ErrorCovariance> llt(filter->covariance());
+    EXPECT_EQ(llt.info(), Eigen::Success);
+    EXPECT_LT((filter->covariance() - filter->covariance().transpose()).norm(), 1e-12);
+    EXPECT_FALSE(filter->correctNonholonomic(0.0, 0.05, 100.0).accepted);
+    EXPECT_FALSE(filter->correctNonholonomic(std::nan(""), 0.05, 100.0).accepted);
+  }
+  EXPECT_NEAR(yaw_errors[0], yaw_errors[1], 2e-4);
+  EXPECT_NEAR(yaw_errors[0], yaw_errors[2], 2e-4);
+}
+
 TEST(Filters, GateRejectsAnOutlierAndKeepsTheState) {
   for (FilterType type : kAllFilters) {
     auto filter = makeFilter(type, ImuNoise());

@@ -415,6 +415,62 @@ TEST(Localizer, AFixOlderThanOneAlreadyAppliedIsNotReplayedOverIt) {
   EXPECT_GT(localizer.state().position_map.x(), 0.5 * after_newer.position_map.x());
 }
 
+// A car at constant speed on a straight road with an unmodelled gyro bias: GPS positions say
+// nothing about its heading, which drifts with the gyro; the land-vehicle constraint ties the
+// heading to the velocity the fixes do observe. With the heading too uncertain the constraint
+// waits (it cannot tell forward from backward).
+double headingErrorAfterStraightDrive(bool nonholonomic, double initial_yaw_sigma_deg,
+                                      Localizer::Statistics* statistics) {
+  LocalizerConfig config;
+  config.nonholonomic = nonholonomic;
+  config.initial_yaw_sigma_deg = initial_yaw_sigma_deg;
+  Localizer localizer(config);
+  constexpr double kSpeed = 15.0, kDt = 0.1, kGyroBiasZ = 0.003;  // rad/s, not modelled
+  const double yaw = 0.6;
+  NavState start;
+  start.rotation = lie::expSO3(Eigen::Vector3d(0.0, 0.0, yaw));
+  start.velocity_map = kSpeed * Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.0);
+  localizer.initialize(start);
+  std::uint32_t lcg = 12345;  // deterministic GPS noise
+  const auto noise = [&lcg]() {
+    double sum = 0.0;  // Irwin-Hall: sum of 12 uniforms - 6 ~ N(0, 1)
+    for (int i = 0; i < 12; ++i) {
+      lcg = lcg * 1664525u + 1013904223u;
+      sum += lcg / 4294967296.0;
+    }
+    return sum - 6.0;
+  };
+  for (int k = 1; k <= 1200; ++k) {
+    ImuSample sample = restingSample(k * kDt);
+    sample.angular_velocity.z() = kGyroBiasZ;
+    localizer.addImu(sample);
+    if (k % 10 == 0) {
+      const Eigen::Vector3d truth = start.velocity_map * (k * kDt);
+      localizer.addPositionFix(fixAt(
+          k * kDt, truth + Eigen::Vector3d(1.5 * noise(), 1.5 * noise(), 3.0 * noise()), 1.5));
+    }
+  }
+  *statistics = localizer.statistics();
+  const Eigen::Matrix3d error =
+      lie::expSO3(Eigen::Vector3d(0.0, 0.0, -yaw)) * localizer.state().rotation;
+  return std::abs(lie::logSO3(error).z()) * 180.0 / M_PI;
+}
+
+TEST(Localizer, TheLandVehicleConstraintHoldsTheHeadingOnAStraightRoad) {
+  Localizer::Statistics statistics;
+  const double without = headingErrorAfterStraightDrive(false, 1.0, &statistics);
+  EXPECT_EQ(statistics.nonholonomic_used, 0);
+  const double with = headingErrorAfterStraightDrive(true, 1.0, &statistics);
+  EXPECT_GT(without, 10.0);  // 0.003 rad/s over 120 s: about 20 deg
+  EXPECT_LT(with, 1.0);
+  EXPECT_GT(statistics.nonholonomic_used, 1000);
+  EXPECT_EQ(statistics.nonholonomic_skipped, 0);
+  // Heading unknown to 1 sigma = 30 deg, unobservable on this road: the constraint never applies.
+  headingErrorAfterStraightDrive(true, 30.0, &statistics);
+  EXPECT_EQ(statistics.nonholonomic_used, 0);
+  EXPECT_EQ(statistics.nonholonomic_skipped, 1200);
+}
+
 TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   const LocalizerConfig loaded = LocalizerConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
   const LocalizerConfig defaults;
@@ -428,6 +484,14 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.imu_noise.gravity_mps2, defaults.imu_noise.gravity_mps2);
   EXPECT_DOUBLE_EQ(loaded.initial_rotation_sigma_deg, defaults.initial_rotation_sigma_deg);
   EXPECT_DOUBLE_EQ(loaded.initial_yaw_sigma_deg, defaults.initial_yaw_sigma_deg);
+  EXPECT_EQ(loaded.nonholonomic, defaults.nonholonomic);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_lateral_sigma_mps, defaults.nonholonomic_lateral_sigma_mps);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_vertical_sigma_mps,
+                   defaults.nonholonomic_vertical_sigma_mps);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_gate_mahalanobis_squared,
+                   defaults.nonholonomic_gate_mahalanobis_squared);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_max_heading_sigma_deg,
+                   defaults.nonholonomic_max_heading_sigma_deg);
   EXPECT_DOUBLE_EQ(loaded.initial_velocity_sigma_mps, defaults.initial_velocity_sigma_mps);
   EXPECT_DOUBLE_EQ(loaded.unknown_velocity_sigma_horizontal_mps,
                    defaults.unknown_velocity_sigma_horizontal_mps);

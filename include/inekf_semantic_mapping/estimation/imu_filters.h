@@ -27,6 +27,11 @@ class ImuFilterBase : public NavigationFilter {
   ErrorCovariance fromWorldCovariance(const NavState& state,
                                       const ErrorCovariance& world_covariance) const override;
 
+  // Generic in the left-invariant error (H = [v_b^ I 0 0 0] rows y, z) mapped into this
+  // filter's coordinates through leftFromError().
+  CorrectionResult correctNonholonomic(double lateral_sigma_mps, double vertical_sigma_mps,
+                                       double gate) override;
+
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;
   virtual Matrix15d leftFromError(const NavState& state) const = 0;
@@ -34,13 +39,19 @@ class ImuFilterBase : public NavigationFilter {
  protected:
   // Accepts the candidate state and covariance if all finite; returns false otherwise.
   bool commit(const NavState& state, const ErrorCovariance& covariance);
-  // Shared Kalman algebra: innovation nu, Jacobian H (3x15), noise N (3x3). Fills the correction
-  // delta and the Joseph-form covariance; returns the result (gate, finiteness).
-  CorrectionResult kalmanUpdate(const Eigen::Vector3d& innovation,
-                                const Eigen::Matrix<double, 3, 15>& jacobian,
-                                const Eigen::Matrix3d& noise, double gate_mahalanobis_squared,
+  // Shared Kalman algebra: innovation nu (M), Jacobian H (Mx15), noise N (MxM). Fills the
+  // correction delta and the Joseph-form covariance; returns the result (gate, finiteness).
+  template <int M>
+  CorrectionResult kalmanUpdate(const Eigen::Matrix<double, M, 1>& innovation,
+                                const Eigen::Matrix<double, M, 15>& jacobian,
+                                const Eigen::Matrix<double, M, M>& noise,
+                                double gate_mahalanobis_squared,
                                 Eigen::Matrix<double, 15, 1>* correction,
                                 ErrorCovariance* updated_covariance) const;
+  // The state corrected by `delta` (this filter's error coordinates) and committed with
+  // `covariance`; false (state kept) if not finite.
+  virtual bool applyCorrection(const Eigen::Matrix<double, 15, 1>& delta,
+                               const ErrorCovariance& covariance) = 0;
   static bool finiteFix(const PositionFix& fix);
 
   ImuNoise noise_;
@@ -60,6 +71,10 @@ class LeftInvariantEkf : public ImuFilterBase {
   CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
   Matrix15d errorFromLeft(const NavState& state) const override;
   Matrix15d leftFromError(const NavState& state) const override;
+
+ protected:
+  bool applyCorrection(const Eigen::Matrix<double, 15, 1>& delta,
+                       const ErrorCovariance& covariance) override;
 };
 
 // Right-invariant EKF: map-frame errors (X_true = exp(xi) X_est). For a position fix
@@ -72,6 +87,10 @@ class RightInvariantEkf : public ImuFilterBase {
   CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
   Matrix15d errorFromLeft(const NavState& state) const override;
   Matrix15d leftFromError(const NavState& state) const override;
+
+ protected:
+  bool applyCorrection(const Eigen::Matrix<double, 15, 1>& delta,
+                       const ErrorCovariance& covariance) override;
 };
 
 // Conventional quaternion error-state EKF: R_true = R Exp(dtheta_body), v and p additive in the
@@ -85,6 +104,10 @@ class QuaternionEskf : public ImuFilterBase {
   CorrectionResult correctPosition(const PositionFix& fix, double gate) override;
   Matrix15d errorFromLeft(const NavState& state) const override;
   Matrix15d leftFromError(const NavState& state) const override;
+
+ protected:
+  bool applyCorrection(const Eigen::Matrix<double, 15, 1>& delta,
+                       const ErrorCovariance& covariance) override;
 
  private:
   Eigen::Quaterniond attitude_ = Eigen::Quaterniond::Identity();

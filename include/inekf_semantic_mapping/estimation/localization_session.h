@@ -132,6 +132,11 @@ class LocalizationSession {
   PoseCovariance poseCovariance() const { return localizer_.filter().poseCovariance(); }
   // The filter's full 15x15 covariance in its own error coordinates (smoothing records it).
   ErrorCovariance errorCovariance() const { return localizer_.filter().covariance(); }
+  // The last IMU step's prediction, before that epoch's constraint update (for the smoother).
+  const NavState& predictedState() const { return localizer_.predictedState(); }
+  const ErrorCovariance& predictedErrorCovariance() const {
+    return localizer_.predictedCovariance();
+  }
   // The map frame's origin; nullopt before the first usable fix (without a configured origin).
   const std::optional<kitti::MercatorProjection>& projection() const { return projection_; }
   Statistics statistics() const;

@@ -86,6 +86,17 @@ struct LocalizerConfig {
   double max_angular_rate_radps = 35.0;    // 2000 deg/s, the widest common MEMS range
   double max_specific_force_mps2 = 160.0;  // 16 g
 
+  // Land-vehicle constraint after every IMU step (NavigationFilter::correctNonholonomic): the
+  // body velocity has no lateral / vertical component, up to these sigmas. Only for an IMU fixed
+  // to a wheeled vehicle, x forward (this package's use: a car); false for anything else.
+  bool nonholonomic = true;
+  double nonholonomic_lateral_sigma_mps = 0.5;
+  double nonholonomic_vertical_sigma_mps = 1.0;
+  double nonholonomic_gate_mahalanobis_squared = 13.8;  // 2 dof: chi2 p = 1e-3
+  // The constraint cannot tell forward from backward: with the heading this uncertain (1 sigma
+  // about the body z axis) it would as soon turn the car around as converge. Skipped until then.
+  double nonholonomic_max_heading_sigma_deg = 10.0;
+
   // Lazy initialization (LocalizationSession's start): take rotation and velocity from
   // setInitialReference() (e.g. the OXTS orientation of the first Imu message) instead of levelling
   // with yaw 0 and zero speed.
@@ -117,6 +128,9 @@ class Localizer {
     std::int64_t starts_without_velocity = 0;  // lazy starts with unknown_velocity_sigma_*
     std::int64_t gps_before_start = 0;         // fixes before any IMU sample: the start waits
     std::int64_t gps_applied_late = 0;         // fixes applied by rewinding to their own time
+    std::int64_t nonholonomic_used = 0;        // land-vehicle constraint updates (per IMU step)
+    std::int64_t nonholonomic_rejected = 0;
+    std::int64_t nonholonomic_skipped = 0;  // heading too uncertain (see the config)
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -148,6 +162,10 @@ class Localizer {
   void reset();
 
   const NavigationFilter& filter() const { return *filter_; }
+  // State and covariance after the last IMU propagation, before that epoch's measurements (the
+  // non-holonomic constraint): what a smoother takes as the prediction.
+  const NavState& predictedState() const { return predicted_state_; }
+  const ErrorCovariance& predictedCovariance() const { return predicted_covariance_; }
   const NavState& state() const { return filter_->state(); }
   Statistics statistics() const { return statistics_; }
   const LocalizerConfig& config() const { return config_; }
@@ -189,6 +207,8 @@ class Localizer {
   std::optional<Eigen::Matrix3d> reference_rotation_;
   std::optional<Eigen::Vector3d> reference_velocity_;
   Statistics statistics_;
+  NavState predicted_state_;
+  ErrorCovariance predicted_covariance_ = ErrorCovariance::Identity();
   double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
   int consecutive_rejected_fixes_ = 0;
   double last_accepted_fix_s_ = 0.0;

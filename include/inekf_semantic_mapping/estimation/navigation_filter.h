@@ -42,6 +42,14 @@ class NavigationFilter {
   virtual CorrectionResult correctPosition(const PositionFix& fix,
                                            double gate_mahalanobis_squared) = 0;
 
+  // Land-vehicle (non-holonomic) constraint: the body's velocity has no lateral (y) and no
+  // vertical (z) component, up to the given standard deviations (m/s: sideslip, the lever arm of
+  // the IMU from the rear axle in turns, suspension). It makes heading observable on straight
+  // roads at constant speed, where GPS positions alone leave it to the gyro's drift. Rejected as
+  // correctPosition is (gate on the 2-dof innovation, non-finite input or result).
+  virtual CorrectionResult correctNonholonomic(double lateral_sigma_mps, double vertical_sigma_mps,
+                                               double gate_mahalanobis_squared) = 0;
+
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
 
