@@ -55,9 +55,10 @@ Eigen::Isometry3d poseAt(double stamp) {
   return pose;
 }
 
-SemanticMappingConfig testConfig() {
+SemanticMappingConfig testConfig(double label_wait_s = SemanticMappingConfig().label_wait_s) {
   SemanticMappingConfig config;
   config.resolution_m = 0.1;
+  config.label_wait_s = label_wait_s;
   return config;
 }
 
@@ -328,9 +329,7 @@ TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
 TEST(SemanticMappingSessionTest, AScanQueueLaggingTheClockLosesNoLabelImage) {
   const std::vector<std::uint8_t> pixels = testLabels();
   const LabelImageView view{pixels.data(), 100, 100, 100};
-  SemanticMappingConfig config = testConfig();
-  config.label_wait_s = 1.0;
-  SemanticMappingSession session(config);
+  SemanticMappingSession session(testConfig(/*label_wait_s=*/1.0));
   session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
   constexpr double kQueueLag_s = 3.0;
   std::size_t labels_sent = 0;
