@@ -258,8 +258,8 @@ int main(int argc, char** argv) {
     std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
               << " nodes, " << counts[0] << " occupied leaves, " << session.tree().classSet().size()
               << " classes, " << session.tree().memoryUsage() / 1e6
-              << " MB in memory; the session's "
-              << "map structures " << session.mapMemoryUsage() / 1e6 << " MB)\n";
+              << " MB in memory; the session's map structures " << session.mapMemoryUsage() / 1e6
+              << " MB)\n";
     for (std::size_t i = 1; i < outputs.size(); ++i) {
       std::cerr << "[semantic_map_offline] wrote " << outputs[i].first;
       if (outputs[i].second == mapping::MapFormat::kPly)
