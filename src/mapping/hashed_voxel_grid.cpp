@@ -372,39 +372,104 @@ std::size_t HashedVoxelGrid::addClassEvidence(const LabeledScan& scan, const Cla
   return added;
 }
 
-std::size_t HashedVoxelGrid::syncTo(SemanticOcTree* tree) {
-  if (dirty_blocks_.empty()) return 0;
+namespace {
+
+// Blocks per setLeaves call of a sync: the leaf states of a batch are built, written and dropped
+// before the next, so a sync holds at most this many blocks' states (256 x 512 x 24 bytes =
+// 3 MB) instead of all of them (101 MB for a whole 50-scan drive). Batches are consecutive in
+// Morton order, so the tree ends up the same as with one call (each node is visited after its
+// last change and pruned then).
+constexpr std::size_t kSyncBatchBlocks = 256;
+
+std::uint64_t blockMorton(const HashedVoxelGrid::Block& block) {
+  const octomap::OcTreeKey corner(
+      static_cast<octomap::key_type>(block.bx << HashedVoxelGrid::kBlockBits),
+      static_cast<octomap::key_type>(block.by << HashedVoxelGrid::kBlockBits),
+      static_cast<octomap::key_type>(block.bz << HashedVoxelGrid::kBlockBits));
+  return SemanticOcTree::mortonCode(corner);
+}
+
+// Writes the known voxels of blocks [begin, end) (in Morton order) into `tree` through
+// `leaves_buffer`; returns their number.
+std::size_t writeLeaves(HashedVoxelGrid::Block* const* begin, HashedVoxelGrid::Block* const* end,
+                        SemanticOcTree* tree,
+                        std::vector<SemanticOcTree::LeafState>* leaves_buffer) {
   // Blocks in Morton order of their coordinates and voxels in local Morton order: the leaves come
   // out in the tree's depth-first order, no sort of the voxels needed.
+  const auto& local = mortonToIndex();
+  static const ClassSlotIndices kNone{{kNoClass, kNoClass, kNoClass, kNoClass}};
+  static const ClassSlotCounts kZero{{0, 0, 0, 0}};
+  std::vector<SemanticOcTree::LeafState>& leaves = *leaves_buffer;
+  leaves.clear();
+  for (HashedVoxelGrid::Block* const* it = begin; it != end; ++it) {
+    const HashedVoxelGrid::Block& block = **it;
+    const std::uint64_t block_morton = blockMorton(block);
+    for (int m = 0; m < HashedVoxelGrid::kBlockVoxels; ++m) {
+      const int v = local[m];
+      if (!block.isKnown(v)) continue;
+      const std::uint16_t slot = block.slot_of ? block.slot_of[v] : 0;
+      leaves.push_back({block_morton | static_cast<std::uint64_t>(m), block.log_odds[v],
+                        slot ? block.slot_classes[slot - 1] : kNone,
+                        slot ? block.slot_counts[slot - 1] : kZero});
+    }
+  }
+  tree->setLeaves(&leaves);
+  return leaves.size();
+}
+
+}  // namespace
+
+std::size_t HashedVoxelGrid::syncTo(SemanticOcTree* tree) {
+  if (dirty_blocks_.empty()) return 0;
   std::vector<std::pair<std::uint64_t, Block*>> order;
   order.reserve(dirty_blocks_.size());
   for (Block* block : dirty_blocks_) {
-    const octomap::OcTreeKey corner(static_cast<octomap::key_type>(block->bx << kBlockBits),
-                                    static_cast<octomap::key_type>(block->by << kBlockBits),
-                                    static_cast<octomap::key_type>(block->bz << kBlockBits));
-    order.emplace_back(SemanticOcTree::mortonCode(corner), block);
+    order.emplace_back(blockMorton(*block), block);
     block->dirty = false;
   }
   dirty_blocks_.clear();
   std::sort(order.begin(), order.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
-  const auto& local = mortonToIndex();
-  static const ClassSlotIndices kNone{{kNoClass, kNoClass, kNoClass, kNoClass}};
-  static const ClassSlotCounts kZero{{0, 0, 0, 0}};
+  std::vector<Block*> batch;
   std::vector<SemanticOcTree::LeafState> leaves;
-  leaves.reserve(order.size() * 128);
-  for (const auto& [block_morton, block] : order) {
-    for (int m = 0; m < kBlockVoxels; ++m) {
-      const int v = local[m];
-      if (!block->isKnown(v)) continue;
-      const std::uint16_t slot = block->slot_of ? block->slot_of[v] : 0;
-      leaves.push_back({block_morton | static_cast<std::uint64_t>(m), block->log_odds[v],
-                        slot ? block->slot_classes[slot - 1] : kNone,
-                        slot ? block->slot_counts[slot - 1] : kZero});
-    }
+  std::size_t written = 0;
+  for (std::size_t first = 0; first < order.size(); first += kSyncBatchBlocks) {
+    const std::size_t last = std::min(order.size(), first + kSyncBatchBlocks);
+    batch.clear();
+    for (std::size_t i = first; i < last; ++i) batch.push_back(order[i].second);
+    written += writeLeaves(batch.data(), batch.data() + batch.size(), tree, &leaves);
   }
-  tree->setLeaves(&leaves);
-  return leaves.size();
+  return written;
+}
+
+std::size_t HashedVoxelGrid::moveTo(SemanticOcTree* tree) {
+  std::sort(blocks_.begin(), blocks_.end(),
+            [](const auto& a, const auto& b) { return blockMorton(*a) < blockMorton(*b); });
+  // The hash table points into blocks that are freed below: forget it first.
+  std::vector<std::uint64_t>().swap(table_keys_);
+  std::vector<Block*>().swap(table_values_);
+  std::vector<Block*>().swap(dirty_blocks_);
+  cached_key_ = ~std::uint64_t{0};
+  cached_block_ = nullptr;
+  std::vector<Block*> batch;
+  std::vector<SemanticOcTree::LeafState> leaves;
+  std::size_t written = 0;
+  for (std::size_t first = 0; first < blocks_.size(); first += kSyncBatchBlocks) {
+    const std::size_t last = std::min(blocks_.size(), first + kSyncBatchBlocks);
+    batch.clear();
+    for (std::size_t i = first; i < last; ++i) {
+      // Clean blocks are in the tree already (an earlier sync).
+      if (blocks_[i]->dirty) batch.push_back(blocks_[i].get());
+    }
+    if (!batch.empty()) {
+      written += writeLeaves(batch.data(), batch.data() + batch.size(), tree, &leaves);
+    }
+    // The batch's memory goes back before the tree grows by the next one.
+    for (std::size_t i = first; i < last; ++i) blocks_[i].reset();
+  }
+  std::vector<std::unique_ptr<Block>>().swap(blocks_);
+  rehash(1024);
+  return written;
 }
 
 void HashedVoxelGrid::loadFrom(const SemanticOcTree& tree) {

@@ -20,6 +20,23 @@ namespace mapping {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// The end of an offline run: the map moves from the insertion grid into the tree (one copy of it
+// in memory for the save that follows), inner nodes refreshed.
+void finishRun(SemanticMappingSession* session, std::ostream* progress) {
+  if (const HashedVoxelGrid* grid = session->grid(); grid && !session->gridReleased() && progress) {
+    *progress << "[semantic_map_offline] insertion grid: " << grid->blockCount() << " blocks, "
+              << grid->knownVoxels() << " known voxels, " << grid->occupiedVoxels() << " occupied, "
+              << grid->memoryUsage() / 1e6 << " MB in memory\n";
+  }
+  SemanticOcTree& tree = session->treeReleasingGrid();
+  ScopedTimer timer("offline/update_inner");
+  tree.updateInnerOccupancy();
+}
+
+}  // namespace
+
 std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans) {
   if (!fs::is_directory(scans_dir)) {
     throw std::runtime_error(scans_dir + ": scans directory not found");
@@ -124,10 +141,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
                 << evidence << "), map " << session->mapSizeText() << "\n";
     }
   }
-  {
-    ScopedTimer timer("offline/update_inner");
-    session->tree().updateInnerOccupancy();
-  }
+  finishRun(session, progress);
   if (progress) {
     *progress << "[semantic_map_offline] inserted " << total_points << " points from "
               << scan_paths.size() << " scans\n";
@@ -200,7 +214,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
                 << "\n";
     }
   }
-  session->tree().updateInnerOccupancy();
+  finishRun(session, progress);
 }
 
 }  // namespace mapping

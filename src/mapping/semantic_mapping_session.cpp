@@ -190,9 +190,31 @@ void SemanticMappingSession::syncTree() const {
   }
 }
 
+SemanticOcTree& SemanticMappingSession::treeReleasingGrid() {
+  if (grid_ && !grid_released_) {
+    ScopedTimer timer("semantic_map/grid_to_tree");
+    grid_->moveTo(tree_.get());
+    grid_released_ = true;
+  }
+  return *tree_;
+}
+
+HashedVoxelGrid& SemanticMappingSession::gridForInsertion() {
+  if (grid_released_) {
+    ScopedTimer timer("semantic_map/tree_to_grid");
+    grid_->loadFrom(*tree_);
+    grid_released_ = false;
+  }
+  return *grid_;
+}
+
+std::size_t SemanticMappingSession::mapMemoryUsage() const {
+  return tree_->memoryUsage() + (grid_ ? grid_->memoryUsage() : 0);
+}
+
 std::string SemanticMappingSession::mapSizeText() const {
-  return grid_ ? std::to_string(grid_->blockCount()) + " blocks"
-               : std::to_string(tree_->size()) + " nodes";
+  return grid_ && !grid_released_ ? std::to_string(grid_->blockCount()) + " blocks"
+                                  : std::to_string(tree_->size()) + " nodes";
 }
 
 std::uint32_t SemanticMappingSession::evidenceLabel(std::uint32_t label_id) const {
@@ -279,9 +301,9 @@ void SemanticMappingSession::insertIntoTree(const Eigen::Matrix3Xf& points_senso
   std::size_t with_class = 0;
   {
     ScopedTimer timer("semantic_map/insert");
-    with_class = grid_
-                     ? grid_->insertLabeledScan(last_scan_, config_.max_range_m, tree_->classSet())
-                     : tree_->insertLabeledScan(last_scan_, config_.max_range_m);
+    with_class = grid_ ? gridForInsertion().insertLabeledScan(last_scan_, config_.max_range_m,
+                                                              tree_->classSet())
+                       : tree_->insertLabeledScan(last_scan_, config_.max_range_m);
   }
   ++statistics_.scans_inserted;
   statistics_.points_inserted += static_cast<std::size_t>(points_sensor.cols());
@@ -461,7 +483,8 @@ bool SemanticMappingSession::applyLateLabels(double stamp, const LabelImageView&
   {
     ScopedTimer timer("semantic_map/late_labels");
     statistics_.points_with_class +=
-        grid_ ? grid_->addClassEvidence(scan, tree_->classSet()) : tree_->addClassEvidence(scan);
+        grid_ ? gridForInsertion().addClassEvidence(scan, tree_->classSet())
+              : tree_->addClassEvidence(scan);
   }
   ++statistics_.label_images_used;
   ++statistics_.label_images_late;
@@ -554,10 +577,11 @@ void SemanticMappingSession::load(const std::string& path) {
   loaded->setRayCastingThreads(config_.ray_casting_threads);
   loaded->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   loaded->setFusionModel(config_.fusion);
+  // The grid follows at the first insertion (gridForInsertion): a loaded map that is only shown
+  // or saved is held once.
   if (grid_) {
-    std::unique_ptr<HashedVoxelGrid> grid = makeGrid();
-    grid->loadFrom(*loaded);
-    grid_ = std::move(grid);
+    grid_ = makeGrid();
+    grid_released_ = true;
   }
   tree_ = std::move(loaded);
   statistics_ = MappingStatistics();
@@ -566,6 +590,7 @@ void SemanticMappingSession::load(const std::string& path) {
 void SemanticMappingSession::reset() {
   tree_ = makeTree();
   grid_ = makeGrid();
+  grid_released_ = false;
   pending_scans_.clear();
   pending_labels_.clear();
   unlabelled_scans_.clear();

@@ -537,6 +537,34 @@ std::uint64_t fnv1a(const std::string& bytes) {
   }
   return hash;
 }
+
+// A stream sink that keeps only the length and the FNV-1a checksum of what is written: the
+// integrity record goes before the node data, and holding the node bytes in memory to learn it
+// cost twice their size at save time (an ostringstream that grows by doubling, then its copy).
+class ChecksumSink : public std::streambuf {
+ public:
+  std::uint64_t length() const { return length_; }
+  std::uint64_t checksum() const { return hash_; }
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (!traits_type::eq_int_type(c, traits_type::eof())) add(traits_type::to_char_type(c));
+    return traits_type::not_eof(c);
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    for (std::streamsize i = 0; i < n; ++i) add(s[i]);
+    return n;
+  }
+
+ private:
+  void add(char c) {
+    hash_ ^= static_cast<std::uint8_t>(c);
+    hash_ *= 1099511628211ull;
+    ++length_;
+  }
+  std::uint64_t length_ = 0;
+  std::uint64_t hash_ = 1469598103934665603ull;  // fnv1a's offset basis
+};
 }  // namespace
 
 // The class table and fusion model go before octomap's node data, so a loaded map knows which
@@ -553,13 +581,14 @@ std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
     writePod(s, static_cast<std::uint32_t>(info.name.size()));
     s.write(info.name.data(), static_cast<std::streamsize>(info.name.size()));
   }
-  std::ostringstream nodes;
-  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(nodes);
-  const std::string bytes = nodes.str();
+  // The node data twice: once into the checksum, then to the stream (no copy of it in memory).
+  ChecksumSink sink;
+  std::ostream checksum_stream(&sink);
+  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(checksum_stream);
   writePod(s, static_cast<std::uint64_t>(size()));
-  writePod(s, static_cast<std::uint64_t>(bytes.size()));
-  writePod(s, fnv1a(bytes));
-  s.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  writePod(s, sink.length());
+  writePod(s, sink.checksum());
+  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(s);
   return s;
 }
 

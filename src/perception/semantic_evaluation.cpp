@@ -278,8 +278,9 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
     kept.push_back(std::move(k));
   }
   SequenceMapScores scores;
-  camera_map.tree().updateInnerOccupancy();
-  human_map.tree().updateInnerOccupancy();
+  // Lookups only from here on: each map held once (the tree), not beside its insertion grid.
+  camera_map.treeReleasingGrid().updateInnerOccupancy();
+  human_map.treeReleasingGrid().updateInnerOccupancy();
   scores.map_voxels = mapping::countOccupiedFinestVoxels(camera_map.tree());
   for (const Kept& k : kept) {
     const Eigen::Matrix3Xf points_map =

@@ -253,14 +253,13 @@ int main(int argc, char** argv) {
       ism::ScopedTimer timer("semantic_map/save");
       counts = mapping::saveMaps(session.tree(), outputs);
     }
+    // The insertion grid's figures were printed when its map moved into the tree (mapRawDrive,
+    // mapSequence): the session holds the tree alone now.
     std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
               << " nodes, " << counts[0] << " occupied leaves, " << session.tree().classSet().size()
-              << " classes, " << session.tree().memoryUsage() / 1e6 << " MB in memory)\n";
-    if (const mapping::HashedVoxelGrid* grid = session.grid()) {
-      std::cerr << "[semantic_map_offline] insertion grid: " << grid->blockCount() << " blocks, "
-                << grid->knownVoxels() << " known voxels, " << grid->occupiedVoxels()
-                << " occupied, " << grid->memoryUsage() / 1e6 << " MB in memory\n";
-    }
+              << " classes, " << session.tree().memoryUsage() / 1e6
+              << " MB in memory; the session's map structures " << session.mapMemoryUsage() / 1e6
+              << " MB)\n";
     for (std::size_t i = 1; i < outputs.size(); ++i) {
       std::cerr << "[semantic_map_offline] wrote " << outputs[i].first;
       if (outputs[i].second == mapping::MapFormat::kPly)

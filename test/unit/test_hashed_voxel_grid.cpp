@@ -173,6 +173,75 @@ TEST(HashedVoxelGrid, SyncedTreeHoldsExactlyTheGridsVoxels) {
   EXPECT_GT(grid.occupiedVoxels(), 1000u);
 }
 
+// The tree's serialized bytes (what a save writes), inner nodes refreshed first.
+std::string treeBytes(SemanticOcTree* tree) {
+  tree->updateInnerOccupancy();
+  std::ostringstream out;
+  tree->write(out);
+  return out.str();
+}
+
+// syncTo writes in batches of blocks (bounded memory); the tree must be the one a single
+// setLeaves of every voxel builds, byte for byte (same pruning, same inner values).
+TEST(HashedVoxelGrid, BatchedSyncBuildsTheSameTreeAsOneSetLeaves) {
+  HashedVoxelGrid grid(gridOptions(0.2, 1.0, 0));
+  const ClassSet classes = ClassSet::cityscapes();
+  for (int s = 0; s < 3; ++s) {
+    grid.insertLabeledScan(syntheticScan(60 + s, {2.f * s, 0.5f * s, 1.7f}), 40.0, classes);
+  }
+  ASSERT_GT(grid.blockCount(), 4u * 256u);  // several batches
+  SemanticOcTree batched(0.2, classes, FusionModel());
+  EXPECT_EQ(grid.syncTo(&batched), grid.knownVoxels());
+
+  std::vector<SemanticOcTree::LeafState> leaves;
+  grid.forEachVoxel([&](std::uint16_t x, std::uint16_t y, std::uint16_t z, float log_odds,
+                        const ClassSlotIndices& c, const ClassSlotCounts& n) {
+    leaves.push_back({SemanticOcTree::mortonCode(octomap::OcTreeKey(x, y, z)), log_odds, c, n});
+  });
+  SemanticOcTree at_once(0.2, classes, FusionModel());
+  at_once.setLeaves(&leaves);
+  EXPECT_EQ(batched.size(), at_once.size());
+  EXPECT_TRUE(treeBytes(&batched) == treeBytes(&at_once));
+}
+
+// moveTo: the tree an incremental sync would have built, while the grid's memory goes; the grid
+// rebuilt from that tree holds the same voxels and goes on like the grid that kept them.
+TEST(HashedVoxelGrid, MoveToBuildsTheSyncedTreeAndEmptiesTheGrid) {
+  const ClassSet classes = ClassSet::cityscapes();
+  HashedVoxelGrid kept(gridOptions(0.2, 1.0, 20));
+  HashedVoxelGrid moved(gridOptions(0.2, 1.0, 20));
+  SemanticOcTree synced(0.2, classes, FusionModel());
+  SemanticOcTree target(0.2, classes, FusionModel());
+  for (HashedVoxelGrid* grid : {&kept, &moved}) {
+    grid->insertLabeledScan(syntheticScan(70, {0.f, 0.f, 1.7f}), 40.0, classes);
+  }
+  kept.syncTo(&synced);
+  moved.syncTo(&target);  // an earlier sync: moveTo writes only what changed since
+  for (int s = 1; s < 3; ++s) {
+    for (HashedVoxelGrid* grid : {&kept, &moved}) {
+      grid->insertLabeledScan(syntheticScan(70 + s, {3.f * s, 0.5f * s, 1.7f}), 40.0, classes);
+    }
+  }
+  kept.syncTo(&synced);
+  const std::size_t grid_bytes = moved.memoryUsage();
+  EXPECT_GT(moved.moveTo(&target), 0u);
+  EXPECT_EQ(moved.blockCount(), 0u);
+  EXPECT_EQ(moved.knownVoxels(), 0u);
+  EXPECT_FALSE(moved.dirty());
+  EXPECT_LT(moved.memoryUsage(), grid_bytes / 100);
+  EXPECT_TRUE(treeBytes(&target) == treeBytes(&synced));
+
+  moved.loadFrom(target);
+  EXPECT_EQ(moved.knownVoxels(), kept.knownVoxels());
+  const LabeledScan more = syntheticScan(80, {8.f, 1.f, 1.7f});
+  kept.insertLabeledScan(more, 40.0, classes);
+  moved.insertLabeledScan(more, 40.0, classes);
+  const Agreement agreement = compare(voxelsOf(moved), voxelsOf(kept));
+  EXPECT_EQ(agreement.state_differs, 0u);
+  EXPECT_EQ(agreement.class_differs, 0u);
+  EXPECT_EQ(agreement.log_odds_equal, agreement.union_voxels);
+}
+
 TEST(HashedVoxelGrid, MatchesOctreeInsertionOnSyntheticScans) {
   for (const double grazing : {0.0, 1.0}) {
     HashedVoxelGrid grid(gridOptions(0.2, grazing, 0));
@@ -418,13 +487,17 @@ TEST(HashedVoxelGridSession, SameMapAsTheOctreeSessionThroughSaveAndLoad) {
   EXPECT_EQ(raw->getTreeType(), "SemanticOcTree");
   SemanticMappingSession loaded(sessionConfig("hashed_grid"));
   loaded.load(path);
+  // The loaded map is held once (the tree) until something is inserted.
+  EXPECT_TRUE(loaded.gridReleased());
+  EXPECT_EQ(loaded.grid()->blockCount(), 0u);
   EXPECT_FALSE(loaded.grid()->dirty());
-  EXPECT_EQ(loaded.grid()->knownVoxels(), grid.grid()->knownVoxels());
   const LabeledScan more = syntheticScan(50, {0, 0, 0});
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.translation() << 7.0, 1.0, 1.7;
   grid.insertScanWithPointLabels(more.points_map, pose, more.label_ids, 0);
   loaded.insertScanWithPointLabels(more.points_map, pose, more.label_ids, 0);
+  EXPECT_FALSE(loaded.gridReleased());
+  EXPECT_EQ(loaded.grid()->knownVoxels(), grid.grid()->knownVoxels());
   const Agreement after = compare(voxelsOf(loaded.tree()), voxelsOf(grid.tree()));
   EXPECT_EQ(after.state_differs, 0u);
   EXPECT_EQ(after.class_differs, 0u);

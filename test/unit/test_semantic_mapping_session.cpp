@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -438,6 +439,50 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
   EXPECT_EQ(session.tree().size(), 0u);
   EXPECT_EQ(session.statistics().scans_inserted, 0u);
   std::filesystem::remove_all(dir);
+}
+
+// The end of a run hands the grid's memory to the tree: the same map (saved bytes included), held
+// once; an insertion afterwards rebuilds the grid and the map goes on as if it had stayed.
+TEST(SemanticMappingSessionTest, ReleasingTheGridKeepsTheMapAndHoldsItOnce) {
+  SemanticMappingConfig config = testConfig();
+  ASSERT_EQ(config.insertion, "hashed_grid");
+  SemanticMappingSession kept(config);
+  SemanticMappingSession released(config);
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  for (SemanticMappingSession* session : {&kept, &released}) {
+    session->insertScan(testScan(), poseAt(0.0), &view, &camera);
+    session->insertScan(testScan(), poseAt(0.5));
+  }
+  kept.tree();  // synced: grid and tree both hold the map
+  EXPECT_FALSE(kept.gridReleased());
+  released.treeReleasingGrid();
+  EXPECT_TRUE(released.gridReleased());
+  EXPECT_EQ(released.grid()->blockCount(), 0u);
+  EXPECT_EQ(released.mapSizeText(), std::to_string(released.tree().size()) + " nodes");
+  EXPECT_EQ(serialized(released), serialized(kept));
+  EXPECT_LT(released.mapMemoryUsage(), kept.mapMemoryUsage());
+  // What is left of the grid: an empty hash table.
+  EXPECT_LT(released.mapMemoryUsage(), released.tree().memoryUsage() + 65536);
+  const std::string dir = test::makeTempDir("session_release");
+  kept.save(dir + "/kept.ot", MapFormat::kSemanticOt);
+  released.save(dir + "/released.ot", MapFormat::kSemanticOt);
+  std::ifstream a(dir + "/kept.ot", std::ios::binary), b(dir + "/released.ot", std::ios::binary);
+  const std::string kept_file((std::istreambuf_iterator<char>(a)), {});
+  const std::string released_file((std::istreambuf_iterator<char>(b)), {});
+  EXPECT_GT(kept_file.size(), 1000u);
+  EXPECT_TRUE(kept_file == released_file);
+  std::filesystem::remove_all(dir);
+
+  // Late labels and scans after the release: the grid comes back from the tree.
+  for (SemanticMappingSession* session : {&kept, &released}) {
+    session->insertScan(testScan(), poseAt(1.0), &view, &camera);
+  }
+  EXPECT_FALSE(released.gridReleased());
+  EXPECT_EQ(released.grid()->knownVoxels(), kept.grid()->knownVoxels());
+  EXPECT_EQ(serialized(released), serialized(kept));
+  EXPECT_EQ(labelAt(released, -1.05, 0.55, 11.05), 7u);
 }
 
 // The hardened .ot reader: corruption anywhere in the node data, truncation, other tree types and

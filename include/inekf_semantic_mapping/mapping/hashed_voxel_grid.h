@@ -71,6 +71,10 @@ class HashedVoxelGrid {
   // Writes every voxel changed since the last sync (or load) into `tree`; inner class evidence is
   // left to tree->updateInnerOccupancy(). Returns the number of leaves written.
   std::size_t syncTo(SemanticOcTree* tree);
+  // syncTo that frees the blocks as they are written: afterwards the grid is empty and `tree`
+  // (the one every earlier sync went to) holds the whole map. Memory holds one copy of the map
+  // at a time, plus one batch of blocks (the end of a run, before a save).
+  std::size_t moveTo(SemanticOcTree* tree);
   // Replaces the grid's contents with the tree's finest-level state (pruned leaves expanded);
   // nothing is dirty afterwards.
   void loadFrom(const SemanticOcTree& tree);

@@ -70,6 +70,8 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
 // Inserts the scans in frame order into `session` (per-point labels if labels_dir is set, else
 // camera labels if `camera_labels` is given, else occupancy only); progress lines go to
 // `progress` (may be null). Throws on missing or malformed inputs (the message names the file).
+// Both end with the map in the session's tree alone (SemanticMappingSession::treeReleasingGrid,
+// inner nodes refreshed), ready to save; the insertion grid's figures go to `progress` first.
 void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress);
 

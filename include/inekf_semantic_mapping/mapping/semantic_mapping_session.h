@@ -165,7 +165,8 @@ class SemanticMappingSession {
 
   // The map. With insertion: hashed_grid the grid's changes are written into the tree first (a
   // cost proportional to what changed since the last call): the tree's leaves belong to the grid,
-  // so change the map through the session, not through the tree.
+  // so change the map through the session, not through the tree. Grid and tree then both hold
+  // the map (the node: its display asks for the tree again and again).
   SemanticOcTree& tree() {
     syncTree();
     return *tree_;
@@ -174,10 +175,18 @@ class SemanticMappingSession {
     syncTree();
     return *tree_;
   }
+  // The map as tree() gives it, with the hashed grid's memory handed over to the tree block by
+  // block (HashedVoxelGrid::moveTo): one copy of the map in memory instead of two, for the end of
+  // a run (save, evaluation). The next insertion rebuilds the grid from the tree
+  // (HashedVoxelGrid::loadFrom: the same voxels), so the map means the same either way.
+  SemanticOcTree& treeReleasingGrid();
   // The map's class set (no sync: cheap per scan).
   const ClassSet& classSet() const { return tree_->classSet(); }
-  // The hashed grid (insertion: hashed_grid), else null.
+  // The hashed grid (insertion: hashed_grid), else null; empty while released (above).
   const HashedVoxelGrid* grid() const { return grid_.get(); }
+  bool gridReleased() const { return grid_released_; }
+  // Bytes of the map structures the session holds (tree and grid, as they are now).
+  std::size_t mapMemoryUsage() const;
   // "N nodes" (octree) or "N blocks" (hashed grid): the map's size without a sync, for progress.
   std::string mapSizeText() const;
   const MappingStatistics& statistics() const { return statistics_; }
@@ -213,6 +222,8 @@ class SemanticMappingSession {
   std::unique_ptr<SemanticOcTree> makeTree() const;
   std::unique_ptr<HashedVoxelGrid> makeGrid() const;
   void syncTree() const;
+  // Insertion into a released grid: rebuilds it from the tree first.
+  HashedVoxelGrid& gridForInsertion();
   // Class evidence per label id (kNoLabel for ids that carry none: unknown or "ignored" ids).
   std::uint32_t evidenceLabel(std::uint32_t label_id) const;
 
@@ -240,7 +251,9 @@ class SemanticMappingSession {
 
   SemanticMappingConfig config_;
   std::unique_ptr<SemanticOcTree> tree_;
-  std::unique_ptr<HashedVoxelGrid> grid_;    // insertion: hashed_grid
+  std::unique_ptr<HashedVoxelGrid> grid_;  // insertion: hashed_grid
+  // The grid is empty and the tree holds the map (treeReleasingGrid, load).
+  bool grid_released_ = false;
   std::vector<std::uint8_t> ignored_label_;  // per label id < 256: 1 = no class evidence
   MappingStatistics statistics_;
   LabeledScan last_scan_;

@@ -45,7 +45,8 @@ class MapServices {
 };
 
 // The node's periodic log line: scans in the map, with labels, pending, without pose; label
-// images used and late; nodes; mean insertion time.
+// images used and late; the map's size (SemanticMappingSession::mapSizeText: no grid -> tree sync,
+// so a node nobody watches holds the map once, in the grid); mean insertion time.
 std::string mappingStatusLine(const mapping::SemanticMappingSession& session);
 
 }  // namespace ros_conversions
