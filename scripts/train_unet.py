@@ -280,7 +280,7 @@ def pad_to_multiple(image, multiple):
     return cv2.copyMakeBorder(image, 0, pad_h, 0, pad_w, cv2.BORDER_REFLECT_101)
 
 
-def random_batch(frames, batch, crop_h, crop_w, rng, augment=False):
+def random_batch(frames, batch, crop_h, crop_w, rng, augment=False, strong_color=False):
     images, labels = [], []
     for _ in range(batch):
         image, label = frames[rng.randrange(len(frames))]
@@ -299,9 +299,15 @@ def random_batch(frames, batch, crop_h, crop_w, rng, augment=False):
         if augment:
             gain = np.array([rng.uniform(0.9, 1.1) for _ in range(3)], np.float32)
             contrast, brightness = rng.uniform(0.7, 1.3), rng.uniform(-30, 30)
+            image = image.astype(np.float32)
+            if strong_color:  # exposure / camera changes: gamma, saturation, wider contrast
+                contrast = rng.uniform(0.5, 1.6)
+                image = 255.0 * (image / 255.0) ** rng.uniform(0.6, 1.6)
+                gray = image.mean(2, keepdims=True)
+                image = gray + (image - gray) * rng.uniform(0.4, 1.5)
             mean = image.reshape(-1, 3).mean(0)
-            image = np.clip((image.astype(np.float32) - mean) * contrast * gain + mean +
-                            brightness, 0, 255).astype(np.uint8)
+            image = np.clip((image - mean) * contrast * gain + mean + brightness, 0,
+                            255).astype(np.uint8)
         if rng.random() < 0.5:
             image, label = image[:, ::-1], label[:, ::-1]
         images.append(image)
@@ -451,6 +457,9 @@ def main():
                              "classes (poles, signs) are learned sooner")
     parser.add_argument("--augment", action="store_true",
                         help="random scale (0.75..1.33) and colour (contrast, brightness, gain)")
+    parser.add_argument("--strong-color", action="store_true",
+                        help="with --augment: also gamma (0.6..1.6), saturation (0.4..1.5) and a "
+                             "wider contrast range (0.5..1.6), against the camera domain gap")
     parser.add_argument("--pseudo-min-confidence", type=float, default=0.0,
                         help="enet_pseudo: ignore pixels whose confidence image is below this")
     parser.add_argument("--repeat-pseudo", type=int, default=1,
@@ -532,7 +541,8 @@ def main():
         progress = max((time.time() - start) / budget_s, step / args.steps)
         for group in optimizer.param_groups:
             group["lr"] = args.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress))))
-        images, labels = random_batch(train_frames, args.batch, crop_h, crop_w, rng, args.augment)
+        images, labels = random_batch(train_frames, args.batch, crop_h, crop_w, rng, args.augment,
+                                      args.strong_color)
         loss = loss_function(model(images.to(device)), labels.to(device))
         optimizer.zero_grad()
         loss.backward()
