@@ -389,8 +389,8 @@ std::uint64_t blockMorton(const HashedVoxelGrid::Block& block) {
   return SemanticOcTree::mortonCode(corner);
 }
 
-// Writes the known voxels of blocks [begin, end) (in Morton order) into `tree` through
-// `leaves_buffer`; returns their number.
+// Writes the known voxels of the dirty blocks among [begin, end) (in Morton order) into `tree`
+// through `leaves_buffer`; returns their number.
 std::size_t writeLeaves(HashedVoxelGrid::Block* const* begin, HashedVoxelGrid::Block* const* end,
                         SemanticOcTree* tree,
                         std::vector<SemanticOcTree::LeafState>* leaves_buffer) {
@@ -403,6 +403,7 @@ std::size_t writeLeaves(HashedVoxelGrid::Block* const* begin, HashedVoxelGrid::B
   leaves.clear();
   for (HashedVoxelGrid::Block* const* it = begin; it != end; ++it) {
     const HashedVoxelGrid::Block& block = **it;
+    if (!block.dirty) continue;  // in the tree already (an earlier sync)
     const std::uint64_t block_morton = blockMorton(block);
     for (int m = 0; m < HashedVoxelGrid::kBlockVoxels; ++m) {
       const int v = local[m];
@@ -413,33 +414,36 @@ std::size_t writeLeaves(HashedVoxelGrid::Block* const* begin, HashedVoxelGrid::B
                         slot ? block.slot_counts[slot - 1] : kZero});
     }
   }
-  tree->setLeaves(&leaves);
+  if (!leaves.empty()) tree->setLeaves(&leaves);
   return leaves.size();
+}
+
+// Writes the dirty ones of `blocks` (in Morton order) into `tree`, kSyncBatchBlocks at a time,
+// calling after_batch(first, last) after each batch. Returns the number of leaves written.
+template <typename AfterBatch>
+std::size_t writeInBatches(const std::vector<HashedVoxelGrid::Block*>& blocks, SemanticOcTree* tree,
+                           AfterBatch&& after_batch) {
+  std::vector<SemanticOcTree::LeafState> leaves;
+  std::size_t written = 0;
+  for (std::size_t first = 0; first < blocks.size(); first += kSyncBatchBlocks) {
+    const std::size_t last = std::min(blocks.size(), first + kSyncBatchBlocks);
+    written += writeLeaves(blocks.data() + first, blocks.data() + last, tree, &leaves);
+    after_batch(first, last);
+  }
+  return written;
 }
 
 }  // namespace
 
 std::size_t HashedVoxelGrid::syncTo(SemanticOcTree* tree) {
   if (dirty_blocks_.empty()) return 0;
-  std::vector<std::pair<std::uint64_t, Block*>> order;
-  order.reserve(dirty_blocks_.size());
-  for (Block* block : dirty_blocks_) {
-    order.emplace_back(blockMorton(*block), block);
-    block->dirty = false;
-  }
-  dirty_blocks_.clear();
-  std::sort(order.begin(), order.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<Block*> batch;
-  std::vector<SemanticOcTree::LeafState> leaves;
-  std::size_t written = 0;
-  for (std::size_t first = 0; first < order.size(); first += kSyncBatchBlocks) {
-    const std::size_t last = std::min(order.size(), first + kSyncBatchBlocks);
-    batch.clear();
-    for (std::size_t i = first; i < last; ++i) batch.push_back(order[i].second);
-    written += writeLeaves(batch.data(), batch.data() + batch.size(), tree, &leaves);
-  }
-  return written;
+  std::vector<Block*> ordered;
+  ordered.swap(dirty_blocks_);
+  std::sort(ordered.begin(), ordered.end(),
+            [](const Block* a, const Block* b) { return blockMorton(*a) < blockMorton(*b); });
+  return writeInBatches(ordered, tree, [&ordered](std::size_t first, std::size_t last) {
+    for (std::size_t i = first; i < last; ++i) ordered[i]->dirty = false;
+  });
 }
 
 std::size_t HashedVoxelGrid::moveTo(SemanticOcTree* tree) {
@@ -451,22 +455,14 @@ std::size_t HashedVoxelGrid::moveTo(SemanticOcTree* tree) {
   std::vector<Block*>().swap(dirty_blocks_);
   cached_key_ = ~std::uint64_t{0};
   cached_block_ = nullptr;
-  std::vector<Block*> batch;
-  std::vector<SemanticOcTree::LeafState> leaves;
-  std::size_t written = 0;
-  for (std::size_t first = 0; first < blocks_.size(); first += kSyncBatchBlocks) {
-    const std::size_t last = std::min(blocks_.size(), first + kSyncBatchBlocks);
-    batch.clear();
-    for (std::size_t i = first; i < last; ++i) {
-      // Clean blocks are in the tree already (an earlier sync).
-      if (blocks_[i]->dirty) batch.push_back(blocks_[i].get());
-    }
-    if (!batch.empty()) {
-      written += writeLeaves(batch.data(), batch.data() + batch.size(), tree, &leaves);
-    }
-    // The batch's memory goes back before the tree grows by the next one.
-    for (std::size_t i = first; i < last; ++i) blocks_[i].reset();
-  }
+  std::vector<Block*> ordered;
+  ordered.reserve(blocks_.size());
+  for (const auto& block : blocks_) ordered.push_back(block.get());
+  const std::size_t written =
+      writeInBatches(ordered, tree, [this](std::size_t first, std::size_t last) {
+        // The batch's memory goes back before the tree grows by the next one.
+        for (std::size_t i = first; i < last; ++i) blocks_[i].reset();
+      });
   std::vector<std::unique_ptr<Block>>().swap(blocks_);
   rehash(1024);
   return written;

@@ -529,13 +529,23 @@ bool readPod(std::istream& s, T* value) {
   return static_cast<bool>(s.read(reinterpret_cast<char*>(value), sizeof(T)));
 }
 
-std::uint64_t fnv1a(const std::string& bytes) {
-  std::uint64_t hash = 1469598103934665603ull;
-  for (const char c : bytes) {
-    hash ^= static_cast<std::uint8_t>(c);
-    hash *= 1099511628211ull;
+// FNV-1a, 64 bit, fed piecewise (the writer streams the node data, the reader has it whole).
+class Fnv1a {
+ public:
+  void add(char c) {
+    hash_ ^= static_cast<std::uint8_t>(c);
+    hash_ *= 1099511628211ull;
   }
-  return hash;
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 1469598103934665603ull;
+};
+
+std::uint64_t fnv1a(const std::string& bytes) {
+  Fnv1a hash;
+  for (const char c : bytes) hash.add(c);
+  return hash.value();
 }
 
 // A stream sink that keeps only the length and the FNV-1a checksum of what is written: the
@@ -544,7 +554,7 @@ std::uint64_t fnv1a(const std::string& bytes) {
 class ChecksumSink : public std::streambuf {
  public:
   std::uint64_t length() const { return length_; }
-  std::uint64_t checksum() const { return hash_; }
+  std::uint64_t checksum() const { return hash_.value(); }
 
  protected:
   int_type overflow(int_type c) override {
@@ -558,12 +568,11 @@ class ChecksumSink : public std::streambuf {
 
  private:
   void add(char c) {
-    hash_ ^= static_cast<std::uint8_t>(c);
-    hash_ *= 1099511628211ull;
+    hash_.add(c);
     ++length_;
   }
   std::uint64_t length_ = 0;
-  std::uint64_t hash_ = 1469598103934665603ull;  // fnv1a's offset basis
+  Fnv1a hash_;
 };
 }  // namespace
 
