@@ -10,6 +10,14 @@
 
 namespace inekf_semantic_mapping {
 namespace estimation {
+
+Eigen::Matrix3d vehicleFrameInImu(double pitch_rad, double yaw_rad) {
+  // Yaw about z, then a rotation about y by -pitch: x = (1, 0, 0) goes to
+  // (cos p cos y, cos p sin y, sin p).
+  return lie::expSO3(Eigen::Vector3d(0.0, 0.0, yaw_rad)) *
+         lie::expSO3(Eigen::Vector3d(0.0, -pitch_rad, 0.0));
+}
+
 namespace {
 
 using Vector15d = Eigen::Matrix<double, 15, 1>;
@@ -177,25 +185,27 @@ CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Matrix<double, M, 1>& 
   return result;
 }
 
-CorrectionResult ImuFilterBase::correctNonholonomic(double lateral_sigma_mps,
-                                                    double vertical_sigma_mps, double gate) {
+CorrectionResult ImuFilterBase::correctNonholonomic(const NonholonomicModel& model, double gate) {
   CorrectionResult result;
-  if (!(lateral_sigma_mps > 0.0) || !(vertical_sigma_mps > 0.0) ||
-      !std::isfinite(lateral_sigma_mps) || !std::isfinite(vertical_sigma_mps)) {
-    result.reason = "non-holonomic sigmas must be positive and finite";
+  const double lateral = model.lateral_sigma_mps, vertical = model.vertical_sigma_mps;
+  if (!(lateral > 0.0) || !(vertical > 0.0) || !std::isfinite(lateral) ||
+      !std::isfinite(vertical) || !model.imu_from_vehicle.allFinite()) {
+    result.reason = "non-holonomic sigmas must be positive and finite, the vehicle frame finite";
     return result;
   }
   // Left-invariant error xi (X_true = X exp(xi)): R_true = R (I + xi_R^), v_true = v + R xi_v,
-  // so the body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R to first order.
+  // so the body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R to first order; the vehicle
+  // frame's velocity is R_iv^T times that.
+  const Eigen::Matrix3d vehicle_from_imu = model.imu_from_vehicle.transpose();
   const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
   Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
-  h_left.block<3, 3>(0, 0) = lie::hat(body_velocity);
-  h_left.block<3, 3>(0, 3).setIdentity();
+  h_left.block<3, 3>(0, 0) = vehicle_from_imu * lie::hat(body_velocity);
+  h_left.block<3, 3>(0, 3) = vehicle_from_imu;
   const Eigen::Matrix<double, 2, 15> h = h_left.bottomRows<2>() * leftFromError(state_);
-  const Eigen::Vector2d innovation = -body_velocity.tail<2>();  // measured: 0 lateral, 0 vertical
-  const Eigen::Matrix2d noise = Eigen::Vector2d(lateral_sigma_mps * lateral_sigma_mps,
-                                                vertical_sigma_mps * vertical_sigma_mps)
-                                    .asDiagonal();
+  // Measured: 0 lateral, 0 vertical in the vehicle frame.
+  const Eigen::Vector2d innovation = -(vehicle_from_imu * body_velocity).tail<2>();
+  const Eigen::Matrix2d noise =
+      Eigen::Vector2d(lateral * lateral, vertical * vertical).asDiagonal();
   Vector15d delta;
   ErrorCovariance updated;
   result = kalmanUpdate<2>(innovation, h, noise, gate, &delta, &updated);

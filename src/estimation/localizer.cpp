@@ -87,6 +87,14 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
   positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
   positive("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg);
+  // A mounting error, not another axis convention: an IMU turned further needs its data rotated
+  // (imu_link in tf), not a constraint that bends.
+  const auto mounting_angle = [&](const char* key, double* out) {
+    reader->read(key, out);
+    if (!(std::abs(*out) <= 30.0)) reader->fail(key, "must be in [-30, 30] deg");
+  };
+  mounting_angle("nonholonomic.vehicle_pitch_deg", &config.nonholonomic_vehicle_pitch_deg);
+  mounting_angle("nonholonomic.vehicle_yaw_deg", &config.nonholonomic_vehicle_yaw_deg);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   return config;
 }
@@ -136,9 +144,13 @@ void Localizer::propagate(const ImuStep& step) {
       ++statistics_.nonholonomic_skipped;
       return;
     }
-    const CorrectionResult result = filter_->correctNonholonomic(
-        config_.nonholonomic_lateral_sigma_mps, config_.nonholonomic_vertical_sigma_mps,
-        config_.nonholonomic_gate_mahalanobis_squared);
+    NonholonomicModel model;
+    model.lateral_sigma_mps = config_.nonholonomic_lateral_sigma_mps;
+    model.vertical_sigma_mps = config_.nonholonomic_vertical_sigma_mps;
+    model.imu_from_vehicle = vehicleFrameInImu(config_.nonholonomic_vehicle_pitch_deg * kDegToRad,
+                                               config_.nonholonomic_vehicle_yaw_deg * kDegToRad);
+    const CorrectionResult result =
+        filter_->correctNonholonomic(model, config_.nonholonomic_gate_mahalanobis_squared);
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
   }
 }

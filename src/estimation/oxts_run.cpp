@@ -205,5 +205,26 @@ double yawErrorDeg(const OxtsRunResult& run, int frame) {
   return wrapDeg(headingDeg(run.states[frame].rotation) - headingDeg(run.truth[frame].linear()));
 }
 
+TravelDirection travelDirectionInImu(const std::vector<NavState>& states, double min_speed_mps) {
+  std::vector<double> pitches, yaws;
+  for (const NavState& s : states) {
+    const Eigen::Vector3d v = s.rotation.transpose() * s.velocity_map;
+    if (!v.allFinite() || !(v.x() >= min_speed_mps)) continue;
+    pitches.push_back(std::atan2(v.z(), v.x()) * 180.0 / M_PI);
+    yaws.push_back(std::atan2(v.y(), v.x()) * 180.0 / M_PI);
+  }
+  TravelDirection direction;
+  direction.samples = static_cast<int>(pitches.size());
+  if (pitches.empty()) return direction;
+  const auto median = [](std::vector<double>* values) {
+    const auto middle = values->begin() + static_cast<std::ptrdiff_t>(values->size() / 2);
+    std::nth_element(values->begin(), middle, values->end());
+    return *middle;
+  };
+  direction.pitch_deg = median(&pitches);
+  direction.yaw_deg = median(&yaws);
+  return direction;
+}
+
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

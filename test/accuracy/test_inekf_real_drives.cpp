@@ -89,8 +89,10 @@ TEST(RealDrives, LeftInvariantEkfMeetsTheTargets) {
   if (ran < 2) GTEST_SKIP() << "fewer than two real drives available in " << test::sharedDir();
 }
 
-// The Rauch-Tung-Striebel pass (inekf_offline --smooth) on the same runs: measured ATE 1.71 ->
-// 1.09 m on 0027, 1.73 -> 1.02 m on 0018, 2.10 -> 1.04 m on 0036; guarded at 0.75 of the filter's.
+// The Rauch-Tung-Striebel pass (inekf_offline --smooth) on the same runs: measured ATE 1.36 ->
+// 1.02 m on 0027, 1.35 -> 0.92 m on 0018, 1.46 -> 0.98 m on 0036 (with KITTI's IMU mounting in
+// the land-vehicle constraint; without it the filter was worse, 1.74 / 1.71 / 1.93 m, and the
+// ratio lower); guarded at 0.85 of the filter's and 1.3 m.
 TEST(RealDrives, SmoothingLowersTheAte) {
   int ran = 0;
   for (const char* drive :
@@ -113,7 +115,8 @@ TEST(RealDrives, SmoothingLowersTheAte) {
         filtered.rotation_rmse_deg);
     EXPECT_TRUE(run.smoothed);
     EXPECT_EQ(run.smoother_breaks, 0) << drive;
-    EXPECT_LT(smoothed.ate_m, 0.75 * filtered.ate_m) << drive;
+    EXPECT_LT(smoothed.ate_m, 0.85 * filtered.ate_m) << drive;
+    EXPECT_LT(smoothed.ate_m, 1.3) << drive;
     EXPECT_LT(smoothed.rotation_rmse_deg, 1.2) << drive;
     ++ran;
   }
@@ -123,6 +126,35 @@ TEST(RealDrives, SmoothingLowersTheAte) {
   right.smooth = true;
   const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));
   EXPECT_THROW(runLocalizerOnOxts(frames, right), std::invalid_argument);
+}
+
+// KITTI's OXTS is mounted 0.65 deg pitched against the car's direction of travel. The smoothed
+// run with no mounting configured finds it from GPS and IMU alone (median 0.81 deg on 0027; the
+// OXTS reference solution says 0.73 on average), and configuring it lowers the filter's ATE (1.74 -> 1.36 m): the
+// constraint no longer tilts the attitude to explain the car's apparent vertical velocity.
+TEST(RealDrives, TheSmootherFindsTheImuMountingAndTheFilterGainsFromIt) {
+  ISM_REQUIRE_SHARED(oxtsDir("2011_09_30_drive_0027"));
+  const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));
+  OxtsRunOptions unmounted = protocol(FilterType::kLeftInvariant);
+  unmounted.config.localizer.nonholonomic_vehicle_pitch_deg = 0.0;
+  unmounted.smooth = true;
+  const OxtsRunResult smoothed = runLocalizerOnOxts(frames, unmounted);
+  const TravelDirection direction = travelDirectionInImu(smoothed.states);
+  std::printf(
+      "[ MEASURED ] 0027 direction of travel in the IMU frame: pitch %.2f deg, yaw %.2f "
+      "deg (%d states)\n",
+      direction.pitch_deg, direction.yaw_deg, direction.samples);
+  EXPECT_GT(direction.samples, 500);
+  EXPECT_NEAR(direction.pitch_deg, 0.65, 0.25);
+  EXPECT_NEAR(direction.yaw_deg, 0.0, 0.25);
+
+  unmounted.smooth = false;
+  const double ate_unmounted = compareWithTruth(runLocalizerOnOxts(frames, unmounted)).ate_m;
+  const double ate_mounted =
+      compareWithTruth(runLocalizerOnOxts(frames, protocol(FilterType::kLeftInvariant))).ate_m;
+  std::printf("[ ACCURACY ] 0027 left: ATE %.2f m with the mounting, %.2f m without\n", ate_mounted,
+              ate_unmounted);
+  EXPECT_LT(ate_mounted, 0.85 * ate_unmounted);
 }
 
 TEST(RealDrives, LeftInvariantEkfRecoversFromA90DegreeYawErrorFasterThanTheEskf) {

@@ -184,13 +184,15 @@ TEST(Filters, NonholonomicUpdateTurnsTheHeadingToTheVelocity) {
   Eigen::Matrix<double, 15, 1> sigma;
   sigma << 0.01, 0.01, 5.0 * M_PI / 180.0, 0.02, 0.02, 0.02, 1.0, 1.0, 1.0, 1e-4, 1e-4, 1e-4, 0.01,
       0.01, 0.01;
+  NonholonomicModel tight;
+  tight.lateral_sigma_mps = tight.vertical_sigma_mps = 0.05;
   std::vector<double> yaw_errors;
   for (FilterType type : kAllFilters) {
     auto filter = makeFilter(type, ImuNoise());
     filter->initialize(estimate,
                        filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
     const double heading_variance_before = filter->poseCovariance()(5, 5);
-    const CorrectionResult result = filter->correctNonholonomic(0.05, 0.05, 100.0);
+    const CorrectionResult result = filter->correctNonholonomic(tight, 100.0);
     ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
     const Eigen::Vector3d body_velocity =
         filter->state().rotation.transpose() * filter->state().velocity_map;
@@ -203,11 +205,60 @@ TEST(Filters, NonholonomicUpdateTurnsTheHeadingToTheVelocity) {
     Eigen::LLT<ErrorCovariance> llt(filter->covariance());
     EXPECT_EQ(llt.info(), Eigen::Success);
     EXPECT_LT((filter->covariance() - filter->covariance().transpose()).norm(), 1e-12);
-    EXPECT_FALSE(filter->correctNonholonomic(0.0, 0.05, 100.0).accepted);
-    EXPECT_FALSE(filter->correctNonholonomic(std::nan(""), 0.05, 100.0).accepted);
+    NonholonomicModel bad = tight;
+    bad.lateral_sigma_mps = 0.0;
+    EXPECT_FALSE(filter->correctNonholonomic(bad, 100.0).accepted);
+    bad.lateral_sigma_mps = std::nan("");
+    EXPECT_FALSE(filter->correctNonholonomic(bad, 100.0).accepted);
+    bad = tight;
+    bad.imu_from_vehicle(0, 0) = std::nan("");
+    EXPECT_FALSE(filter->correctNonholonomic(bad, 100.0).accepted);
   }
   EXPECT_NEAR(yaw_errors[0], yaw_errors[1], 2e-4);
   EXPECT_NEAR(yaw_errors[0], yaw_errors[2], 2e-4);
+}
+
+TEST(Filters, NonholonomicUpdateMeasuresInTheVehicleFrame) {
+  // x = (1, 0, 0) of the vehicle frame is the direction of travel in the IMU frame.
+  const double pitch = 2.0 * M_PI / 180.0, yaw = -1.5 * M_PI / 180.0;
+  const Eigen::Matrix3d imu_from_vehicle = vehicleFrameInImu(pitch, yaw);
+  EXPECT_TRUE(imu_from_vehicle.col(0).isApprox(
+      Eigen::Vector3d(std::cos(pitch) * std::cos(yaw), std::cos(pitch) * std::sin(yaw),
+                      std::sin(pitch)),
+      1e-12));
+  EXPECT_NEAR(imu_from_vehicle.determinant(), 1.0, 1e-12);
+  EXPECT_NEAR(imu_from_vehicle(2, 1), 0.0, 1e-12);  // no roll: the vehicle's y axis stays level
+
+  // The IMU moves along the vehicle's x: nothing to correct in the vehicle frame; taken in the
+  // IMU's own axes, the same velocity is 2 deg "vertical" and tilts the estimate.
+  NavState estimate;
+  estimate.stamp_s = 1.0;
+  estimate.rotation = lie::expSO3(Eigen::Vector3d(0.01, -0.02, 0.7));
+  estimate.velocity_map = estimate.rotation * imu_from_vehicle * Eigen::Vector3d(14.0, 0.0, 0.0);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 0.02, 0.02, 0.05, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0, 1e-4, 1e-4, 1e-4, 0.01, 0.01, 0.01;
+  NonholonomicModel model;
+  model.lateral_sigma_mps = model.vertical_sigma_mps = 0.05;
+  model.imu_from_vehicle = imu_from_vehicle;
+  NonholonomicModel imu_axes = model;
+  imu_axes.imu_from_vehicle.setIdentity();
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    const ErrorCovariance covariance =
+        filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal());
+    filter->initialize(estimate, covariance);
+    ASSERT_TRUE(filter->correctNonholonomic(model, 1e6).accepted) << toString(type);
+    EXPECT_LT(lie::logSO3(estimate.rotation.transpose() * filter->state().rotation).norm(), 1e-9)
+        << toString(type);
+    EXPECT_LT((filter->state().velocity_map - estimate.velocity_map).norm(), 1e-9)
+        << toString(type);
+
+    filter->initialize(estimate, covariance);
+    ASSERT_TRUE(filter->correctNonholonomic(imu_axes, 1e6).accepted) << toString(type);
+    const Eigen::Vector3d body_velocity =
+        filter->state().rotation.transpose() * filter->state().velocity_map;
+    EXPECT_LT(std::abs(body_velocity.z()), 0.5 * 14.0 * std::sin(pitch)) << toString(type);
+  }
 }
 
 TEST(Filters, GateRejectsAnOutlierAndKeepsTheState) {

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <optional>
 #include <vector>
@@ -471,6 +472,52 @@ TEST(Localizer, TheLandVehicleConstraintHoldsTheHeadingOnAStraightRoad) {
   EXPECT_EQ(statistics.nonholonomic_skipped, 1200);
 }
 
+// A car on a level straight road whose IMU is mounted pitched: its x axis points
+// `mount_pitch_deg` below the direction of travel, so the velocity has an upward component in
+// the IMU's axes. GPS fixes as above. Returns the final pitch error of the IMU's attitude (deg).
+double pitchErrorWithMountedImu(double mount_pitch_deg, double configured_pitch_deg) {
+  LocalizerConfig config;
+  config.nonholonomic_vertical_sigma_mps = 0.1;  // tight: what a known mounting allows
+  config.nonholonomic_vehicle_pitch_deg = configured_pitch_deg;
+  Localizer localizer(config);
+  constexpr double kSpeed = 15.0, kDt = 0.1;
+  const double pitch = mount_pitch_deg * M_PI / 180.0;
+  NavState start;
+  start.rotation = lie::expSO3(Eigen::Vector3d(0.0, pitch, 0.0));  // x axis tipped down
+  start.velocity_map = Eigen::Vector3d(kSpeed, 0.0, 0.0);
+  localizer.initialize(start);
+  std::uint32_t lcg = 777;
+  const auto noise = [&lcg]() {
+    lcg = lcg * 1664525u + 1013904223u;
+    return lcg / 4294967296.0 - 0.5;  // uniform, sigma 0.29
+  };
+  for (int k = 1; k <= 600; ++k) {
+    ImuSample sample = restingSample(k * kDt);
+    sample.specific_force = start.rotation.transpose() * Eigen::Vector3d(0.0, 0.0, 9.81);
+    localizer.addImu(sample);
+    if (k % 10 == 0) {
+      const Eigen::Vector3d truth = start.velocity_map * (k * kDt);
+      localizer.addPositionFix(fixAt(k * kDt, truth + Eigen::Vector3d(noise(), noise(), noise())));
+    }
+  }
+  EXPECT_GT(localizer.statistics().nonholonomic_used, 500);
+  const Eigen::Matrix3d error = start.rotation.transpose() * localizer.state().rotation;
+  return lie::logSO3(error).y() * 180.0 / M_PI;
+}
+
+TEST(Localizer, TheLandVehicleConstraintTakesTheImuMountingFromTheConfig) {
+  const double ignored = pitchErrorWithMountedImu(1.0, 0.0);
+  const double configured = pitchErrorWithMountedImu(1.0, 1.0);
+  const double wrong_sign = pitchErrorWithMountedImu(1.0, -1.0);
+  std::printf("pitch error: mounting ignored %.3f deg, configured %.3f, wrong sign %.3f\n", ignored,
+              configured, wrong_sign);
+  EXPECT_LT(std::abs(configured), 0.05);
+  EXPECT_GT(std::abs(ignored), 0.5);
+  EXPECT_GT(std::abs(wrong_sign), 1.5 * std::abs(ignored));
+  // An aligned IMU with nothing configured stays right too.
+  EXPECT_LT(std::abs(pitchErrorWithMountedImu(0.0, 0.0)), 0.05);
+}
+
 TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   const LocalizerConfig loaded = LocalizerConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
   const LocalizerConfig defaults;
@@ -492,6 +539,10 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
                    defaults.nonholonomic_gate_mahalanobis_squared);
   EXPECT_DOUBLE_EQ(loaded.nonholonomic_max_heading_sigma_deg,
                    defaults.nonholonomic_max_heading_sigma_deg);
+  // The one value that is KITTI's rig, not a default for any vehicle: the IMU's mounting.
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_vehicle_pitch_deg, 0.65);
+  EXPECT_DOUBLE_EQ(defaults.nonholonomic_vehicle_pitch_deg, 0.0);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_vehicle_yaw_deg, defaults.nonholonomic_vehicle_yaw_deg);
   EXPECT_DOUBLE_EQ(loaded.initial_velocity_sigma_mps, defaults.initial_velocity_sigma_mps);
   EXPECT_DOUBLE_EQ(loaded.unknown_velocity_sigma_horizontal_mps,
                    defaults.unknown_velocity_sigma_horizontal_mps);
@@ -536,6 +587,7 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("imu_noise:\n  gyro_noise_density: fast\n", "imu_noise.gyro_noise_density");
   expectError("gps:\n  gate_mahalanobis_squared: -3\n", "gps.gate_mahalanobis_squared");
   expectError("filter: middle\n", "filter");
+  expectError("nonholonomic:\n  vehicle_pitch_deg: 90\n", "nonholonomic.vehicle_pitch_deg");
   expectError("gps:\n  max_consecutive_rejected_fixes: 1e30\n",
               "gps.max_consecutive_rejected_fixes");
   expectError("imu: [1, 2]\n", "imu");

@@ -27,10 +27,9 @@ class ImuFilterBase : public NavigationFilter {
   ErrorCovariance fromWorldCovariance(const NavState& state,
                                       const ErrorCovariance& world_covariance) const override;
 
-  // Generic in the left-invariant error (H = [v_b^ I 0 0 0] rows y, z) mapped into this
-  // filter's coordinates through leftFromError().
-  CorrectionResult correctNonholonomic(double lateral_sigma_mps, double vertical_sigma_mps,
-                                       double gate) override;
+  // Generic in the left-invariant error (H = R_iv^T [v_b^ I 0 0 0] rows y, z, with R_iv the
+  // vehicle frame in the IMU's) mapped into this filter's coordinates through leftFromError().
+  CorrectionResult correctNonholonomic(const NonholonomicModel& model, double gate) override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

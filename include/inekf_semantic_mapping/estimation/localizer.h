@@ -92,6 +92,11 @@ struct LocalizerConfig {
   bool nonholonomic = true;
   double nonholonomic_lateral_sigma_mps = 0.5;
   double nonholonomic_vertical_sigma_mps = 1.0;
+  // The direction of travel in the IMU frame (NonholonomicModel::imu_from_vehicle): degrees
+  // above the IMU's x-y plane and from its x axis towards +y. 0, 0: the IMU's x axis is the
+  // car's. config/inekf.yaml holds KITTI's; inekf_offline --smooth reports a drive's own.
+  double nonholonomic_vehicle_pitch_deg = 0.0;
+  double nonholonomic_vehicle_yaw_deg = 0.0;
   double nonholonomic_gate_mahalanobis_squared = 13.8;  // 2 dof: chi2 p = 1e-3
   // The constraint cannot tell forward from backward: with the heading this uncertain (1 sigma
   // about the body z axis) it would as soon turn the car around as converge. Skipped until then.

@@ -77,5 +77,17 @@ TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first = 0, int l
 // Signed yaw error (deg, in (-180, 180]) of frame k: heading of the estimate minus the truth's.
 double yawErrorDeg(const OxtsRunResult& run, int frame);
 
+// The direction of travel in the IMU frame, as the estimated velocity shows it: medians of the
+// body velocity's elevation (towards +z) and azimuth (towards +y) over the states moving forward
+// at min_speed_mps or more (slower, sensor noise and standstill dominate). From a smoothed
+// GPS-aided run it calibrates the land-vehicle constraint's vehicle frame
+// (LocalizerConfig::nonholonomic_vehicle_pitch_deg / _yaw_deg) without any ground truth.
+struct TravelDirection {
+  int samples = 0;  // states used; 0: none fast enough (the angles are then 0)
+  double pitch_deg = 0.0, yaw_deg = 0.0;
+};
+TravelDirection travelDirectionInImu(const std::vector<NavState>& states,
+                                     double min_speed_mps = 3.0);
+
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping
