@@ -99,8 +99,23 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   return config;
 }
 
+namespace {
+
+NonholonomicModel nonholonomicModel(const LocalizerConfig& config) {
+  NonholonomicModel model;
+  model.lateral_sigma_mps = config.nonholonomic_lateral_sigma_mps;
+  model.vertical_sigma_mps = config.nonholonomic_vertical_sigma_mps;
+  model.imu_from_vehicle = vehicleFrameInImu(config.nonholonomic_vehicle_pitch_deg * kDegToRad,
+                                             config.nonholonomic_vehicle_yaw_deg * kDegToRad);
+  return model;
+}
+
+}  // namespace
+
 Localizer::Localizer(LocalizerConfig config)
-    : config_(std::move(config)), filter_(makeFilter(config_.filter_type, config_.imu_noise)) {}
+    : config_(std::move(config)),
+      nonholonomic_model_(nonholonomicModel(config_)),
+      filter_(makeFilter(config_.filter_type, config_.imu_noise)) {}
 
 ErrorCovariance Localizer::initialWorldCovariance() const {
   Eigen::Matrix<double, 15, 1> sigma;
@@ -144,13 +159,8 @@ void Localizer::propagate(const ImuStep& step) {
       ++statistics_.nonholonomic_skipped;
       return;
     }
-    NonholonomicModel model;
-    model.lateral_sigma_mps = config_.nonholonomic_lateral_sigma_mps;
-    model.vertical_sigma_mps = config_.nonholonomic_vertical_sigma_mps;
-    model.imu_from_vehicle = vehicleFrameInImu(config_.nonholonomic_vehicle_pitch_deg * kDegToRad,
-                                               config_.nonholonomic_vehicle_yaw_deg * kDegToRad);
-    const CorrectionResult result =
-        filter_->correctNonholonomic(model, config_.nonholonomic_gate_mahalanobis_squared);
+    const CorrectionResult result = filter_->correctNonholonomic(
+        nonholonomic_model_, config_.nonholonomic_gate_mahalanobis_squared);
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
   }
 }

@@ -206,6 +206,7 @@ class Localizer {
   CorrectionResult applyFix(const PositionFix& fix);
 
   LocalizerConfig config_;
+  NonholonomicModel nonholonomic_model_;  // from config_, built once
   std::unique_ptr<NavigationFilter> filter_;
   bool initialized_ = false;
   std::optional<ImuSample> last_imu_;  // latest sample, also before initialization
