@@ -120,6 +120,8 @@ Matrix6d loopCovariance(const LoopClosureOptions& options) {
 
 Matrix6d inverseSpd(const Matrix6d& m) { return m.llt().solve(Matrix6d::Identity()); }
 
+Matrix6d symmetricPart(const Matrix6d& m) { return 0.5 * (m + m.transpose()); }
+
 }  // namespace
 
 void LoopClosureOptions::read(common::YamlReader* reader) {
@@ -469,7 +471,28 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
 
   // The loop-closed pose covariances (see LoopClosureResult::pose_covariances).
   const auto covariance_start = std::chrono::steady_clock::now();
-  const std::vector<Matrix6d> marginals = graph.marginalCovariances();
+  // At the keyframes: the smoother's information plus the information the accepted loops add to
+  // the graph, (P_s^-1 + Sigma_loops^-1 - Sigma_no_loops^-1)^-1, with the graph's marginals with
+  // and without the loop factors at the same (loop-closed) solution. Not the graph's marginal
+  // itself: the graph counts the fixes twice (in the GPS factors and in the smoother's relative
+  // covariances), and without loops its marginals are about half the smoother's sigma where the
+  // estimate is no better (drive 0018 with oracle loops: position NEES 12 against the OXTS truth;
+  // this way 6, and the smoothed covariance unchanged far from every loop). The loop information
+  // is positive semi-definite (adding factors at the same point can only lower the marginals);
+  // rounding below zero is clipped.
+  const std::vector<Matrix6d> with_loops = graph.marginalCovariances();
+  PoseGraph without_loops = graph;
+  for (int index : loop_factor) without_loops.setRelativeActive(index, false);
+  const std::vector<Matrix6d> no_loops = without_loops.marginalCovariances();
+  std::vector<Matrix6d> marginals(nodes);
+  for (int n = 0; n < nodes; ++n) {
+    const Matrix6d smoothed = run.pose_covariances[result.keyframes[n]];
+    const Matrix6d gain = symmetricPart(inverseSpd(with_loops[n]) - inverseSpd(no_loops[n]));
+    const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(gain);
+    const Matrix6d gained = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+                            eig.eigenvectors().transpose();
+    marginals[n] = symmetricPart(inverseSpd(inverseSpd(smoothed) + gained));
+  }
   // The marginal of keyframe node n carried to frame k: T_k = T_n T_nk, with T_n perturbed as a
   // graph node (p + dp, R Exp(dphi)) and the relative pose T_nk = (R_nk, t_nk) as a relative
   // factor's measurement (t_nk + dt in n's frame, R_nk Exp(dphi')) with the smoother's
@@ -506,8 +529,8 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
     }
     cov = 0.5 * (cov + cov.transpose());
     if (!cov.allFinite()) {
-      throw std::runtime_error("loop closure: the pose covariance of frame " +
-                               std::to_string(k) + " is not finite");
+      throw std::runtime_error("loop closure: the pose covariance of frame " + std::to_string(k) +
+                               " is not finite");
     }
     result.pose_covariances[k] = cov;
   }

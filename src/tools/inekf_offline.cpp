@@ -1,8 +1,9 @@
 // inekf_offline: runs a filter over a KITTI raw oxts/ folder under the evaluation protocol and
 // writes the trajectory (KITTI 12-number poses, TUM), the OXTS truth in the same format, and the
 // per-frame states with the Euclidean pose covariance (for NEES): the filter's, the smoother's
-// (--smooth) or the loop-closed one (--loop-closure), always in the same convention. The OXTS frames go through the
-// same LocalizationSession as inekf_node's messages (start, origin, fix policy).
+// (--smooth) or the loop-closed one (--loop-closure), always in the same convention. The OXTS
+// frames go through the same LocalizationSession as inekf_node's messages (start, origin, fix
+// policy).
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -58,9 +59,10 @@ constexpr char kUsage[] =
     "                    and its covariance, GICP of the two scans, a pose graph over keyframes\n"
     "                    with odometry, GPS and robust loop factors); every --output-* holds\n"
     "                    the loop-closed poses, and the covariance columns the loop-closed\n"
-    "                    covariance (the graph's marginals at its keyframes, carried to the\n"
-    "                    frames between them with the smoother's relative covariance); without\n"
-    "                    an accepted loop the smoothed run, covariance included, stands\n"
+    "                    covariance (at the graph's keyframes the smoother's updated with the\n"
+    "                    information the loops add to the graph, carried to the frames between\n"
+    "                    them with the smoother's relative covariance; see loop_closure.h);\n"
+    "                    without an accepted loop the smoothed run, covariance included, stands\n"
     "  --scans           the scans, DIR/%010d.bin (or .txt) per OXTS frame (default: the\n"
     "                    drive's velodyne_points/data); the IMU-to-lidar calibration is\n"
     "                    calib_imu_to_velo.txt of the date folder (else of the drive folder)\n"

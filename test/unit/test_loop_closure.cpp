@@ -309,8 +309,7 @@ TEST_F(LoopClosureTest, TheLoopClosedCovarianceShrinksInTheOutageAndStaysConsist
   std::printf(
       "[ MEASURED ] outage (%d frames): mean position sigma smoothed %.2f m, loop-closed %.2f m; "
       "mean position NEES (3 dof) smoothed %.2f, loop-closed %.2f; covariance %.3f s\n",
-      count, sigma_smoothed, sigma_closed, nees_smoothed, nees_closed,
-      result.seconds_covariance);
+      count, sigma_smoothed, sigma_closed, nees_smoothed, nees_closed, result.seconds_covariance);
   EXPECT_LT(sigma_closed, 0.5 * sigma_smoothed);
   // At each accepted loop inside the outage the frame itself is better known than before.
   for (const LoopRecord& loop : result.loops) {
@@ -366,8 +365,8 @@ TEST_F(LoopClosureTest, AMissingOrBrokenScanIsAnErrorNamingTheFile) {
 // noise of the loop factor's own sigmas (0.1 m, 0.5 deg per axis). Drive 2011_09_30_0018 drives
 // the same streets again from about 130 s on; the protocol's GPS (1.5 m / 3 m at 1 Hz, seed 1,
 // config/inekf.yaml) with a 40 s outage over the first revisit. The loop-closed covariance must
-// shrink there and stay consistent with the errors against the OXTS truth.
-TEST(LoopClosureRealDrive, OracleLoopsGiveASmallerConsistentCovariance) {
+// shrink there and keep the position NEES against the OXTS truth in its band.
+TEST(LoopClosureRealDrive, OracleLoopsShrinkTheCovarianceWithinTheNeesBand) {
   const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0018_sync";
   ISM_REQUIRE_SHARED(drive);
   const double outage_start_s = 120.0, outage_duration_s = 40.0;
@@ -436,9 +435,9 @@ TEST(LoopClosureRealDrive, OracleLoopsGiveASmallerConsistentCovariance) {
   std::printf(
       "[ MEASURED ] drive 0018, outage %.0f:%.0f s: %zu keyframes, loops %d accepted %d "
       "rejected, ATE %.2f -> %.2f m; covariance %.3f s (graph %.2f s)\n",
-      outage_start_s, outage_duration_s, result.keyframes.size(), result.accepted,
-      result.rejected, compareWithTruth(run).ate_m, compareWithTruth(closed_run).ate_m,
-      result.seconds_covariance, result.seconds_optimization);
+      outage_start_s, outage_duration_s, result.keyframes.size(), result.accepted, result.rejected,
+      compareWithTruth(run).ate_m, compareWithTruth(closed_run).ate_m, result.seconds_covariance,
+      result.seconds_optimization);
   for (const auto& [name, f] : {std::make_pair("outage", outage), std::make_pair("drive", all)}) {
     std::printf(
         "[ MEASURED ]   %s (%d frames): mean position sigma %.2f -> %.2f m, mean position NEES "
@@ -450,9 +449,13 @@ TEST(LoopClosureRealDrive, OracleLoopsGiveASmallerConsistentCovariance) {
   ASSERT_GT(outage.count, 300);
   EXPECT_GE(result.accepted, 10);
   EXPECT_LT(outage.sigma_closed, 0.5 * outage.sigma_smoothed);
-  // The same band as the synthetic drive's (the average of 3 independent 3-dof NEES).
-  EXPECT_GT(outage.nees_closed / outage.count, 2.70 / 3);
-  EXPECT_LT(outage.nees_closed / outage.count, 19.02 / 3);
+  // One outage of one drive is about one sample of a correlated error (the revisit inherits the
+  // first pass's error through the loops): the band of a single 3-dof NEES, chi2(3) at 2.5 % and
+  // 97.5 %. Measured 5.9: still overconfident by about 2 in the variance (the loops' information
+  // comes from a graph that counts the fixes twice); the graph's own marginals (10.7 measured)
+  // or a covariance 100 times off leave the band.
+  EXPECT_GT(outage.nees_closed / outage.count, 0.216);
+  EXPECT_LT(outage.nees_closed / outage.count, 9.348);
 }
 
 TEST(LoopClosureOptions, RejectsBadValuesAndNeedsASmoothedRun) {
