@@ -68,10 +68,15 @@ class Graph {
       : run_(run), options_(options) {}
 
   // Covariance of the relative pose of frame b in frame a (residual order [dp in a's frame,
-  // dphi]) from the smoothed marginals and cross-covariance (a < b).
-  Matrix6d relativeCovariance(int a, int b) const {
-    Matrix15d cross = run_.smoothed_covariances[b];  // Cov(xi_a, xi_b) = G_a..G_b-1 P_b
-    for (int k = b - 1; k >= a; --k) cross = run_.smoother_gains[k] * cross;
+  // dphi]) from the smoothed marginals and cross-covariance, with the odometry floors added
+  // (floored) or not. a > b is allowed (the relative pose backwards in time); a == b gives 0.
+  Matrix6d relativeCovariance(int a, int b, bool floored = true) const {
+    // Cov(xi_a, xi_b) = G_a..G_b-1 P_b for a <= b, its transpose the other way round.
+    Matrix15d cross = run_.smoothed_covariances[std::max(a, b)];
+    for (int k = std::max(a, b) - 1; k >= std::min(a, b); --k) {
+      cross = run_.smoother_gains[k] * cross;
+    }
+    if (a > b) cross.transposeInPlace();
     const Pose3 ta = poseOf(run_.states[a]), tb = poseOf(run_.states[b]);
     const Pose3 relative = ta.inverse() * tb;
     const Matrix6d ad = adjoint(relative.inverse());
@@ -88,6 +93,7 @@ class Graph {
     const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(cov);
     cov = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
           eig.eigenvectors().transpose();
+    if (!floored) return cov;
     const double fm = options_.odometry_floor_sigma_m;
     const double fr = options_.odometry_floor_sigma_deg * kDegToRad;
     cov.diagonal() +=
@@ -113,6 +119,8 @@ Matrix6d loopCovariance(const LoopClosureOptions& options) {
 }
 
 Matrix6d inverseSpd(const Matrix6d& m) { return m.llt().solve(Matrix6d::Identity()); }
+
+Matrix6d symmetricPart(const Matrix6d& m) { return 0.5 * (m + m.transpose()); }
 
 }  // namespace
 
@@ -199,6 +207,7 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
   }
   LoopClosureResult result;
   result.states = run.states;
+  result.pose_covariances = run.pose_covariances;
   const Graph helper(run, options);
   const auto has_scan = [&](int k) { return frame_has_scan.empty() || frame_has_scan[k]; };
 
@@ -459,6 +468,77 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
     out.rotation = rotation;
     out.position_map += dp;
   }
+
+  // The loop-closed pose covariances (see LoopClosureResult::pose_covariances).
+  const auto covariance_start = std::chrono::steady_clock::now();
+  // At the keyframes: the smoother's information plus the information the accepted loops add to
+  // the graph, (P_s^-1 + Sigma_loops^-1 - Sigma_no_loops^-1)^-1, with the graph's marginals with
+  // and without the loop factors at the same (loop-closed) solution. Not the graph's marginal
+  // itself: the graph counts the fixes twice (in the GPS factors and in the smoother's relative
+  // covariances), and without loops its marginals are about half the smoother's sigma where the
+  // estimate is no better (drive 0018 with oracle loops: position NEES 12 against the OXTS truth;
+  // this way 6, and the smoothed covariance unchanged far from every loop). The loop information
+  // is positive semi-definite (adding factors at the same point can only lower the marginals);
+  // rounding below zero is clipped.
+  const std::vector<Matrix6d> with_loops = graph.marginalCovariances();
+  PoseGraph without_loops = graph;
+  for (int index : loop_factor) without_loops.setRelativeActive(index, false);
+  const std::vector<Matrix6d> no_loops = without_loops.marginalCovariances();
+  std::vector<Matrix6d> marginals(nodes);
+  for (int n = 0; n < nodes; ++n) {
+    const Matrix6d smoothed = run.pose_covariances[result.keyframes[n]];
+    const Matrix6d gain = symmetricPart(inverseSpd(with_loops[n]) - inverseSpd(no_loops[n]));
+    const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(gain);
+    const Matrix6d gained = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+                            eig.eigenvectors().transpose();
+    marginals[n] = symmetricPart(inverseSpd(inverseSpd(smoothed) + gained));
+  }
+  // The marginal of keyframe node n carried to frame k: T_k = T_n T_nk, with T_n perturbed as a
+  // graph node (p + dp, R Exp(dphi)) and the relative pose T_nk = (R_nk, t_nk) as a relative
+  // factor's measurement (t_nk + dt in n's frame, R_nk Exp(dphi')) with the smoother's
+  // covariance of [dt, dphi'], the two independent. To first order:
+  // dp_k = dp - R_n [t_nk]x dphi + R_n dt, dphi_k = R_nk^T dphi + dphi'.
+  const auto carried = [&](int n, int k) -> Matrix6d {
+    const int keyframe = result.keyframes[n];
+    if (k == keyframe) return marginals[n];
+    const Pose3 from = graph.node(n);
+    const Pose3 relative = from.inverse() * poseOf(result.states[k]);
+    Matrix6d j_node = Matrix6d::Identity();
+    j_node.block<3, 3>(0, 3) = -from.rotation * lie::hat(relative.position);
+    j_node.block<3, 3>(3, 3) = relative.rotation.transpose();
+    Matrix6d j_relative = Matrix6d::Identity();
+    j_relative.block<3, 3>(0, 0) = from.rotation;
+    return j_node * marginals[n] * j_node.transpose() +
+           j_relative * helper.relativeCovariance(keyframe, k, false) * j_relative.transpose();
+  };
+  next = 0;
+  for (int k = run.first_estimated_frame; k < frames; ++k) {
+    while (next < nodes && result.keyframes[next] < k) ++next;
+    Matrix6d cov;
+    if (next == 0) {
+      cov = carried(0, k);
+    } else if (next == nodes) {
+      cov = carried(nodes - 1, k);
+    } else {
+      const double t0 = run.states[result.keyframes[next - 1]].stamp_s;
+      const double t1 = run.states[result.keyframes[next]].stamp_s;
+      const double alpha =
+          t1 > t0 ? std::clamp((run.states[k].stamp_s - t0) / (t1 - t0), 0.0, 1.0) : 1.0;
+      cov = alpha >= 1.0 ? carried(next, k)
+                         : (1.0 - alpha) * carried(next - 1, k) + alpha * carried(next, k);
+    }
+    cov = 0.5 * (cov + cov.transpose());
+    if (!cov.allFinite()) {
+      throw std::runtime_error("loop closure: the pose covariance of frame " + std::to_string(k) +
+                               " is not finite");
+    }
+    result.pose_covariances[k] = cov;
+  }
+  // Frames before the filter's start repeat its first estimate (OxtsRunResult), covariance too.
+  for (int k = 0; k < std::min(run.first_estimated_frame, frames); ++k) {
+    result.pose_covariances[k] = result.pose_covariances[run.first_estimated_frame];
+  }
+  result.seconds_covariance = seconds(covariance_start);
   return result;
 }
 

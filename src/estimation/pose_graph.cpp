@@ -2,6 +2,7 @@
 
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -230,6 +231,137 @@ PoseGraphSummary PoseGraph::optimize(const PoseGraphOptions& options) {
   return summary;
 }
 
+void PoseGraph::normalEquations(double kernel_multiplier, Eigen::SparseMatrix<double>* hessian,
+                                Eigen::VectorXd* gradient_out) const {
+  const int n = numNodes();
+  // Normal equations H dx = -g of the (reweighted) linearization at the current poses.
+  Triplets triplets;
+  triplets.reserve(static_cast<std::size_t>(relatives_.size()) * 144 + 36 * n);
+  Eigen::VectorXd gradient = Eigen::VectorXd::Zero(6 * n);
+  for (const RelativePoseFactor& f : relatives_) {
+    if (!f.active) continue;
+    Matrix6d ja, jb;
+    const Vector6d r = relativeResidual(nodes_[f.from], nodes_[f.to], f.measurement, &ja, &jb);
+    const double w =
+        robustWeight(f.kernel, kernel_multiplier * f.kernel_scale, r.dot(f.information * r));
+    const Matrix6d wi = w * f.information;
+    addBlock(&triplets, f.from, f.from, ja.transpose() * wi * ja);
+    addBlock(&triplets, f.to, f.to, jb.transpose() * wi * jb);
+    addBlock(&triplets, f.from, f.to, ja.transpose() * wi * jb);
+    addBlock(&triplets, f.to, f.from, jb.transpose() * wi * ja);
+    gradient.segment<6>(6 * f.from) += ja.transpose() * wi * r;
+    gradient.segment<6>(6 * f.to) += jb.transpose() * wi * r;
+  }
+  for (const PositionFactor& f : positions_) {
+    Matrix6d block = Matrix6d::Zero();
+    block.topLeftCorner<3, 3>() = f.information;
+    addBlock(&triplets, f.node, f.node, block);
+    gradient.segment<3>(6 * f.node) += f.information * (nodes_[f.node].position - f.position);
+  }
+  for (const PosePriorFactor& f : priors_) {
+    Vector6d r;
+    r.head<3>() = nodes_[f.node].position - f.pose.position;
+    r.tail<3>() = lie::logSO3(f.pose.rotation.transpose() * nodes_[f.node].rotation);
+    Matrix6d j = Matrix6d::Identity();
+    j.bottomRightCorner<3, 3>() = lie::rightJacobianInverseSO3(r.tail<3>());
+    addBlock(&triplets, f.node, f.node, j.transpose() * f.information * j);
+    gradient.segment<6>(6 * f.node) += j.transpose() * f.information * r;
+  }
+  for (int i = 0; i < n; ++i) addBlock(&triplets, i, i, Matrix6d::Zero());  // every diagonal
+  hessian->resize(6 * n, 6 * n);
+  hessian->setFromTriplets(triplets.begin(), triplets.end());
+  if (gradient_out) *gradient_out = std::move(gradient);
+}
+
+std::vector<Matrix6d> PoseGraph::marginalCovariances(const std::vector<int>& nodes) const {
+  std::vector<int> wanted = nodes;
+  if (wanted.empty()) {
+    for (int i = 0; i < numNodes(); ++i) wanted.push_back(i);
+  }
+  for (int node : wanted) checkNode(node, numNodes(), "a marginal covariance request");
+  if (wanted.empty()) return {};
+
+  // The Hessian at the current poses with the kernels at their configured scales (the IRLS
+  // weights of the solution optimize() converged to).
+  Eigen::SparseMatrix<double> hessian;
+  normalEquations(1.0, &hessian, nullptr);
+  const int size = static_cast<int>(hessian.rows());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(hessian);
+  // P H P^T = L D L^T. Eigen only reports an exactly zero pivot; a pivot that is not clearly
+  // positive against the diagonal it came from is a direction the factors do not observe (the
+  // inverse would be rounding noise, or negative).
+  const auto fail = [](const std::string& why) {
+    return std::runtime_error(
+        "PoseGraph: the Hessian cannot be factored for the marginal covariances (" + why +
+        "; is the graph anchored, is every direction of every node observed?)");
+  };
+  if (solver.info() != Eigen::Success) throw fail("zero pivot");
+  const Eigen::VectorXd d = solver.vectorD();
+  const auto& indices = solver.permutationP().indices();
+  Eigen::VectorXd permuted_diagonal(size);
+  for (int i = 0; i < size; ++i) permuted_diagonal(indices(i)) = hessian.coeff(i, i);
+  constexpr double kRelativePivot = 1e-12;
+  for (int i = 0; i < size; ++i) {
+    if (!std::isfinite(d(i)) || !(d(i) > kRelativePivot * permuted_diagonal(i))) {
+      throw fail("pivot " + std::to_string(d(i)) + " for a diagonal of " +
+                 std::to_string(permuted_diagonal(i)));
+    }
+  }
+
+  // Takahashi's recursion for Z = (L D L^T)^-1 on the pattern of L (the strictly lower part as
+  // stored by Eigen, each column's rows ascending), columns from the last to the first:
+  //   Z(j, i) = -sum_{k in S_i} L(k, i) Z(k, j)  for j in S_i,
+  //   Z(i, i) = 1 / d_i - sum_{k in S_i} L(k, i) Z(k, i),
+  // with S_i the rows of column i below the diagonal. S_i is a clique of the filled graph, so
+  // every Z(k, j) needed is on the pattern and already computed. Cost: sum |S_i|^2 log |S_i|.
+  const auto& l = solver.matrixL().nestedExpression();
+  const int* outer = l.outerIndexPtr();
+  const int* rows = l.innerIndexPtr();
+  const double* values = l.valuePtr();
+  std::vector<double> z_lower(static_cast<std::size_t>(outer[size]), 0.0);
+  std::vector<double> z_diagonal(size, 0.0);
+  const auto z = [&](int r, int c) -> double {
+    if (r == c) return z_diagonal[r];
+    if (r < c) std::swap(r, c);
+    const int* begin = rows + outer[c];
+    const int* end = rows + outer[c + 1];
+    const int* found = std::lower_bound(begin, end, r);
+    if (found == end || *found != r) {
+      throw std::logic_error("PoseGraph: the selected inverse left its pattern");
+    }
+    return z_lower[found - rows];
+  };
+  for (int i = size - 1; i >= 0; --i) {
+    const int begin = outer[i], end = outer[i + 1];
+    double diagonal = 1.0 / d(i);
+    for (int p = begin; p < end; ++p) {
+      const int j = rows[p];
+      double sum = 0.0;
+      for (int q = begin; q < end; ++q) sum += values[q] * z(rows[q], j);
+      z_lower[p] = -sum;
+      diagonal -= values[p] * z_lower[p];
+    }
+    z_diagonal[i] = diagonal;
+  }
+
+  // H^-1 (a, b) = Z(P a, P b).
+  std::vector<Matrix6d> marginals;
+  marginals.reserve(wanted.size());
+  for (int node : wanted) {
+    Matrix6d block;
+    for (int r = 0; r < 6; ++r) {
+      for (int c = 0; c <= r; ++c) {
+        block(r, c) = block(c, r) = z(indices(6 * node + r), indices(6 * node + c));
+      }
+    }
+    if (!block.allFinite() || !(block.diagonal().minCoeff() > 0.0)) {
+      throw fail("a marginal covariance is not finite and positive");
+    }
+    marginals.push_back(block);
+  }
+  return marginals;
+}
+
 PoseGraphSummary PoseGraph::solve(const PoseGraphOptions& options, double kernel_multiplier) {
   PoseGraphSummary summary;
   const int n = numNodes();
@@ -239,42 +371,9 @@ PoseGraphSummary PoseGraph::solve(const PoseGraphOptions& options, double kernel
   double current = cost(nodes_, kernel_multiplier);
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     summary.iterations = iteration + 1;
-    // Normal equations H dx = -g of the (reweighted) linearization at the current poses.
-    Triplets triplets;
-    triplets.reserve(static_cast<std::size_t>(relatives_.size()) * 144 + 36 * n);
-    Eigen::VectorXd gradient = Eigen::VectorXd::Zero(6 * n);
-    for (const RelativePoseFactor& f : relatives_) {
-      if (!f.active) continue;
-      Matrix6d ja, jb;
-      const Vector6d r = relativeResidual(nodes_[f.from], nodes_[f.to], f.measurement, &ja, &jb);
-      const double w =
-          robustWeight(f.kernel, kernel_multiplier * f.kernel_scale, r.dot(f.information * r));
-      const Matrix6d wi = w * f.information;
-      addBlock(&triplets, f.from, f.from, ja.transpose() * wi * ja);
-      addBlock(&triplets, f.to, f.to, jb.transpose() * wi * jb);
-      addBlock(&triplets, f.from, f.to, ja.transpose() * wi * jb);
-      addBlock(&triplets, f.to, f.from, jb.transpose() * wi * ja);
-      gradient.segment<6>(6 * f.from) += ja.transpose() * wi * r;
-      gradient.segment<6>(6 * f.to) += jb.transpose() * wi * r;
-    }
-    for (const PositionFactor& f : positions_) {
-      Matrix6d block = Matrix6d::Zero();
-      block.topLeftCorner<3, 3>() = f.information;
-      addBlock(&triplets, f.node, f.node, block);
-      gradient.segment<3>(6 * f.node) += f.information * (nodes_[f.node].position - f.position);
-    }
-    for (const PosePriorFactor& f : priors_) {
-      Vector6d r;
-      r.head<3>() = nodes_[f.node].position - f.pose.position;
-      r.tail<3>() = lie::logSO3(f.pose.rotation.transpose() * nodes_[f.node].rotation);
-      Matrix6d j = Matrix6d::Identity();
-      j.bottomRightCorner<3, 3>() = lie::rightJacobianInverseSO3(r.tail<3>());
-      addBlock(&triplets, f.node, f.node, j.transpose() * f.information * j);
-      gradient.segment<6>(6 * f.node) += j.transpose() * f.information * r;
-    }
-    for (int i = 0; i < n; ++i) addBlock(&triplets, i, i, Matrix6d::Zero());  // every diagonal
-    Eigen::SparseMatrix<double> hessian(6 * n, 6 * n);
-    hessian.setFromTriplets(triplets.begin(), triplets.end());
+    Eigen::SparseMatrix<double> hessian;
+    Eigen::VectorXd gradient;
+    normalEquations(kernel_multiplier, &hessian, &gradient);
     const Eigen::VectorXd diagonal = hessian.diagonal().cwiseMax(1e-9);
     if (!pattern_known) {  // the pattern stays: the same factors, all blocks stored
       solver.analyzePattern(hessian);

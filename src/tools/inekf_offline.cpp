@@ -1,7 +1,9 @@
 // inekf_offline: runs a filter over a KITTI raw oxts/ folder under the evaluation protocol and
 // writes the trajectory (KITTI 12-number poses, TUM), the OXTS truth in the same format, and the
-// per-frame states with the Euclidean pose covariance (for NEES). The OXTS frames go through the
-// same LocalizationSession as inekf_node's messages (start, origin, fix policy).
+// per-frame states with the Euclidean pose covariance (for NEES): the filter's, the smoother's
+// (--smooth) or the loop-closed one (--loop-closure), always in the same convention. The OXTS
+// frames go through the same LocalizationSession as inekf_node's messages (start, origin, fix
+// policy).
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -46,6 +48,8 @@ constexpr char kUsage[] =
     "  --output-tum      'stamp_s x y z qx qy qz qw' per frame\n"
     "  --output-truth    the OXTS truth poses, same format as --output-kitti\n"
     "  --output-states   CSV: stamp, position, quaternion, velocity, biases, 6x6 pose covariance\n"
+    "                    c00..c55 (row-major): [position error in the map frame (m), rotation\n"
+    "                    error as a body-frame small angle, R_true = R Exp(d) (rad)]\n"
     "  --config          YAML as config/inekf.yaml (default: built-in defaults)\n"
     "  --filter          overrides the config's filter\n"
     "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n"
@@ -54,7 +58,11 @@ constexpr char kUsage[] =
     "  --loop-closure    after --smooth: lidar loop closures (revisits by the smoothed estimate\n"
     "                    and its covariance, GICP of the two scans, a pose graph over keyframes\n"
     "                    with odometry, GPS and robust loop factors); every --output-* holds\n"
-    "                    the loop-closed poses (the covariance columns stay the smoother's)\n"
+    "                    the loop-closed poses, and the covariance columns the loop-closed\n"
+    "                    covariance (at the graph's keyframes the smoother's updated with the\n"
+    "                    information the loops add to the graph, carried to the frames between\n"
+    "                    them with the smoother's relative covariance; see loop_closure.h);\n"
+    "                    without an accepted loop the smoothed run, covariance included, stands\n"
     "  --scans           the scans, DIR/%010d.bin (or .txt) per OXTS frame (default: the\n"
     "                    drive's velodyne_points/data); the IMU-to-lidar calibration is\n"
     "                    calib_imu_to_velo.txt of the date folder (else of the drive folder)\n"
@@ -208,6 +216,7 @@ int main(int argc, char** argv) {
           [&scan_paths](int frame) { return scan_paths.at(frame); }, icp_options);
       loops = estimation::closeLoops(run, {}, T_imu_velo, matcher, loop_options);
       run.states = loops.states;
+      run.pose_covariances = loops.pose_covariances;  // what --output-states writes
       for (const estimation::LoopRecord& loop : loops.loops) {
         std::printf(
             "inekf_offline: loop %d -> %d (%.1f s apart, %.2f m +- %.2f): %s, fitness "
@@ -286,11 +295,11 @@ int main(int argc, char** argv) {
     if (loop_closure) {
       std::printf(
           "inekf_offline: loop closure: %zu keyframes, %d GPS factors, %zu candidates, %d "
-          "accepted, %d rejected; registration %.2f s, graph %.2f s (%d iterations); ATE %.3f m "
-          "-> %.3f m (smoothed -> loop-closed)\n",
+          "accepted, %d rejected; registration %.2f s, graph %.2f s (%d iterations), covariance "
+          "%.3f s; ATE %.3f m -> %.3f m (smoothed -> loop-closed)\n",
           loops.keyframes.size(), loops.gps_factors, loops.loops.size(), loops.accepted,
           loops.rejected, loops.seconds_registration, loops.seconds_optimization,
-          loops.summary.iterations, smoothed_errors.ate_m, errors.ate_m);
+          loops.summary.iterations, loops.seconds_covariance, smoothed_errors.ate_m, errors.ate_m);
     }
     if (run.smoothed && options.config.localizer.nonholonomic) {
       // The smoothed velocity is GPS-aided and the constraint's vertical sigma loose, so its

@@ -5,8 +5,12 @@
 // worst position error of the outage against the smoother alone; a false loop (a registration
 // that claims a wrong pose) must be rejected, by the gate against the estimate and, with the
 // gate off, by the robust kernel and the residual check; a missing scan is an error naming it.
+// The loop-closed pose covariance shrinks in the outage and stays consistent with the errors
+// (position NEES), here and on a real KITTI drive with loops from the truth (an oracle
+// registration: the shared drives have no lidar where they revisit a place).
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -14,6 +18,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -256,6 +261,71 @@ TEST_F(LoopClosureTest, AFalseLoopIsRejected) {
   EXPECT_LT(robust_error, honest_error + 0.3);
 }
 
+// The loop-closed pose covariance (LoopClosureResult::pose_covariances): symmetric positive
+// semi-definite and finite on every frame; inside the outage, where the smoother's grows with
+// the dead reckoning, the loops shrink it; and it stays consistent with the loop-closed errors
+// against the truth: the 3-dof position NEES averaged over the outage's frames within the
+// chi-square band (see kNeesBand).
+TEST_F(LoopClosureTest, TheLoopClosedCovarianceShrinksInTheOutageAndStaysConsistent) {
+  const LoopClosureResult result =
+      closeLoops(run(), {}, g_drive->T_imu_velo, matcher(), testOptions());
+  ASSERT_GE(result.accepted, 10);
+  ASSERT_EQ(result.pose_covariances.size(), run().states.size());
+  for (std::size_t k = 0; k < result.pose_covariances.size(); ++k) {
+    const PoseCovariance& p = result.pose_covariances[k];
+    ASSERT_TRUE(p.allFinite()) << k;
+    ASSERT_LE((p - p.transpose()).norm(), 1e-12 * p.norm()) << k;
+    ASSERT_GE(Eigen::SelfAdjointEigenSolver<PoseCovariance>(p).eigenvalues().minCoeff(),
+              -1e-12 * p.norm())
+        << k;
+  }
+  const double t0 = g_drive->frames.front().stampSeconds();
+  const auto in_outage = [&](std::size_t k) {
+    const double t = g_drive->frames[k].stampSeconds() - t0;
+    return t >= kOutageStartS && t <= kOutageStartS + kOutageDurationS;
+  };
+  const auto position_sigma = [](const PoseCovariance& p) {
+    return std::sqrt(p.topLeftCorner<3, 3>().trace());
+  };
+  const auto position_nees = [&](const NavState& s, const PoseCovariance& p, std::size_t k) {
+    const Eigen::Vector3d e = run().truth[k].translation() - s.position_map;
+    return e.dot(p.topLeftCorner<3, 3>().ldlt().solve(e));
+  };
+  double sigma_smoothed = 0.0, sigma_closed = 0.0, nees_smoothed = 0.0, nees_closed = 0.0;
+  int count = 0;
+  for (std::size_t k = 0; k < run().states.size(); ++k) {
+    if (!in_outage(k)) continue;
+    sigma_smoothed += position_sigma(run().pose_covariances[k]);
+    sigma_closed += position_sigma(result.pose_covariances[k]);
+    nees_smoothed += position_nees(run().states[k], run().pose_covariances[k], k);
+    nees_closed += position_nees(result.states[k], result.pose_covariances[k], k);
+    ++count;
+  }
+  ASSERT_GT(count, 100);
+  sigma_smoothed /= count;
+  sigma_closed /= count;
+  nees_smoothed /= count;
+  nees_closed /= count;
+  std::printf(
+      "[ MEASURED ] outage (%d frames): mean position sigma smoothed %.2f m, loop-closed %.2f m; "
+      "mean position NEES (3 dof) smoothed %.2f, loop-closed %.2f; covariance %.3f s\n",
+      count, sigma_smoothed, sigma_closed, nees_smoothed, nees_closed, result.seconds_covariance);
+  EXPECT_LT(sigma_closed, 0.5 * sigma_smoothed);
+  // At each accepted loop inside the outage the frame itself is better known than before.
+  for (const LoopRecord& loop : result.loops) {
+    if (!loop.accepted || !in_outage(loop.query_frame)) continue;
+    EXPECT_LT(position_sigma(result.pose_covariances[loop.query_frame]),
+              position_sigma(run().pose_covariances[loop.query_frame]))
+        << "loop at frame " << loop.query_frame;
+  }
+  // The frames of one drive are not independent samples (the errors are correlated over seconds,
+  // through the dead reckoning and the graph): the band is that of the average of 3 independent
+  // 3-dof NEES, chi2(9) / 3 at 2.5 % and 97.5 % (the band of a single sample would be wider,
+  // 0.22 .. 9.35). A covariance 100 times too large or too small leaves it.
+  EXPECT_GT(nees_closed, 2.70 / 3);
+  EXPECT_LT(nees_closed, 19.02 / 3);
+}
+
 // No revisit (the time gap longer than the drive): nothing to close, the smoothed run stands.
 TEST_F(LoopClosureTest, WithoutLoopsTheSmoothedRunStands) {
   LoopClosureOptions options = testOptions();
@@ -263,8 +333,10 @@ TEST_F(LoopClosureTest, WithoutLoopsTheSmoothedRunStands) {
   const LoopClosureResult result = closeLoops(run(), {}, g_drive->T_imu_velo, matcher(), options);
   EXPECT_TRUE(result.loops.empty());
   ASSERT_EQ(result.states.size(), run().states.size());
+  ASSERT_EQ(result.pose_covariances.size(), run().pose_covariances.size());
   for (std::size_t k = 0; k < result.states.size(); ++k) {
     ASSERT_EQ(result.states[k].position_map, run().states[k].position_map) << k;
+    ASSERT_EQ(result.pose_covariances[k], run().pose_covariances[k]) << k;
   }
 }
 
@@ -286,6 +358,104 @@ TEST_F(LoopClosureTest, AMissingOrBrokenScanIsAnErrorNamingTheFile) {
           << error.what();
     }
   }
+}
+
+// Real IMU and GPS with loops from the truth: the shared KITTI drives have no lidar where they
+// revisit a place, so the registration is an oracle giving the OXTS truth's relative pose with
+// noise of the loop factor's own sigmas (0.1 m, 0.5 deg per axis). Drive 2011_09_30_0018 drives
+// the same streets again from about 130 s on; the protocol's GPS (1.5 m / 3 m at 1 Hz, seed 1,
+// config/inekf.yaml) with a 40 s outage over the first revisit. The loop-closed covariance must
+// shrink there and keep the position NEES against the OXTS truth in its band.
+TEST(LoopClosureRealDrive, OracleLoopsShrinkTheCovarianceWithinTheNeesBand) {
+  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0018_sync";
+  ISM_REQUIRE_SHARED(drive);
+  const double outage_start_s = 120.0, outage_duration_s = 40.0;
+  const std::vector<kitti::OxtsFrame> frames =
+      kitti::readOxtsFolder(test::sharedPath(drive + "/oxts"));
+  OxtsRunOptions options;
+  options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
+  options.gps.sigma_horizontal_m = 1.5;
+  options.gps.sigma_vertical_m = 3.0;
+  options.gps.every_n_frames = 10;
+  options.gps.seed = 1;
+  options.gps.outages_s.push_back({outage_start_s, outage_duration_s});
+  options.smooth = true;
+  const OxtsRunResult run = runLocalizerOnOxts(frames, options);
+
+  // The oracle works in the IMU frame: no lidar calibration (the date folder has none).
+  const Eigen::Isometry3d T_imu_velo = Eigen::Isometry3d::Identity();
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const LoopClosureOptions loop_options;
+  const ScanRegistration oracle = [&](int target, int source, const Eigen::Isometry3d&) {
+    Eigen::Isometry3d perturbation = Eigen::Isometry3d::Identity();
+    const double sr = loop_options.loop_sigma_deg * M_PI / 180, sm = loop_options.loop_sigma_m;
+    perturbation.linear() =
+        lie::expSO3(Eigen::Vector3d(sr * noise(rng), sr * noise(rng), sr * noise(rng)));
+    perturbation.translation() = Eigen::Vector3d(sm * noise(rng), sm * noise(rng), sm * noise(rng));
+    ScanRegistrationResult result;
+    result.converged = true;
+    result.fitness_m2 = 0.05;
+    result.target_from_source = run.truth[target].inverse() * run.truth[source] * perturbation;
+    return result;
+  };
+  const LoopClosureResult result = closeLoops(run, {}, T_imu_velo, oracle, loop_options);
+
+  const double t0 = frames.front().stampSeconds();
+  struct Figures {
+    double sigma_smoothed = 0, sigma_closed = 0, nees_smoothed = 0, nees_closed = 0;
+    int inside_band = 0, count = 0;
+  };
+  Figures outage, all;
+  for (std::size_t k = static_cast<std::size_t>(run.first_estimated_frame); k < frames.size();
+       ++k) {
+    const double t = frames[k].stampSeconds() - t0;
+    const auto sigma = [](const PoseCovariance& p) {
+      return std::sqrt(p.topLeftCorner<3, 3>().trace());
+    };
+    const auto nees = [&](const NavState& s, const PoseCovariance& p) {
+      const Eigen::Vector3d e = run.truth[k].translation() - s.position_map;
+      return e.dot(p.topLeftCorner<3, 3>().ldlt().solve(e));
+    };
+    const double closed = nees(result.states[k], result.pose_covariances[k]);
+    for (Figures* f : {&all, &outage}) {
+      if (f == &outage && (t < outage_start_s || t >= outage_start_s + outage_duration_s)) {
+        continue;
+      }
+      f->sigma_smoothed += sigma(run.pose_covariances[k]);
+      f->sigma_closed += sigma(result.pose_covariances[k]);
+      f->nees_smoothed += nees(run.states[k], run.pose_covariances[k]);
+      f->nees_closed += closed;
+      f->inside_band += closed >= 0.216 && closed <= 9.348;  // chi2(3) 2.5 % .. 97.5 %
+      ++f->count;
+    }
+  }
+  OxtsRunResult closed_run = run;
+  closed_run.states = result.states;
+  std::printf(
+      "[ MEASURED ] drive 0018, outage %.0f:%.0f s: %zu keyframes, loops %d accepted %d "
+      "rejected, ATE %.2f -> %.2f m; covariance %.3f s (graph %.2f s)\n",
+      outage_start_s, outage_duration_s, result.keyframes.size(), result.accepted, result.rejected,
+      compareWithTruth(run).ate_m, compareWithTruth(closed_run).ate_m, result.seconds_covariance,
+      result.seconds_optimization);
+  for (const auto& [name, f] : {std::make_pair("outage", outage), std::make_pair("drive", all)}) {
+    std::printf(
+        "[ MEASURED ]   %s (%d frames): mean position sigma %.2f -> %.2f m, mean position NEES "
+        "%.2f -> %.2f (smoothed -> loop-closed), loop-closed NEES inside the 95 %% band in %.0f "
+        "%% of the frames\n",
+        name, f.count, f.sigma_smoothed / f.count, f.sigma_closed / f.count,
+        f.nees_smoothed / f.count, f.nees_closed / f.count, 100.0 * f.inside_band / f.count);
+  }
+  ASSERT_GT(outage.count, 300);
+  EXPECT_GE(result.accepted, 10);
+  EXPECT_LT(outage.sigma_closed, 0.5 * outage.sigma_smoothed);
+  // One outage of one drive is about one sample of a correlated error (the revisit inherits the
+  // first pass's error through the loops): the band of a single 3-dof NEES, chi2(3) at 2.5 % and
+  // 97.5 %. Measured 5.9: still overconfident by about 2 in the variance (the loops' information
+  // comes from a graph that counts the fixes twice); the graph's own marginals (10.7 measured)
+  // or a covariance 100 times off leave the band.
+  EXPECT_GT(outage.nees_closed / outage.count, 0.216);
+  EXPECT_LT(outage.nees_closed / outage.count, 9.348);
 }
 
 TEST(LoopClosureOptions, RejectsBadValuesAndNeedsASmoothedRun) {

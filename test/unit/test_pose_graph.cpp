@@ -1,10 +1,15 @@
 // The SE(3) pose graph of the loop closure: the relative residual's Jacobians against central
 // differences, an exact graph stays put, a loop pulls a drifted chain back onto the truth, and a
 // false loop is defeated by the Cauchy kernel (and shows a large residual) where without a
-// kernel it bends the chain.
+// kernel it bends the chain; the marginal covariances equal the dense inverse of the Hessian
+// (built here from numerical Jacobians) and grow linearly along an anchored random-walk chain.
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <chrono>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -172,6 +177,211 @@ TEST(PoseGraph, RejectsBadFactorsAndKernelNames) {
   EXPECT_THROW(graph.addRelative(f), std::invalid_argument);
   EXPECT_THROW(robustKernelFromString("tukey"), std::invalid_argument);
   EXPECT_EQ(robustKernelFromString("huber"), RobustKernel::kHuber);
+}
+
+Matrix6d diagonalInformation(double sigma_m, double sigma_rad) {
+  const double m = 1 / (sigma_m * sigma_m), r = 1 / (sigma_rad * sigma_rad);
+  return (Vector6d() << m, m, m, r, r, r).finished().asDiagonal();
+}
+
+// The Gauss-Newton Hessian J^T W J of a graph at its poses, built independently of PoseGraph's
+// own: each factor's whitened residual (IRLS weight held at its value at the poses) is
+// differentiated numerically along every node's retraction.
+struct DenseFactor {
+  std::vector<int> nodes;
+  std::function<Eigen::VectorXd(const std::vector<Pose3>&)> whitened;
+};
+
+Eigen::MatrixXd numericalHessian(const std::vector<Pose3>& poses,
+                                 const std::vector<DenseFactor>& factors) {
+  const int n = static_cast<int>(poses.size());
+  Eigen::MatrixXd h = Eigen::MatrixXd::Zero(6 * n, 6 * n);
+  const double step = 1e-6;
+  for (const DenseFactor& factor : factors) {
+    const int m = static_cast<int>(factor.whitened(poses).size());
+    Eigen::MatrixXd j = Eigen::MatrixXd::Zero(m, 6 * n);
+    for (int node : factor.nodes) {
+      for (int i = 0; i < 6; ++i) {
+        Vector6d d = Vector6d::Zero();
+        d(i) = step;
+        std::vector<Pose3> plus = poses, minus = poses;
+        plus[node] = PoseGraph::retract(poses[node], d);
+        minus[node] = PoseGraph::retract(poses[node], -d);
+        j.col(6 * node + i) = (factor.whitened(plus) - factor.whitened(minus)) / (2 * step);
+      }
+    }
+    h += j.transpose() * j;
+  }
+  return h;
+}
+
+// Five poses around a bend: odometry, GPS on three, a weak prior on the first, a Cauchy loop
+// from the last to the first that disagrees with the odometry (so its IRLS weight at the
+// solution is well below 1) and a wildly wrong loop switched off.
+TEST(PoseGraphMarginals, EqualTheDenseInverseOfTheHessian) {
+  std::vector<Pose3> truth;
+  for (int k = 0; k < 5; ++k) {
+    truth.push_back(makePose({0.02 * k, -0.01 * k, 0.4 * k}, {3.0 * k, 1.0 * k * k, 0.1 * k}));
+  }
+  PoseGraph graph;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const auto jitter = [&](const Pose3& pose, double m, double r) {
+    return PoseGraph::retract(pose, (Vector6d() << m * noise(rng), m * noise(rng), m * noise(rng),
+                                     r * noise(rng), r * noise(rng), r * noise(rng))
+                                        .finished());
+  };
+  for (const Pose3& pose : truth) graph.addNode(jitter(pose, 0.5, 0.05));
+  std::vector<DenseFactor> dense;
+  const auto whiten = [](const Eigen::MatrixXd& information) {
+    return Eigen::MatrixXd(Eigen::LLT<Eigen::MatrixXd>(information).matrixU());
+  };
+  for (int k = 0; k + 1 < 5; ++k) {
+    RelativePoseFactor f;
+    f.from = k;
+    f.to = k + 1;
+    f.measurement = jitter(truth[k].inverse() * truth[k + 1], 0.05, 0.01);
+    f.information = diagonalInformation(0.05, 0.01);
+    f.information(0, 4) = f.information(4, 0) = 50.0;  // a correlated one
+    graph.addRelative(f);
+  }
+  RelativePoseFactor loop;
+  loop.from = 4;
+  loop.to = 0;
+  loop.measurement = truth[4].inverse() * truth[0] * makePose({0, 0, 0.02}, {0.3, -0.2, 0});
+  loop.information = diagonalInformation(0.1, 0.01);
+  loop.kernel = RobustKernel::kCauchy;
+  loop.kernel_scale = 1.0;
+  const int loop_index = graph.addRelative(loop);
+  RelativePoseFactor wrong = loop;
+  wrong.from = 1;
+  wrong.to = 3;
+  wrong.measurement = makePose({0, 0, 1.0}, {10, 0, 0});
+  const int wrong_index = graph.addRelative(wrong);
+  graph.setRelativeActive(wrong_index, false);
+  for (int k : {0, 2, 3}) {
+    PositionFactor f;
+    f.node = k;
+    f.position = truth[k].position + Eigen::Vector3d(0.2, -0.1, 0.3);
+    f.information = Eigen::Vector3d(1.0, 2.0, 0.25).asDiagonal();
+    graph.addPosition(f);
+  }
+  PosePriorFactor prior;
+  prior.node = 0;
+  prior.pose = jitter(truth[0], 1.0, 0.1);
+  prior.information = diagonalInformation(3.0, 0.2);
+  graph.addPrior(prior);
+  graph.optimize();
+
+  for (int index = 0; index < graph.numRelatives(); ++index) {
+    const RelativePoseFactor& f = graph.relative(index);
+    if (!f.active) continue;
+    const double weight = robustWeight(f.kernel, f.kernel_scale, graph.relativeChi2(index));
+    if (index == loop_index) {
+      std::printf("[ MEASURED ] the loop's IRLS weight at the solution: %.3f\n", weight);
+      EXPECT_LT(weight, 0.9);  // the kernel matters in this Hessian
+    }
+    const Eigen::MatrixXd u = whiten(weight * f.information);
+    dense.push_back({{f.from, f.to}, [f, u](const std::vector<Pose3>& x) -> Eigen::VectorXd {
+                       return u * PoseGraph::relativeResidual(x[f.from], x[f.to], f.measurement);
+                     }});
+  }
+  for (int k : {0, 2, 3}) {
+    const Eigen::Vector3d z = truth[k].position + Eigen::Vector3d(0.2, -0.1, 0.3);
+    const Eigen::MatrixXd u = whiten(Eigen::Vector3d(1.0, 2.0, 0.25).asDiagonal().toDenseMatrix());
+    dense.push_back({{k}, [k, z, u](const std::vector<Pose3>& x) -> Eigen::VectorXd {
+                       return u * (x[k].position - z);
+                     }});
+  }
+  {
+    const Eigen::MatrixXd u = whiten(prior.information);
+    dense.push_back({{0}, [prior, u](const std::vector<Pose3>& x) -> Eigen::VectorXd {
+                       Vector6d r;
+                       r.head<3>() = x[0].position - prior.pose.position;
+                       r.tail<3>() = lie::logSO3(prior.pose.rotation.transpose() * x[0].rotation);
+                       return u * r;
+                     }});
+  }
+  std::vector<Pose3> solution;
+  for (int k = 0; k < graph.numNodes(); ++k) solution.push_back(graph.node(k));
+  const Eigen::MatrixXd inverse = numericalHessian(solution, dense).inverse();
+
+  const std::vector<Matrix6d> all = graph.marginalCovariances();
+  ASSERT_EQ(all.size(), 5u);
+  for (int k = 0; k < 5; ++k) {
+    const Matrix6d expected = inverse.block<6, 6>(6 * k, 6 * k);
+    EXPECT_LT((all[k] - expected).norm(), 1e-5 * expected.norm()) << "node " << k << "\n"
+                                                                  << all[k] << "\nexpected\n"
+                                                                  << expected;
+    EXPECT_LT((all[k] - all[k].transpose()).norm(), 1e-12 * all[k].norm());
+  }
+  // A chosen subset, in the order asked for.
+  const std::vector<Matrix6d> some = graph.marginalCovariances({3, 1});
+  ASSERT_EQ(some.size(), 2u);
+  EXPECT_EQ(some[0], all[3]);
+  EXPECT_EQ(some[1], all[1]);
+  EXPECT_THROW(graph.marginalCovariances({5}), std::invalid_argument);
+}
+
+// A random walk anchored at one end: every node at the origin with the identity rotation, the
+// odometry measuring "no motion" with a full covariance C, a prior P0 on node 0. The Jacobians
+// are then -I and I, and node k's marginal is exactly P0 + k C. 2000 nodes also time it.
+TEST(PoseGraphMarginals, GrowLinearlyAlongAnAnchoredChain) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  Matrix6d a;
+  for (int i = 0; i < 36; ++i) a(i / 6, i % 6) = noise(rng);
+  const Matrix6d odometry = 0.01 * (a * a.transpose() + Matrix6d::Identity());
+  const Matrix6d anchor =
+      (Vector6d() << 0.04, 0.09, 0.01, 1e-4, 4e-4, 1e-4).finished().asDiagonal();
+  const int nodes = 2000;
+  PoseGraph graph;
+  for (int k = 0; k < nodes; ++k) graph.addNode(Pose3());
+  for (int k = 0; k + 1 < nodes; ++k) {
+    RelativePoseFactor f;
+    f.from = k;
+    f.to = k + 1;
+    f.information = odometry.inverse();
+    graph.addRelative(f);
+  }
+  PosePriorFactor prior;
+  prior.information = anchor.inverse();
+  graph.addPrior(prior);
+  const auto start = std::chrono::steady_clock::now();
+  const std::vector<Matrix6d> marginals = graph.marginalCovariances();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("[ MEASURED ] marginals of a %d-node chain: %.3f s\n", nodes, seconds);
+  ASSERT_EQ(static_cast<int>(marginals.size()), nodes);
+  for (int k : {0, 1, 2, 10, 500, 1999}) {
+    const Matrix6d expected = anchor + k * odometry;
+    EXPECT_LT((marginals[k] - expected).norm(), 1e-8 * expected.norm())
+        << "node " << k << "\n"
+        << marginals[k] << "\nexpected\n"
+        << expected;
+  }
+  EXPECT_LT(seconds, 2.0);
+}
+
+// Without the prior nothing fixes where the chain is: the Hessian is singular.
+TEST(PoseGraphMarginals, AnUnanchoredGraphIsAClearError) {
+  PoseGraph graph;
+  for (int k = 0; k < 4; ++k) graph.addNode(makePose({0, 0, 0.1 * k}, {1.0 * k, 0, 0}));
+  for (int k = 0; k + 1 < 4; ++k) {
+    RelativePoseFactor f;
+    f.from = k;
+    f.to = k + 1;
+    f.measurement = graph.node(k).inverse() * graph.node(k + 1);
+    f.information = diagonalInformation(0.1, 0.01);
+    graph.addRelative(f);
+  }
+  try {
+    graph.marginalCovariances();
+    ADD_FAILURE() << "no error for an unanchored graph";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("cannot be factored"), std::string::npos)
+        << error.what();
+  }
 }
 
 }  // namespace

@@ -105,14 +105,44 @@ struct LoopRecord {
 
 struct LoopClosureResult {
   std::vector<NavState> states;  // one per frame: the loop-closed estimate
-  std::vector<int> keyframes;    // their frames
+  // One per frame: the loop-closed pose covariance, in the convention of
+  // OxtsRunResult::pose_covariances (NavigationFilter::poseCovariance): position error in the
+  // map frame (m) first, then the rotation error as a body-frame small angle (R_true =
+  // R_est Exp(delta), rad); Euclidean, symmetric positive semi-definite. At a keyframe: the
+  // smoother's covariance updated with the information the accepted loops add to the pose graph,
+  // (P_smoothed^-1 + Sigma_with_loops^-1 - Sigma_without_loops^-1)^-1, from the graph's marginals
+  // (PoseGraph::marginalCovariances, whose node tangent [dp map, dphi body] is that convention)
+  // with and without the loop factors at the solution; why not the graph's marginal alone: see
+  // closeLoops. Between two keyframes a and b: each keyframe's covariance carried
+  // to the frame with the smoother's covariance of the relative pose (keyframe -> frame),
+  // blended with the weights of the pose interpolation (1 - alpha from a, alpha from b); before
+  // the first and after the last keyframe from the nearest one alone. See closeLoops. Without an
+  // accepted loop: the smoothed run's pose_covariances unchanged.
+  std::vector<PoseCovariance> pose_covariances;
+  std::vector<int> keyframes;  // their frames
   std::vector<LoopRecord> loops;
   int accepted = 0, rejected = 0;
   int gps_factors = 0;
   PoseGraphSummary summary;
   double seconds_registration = 0.0, seconds_optimization = 0.0;
+  double seconds_covariance = 0.0;  // the marginals and the per-frame covariances
 };
 
+// The keyframes' covariance: the graph's own marginal would be the estimator's Laplace
+// covariance, but the graph counts the fixes twice (module comment): without loops its position
+// sigma is about half the smoother's (drive 0018: 0.44 vs 0.86 m mean at the keyframes) where
+// the estimate is no better, and with oracle loops on that drive its position NEES against the
+// OXTS truth is 12 (3 if consistent). The smoother's covariance plus the loops' information
+// keeps the smoother's calibration away from the loops and is exactly it without loops
+// (measured NEES 6 on 0018, 2.2 in the synthetic outage).
+// Why the blend between keyframes: the keyframe covariance carried forward from a (or backward
+// from b) is the covariance of "keyframe pose composed with the smoothed relative pose", each
+// a defensible estimate of the frame's uncertainty that ignores the other keyframe's
+// constraint (to first order not smaller than the exact one); the convex blend keeps that,
+// stays positive semi-definite, equals the keyframe's covariance at the keyframes and is
+// continuous in time, like the interpolated pose correction. Keyframes are <=
+// keyframe_spacing_m / keyframe_max_interval_s apart, so the relative part is small.
+//
 // frame_has_scan: one per frame (empty: every frame has one). T_imu_sensor: the scanner's pose
 // in the IMU frame. Needs a smoothed run (run.smoothed, with its covariances and gains); throws
 // std::invalid_argument otherwise.

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 #include <string>
 #include <vector>
 
@@ -97,6 +98,17 @@ class PoseGraph {
   // equations cannot be factored (an unconstrained graph: give it a prior or GPS factors).
   PoseGraphSummary optimize(const PoseGraphOptions& options = PoseGraphOptions());
 
+  // Marginal covariances of the nodes at the current poses (after optimize(): at the solution):
+  // the 6x6 diagonal blocks of the inverse of the Gauss-Newton Hessian J^T W J, in the nodes'
+  // tangent order [dp (map frame), dphi (body frame, R_true = R Exp(dphi))]. Robust factors
+  // enter with their IRLS weight at the current residual (the configured kernel scale), inactive
+  // factors not at all. One sparse LDL^T factorization and the selected inverse on its pattern
+  // (Takahashi's recursion): no dense inverse, cost independent of how many nodes are asked
+  // for. `nodes` empty: every node, in order. Throws std::invalid_argument for an unknown node
+  // and std::runtime_error when the Hessian cannot be factored (a pivot not clearly positive: an
+  // unanchored graph or a direction no factor observes).
+  std::vector<Matrix6d> marginalCovariances(const std::vector<int>& nodes = {}) const;
+
   int numNodes() const { return static_cast<int>(nodes_.size()); }
   const Pose3& node(int index) const { return nodes_.at(index); }
   const RelativePoseFactor& relative(int index) const { return relatives_.at(index); }
@@ -118,6 +130,10 @@ class PoseGraph {
  private:
   double cost(const std::vector<Pose3>& nodes, double kernel_multiplier) const;
   PoseGraphSummary solve(const PoseGraphOptions& options, double kernel_multiplier);
+  // The reweighted Gauss-Newton normal equations H dx = -g at the current poses (every node's
+  // diagonal block stored, so the pattern depends on the graph only). gradient may be null.
+  void normalEquations(double kernel_multiplier, Eigen::SparseMatrix<double>* hessian,
+                       Eigen::VectorXd* gradient) const;
 
   std::vector<Pose3> nodes_;
   std::vector<RelativePoseFactor> relatives_;
