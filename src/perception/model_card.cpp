@@ -84,7 +84,7 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
       path, root,
       {"name", "input", "resize_policy", "pad_multiple", "resize_factor", "mean", "scale",
        "swap_rb", "tile_scale", "network_focal_px", "tile_overlap", "tile_bottom_margin",
-       "tile_max_width", "flip_average", "suppress_unlabeled", "label_filter",
+       "tile_max_width", "flip_average", "suppress_unlabeled", "label_filter", "gamma",
        "color_normalization", "color_mean", "color_std", "output_label_ids", "num_output_channels",
        // Informational (scripts/train_unet.py records the network's validation score).
        "validation_miou"},
@@ -130,6 +130,8 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
                                       2 * card.tile_bottom_margin >= card.input_height))
     fail(path, root["tile_bottom_margin"],
          "tile_bottom_margin must be >= 0 and less than half the input height");
+  if (!(card.gamma >= 0.2 && card.gamma <= 5.0))
+    fail(path, root["gamma"], "gamma must be in [0.2, 5] (1: no tone curve)");
   for (double value : card.color_std) {
     if (!(value > 0.0)) fail(path, root["color_std"], "color_std values must be > 0");
   }
@@ -224,6 +226,7 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
       fail(yaml_path, filter,
            "label_filter: min_confidence must be in [0, 1), boundary_radius_px in [0, 50]");
   }
+  card.gamma = readOr<double>(yaml_path, root, "gamma", 1.0);
   if (root["color_normalization"]) {
     card.color_normalization = parseColorNormalization(yaml_path, root["color_normalization"]);
   }
@@ -277,6 +280,7 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
       << "min_confidence" << YAML::Value << card.label_filter.min_confidence << YAML::Key
       << "boundary_radius_px" << YAML::Value << card.label_filter.boundary_radius_px
       << YAML::EndMap;
+  out << YAML::Key << "gamma" << YAML::Value << card.gamma;
   out << YAML::Key << "color_normalization" << YAML::Value
       << colorNormalizationName(card.color_normalization);
   out << YAML::Key << "color_mean" << YAML::Value << YAML::Flow << YAML::BeginSeq
@@ -321,6 +325,11 @@ ModelCard builtinEnetCityscapesCard() {
   // white balance confuse it far more than their geometry, so each image is standardized to
   // Cityscapes' colour statistics first.
   card.color_normalization = ColorNormalization::kStandardize;
+  // ... after lifting the shadows and midtones: the affine standardization matches the mean and
+  // spread of the colours, not the shape of their distribution. Measured (README): raw point
+  // accuracy 0.817 -> 0.841 on SemanticKITTI 05, 0.708 -> 0.712 on 08, pixel accuracy 0.788 ->
+  // 0.828 on the Cityscapes sample; 0.6 and 0.8 within noise of 0.7, 1.25 worse everywhere.
+  card.gamma = 0.7;
   for (int c = 0; c < 3; ++c) {
     card.color_mean[c] = kCityscapesRgbMean[c];  // RGB: the network's channel order
     card.color_std[c] = kCityscapesRgbStd[c];

@@ -121,6 +121,17 @@ PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
   return prepared;
 }
 
+// v' = 255 (v / 255)^gamma per channel, by a lookup table.
+cv::Mat applyGamma(const cv::Mat& bgr, double gamma) {
+  cv::Mat table(1, 256, CV_8U);
+  for (int v = 0; v < 256; ++v) {
+    table.at<std::uint8_t>(v) = cv::saturate_cast<std::uint8_t>(255.0 * std::pow(v / 255.0, gamma));
+  }
+  cv::Mat out;
+  cv::LUT(bgr, table, out);
+  return out;
+}
+
 // Maps each channel affinely so its mean and standard deviation over the image become the
 // card's color_mean / color_std (given in the network's channel order).
 cv::Mat standardizeColors(const cv::Mat& bgr, const ModelCard& card) {
@@ -425,9 +436,12 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
 
 Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
   cv::Mat bgr = toBgr(image);
-  if (card_.color_normalization == ColorNormalization::kStandardize) {
+  if (card_.gamma != 1.0 || card_.color_normalization == ColorNormalization::kStandardize) {
     ScopedTimer timer("segmentation/preprocess");
-    bgr = standardizeColors(bgr, card_);
+    if (card_.gamma != 1.0) bgr = applyGamma(bgr, card_.gamma);
+    if (card_.color_normalization == ColorNormalization::kStandardize) {
+      bgr = standardizeColors(bgr, card_);
+    }
   }
   if (card_.resize_policy == ResizePolicy::kTiles) return segmentTiles(bgr, camera_focal_px);
   PreparedInput prepared;

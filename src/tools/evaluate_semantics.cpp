@@ -9,7 +9,7 @@
 //       [--max-frames N] [--threads 2] [--json FILE]
 //       [card overrides: --policy P --input WxH --tile-scale S --network-focal F --tile-overlap PX
 //        --tile-max-width PX (0: tiles input-wide)
-//       --flip 0|1 --suppress-unlabeled 0|1
+//       --flip 0|1 --suppress-unlabeled 0|1 --gamma G
 //        --color none|standardize --no-focal]
 //       [labelling variants, each repeatable, scored in every combination:
 //        --min-confidence C --boundary-radius PX --occlusion off|CWxCH:RX:UP:DOWN:REL:ABS
@@ -45,7 +45,7 @@ constexpr char kUsage[] =
     "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
     "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
     "         [--network-focal F] [--tile-overlap PX] [--tile-max-width PX]\n"
-    "         [--bottom-margin PX] [--flip 0|1]\n"
+    "         [--bottom-margin PX] [--flip 0|1] [--gamma G]\n"
     "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
@@ -197,6 +197,8 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_max_width = cli.getInt("--tile-max-width", card.tile_max_width);
   card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
   card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
+  card.gamma = cli.getDouble("--gamma", card.gamma);
+  if (!(card.gamma >= 0.2 && card.gamma <= 5.0)) throw UsageError("--gamma must be in [0.2, 5]");
   card.suppress_unlabeled =
       cli.getInt("--suppress-unlabeled", card.suppress_unlabeled ? 1 : 0) != 0;
   if (cli.has("--color")) {
@@ -290,8 +292,8 @@ int main(int argc, char** argv) {
         argc, argv,
         {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
          "--tile-scale", "--network-focal", "--tile-overlap", "--tile-max-width", "--flip",
-         "--color", "--color-mean", "--color-std", "--suppress-unlabeled", "--bottom-margin",
-         "--map-config"},
+         "--gamma", "--color", "--color-mean", "--color-std", "--suppress-unlabeled",
+         "--bottom-margin", "--map-config"},
         {"--no-focal", "--no-map"},
         {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
@@ -321,11 +323,11 @@ int main(int argc, char** argv) {
     perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));
     std::printf(
         "model %s, card %s: policy %s, tile_scale %g, network_focal_px %g, overlap %d, "
-        "max width %d, bottom margin %d, flip %d, color %s, suppress unlabeled %d, focal given "
-        "%d\n",
+        "max width %d, bottom margin %d, flip %d, gamma %g, color %s, suppress unlabeled %d, "
+        "focal given %d\n",
         model.c_str(), card.source.c_str(), perception::resizePolicyName(card.resize_policy),
         card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_max_width,
-        card.tile_bottom_margin, card.flip_average ? 1 : 0,
+        card.tile_bottom_margin, card.flip_average ? 1 : 0, card.gamma,
         perception::colorNormalizationName(card.color_normalization),
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 

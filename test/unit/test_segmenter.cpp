@@ -282,6 +282,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
                                      "tile_overlap: 64\n"
                                      "tile_bottom_margin: 40\n"
                                      "flip_average: true\n"
+                                     "gamma: 0.8\n"
                                      "color_normalization: standardize\n"
                                      "color_mean: [73, 83, 72]\n"
                                      "color_std: [48, 48.5, 47.7]\n"
@@ -293,6 +294,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
   EXPECT_EQ(card.tile_overlap, 64);
   EXPECT_EQ(card.tile_bottom_margin, 40);
   EXPECT_TRUE(card.flip_average);
+  EXPECT_DOUBLE_EQ(card.gamma, 0.8);
   EXPECT_EQ(card.color_normalization, ColorNormalization::kStandardize);
   EXPECT_DOUBLE_EQ(card.color_mean[1], 83.0);
   EXPECT_DOUBLE_EQ(card.color_std[1], 48.5);
@@ -305,6 +307,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
   EXPECT_EQ(reloaded.tile_overlap, card.tile_overlap);
   EXPECT_EQ(reloaded.tile_bottom_margin, card.tile_bottom_margin);
   EXPECT_EQ(reloaded.flip_average, card.flip_average);
+  EXPECT_DOUBLE_EQ(reloaded.gamma, card.gamma);
   EXPECT_EQ(reloaded.color_normalization, card.color_normalization);
   EXPECT_DOUBLE_EQ(reloaded.color_std[2], card.color_std[2]);
 
@@ -313,6 +316,7 @@ TEST(ModelCard, ParsesTileAndColorFields) {
   const ModelCard builtin = loadModelCard(saved);
   EXPECT_EQ(builtin.resize_policy, builtinEnetCityscapesCard().resize_policy);
   EXPECT_EQ(builtin.color_normalization, builtinEnetCityscapesCard().color_normalization);
+  EXPECT_DOUBLE_EQ(builtin.gamma, builtinEnetCityscapesCard().gamma);
   fs::remove_all(dir);
 }
 
@@ -328,6 +332,7 @@ TEST(ModelCard, BadTileAndColorFieldsAreRejectedNamingTheField) {
             std::string::npos);
   EXPECT_NE(cardError(head + "flip_average: maybe\n" + tail).find("flip_average"),
             std::string::npos);
+  EXPECT_NE(cardError(head + "gamma: 0\n" + tail).find("gamma"), std::string::npos);
   EXPECT_NE(cardError(head + "color_normalization: auto\n" + tail).find("auto"), std::string::npos);
   EXPECT_NE(cardError(head + "color_normalization: standardize\n" + tail).find("color_mean"),
             std::string::npos);
