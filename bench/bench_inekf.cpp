@@ -77,10 +77,7 @@ void BM_WholeDriveThroughLocalizer(benchmark::State& state) {
   static const std::vector<kitti::OxtsFrame> frames = benchmarkDrive();
   estimation::OxtsRunOptions options;
   options.config.localizer.filter_type = filterOf(state);
-  options.gps.every_n_frames = 10;
-  options.gps.sigma_horizontal_m = 1.5;
-  options.gps.sigma_vertical_m = 3.0;
-  options.gps.seed = 1;
+  options.gps = estimation::protocolGps();
   for (auto _ : state) {
     benchmark::DoNotOptimize(estimation::runLocalizerOnOxts(frames, options));
   }
@@ -93,10 +90,7 @@ BENCHMARK(BM_WholeDriveThroughLocalizer)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark
 void BM_WholeDriveFilteredAndSmoothed(benchmark::State& state) {
   static const std::vector<kitti::OxtsFrame> frames = benchmarkDrive();
   estimation::OxtsRunOptions options;
-  options.gps.every_n_frames = 10;
-  options.gps.sigma_horizontal_m = 1.5;
-  options.gps.sigma_vertical_m = 3.0;
-  options.gps.seed = 1;
+  options.gps = estimation::protocolGps();
   options.smooth = true;
   for (auto _ : state) {
     benchmark::DoNotOptimize(estimation::runLocalizerOnOxts(frames, options));

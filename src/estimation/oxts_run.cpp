@@ -205,6 +205,15 @@ double yawErrorDeg(const OxtsRunResult& run, int frame) {
   return wrapDeg(headingDeg(run.states[frame].rotation) - headingDeg(run.truth[frame].linear()));
 }
 
+kitti::GpsDegradationOptions protocolGps() {
+  kitti::GpsDegradationOptions gps;
+  gps.sigma_horizontal_m = 1.5;
+  gps.sigma_vertical_m = 3.0;
+  gps.every_n_frames = 10;
+  gps.seed = 1;
+  return gps;
+}
+
 TravelDirection travelDirectionInImu(const std::vector<NavState>& states, double min_speed_mps) {
   std::vector<double> pitches, yaws;
   for (const NavState& s : states) {

@@ -24,10 +24,7 @@ OxtsRunOptions protocol(FilterType type) {
   OxtsRunOptions options;
   options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
   options.config.localizer.filter_type = type;
-  options.gps.sigma_horizontal_m = 1.5;
-  options.gps.sigma_vertical_m = 3.0;
-  options.gps.every_n_frames = 10;
-  options.gps.seed = 1;
+  options.gps = protocolGps();
   return options;
 }
 
@@ -130,8 +127,9 @@ TEST(RealDrives, SmoothingLowersTheAte) {
 
 // KITTI's OXTS is mounted 0.65 deg pitched against the car's direction of travel. The smoothed
 // run with no mounting configured finds it from GPS and IMU alone (median 0.81 deg on 0027; the
-// OXTS reference solution says 0.73 on average), and configuring it lowers the filter's ATE (1.74 -> 1.36 m): the
-// constraint no longer tilts the attitude to explain the car's apparent vertical velocity.
+// OXTS reference solution says 0.73 on average), and configuring it lowers the filter's ATE (1.74
+// -> 1.36 m): the constraint no longer tilts the attitude to explain the car's apparent vertical
+// velocity.
 TEST(RealDrives, TheSmootherFindsTheImuMountingAndTheFilterGainsFromIt) {
   ISM_REQUIRE_SHARED(oxtsDir("2011_09_30_drive_0027"));
   const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));

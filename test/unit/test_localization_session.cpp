@@ -437,10 +437,7 @@ TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
   frames.resize(std::min<std::size_t>(frames.size(), 450));
   OxtsRunOptions options;
   options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.gps.sigma_horizontal_m = 1.5;
-  options.gps.sigma_vertical_m = 3.0;
-  options.gps.every_n_frames = 10;
-  options.gps.seed = 1;
+  options.gps = protocolGps();
   const OxtsRunResult offline = runLocalizerOnOxts(frames, options);
   ASSERT_EQ(offline.first_estimated_frame, 0);
 

@@ -92,10 +92,7 @@ class LoopClosureTest : public ::testing::Test {
   static OxtsRunResult smoothedRun(bool nonholonomic = false) {
     OxtsRunOptions options;
     options.config.localizer.nonholonomic = nonholonomic;
-    options.gps.sigma_horizontal_m = 1.5;
-    options.gps.sigma_vertical_m = 3.0;
-    options.gps.every_n_frames = 10;
-    options.gps.seed = 1;
+    options.gps = protocolGps();
     options.gps.outages_s.push_back({kOutageStartS, kOutageDurationS});
     options.smooth = true;
     // The filter's model of that IMU (the densities of config/inekf.yaml cover its white noise).
@@ -374,10 +371,7 @@ TEST(LoopClosureRealDrive, OracleLoopsShrinkTheCovarianceWithinTheNeesBand) {
       kitti::readOxtsFolder(test::sharedPath(drive + "/oxts"));
   OxtsRunOptions options;
   options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.gps.sigma_horizontal_m = 1.5;
-  options.gps.sigma_vertical_m = 3.0;
-  options.gps.every_n_frames = 10;
-  options.gps.seed = 1;
+  options.gps = protocolGps();
   options.gps.outages_s.push_back({outage_start_s, outage_duration_s});
   options.smooth = true;
   const OxtsRunResult run = runLocalizerOnOxts(frames, options);

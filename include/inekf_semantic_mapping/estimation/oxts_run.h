@@ -56,6 +56,10 @@ struct OxtsRunResult {
   std::vector<Fix> fixes;
 };
 
+// The evaluation protocol's GPS (scripts/run_inekf_protocol.sh): the OXTS fix plus N(0, 1.5 m)
+// horizontal and N(0, 3 m) vertical noise, once a second (every 10th frame), seed 1.
+kitti::GpsDegradationOptions protocolGps();
+
 // The fix event a receiver reporting `fix` at `stamp_s` gives the session (diagonal ENU
 // covariance from its horizontal and vertical sigmas): what kitti_player/kitti2bag publish.
 GeodeticFixEvent fixEventFromDegraded(const kitti::GeodeticFix& fix, double stamp_s);
