@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "inekf_semantic_mapping/estimation/oxts_run.h"
+#include "inekf_semantic_mapping/estimation/pose_graph.h"
 
 namespace estimation = inekf_semantic_mapping::estimation;
 namespace kitti = inekf_semantic_mapping::kitti;
@@ -98,6 +99,25 @@ void BM_WholeDriveFilteredAndSmoothed(benchmark::State& state) {
   state.SetLabel("left + RTS, " + std::to_string(frames.size()) + " frames");
 }
 BENCHMARK(BM_WholeDriveFilteredAndSmoothed)->Unit(benchmark::kMillisecond);
+
+// The loop-closed covariance's marginals (PoseGraph::marginalCovariances, the selected inverse):
+// a chain of N keyframes with odometry and a prior, about what N * 2 m of drive gives.
+void BM_PoseGraphMarginals(benchmark::State& state) {
+  const int nodes = static_cast<int>(state.range(0));
+  estimation::PoseGraph graph;
+  for (int k = 0; k < nodes; ++k) graph.addNode(estimation::Pose3());
+  for (int k = 0; k + 1 < nodes; ++k) {
+    estimation::RelativePoseFactor odometry;
+    odometry.from = k;
+    odometry.to = k + 1;
+    odometry.information = 100.0 * estimation::Matrix6d::Identity();
+    graph.addRelative(odometry);
+  }
+  graph.addPrior(estimation::PosePriorFactor());
+  for (auto _ : state) benchmark::DoNotOptimize(graph.marginalCovariances());
+  state.SetLabel(std::to_string(nodes) + " nodes");
+}
+BENCHMARK(BM_PoseGraphMarginals)->Arg(500)->Arg(2000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -7,7 +7,6 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
-#include <chrono>
 #include <cmath>
 #include <functional>
 #include <random>
@@ -325,7 +324,8 @@ TEST(PoseGraphMarginals, EqualTheDenseInverseOfTheHessian) {
 
 // A random walk anchored at one end: every node at the origin with the identity rotation, the
 // odometry measuring "no motion" with a full covariance C, a prior P0 on node 0. The Jacobians
-// are then -I and I, and node k's marginal is exactly P0 + k C. 2000 nodes also time it.
+// are then -I and I, and node k's marginal is exactly P0 + k C. (Its speed on 2000 nodes:
+// bench_inekf BM_PoseGraphMarginals.)
 TEST(PoseGraphMarginals, GrowLinearlyAlongAnAnchoredChain) {
   std::mt19937 rng(3);
   std::normal_distribution<double> noise(0.0, 1.0);
@@ -334,7 +334,7 @@ TEST(PoseGraphMarginals, GrowLinearlyAlongAnAnchoredChain) {
   const Matrix6d odometry = 0.01 * (a * a.transpose() + Matrix6d::Identity());
   const Matrix6d anchor =
       (Vector6d() << 0.04, 0.09, 0.01, 1e-4, 4e-4, 1e-4).finished().asDiagonal();
-  const int nodes = 2000;
+  const int nodes = 600;
   PoseGraph graph;
   for (int k = 0; k < nodes; ++k) graph.addNode(Pose3());
   for (int k = 0; k + 1 < nodes; ++k) {
@@ -347,20 +347,15 @@ TEST(PoseGraphMarginals, GrowLinearlyAlongAnAnchoredChain) {
   PosePriorFactor prior;
   prior.information = anchor.inverse();
   graph.addPrior(prior);
-  const auto start = std::chrono::steady_clock::now();
   const std::vector<Matrix6d> marginals = graph.marginalCovariances();
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("[ MEASURED ] marginals of a %d-node chain: %.3f s\n", nodes, seconds);
   ASSERT_EQ(static_cast<int>(marginals.size()), nodes);
-  for (int k : {0, 1, 2, 10, 500, 1999}) {
+  for (int k : {0, 1, 2, 10, 300, nodes - 1}) {
     const Matrix6d expected = anchor + k * odometry;
     EXPECT_LT((marginals[k] - expected).norm(), 1e-8 * expected.norm())
         << "node " << k << "\n"
         << marginals[k] << "\nexpected\n"
         << expected;
   }
-  EXPECT_LT(seconds, 2.0);
 }
 
 // Without the prior nothing fixes where the chain is: the Hessian is singular.
