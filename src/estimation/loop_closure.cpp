@@ -62,6 +62,16 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
+Matrix6d symmetricPart(const Matrix6d& m) { return 0.5 * (m + m.transpose()); }
+
+// The nearest positive semi-definite matrix to the symmetric part of m (negative eigenvalues,
+// rounding or a difference of informations, clipped to 0).
+Matrix6d clippedToPsd(const Matrix6d& m) {
+  const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(symmetricPart(m));
+  return eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+         eig.eigenvectors().transpose();
+}
+
 class Graph {
  public:
   Graph(const OxtsRunResult& run, const LoopClosureOptions& options)
@@ -88,11 +98,7 @@ class Graph {
     Matrix6d m = Matrix6d::Zero();
     m.block<3, 3>(0, 3) = relative.rotation;
     m.block<3, 3>(3, 0) = Eigen::Matrix3d::Identity();
-    Matrix6d cov = m * error * m.transpose();
-    cov = 0.5 * (cov + cov.transpose());
-    const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(cov);
-    cov = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
-          eig.eigenvectors().transpose();
+    Matrix6d cov = clippedToPsd(m * error * m.transpose());
     if (!floored) return cov;
     const double fm = options_.odometry_floor_sigma_m;
     const double fr = options_.odometry_floor_sigma_deg * kDegToRad;
@@ -119,8 +125,6 @@ Matrix6d loopCovariance(const LoopClosureOptions& options) {
 }
 
 Matrix6d inverseSpd(const Matrix6d& m) { return m.llt().solve(Matrix6d::Identity()); }
-
-Matrix6d symmetricPart(const Matrix6d& m) { return 0.5 * (m + m.transpose()); }
 
 }  // namespace
 
@@ -487,10 +491,7 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
   std::vector<Matrix6d> marginals(nodes);
   for (int n = 0; n < nodes; ++n) {
     const Matrix6d smoothed = run.pose_covariances[result.keyframes[n]];
-    const Matrix6d gain = symmetricPart(inverseSpd(with_loops[n]) - inverseSpd(no_loops[n]));
-    const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(gain);
-    const Matrix6d gained = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
-                            eig.eigenvectors().transpose();
+    const Matrix6d gained = clippedToPsd(inverseSpd(with_loops[n]) - inverseSpd(no_loops[n]));
     marginals[n] = symmetricPart(inverseSpd(inverseSpd(smoothed) + gained));
   }
   // The marginal of keyframe node n carried to frame k: T_k = T_n T_nk, with T_n perturbed as a
@@ -527,7 +528,7 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
       cov = alpha >= 1.0 ? carried(next, k)
                          : (1.0 - alpha) * carried(next - 1, k) + alpha * carried(next, k);
     }
-    cov = 0.5 * (cov + cov.transpose());
+    cov = symmetricPart(cov);
     if (!cov.allFinite()) {
       throw std::runtime_error("loop closure: the pose covariance of frame " + std::to_string(k) +
                                " is not finite");

@@ -130,7 +130,7 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
                                       2 * card.tile_bottom_margin >= card.input_height))
     fail(path, root["tile_bottom_margin"],
          "tile_bottom_margin must be >= 0 and less than half the input height");
-  if (!(card.gamma >= 0.2 && card.gamma <= 5.0))
+  if (!(card.gamma >= ModelCard::kMinGamma && card.gamma <= ModelCard::kMaxGamma))
     fail(path, root["gamma"], "gamma must be in [0.2, 5] (1: no tone curve)");
   for (double value : card.color_std) {
     if (!(value > 0.0)) fail(path, root["color_std"], "color_std values must be > 0");

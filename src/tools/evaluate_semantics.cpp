@@ -198,7 +198,9 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
   card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
   card.gamma = cli.getDouble("--gamma", card.gamma);
-  if (!(card.gamma >= 0.2 && card.gamma <= 5.0)) throw UsageError("--gamma must be in [0.2, 5]");
+  if (!(card.gamma >= perception::ModelCard::kMinGamma &&
+        card.gamma <= perception::ModelCard::kMaxGamma))
+    throw UsageError("--gamma must be in [0.2, 5]");
   card.suppress_unlabeled =
       cli.getInt("--suppress-unlabeled", card.suppress_unlabeled ? 1 : 0) != 0;
   if (cli.has("--color")) {

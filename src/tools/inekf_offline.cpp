@@ -304,13 +304,15 @@ int main(int argc, char** argv) {
     if (run.smoothed && options.config.localizer.nonholonomic) {
       // The smoothed velocity is GPS-aided and the constraint's vertical sigma loose, so its
       // direction shows the mounting; the causal estimate lags in pitch.
-      const estimation::TravelDirection direction = estimation::travelDirectionInImu(run.states);
+      constexpr double kMinSpeedMps = 3.0;
+      const estimation::TravelDirection direction =
+          estimation::travelDirectionInImu(run.states, kMinSpeedMps);
       if (direction.samples > 0) {
         std::printf(
             "inekf_offline: direction of travel in the IMU frame (median over %d smoothed states "
-            "at >= 3 m/s): pitch %.2f deg, yaw %.2f deg (nonholonomic.vehicle_pitch_deg / "
+            "at >= %.0f m/s): pitch %.2f deg, yaw %.2f deg (nonholonomic.vehicle_pitch_deg / "
             "vehicle_yaw_deg: %.2f / %.2f)\n",
-            direction.samples, direction.pitch_deg, direction.yaw_deg,
+            direction.samples, kMinSpeedMps, direction.pitch_deg, direction.yaw_deg,
             options.config.localizer.nonholonomic_vehicle_pitch_deg,
             options.config.localizer.nonholonomic_vehicle_yaw_deg);
       }

@@ -88,8 +88,9 @@ struct ModelCard {
   // a network trained there paints over the road of cameras without a bonnet in view.
   bool suppress_unlabeled = false;
   // Tone curve applied to every pixel before the colour normalization: v' = 255 (v / 255)^gamma
-  // (< 1 lifts the shadows and midtones). 1: none.
+  // (< 1 lifts the shadows and midtones). 1: none. Valid: [kMinGamma, kMaxGamma].
   double gamma = 1.0;
+  static constexpr double kMinGamma = 0.2, kMaxGamma = 5.0;
   ColorNormalization color_normalization = ColorNormalization::kNone;
   // kStandardize targets, per channel in the order of `mean` (pixel values 0..255).
   std::array<double, 3> color_mean{{0.0, 0.0, 0.0}};
