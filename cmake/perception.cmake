@@ -5,7 +5,6 @@ ism_add_core_library(${PROJECT_NAME}_projection
 
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp
-          src/perception/batchnorm_adaptation.cpp
   LINK ${OpenCV_LIBS} yaml-cpp
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
@@ -20,18 +19,6 @@ ism_add_gtest(test_unet_synthetic_accuracy
 
 ism_add_tool(segment_image
   SOURCES src/tools/segment_image.cpp
-  LINK ${PROJECT_NAME}_perception)
-
-ism_add_gtest(test_batchnorm_adaptation
-  SOURCES test/unit/test_batchnorm_adaptation.cpp
-  LINK ${PROJECT_NAME}_perception)
-if(TARGET test_batchnorm_adaptation)
-  # The folding helpers are internal to the library (they include OpenCV's dnn headers).
-  target_include_directories(test_batchnorm_adaptation PRIVATE ${ISM_REPO_ROOT}/src/perception)
-endif()
-
-ism_add_tool(adapt_segmenter
-  SOURCES src/tools/adapt_segmenter.cpp
   LINK ${PROJECT_NAME}_perception)
 
 ism_add_gtest(test_segmenter_frame_buffer

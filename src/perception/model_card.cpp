@@ -85,8 +85,7 @@ void validate(const ModelCard& card, const std::string& path, const YAML::Node& 
       {"name", "input", "resize_policy", "pad_multiple", "resize_factor", "mean", "scale",
        "swap_rb", "tile_scale", "network_focal_px", "tile_overlap", "tile_bottom_margin",
        "tile_max_width", "flip_average", "suppress_unlabeled", "label_filter", "gamma",
-       "color_normalization", "color_mean", "color_std", "batchnorm_statistics", "output_label_ids",
-       "num_output_channels",
+       "color_normalization", "color_mean", "color_std", "output_label_ids", "num_output_channels",
        // Informational (scripts/train_unet.py records the network's validation score).
        "validation_miou"},
       "");
@@ -237,16 +236,6 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
       (!root["color_mean"] || !root["color_std"]))
     fail(yaml_path, root["color_normalization"],
          "color_normalization standardize needs color_mean and color_std");
-  if (root["batchnorm_statistics"]) {
-    const fs::path statistics = read<std::string>(yaml_path, root, "batchnorm_statistics");
-    if (statistics.empty()) fail(yaml_path, root["batchnorm_statistics"], "empty path");
-    card.batchnorm_statistics = statistics.is_absolute()
-                                    ? statistics.string()
-                                    : (fs::path(yaml_path).parent_path() / statistics).string();
-    if (!fs::exists(card.batchnorm_statistics))
-      fail(yaml_path, root["batchnorm_statistics"],
-           "batchnorm_statistics file " + card.batchnorm_statistics + " not found");
-  }
   const auto ids = read<std::vector<int>>(yaml_path, root, "output_label_ids");
   for (int id : ids) {
     if (id < 0 || id >= cityscapes::kNumLabelIds)
@@ -298,8 +287,6 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
       << card.color_mean[0] << card.color_mean[1] << card.color_mean[2] << YAML::EndSeq;
   out << YAML::Key << "color_std" << YAML::Value << YAML::Flow << YAML::BeginSeq
       << card.color_std[0] << card.color_std[1] << card.color_std[2] << YAML::EndSeq;
-  if (!card.batchnorm_statistics.empty())
-    out << YAML::Key << "batchnorm_statistics" << YAML::Value << card.batchnorm_statistics;
   out << YAML::Key << "num_output_channels" << YAML::Value << card.numOutputChannels();
   out << YAML::Key << "output_label_ids" << YAML::Value << YAML::Flow << YAML::BeginSeq;
   for (std::uint8_t id : card.output_label_ids) out << static_cast<int>(id);

@@ -3,14 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
-#include <opencv2/dnn/all_layers.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
-#include "batchnorm_folding.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 
@@ -251,29 +248,22 @@ struct Segmenter::Network {
   cv::dnn::Net net;
   cv::Mat label_lut;    // 1x256 CV_8U: channel index -> labelId
   cv::Size input_size;  // of the last forward pass
-  // Batch normalization adaptation: per site, the channel map folded into its producers
-  // (empty: the trained network).
-  std::vector<BatchNormSite> sites;
-  std::vector<std::vector<double>> fold_scale, fold_offset;
-  // While adaptBatchNorm collects the network inputs that segment() makes.
-  bool measuring = false;
-  std::vector<cv::Mat> captured_inputs;
 };
+
+namespace {
 
 // OpenCV 4.6 keeps some layer shapes from a network's first forward pass: ENet (Torch
 // importer, MaxUnpool) run at 1024x512 and then at 1392x512 labels 1 % of KITTI's lidar points
 // right, the same network read afresh for 1392x512 80 %. A network is therefore read again
-// whenever the input size changes (once per camera in practice; tiles keep one size), with the
-// batch normalization adaptation folded in again.
-void Segmenter::readNetworkForCpu() {
-  cv::dnn::Net net = readNetwork(model_path_);
+// whenever the input size changes (once per camera in practice; tiles keep one size).
+cv::dnn::Net readNetworkForCpu(const std::string& model_path) {
+  cv::dnn::Net net = readNetwork(model_path);
   net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
   net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
-  for (std::size_t i = 0; i < network_->fold_scale.size(); ++i)
-    foldChannelMap(net, network_->sites[i], network_->fold_scale[i], network_->fold_offset[i]);
-  network_->net = net;
-  network_->input_size = cv::Size();
+  return net;
 }
+
+}  // namespace
 
 Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int num_threads)
     : model_path_(model_path), card_(card), network_(std::make_unique<Network>()) {
@@ -282,18 +272,11 @@ Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int n
   if (card_.numOutputChannels() > 256)
     throw SegmentationError("model card " + card_.source + ": more than 256 output channels");
   cv::setNumThreads(num_threads);
-  readNetworkForCpu();
+  network_->net = readNetworkForCpu(model_path);
   network_->label_lut = cv::Mat::zeros(1, 256, CV_8U);
   for (int i = 0; i < card_.numOutputChannels(); ++i)
     network_->label_lut.at<std::uint8_t>(i) = card_.output_label_ids[i];
 
-  if (!card_.batchnorm_statistics.empty()) {
-    try {
-      setBatchNormAdaptation(loadBatchNormAdaptation(card_.batchnorm_statistics));
-    } catch (const BatchNormAdaptationError& error) {
-      throw SegmentationError(std::string(error.what()) + " (model card " + card_.source + ")");
-    }
-  }
   // One forward pass on a neutral image: catches a card that does not fit the model now,
   // not on the first camera frame (and warms up the network).
   const int probe_width =
@@ -314,10 +297,9 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
                                               card_.swap_rb, false, CV_32F);
   try {
     const cv::Size input_size(blob.size[3], blob.size[2]);
-    if (network_->measuring) return captureInput(blob);
     if (!network_->input_size.empty() && input_size != network_->input_size) {
       ScopedTimer timer("segmentation/reload");
-      readNetworkForCpu();
+      network_->net = readNetworkForCpu(model_path_);
     }
     network_->input_size = input_size;
     network_->net.setInput(blob);
@@ -336,152 +318,6 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
     throw SegmentationError(msg.str());
   }
   return output;
-}
-
-cv::Mat Segmenter::captureInput(const cv::Mat& blob) {
-  // adaptBatchNorm collects the inputs; the scores are neutral (uniform probabilities).
-  network_->captured_inputs.push_back(blob.clone());
-  const int sizes[4] = {1, card_.numOutputChannels(), blob.size[2], blob.size[3]};
-  return cv::Mat(4, sizes, CV_32F, cv::Scalar(0));
-}
-
-void Segmenter::ensureBatchNormSites() {
-  if (!network_->sites.empty()) return;
-  cv::dnn::Net net = readNetwork(model_path_);
-  network_->sites = findBatchNormSites(net);
-}
-
-void Segmenter::setBatchNormAdaptation(const BatchNormAdaptation& adaptation) {
-  ensureBatchNormSites();
-  std::map<std::string, const BatchNormLayerStatistics*> by_layer;
-  for (const BatchNormLayerStatistics& layer : adaptation.layers) by_layer[layer.layer] = &layer;
-  std::vector<std::vector<double>> scale, offset;
-  for (const BatchNormSite& site : network_->sites) {
-    const std::size_t channels = site.mean.size();
-    scale.emplace_back(channels, 1.0);
-    offset.emplace_back(channels, 0.0);
-    const auto found = by_layer.find(site.layer);
-    if (found == by_layer.end()) continue;
-    const BatchNormLayerStatistics& statistics = *found->second;
-    if (statistics.mean.size() != channels)
-      throw SegmentationError("batch normalization statistics " + adaptation.source + ": layer " +
-                              site.layer + " has " + std::to_string(statistics.mean.size()) +
-                              " channels, the network's " + std::to_string(channels) +
-                              " (statistics of another model?)");
-    for (std::size_t c = 0; c < channels; ++c) {
-      if (!site.foldable[c]) continue;
-      channelMapFor(site, c, statistics.mean[c], statistics.variance[c], &scale.back()[c],
-                    &offset.back()[c]);
-    }
-    by_layer.erase(found);
-  }
-  if (!by_layer.empty())
-    throw SegmentationError("batch normalization statistics " + adaptation.source +
-                            ": the network " + model_path_ + " has no adaptable layer " +
-                            by_layer.begin()->first + " (statistics of another model?)");
-  network_->fold_scale = std::move(scale);
-  network_->fold_offset = std::move(offset);
-  readNetworkForCpu();
-}
-
-BatchNormAdaptation Segmenter::adaptBatchNorm(const std::vector<cv::Mat>& images,
-                                              double camera_focal_px, double target_weight,
-                                              int max_layers, const AdaptationProgress& progress) {
-  if (images.empty()) throw SegmentationError("adaptBatchNorm: no images");
-  if (!(target_weight >= 0.0 && target_weight <= 1.0))
-    throw SegmentationError("adaptBatchNorm: target_weight must be in [0, 1]");
-  ensureBatchNormSites();
-  Network& network = *network_;
-  const std::size_t num_sites = network.sites.size();
-  // Start from the trained network: the identity map everywhere.
-  network.fold_scale.assign(num_sites, {});
-  network.fold_offset.assign(num_sites, {});
-  for (std::size_t s = 0; s < num_sites; ++s) {
-    network.fold_scale[s].assign(network.sites[s].mean.size(), 1.0);
-    network.fold_offset[s].assign(network.sites[s].mean.size(), 0.0);
-  }
-  // The network inputs exactly as segment() makes them (colour, scale, tiles, margin).
-  network.captured_inputs.clear();
-  network.measuring = true;
-  try {
-    readNetworkForCpu();
-    for (const cv::Mat& image : images) segment(image, camera_focal_px);
-  } catch (...) {
-    network.measuring = false;
-    network.captured_inputs.clear();
-    readNetworkForCpu();
-    throw;
-  }
-  network.measuring = false;
-  const std::vector<cv::Mat> inputs = std::move(network.captured_inputs);
-  network.captured_inputs.clear();
-
-  // Layer after layer in the network's order (a layer's input depends only on the layers
-  // before it): measure the input of one layer behind the adaptation of all earlier ones, then
-  // fold its new statistics in. Forward passes stop at the measured layer.
-  BatchNormAdaptation adaptation;
-  adaptation.num_images = static_cast<int>(images.size());
-  int adapted = 0;
-  for (std::size_t s = 0; s < num_sites; ++s) {
-    const BatchNormSite& site = network.sites[s];
-    const std::size_t channels = site.mean.size();
-    BatchNormLayerStatistics statistics{site.layer, {}, {}};
-    const bool foldable =
-        std::find(site.foldable.begin(), site.foldable.end(), 1) != site.foldable.end();
-    std::vector<double> sum(channels, 0.0), sum_squares(channels, 0.0);
-    double count = 0.0;
-    if (foldable && (max_layers <= 0 || adapted < max_layers)) {
-      cv::dnn::Net net = readNetwork(model_path_);
-      net.setPreferableBackend(cv::dnn::DNN_BACKEND_OPENCV);
-      net.setPreferableTarget(cv::dnn::DNN_TARGET_CPU);
-      net.enableFusion(false);  // the producer's own output, not fused with the normalization
-      for (std::size_t i = 0; i < s; ++i)
-        foldChannelMap(net, network.sites[i], network.fold_scale[i], network.fold_offset[i]);
-      for (const cv::Mat& input : inputs) {
-        net.setInput(input);
-        const cv::Mat blob = net.forward(site.input);
-        if (blob.dims != 4 || blob.size[1] != static_cast<int>(channels))
-          throw SegmentationError("adaptBatchNorm: layer " + site.input + " of " + model_path_ +
-                                  " does not output the " + std::to_string(channels) +
-                                  " channels that " + site.layer + " normalizes");
-        const int plane_size = blob.size[2] * blob.size[3];
-        for (std::size_t c = 0; c < channels; ++c) {
-          const cv::Mat plane(1, plane_size, CV_32F,
-                              const_cast<float*>(blob.ptr<float>(0, static_cast<int>(c))));
-          sum[c] += cv::sum(plane)[0];
-          sum_squares[c] += plane.dot(plane);
-        }
-        count += plane_size;
-      }
-      ++adapted;
-    }
-    for (std::size_t c = 0; c < channels && count > 0.0; ++c) {
-      if (!site.foldable[c]) {  // keeps the trained statistics
-        statistics.mean.push_back(site.mean[c]);
-        statistics.variance.push_back(std::max(0.0, site.sigma[c] * site.sigma[c] - site.epsilon));
-        continue;
-      }
-      const double measured_mean = sum[c] / count;
-      const double measured_variance =
-          std::max(0.0, sum_squares[c] / count - measured_mean * measured_mean);
-      const double trained_variance = std::max(0.0, site.sigma[c] * site.sigma[c] - site.epsilon);
-      const double mean = (1.0 - target_weight) * site.mean[c] + target_weight * measured_mean;
-      const double variance =
-          (1.0 - target_weight) * trained_variance + target_weight * measured_variance;
-      statistics.mean.push_back(mean);
-      statistics.variance.push_back(variance);
-      channelMapFor(site, c, mean, variance, &network.fold_scale[s][c], &network.fold_offset[s][c]);
-    }
-    if (count > 0.0) adaptation.layers.push_back(std::move(statistics));
-    if (progress) progress(static_cast<int>(s), static_cast<int>(num_sites));
-  }
-  if (adapted == 0)
-    throw SegmentationError("model " + model_path_ +
-                            " has no batch normalization layer fed by a convolution to adapt");
-  adaptation.adapted_layers = adapted;
-  adaptation.target_weight = target_weight;
-  readNetworkForCpu();
-  return adaptation;
 }
 
 double Segmenter::tileScaleFor(const cv::Size& image_size, double camera_focal_px) const {

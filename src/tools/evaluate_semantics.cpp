@@ -45,7 +45,7 @@ constexpr char kUsage[] =
     "         [--model-card CARD] [--max-frames N] [--threads 2] [--json FILE]\n"
     "         [--policy resize|letterbox|pad_to_multiple|tiles] [--input WxH] [--tile-scale S]\n"
     "         [--network-focal F] [--tile-overlap PX] [--tile-max-width PX]\n"
-    "         [--bottom-margin PX] [--flip 0|1] [--gamma G] [--batchnorm-statistics F]\n"
+    "         [--bottom-margin PX] [--flip 0|1] [--gamma G]\n"
     "         [--color none|standardize] [--color-mean R,G,B] [--color-std R,G,B]\n"
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
@@ -198,7 +198,6 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
   card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
   card.gamma = cli.getDouble("--gamma", card.gamma);
-  card.batchnorm_statistics = cli.get("--batchnorm-statistics", card.batchnorm_statistics);
   if (!(card.gamma >= perception::ModelCard::kMinGamma &&
         card.gamma <= perception::ModelCard::kMaxGamma))
     throw UsageError("--gamma must be in [0.2, 5]");
@@ -292,16 +291,11 @@ void printScore(const std::string& title, const perception::PointLabelScore& sco
 int main(int argc, char** argv) {
   return ism::common::runCli("evaluate_semantics", kUsage, [&] {
     const ism::common::CommandLine cli(
-        argc, argv, {"--model",          "--model-card",
-                     "--max-frames",     "--threads",
-                     "--json",           "--policy",
-                     "--input",          "--tile-scale",
-                     "--network-focal",  "--tile-overlap",
-                     "--tile-max-width", "--flip",
-                     "--gamma",          "--batchnorm-statistics",
-                     "--color",          "--color-mean",
-                     "--color-std",      "--suppress-unlabeled",
-                     "--bottom-margin",  "--map-config"},
+        argc, argv,
+        {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
+         "--tile-scale", "--network-focal", "--tile-overlap", "--tile-max-width", "--flip",
+         "--gamma", "--color", "--color-mean", "--color-std", "--suppress-unlabeled",
+         "--bottom-margin", "--map-config"},
         {"--no-focal", "--no-map"},
         {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
@@ -332,13 +326,12 @@ int main(int argc, char** argv) {
     std::printf(
         "model %s, card %s: policy %s, tile_scale %g, network_focal_px %g, overlap %d, "
         "max width %d, bottom margin %d, flip %d, gamma %g, color %s, suppress unlabeled %d, "
-        "focal given %d, batch norm statistics %s\n",
+        "focal given %d\n",
         model.c_str(), card.source.c_str(), perception::resizePolicyName(card.resize_policy),
         card.tile_scale, card.network_focal_px, card.tile_overlap, card.tile_max_width,
         card.tile_bottom_margin, card.flip_average ? 1 : 0, card.gamma,
         perception::colorNormalizationName(card.color_normalization),
-        card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0,
-        card.batchnorm_statistics.empty() ? "trained" : card.batchnorm_statistics.c_str());
+        card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     std::vector<perception::PointLabelScore> totals(variants.size());

@@ -97,64 +97,6 @@ TEST(SegmenterEnet, RejectsEmptyAndNon8BitImages) {
   EXPECT_EQ(gray.label_ids.size(), cv::Size(124, 37));
 }
 
-// adapt_segmenter's path through the Segmenter: the network inputs segment() makes, the layers
-// adapted one after another, the statistics applied again from a card. Two layers keep it fast;
-// the folding itself is checked exactly in test_batchnorm_adaptation.
-TEST(SegmenterEnet, BatchNormAdaptationChangesLabelsOnlyWhenTheStatisticsChange) {
-  ISM_REQUIRE_SHARED(kEnetModel);
-  ISM_REQUIRE_SHARED(kCityscapesImage);
-  const std::string model = sharedPath(kEnetModel);
-  const cv::Mat image = cv::imread(sharedPath(kCityscapesImage), cv::IMREAD_COLOR);
-  // A darker, bluer camera than Cityscapes': the adapted first layers see other statistics.
-  cv::Mat other_camera;
-  image.convertTo(other_camera, CV_8UC3, 0.5, 10);
-  cv::Mat channels[3];
-  cv::split(other_camera, channels);
-  channels[0] += 60;
-  cv::merge(channels, 3, other_camera);
-
-  Segmenter trained(model, builtinEnetCityscapesCard());
-  const cv::Mat trained_labels = trained.segment(other_camera).label_ids;
-
-  Segmenter unchanged(model, builtinEnetCityscapesCard());
-  const BatchNormAdaptation none = unchanged.adaptBatchNorm({other_camera}, 0.0, 0.0, 2);
-  ASSERT_EQ(none.adapted_layers, 2);
-  ASSERT_EQ(none.layers.size(), 2u);
-  EXPECT_EQ(cv::countNonZero(unchanged.segment(other_camera).label_ids != trained_labels), 0);
-
-  Segmenter adapted(model, builtinEnetCityscapesCard());
-  const BatchNormAdaptation measured = adapted.adaptBatchNorm({other_camera}, 0.0, 1.0, 2);
-  const cv::Mat adapted_labels = adapted.segment(other_camera).label_ids;
-  EXPECT_GT(cv::countNonZero(adapted_labels != trained_labels), 100);
-
-  // Saved and named in a card, the statistics give the same labels in a new Segmenter.
-  const std::string dir = makeTempDir("ism_bn_card");
-  saveBatchNormAdaptation(measured, dir + "/stats.yaml");
-  ModelCard card = builtinEnetCityscapesCard();
-  card.batchnorm_statistics = "stats.yaml";
-  saveModelCard(card, dir + "/card.yaml");
-  Segmenter from_card(model, loadModelCard(dir + "/card.yaml"));
-  EXPECT_EQ(cv::countNonZero(from_card.segment(other_camera).label_ids != adapted_labels), 0);
-
-  // Statistics of another network are refused, naming the file and the layer.
-  BatchNormAdaptation foreign = measured;
-  foreign.layers[0].layer = "no_such_layer";
-  saveBatchNormAdaptation(foreign, dir + "/foreign.yaml");
-  foreign = loadBatchNormAdaptation(dir + "/foreign.yaml");
-  try {
-    adapted.setBatchNormAdaptation(foreign);
-    ADD_FAILURE() << "foreign statistics accepted";
-  } catch (const SegmentationError& error) {
-    EXPECT_NE(std::string(error.what()).find("no_such_layer"), std::string::npos) << error.what();
-    EXPECT_NE(std::string(error.what()).find("foreign.yaml"), std::string::npos) << error.what();
-  }
-  // A card naming a missing file is refused when it is read.
-  card.batchnorm_statistics = "missing.yaml";
-  saveModelCard(card, dir + "/missing_card.yaml");
-  EXPECT_THROW(loadModelCard(dir + "/missing_card.yaml"), ModelCardError);
-  fs::remove_all(dir);
-}
-
 TEST(SegmenterUnet, CommittedModelSegmentsWideKittiSizedImagesAtInputResolution) {
   const std::string model = repoPath("models/unet_synthetic.onnx");
   if (!fs::exists(model)) GTEST_SKIP() << "models/unet_synthetic.onnx not committed yet";

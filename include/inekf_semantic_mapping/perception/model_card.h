@@ -95,10 +95,6 @@ struct ModelCard {
   // kStandardize targets, per channel in the order of `mean` (pixel values 0..255).
   std::array<double, 3> color_mean{{0.0, 0.0, 0.0}};
   std::array<double, 3> color_std{{1.0, 1.0, 1.0}};
-  // Batch normalization statistics measured on the target camera (adapt_segmenter; see
-  // batchnorm_adaptation.h). Empty: the trained ones. In the YAML a path relative to the card's
-  // folder; loadModelCard resolves it.
-  std::string batchnorm_statistics;
   // Output channel index -> Cityscapes labelId; its size is the number of output channels.
   std::vector<std::uint8_t> output_label_ids;
   // What segmentation_node and semantic_map_offline apply before labels reach a map (YAML

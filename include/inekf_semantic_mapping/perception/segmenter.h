@@ -2,14 +2,11 @@
 // segmentation_node and the segment_image tool are thin faces over this class.
 #pragma once
 
-#include <functional>
 #include <memory>
 #include <opencv2/core/mat.hpp>
 #include <stdexcept>
 #include <string>
-#include <vector>
 
-#include "inekf_semantic_mapping/perception/batchnorm_adaptation.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 
 namespace inekf_semantic_mapping {
@@ -44,27 +41,6 @@ class Segmenter {
   // The factor kTiles scales an image of this size by (1 for the other policies).
   double tileScaleFor(const cv::Size& image_size, double camera_focal_px = 0.0) const;
 
-  // Adapts the network to a camera (AdaBN, see batchnorm_adaptation.h): prepares each image as
-  // segment() does, then, layer after layer in the network's order, measures the input of each
-  // batch normalization layer fed by a convolution behind the adaptation of all earlier layers
-  // and replaces its trained statistics with a blend: target_weight x the measured ones +
-  // (1 - target_weight) x the trained ones (1: AdaBN proper; a blend keeps the training set as a
-  // prior where a few images of one drive say little, after Schneider et al. 2020, "Improving
-  // robustness against common corruptions by covariate shift adaptation"). A layer measured
-  // before the earlier ones were adapted would be adapted to inputs that no longer occur.
-  // max_layers > 0 adapts only the first max_layers such layers. The result is applied to this
-  // Segmenter and returned (for saveBatchNormAdaptation). progress(layer, layers) after each layer.
-  // Throws SegmentationError for a network without such a layer.
-  using AdaptationProgress = std::function<void(int layer, int layers)>;
-  BatchNormAdaptation adaptBatchNorm(const std::vector<cv::Mat>& images, double camera_focal_px,
-                                     double target_weight = kDefaultTargetWeight,
-                                     int max_layers = 0, const AdaptationProgress& progress = {});
-  static constexpr double kDefaultTargetWeight = 0.5;
-  // Applies statistics measured before (the card's batchnorm_statistics does this on
-  // construction). Throws SegmentationError when they name a layer the network lacks or have
-  // another channel count.
-  void setBatchNormAdaptation(const BatchNormAdaptation& adaptation);
-
   const ModelCard& card() const { return card_; }
   const std::string& modelPath() const { return model_path_; }
 
@@ -72,9 +48,6 @@ class Segmenter {
   struct Network;
   Segmentation segmentTiles(const cv::Mat& bgr, double camera_focal_px);
   cv::Mat forward(const cv::Mat& network_image);  // 1 x C x h x w scores, checked
-  cv::Mat captureInput(const cv::Mat& blob);      // forward() while adaptBatchNorm collects
-  void readNetworkForCpu();
-  void ensureBatchNormSites();
   bool skipsInArgmax(int channel) const;
   std::string model_path_;
   ModelCard card_;
