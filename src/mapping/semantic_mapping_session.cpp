@@ -115,6 +115,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("label_geometry.min_raised_height", &config.label_geometry_min_raised_height_m);
   reader.read("label_geometry.high_terrain_is_vegetation",
               &config.label_geometry_high_terrain_is_vegetation);
+  reader.read("label_geometry.curbs", &config.label_geometry_curbs);
   reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
   reader.read("label_wait", &config.label_wait_s);
   reader.read("pose_wait", &config.pose_wait_s);
@@ -252,6 +253,12 @@ std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
         config_.label_geometry_high_terrain_is_vegetation
             ? &perception::cityscapesHighFlatRelabels()
             : nullptr);
+    if (config_.label_geometry_curbs) {
+      std::vector<std::uint8_t> beyond;
+      perception::markPointsBeyondCurbs(points_sensor, perception::CurbOptions(), &beyond);
+      perception::relabelBeyondCurbs(beyond, perception::cityscapesBeyondCurbRelabels(),
+                                     &label_ids);
+    }
   }
   for (std::uint32_t& id : label_ids) {
     if (id != kNoLabel) id = evidenceLabel(id);

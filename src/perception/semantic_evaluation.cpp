@@ -214,6 +214,12 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
         heights, cityscapesSurfaceKinds(), options.geometry, cityscapes::kUnlabeled, &labels,
         nullptr, options.high_terrain_is_vegetation ? &cityscapesHighFlatRelabels() : nullptr);
   }
+  if (options.check_curbs) {
+    ScopedTimer timer("labelling/curbs");
+    std::vector<std::uint8_t> beyond;
+    markPointsBeyondCurbs(xyzi.topRows<3>(), options.curbs, &beyond);
+    relabelBeyondCurbs(beyond, cityscapesBeyondCurbRelabels(), &labels);
+  }
   return labels;
 }
 

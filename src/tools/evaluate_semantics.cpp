@@ -50,7 +50,7 @@ constexpr char kUsage[] =
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
     "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]... [--geometry off|F:R:S[:K[:V]]]...\n"
-    "         [--map-config YAML] [--no-map]\n"
+    "         [--map-config YAML] [--no-map] [--curbs 0|1]\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
     "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
@@ -142,7 +142,9 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
   raw.options.filter = perception::LabelFilterOptions{0.0, 0};
   raw.options.reject_occluded = false;
   raw.options.check_geometry = false;
+  raw.options.check_curbs = false;
   variants.push_back(raw);
+  const bool curbs = cli.getInt("--curbs", 1) != 0;
   for (double confidence : confidences) {
     for (int radius : radii) {
       for (const std::string& occlusion : occlusions) {
@@ -151,6 +153,7 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
           variant.options.filter = perception::LabelFilterOptions{confidence, radius};
           variant.options.occlusion = parseOcclusion(occlusion, &variant.options.reject_occluded);
           parseGeometry(geometry, &variant.options);
+          variant.options.check_curbs = curbs && variant.options.check_geometry;
           std::ostringstream name;
           name << "conf=" << confidence << ",boundary=" << radius << ",occlusion="
                << occlusionName(variant.options.reject_occluded, variant.options.occlusion);
@@ -160,6 +163,7 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
                  << g.ground.max_slope << ":" << g.ground.min_support << ":"
                  << (variant.options.high_terrain_is_vegetation ? 1 : 0);
           }
+          if (variant.options.check_curbs) name << ",curbs";
           variant.name = name.str();
           variants.push_back(variant);
         }
@@ -292,10 +296,26 @@ int main(int argc, char** argv) {
   return ism::common::runCli("evaluate_semantics", kUsage, [&] {
     const ism::common::CommandLine cli(
         argc, argv,
-        {"--model", "--model-card", "--max-frames", "--threads", "--json", "--policy", "--input",
-         "--tile-scale", "--network-focal", "--tile-overlap", "--tile-max-width", "--flip",
-         "--gamma", "--color", "--color-mean", "--color-std", "--suppress-unlabeled",
-         "--bottom-margin", "--map-config"},
+        {"--model",
+         "--model-card",
+         "--max-frames",
+         "--threads",
+         "--json",
+         "--policy",
+         "--input",
+         "--tile-scale",
+         "--network-focal",
+         "--tile-overlap",
+         "--tile-max-width",
+         "--flip",
+         "--gamma",
+         "--color",
+         "--color-mean",
+         "--color-std",
+         "--suppress-unlabeled",
+         "--bottom-margin",
+         "--map-config",
+         "--curbs"},
         {"--no-focal", "--no-map"},
         {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
@@ -309,17 +329,19 @@ int main(int argc, char** argv) {
                                                : perception::defaultModelCardFor(model),
                        cli);
     const std::vector<Variant> variants = makeVariants(cli);
-    const ism::mapping::SemanticMappingConfig map_config =
+    ism::mapping::SemanticMappingConfig map_config =
         cli.has("--map-config") ? ism::mapping::loadSemanticMappingConfig(cli.get("--map-config"))
                                 : ism::mapping::SemanticMappingConfig();
+    if (cli.has("--curbs")) map_config.label_geometry_curbs = cli.getInt("--curbs", 1) != 0;
     if (!cli.has("--no-map")) {
       std::printf(
           "maps: label_geometry %s (max flat %.2f m, min raised %.2f m, high terrain is "
-          "vegetation %d)\n",
+          "vegetation %d, curbs %d)\n",
           map_config.label_geometry_check ? "on" : "off",
           map_config.label_geometry_max_flat_height_m,
           map_config.label_geometry_min_raised_height_m,
-          map_config.label_geometry_high_terrain_is_vegetation ? 1 : 0);
+          map_config.label_geometry_high_terrain_is_vegetation ? 1 : 0,
+          map_config.label_geometry_curbs ? 1 : 0);
     }
 
     perception::Segmenter segmenter(model, card, cli.getInt("--threads", 2));

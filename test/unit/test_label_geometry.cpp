@@ -3,8 +3,10 @@
 // the labels it rejects or keeps.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "inekf_semantic_mapping/perception/cityscapes.h"
@@ -286,6 +288,206 @@ TEST(LabelGeometryTest, BadInputsThrow) {
   std::vector<std::uint32_t> labels(3, cityscapes::kRoad);
   EXPECT_THROW(rejectGeometricallyInconsistentLabels(heights, cityscapesSurfaceKinds(),
                                                      LabelGeometryOptions(), kNone, &labels),
+               std::invalid_argument);
+}
+
+// A spinning lidar's scan in ring order (KITTI's): rings at elevations -24..-6 deg, each once
+// around from behind the sensor (azimuth -pi .. pi in 0.2 deg steps), cast analytically against
+// a road at the sensor's height below it with kerbs `kerb_height` high at y = +4 m (left) and
+// y = -5 m (right) and sidewalks beyond, an optional box (a parked car) and an optional narrow
+// strip `bump_height` high at y = 2.0..2.3 m (a drain's edge, no sidewalk).
+struct KerbWorld {
+  float kerb_height = 0.12f;
+  bool parked_car = false;  // x 6..10, y 2.2..3.8, 1.5 m tall
+  float bump_height = 0.0f;
+  float groundAt(float y) const {
+    if (y >= 4.0f || y <= -5.0f) return -kSensorHeight + kerb_height;
+    if (bump_height > 0.0f && y >= 2.0f && y <= 2.3f) return -kSensorHeight + bump_height;
+    return -kSensorHeight;
+  }
+};
+
+// Where the ray (unit direction d) meets the world first, or false beyond 40 m.
+bool castRay(const KerbWorld& world, const Eigen::Vector3f& d, Eigen::Vector3f* hit) {
+  float best = 40.0f;
+  bool found = false;
+  // Horizontal surfaces: the road, the raised parts.
+  for (float z :
+       {-kSensorHeight, -kSensorHeight + world.kerb_height, -kSensorHeight + world.bump_height}) {
+    if (d.z() >= 0.0f || z >= 0.0f) continue;
+    const float t = z / d.z();
+    if (t > 0.0f && t < best && std::abs(world.groundAt(t * d.y()) - z) < 1e-4f) {
+      best = t;
+      found = true;
+    }
+  }
+  // Vertical faces: the kerbs and the bump's sides, between the two levels they join.
+  for (float y : {4.0f, -5.0f, 2.0f, 2.3f}) {
+    if (std::abs(d.y()) < 1e-6f) continue;
+    const float t = y / d.y();
+    const float z = t * d.z();
+    const float low = -kSensorHeight;
+    const float high = std::max(world.groundAt(y - 1e-3f), world.groundAt(y + 1e-3f));
+    if (t > 0.0f && t < best && z >= low && z <= high) {
+      best = t;
+      found = true;
+    }
+  }
+  if (world.parked_car) {  // slab test against the box
+    const Eigen::Vector3f lo(6.0f, 2.2f, -kSensorHeight), hi(10.0f, 3.8f, -kSensorHeight + 1.5f);
+    float t_in = 0.0f, t_out = best;
+    bool hits = true;
+    for (int a = 0; a < 3 && hits; ++a) {
+      if (std::abs(d[a]) < 1e-9f) {
+        hits = lo[a] <= 0.0f && 0.0f <= hi[a];
+        continue;
+      }
+      float t0 = lo[a] / d[a], t1 = hi[a] / d[a];
+      if (t0 > t1) std::swap(t0, t1);
+      t_in = std::max(t_in, t0);
+      t_out = std::min(t_out, t1);
+      hits = t_in <= t_out;
+    }
+    if (hits && t_in < best) {
+      best = t_in;
+      found = true;
+    }
+  }
+  if (found) *hit = best * d;
+  return found;
+}
+
+Eigen::Matrix3Xf ringOrderedScan(const KerbWorld& world) {
+  std::vector<Eigen::Vector3f> points;
+  constexpr float kDeg = 3.14159265f / 180.0f;
+  for (float elevation = -24.0f; elevation <= -6.0f; elevation += 0.4f) {
+    for (float azimuth = -179.9f; azimuth < 180.0f; azimuth += 0.2f) {
+      const Eigen::Vector3f d(std::cos(elevation * kDeg) * std::cos(azimuth * kDeg),
+                              std::cos(elevation * kDeg) * std::sin(azimuth * kDeg),
+                              std::sin(elevation * kDeg));
+      Eigen::Vector3f hit;
+      if (castRay(world, d, &hit)) points.push_back(hit);
+    }
+  }
+  Eigen::Matrix3Xf m(3, static_cast<Eigen::Index>(points.size()));
+  for (std::size_t i = 0; i < points.size(); ++i) m.col(static_cast<Eigen::Index>(i)) = points[i];
+  return m;
+}
+
+struct KerbCounts {
+  int road = 0, road_flagged = 0, sidewalk = 0, sidewalk_flagged = 0;
+  int raised_flagged = 0;  // points higher than the sidewalk (a car)
+};
+
+// Points ahead within 20 m: the road between the kerbs, the sidewalks beyond.
+KerbCounts countFlags(const Eigen::Matrix3Xf& scan, const std::vector<std::uint8_t>& beyond) {
+  KerbCounts counts;
+  for (Eigen::Index i = 0; i < scan.cols(); ++i) {
+    const Eigen::Vector3f p = scan.col(i);
+    if (p.x() <= 0.0f || p.x() > 20.0f) continue;
+    const bool flagged = beyond[static_cast<std::size_t>(i)] != 0;
+    const bool on_road = std::abs(p.z() + kSensorHeight) < 1e-3f && p.y() < 4.0f && p.y() > -5.0f;
+    const bool on_sidewalk =
+        std::abs(p.z() + kSensorHeight - 0.12f) < 1e-3f && (p.y() > 4.0f || p.y() < -5.0f);
+    if (on_road) {
+      ++counts.road;
+      counts.road_flagged += flagged;
+    } else if (on_sidewalk) {
+      ++counts.sidewalk;
+      counts.sidewalk_flagged += flagged;
+    } else if (p.z() + kSensorHeight > 0.15f) {
+      counts.raised_flagged += flagged;
+    }
+  }
+  return counts;
+}
+
+TEST(CurbTest, SidewalksBeyondBothKerbsAreFoundAndNoRoadPoint) {
+  const Eigen::Matrix3Xf scan = ringOrderedScan(KerbWorld());
+  std::vector<std::uint8_t> beyond;
+  EXPECT_GE(markPointsBeyondCurbs(scan, CurbOptions(), &beyond), 30);
+  const KerbCounts counts = countFlags(scan, beyond);
+  ASSERT_GT(counts.road, 1000);
+  ASSERT_GT(counts.sidewalk, 1000);
+  EXPECT_EQ(counts.road_flagged, 0);
+  EXPECT_GT(counts.sidewalk_flagged, 0.9 * counts.sidewalk);
+
+  // A lidar spinning the other way: each ring's points in reverse, the same kerbs found.
+  Eigen::Matrix3Xf reversed(3, scan.cols());
+  for (Eigen::Index i = 0; i < scan.cols(); ++i) reversed.col(i) = scan.col(scan.cols() - 1 - i);
+  std::vector<std::uint8_t> reversed_beyond;
+  markPointsBeyondCurbs(reversed, CurbOptions(), &reversed_beyond);
+  EXPECT_EQ(countFlags(reversed, reversed_beyond).road_flagged, 0);
+  EXPECT_EQ(countFlags(reversed, reversed_beyond).sidewalk_flagged, counts.sidewalk_flagged);
+
+  // A step higher than a kerb (a wall's foot, a loading dock) may mark what lies beyond it, never
+  // the road before it.
+  KerbWorld high;
+  high.kerb_height = 0.45f;
+  const Eigen::Matrix3Xf high_scan = ringOrderedScan(high);
+  markPointsBeyondCurbs(high_scan, CurbOptions(), &beyond);
+  EXPECT_EQ(countFlags(high_scan, beyond).road_flagged, 0);
+}
+
+TEST(CurbTest, AParkedCarStopsItsRingsAndTheKerbLineStillMarksTheSidewalk) {
+  KerbWorld world;
+  world.parked_car = true;
+  const Eigen::Matrix3Xf scan = ringOrderedScan(world);
+  std::vector<std::uint8_t> beyond;
+  CurbOptions rings_only;
+  rings_only.line_min_points = 0;
+  markPointsBeyondCurbs(scan, rings_only, &beyond);
+  const KerbCounts by_rings = countFlags(scan, beyond);
+  markPointsBeyondCurbs(scan, CurbOptions(), &beyond);
+  const KerbCounts with_line = countFlags(scan, beyond);
+  EXPECT_EQ(by_rings.road_flagged, 0);
+  EXPECT_EQ(with_line.road_flagged, 0);
+  EXPECT_EQ(with_line.raised_flagged, 0);  // nothing of the car
+  // The rings that meet the car before the kerb find none; the line through the others' kerbs
+  // marks the sidewalk those rings reach past the car.
+  EXPECT_GT(with_line.sidewalk_flagged, by_rings.sidewalk_flagged);
+  EXPECT_GT(with_line.sidewalk_flagged, 0.85 * with_line.sidewalk);
+}
+
+TEST(CurbTest, ANarrowStripOrAKerbTooLowIsNoKerb) {
+  for (const auto& [kerb, bump] : {std::pair<float, float>{0.0f, 0.08f}, {0.03f, 0.0f}}) {
+    KerbWorld world;
+    world.kerb_height = kerb;
+    world.bump_height = bump;
+    const Eigen::Matrix3Xf scan = ringOrderedScan(world);
+    std::vector<std::uint8_t> beyond;
+    markPointsBeyondCurbs(scan, CurbOptions(), &beyond);
+    EXPECT_EQ(std::count(beyond.begin(), beyond.end(), 1), 0) << kerb << " " << bump;
+  }
+}
+
+TEST(CurbTest, AScanNotInRingOrderFlagsNothing) {
+  Eigen::Matrix3Xf scan = ringOrderedScan(KerbWorld());
+  std::vector<Eigen::Index> order(static_cast<std::size_t>(scan.cols()));
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<Eigen::Index>(i);
+  std::shuffle(order.begin(), order.end(), std::mt19937(3));
+  Eigen::Matrix3Xf shuffled(3, scan.cols());
+  for (std::size_t i = 0; i < order.size(); ++i)
+    shuffled.col(static_cast<Eigen::Index>(i)) = scan.col(order[i]);
+  std::vector<std::uint8_t> beyond;
+  // A shuffled scan jumps back in azimuth everywhere: no ring is a full revolution's run...
+  markPointsBeyondCurbs(shuffled, CurbOptions(), &beyond);
+  EXPECT_EQ(std::count(beyond.begin(), beyond.end(), 1), 0);
+  // ... and a scan of a few points is no scan of rings.
+  EXPECT_EQ(markPointsBeyondCurbs(scan.leftCols(500), CurbOptions(), &beyond), 0);
+  EXPECT_EQ(beyond.size(), 500u);
+}
+
+TEST(CurbTest, OnlyRoadBeyondAKerbBecomesSidewalk) {
+  std::vector<std::uint32_t> labels = {cityscapes::kRoad, cityscapes::kRoad, cityscapes::kCar,
+                                       cityscapes::kTerrain, kNone};
+  const std::vector<std::uint8_t> beyond = {1, 0, 1, 1, 1};
+  std::size_t changed = 0;
+  relabelBeyondCurbs(beyond, cityscapesBeyondCurbRelabels(), &labels, &changed);
+  EXPECT_EQ(changed, 1u);
+  EXPECT_EQ(labels, (std::vector<std::uint32_t>{cityscapes::kSidewalk, cityscapes::kRoad,
+                                                cityscapes::kCar, cityscapes::kTerrain, kNone}));
+  EXPECT_THROW(relabelBeyondCurbs({1}, cityscapesBeyondCurbRelabels(), &labels),
                std::invalid_argument);
 }
 

@@ -87,5 +87,52 @@ void rejectGeometricallyInconsistentLabels(const Eigen::VectorXf& heights,
                                            std::size_t* rejected = nullptr,
                                            const RelabelTable* relabel_high = nullptr);
 
+// Kerbs on the laser rings of one scan (sensor frame: x forward, z up). A spinning lidar's ring
+// crosses the vehicle's own road straight ahead, then, walking sideways along it, the kerb and
+// the sidewalk: a kerb is a rise of min_step_m..max_step_m within max_step_run_m horizontally,
+// after a flat stretch of road at least min_road_run_m long and before a flat raised surface at
+// least min_top_run_m wide (a sidewalk, not a bump or a drain's edge). Everything after it on
+// that side of the ring's forward half is beyond the kerb. A rise of more than max_step_m first
+// (a parked car, a wall) ends the walk with nothing found: behind an obstacle the ring says
+// nothing about the road. The camera's sidewalk and road look alike to a network trained
+// elsewhere; the kerb between them is plain in the lidar.
+struct CurbOptions {
+  float min_step_m = 0.06f;        // lower kerbs than this are a road's roughness
+  float max_step_m = 0.30f;        // higher is an obstacle, not a kerb
+  float max_step_run_m = 0.5f;     // the rise happens within this (horizontally)
+  float flat_tolerance_m = 0.04f;  // the road continues within this of its last point
+  float min_road_run_m = 0.5f;     // flat road before the kerb
+  float min_top_run_m = 0.6f;      // flat raised surface after it
+  float max_ring_range_m = 25.0f;  // rings meeting the ground farther ahead are too sparse
+  float min_ground_drop_m = 1.0f;  // a ring whose forward half is not this far below the
+                                   // sensor does not reach the ground ahead
+  // The kerb as a line: with at least line_min_points kerbs on one side, a straight line
+  // y = a + b x through them (refitted without those more than 0.5 m off; none if the median
+  // is more than 0.3 m off) also marks the points of rings whose walk stopped early (a parked
+  // car, a gap): those more than line_margin_m beyond it, within line_height_tolerance_m of the
+  // kerbs' height, between the first and last kerb +- line_extension_m along x. 0: no line.
+  int line_min_points = 3;
+  float line_margin_m = 0.5f;
+  float line_height_tolerance_m = 0.15f;
+  float line_extension_m = 2.0f;
+};
+
+// Per point: 1 when it lies beyond a kerb on its ring, else 0 (`beyond` is resized). The rings
+// come from the scan's point order: a KITTI HDL-64 scan (raw .bin files, kitti2bag's clouds)
+// stores ring after ring, each once around in azimuth from behind the sensor, so a ring ends
+// where the azimuth jumps from +pi back to -pi (or from -pi to +pi for a lidar spinning the other
+// way, as the synthetic drives'). Returns the number of rings used; a scan with fewer than 16
+// such revolutions (another order, a cropped cloud) flags nothing.
+int markPointsBeyondCurbs(const PointMatrixRef& points, const CurbOptions& options,
+                          std::vector<std::uint8_t>* beyond);
+
+// Cityscapes: road -> sidewalk for a point beyond a kerb (every other id kNoRelabel).
+const RelabelTable& cityscapesBeyondCurbRelabels();
+
+// labels[i] = relabel[labels[i]] where beyond[i] and there is an entry. changed (optional): how
+// many. Throws std::invalid_argument when the sizes differ.
+void relabelBeyondCurbs(const std::vector<std::uint8_t>& beyond, const RelabelTable& relabel,
+                        std::vector<std::uint32_t>* labels, std::size_t* changed = nullptr);
+
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

@@ -88,6 +88,10 @@ struct PointLabellingOptions {
   bool check_geometry = true;
   LabelGeometryOptions geometry;
   bool high_terrain_is_vegetation = true;
+  // markPointsBeyondCurbs + relabelBeyondCurbs with cityscapesBeyondCurbRelabels (road beyond a
+  // kerb is sidewalk): the session's default.
+  bool check_curbs = true;
+  CurbOptions curbs;
 };
 
 // Per point of the scan: the camera's labelId at its pixel after filterLabels, 0 for points
