@@ -221,12 +221,12 @@ void rejectGeometricallyInconsistentLabels(
 
 namespace {
 
-// The forward half of one ring: from the point straight ahead, walks sideways (step +1: left,
-// -1: right) and returns the index in `forward` of the first point of a kerb's rise, or -1.
-// The road's level is the median height of its last 0.5 m of points: a ring meets a kerb's face
-// at a slant and climbs it half a centimetre to a centimetre per point, so against the point
-// before, or a mean that takes the face in, the rise would never show; a gentle grade moves the
-// window along with it.
+// The forward half of one ring: from the point straight ahead, walks sideways (step +1 or -1,
+// the two ways along the ring) and returns the index in `forward` of the first point of a kerb's
+// rise, or -1. The road's level is the mean height of the older half of its last 0.3 m of
+// points: a ring meets a kerb's face at a slant and climbs it by about a centimetre per point, so
+// against the point before, or a window that takes the face in as it climbs, the rise would never
+// show; a gentle grade moves the window along with it.
 int findCurb(const std::vector<Eigen::Index>& forward, const PointMatrixRef& points, int seed,
              int step, const CurbOptions& options) {
   const auto xy_distance = [&](int a, int b) {
