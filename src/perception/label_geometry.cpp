@@ -349,18 +349,24 @@ int markPointsBeyondCurbs(const PointMatrixRef& points, const CurbOptions& optio
                           std::vector<std::uint8_t>* beyond) {
   const Eigen::Index n = points.cols();
   beyond->assign(static_cast<std::size_t>(n), 0);
-  // Ring boundaries: the azimuth runs from -pi to +pi within a ring and jumps back at its end.
+  // Ring boundaries: the azimuth rises within a ring (from -pi to +pi) and jumps back at its
+  // end; a cloud cropped to the camera's view (the session keeps only those points of a scan
+  // whose label image comes late) jumps back by the view's width. Gaps in the returns (sky) jump
+  // forward. A lidar spinning the other way does all of it mirrored.
   constexpr float kPi = 3.14159265f;
+  constexpr float kRingJump = kPi / 4;
   std::vector<float> azimuth(static_cast<std::size_t>(n));
   for (Eigen::Index i = 0; i < n; ++i) azimuth[i] = std::atan2(points(1, i), points(0, i));
-  // A lidar spinning the other way (azimuth falling within a ring) jumps up instead.
-  std::vector<Eigen::Index> ring_starts{0}, falling_ring_starts{0};
+  Eigen::Index rising = 0, falling = 0;
   for (Eigen::Index i = 1; i < n; ++i) {
     const float change = azimuth[i] - azimuth[i - 1];
-    if (change < -kPi) ring_starts.push_back(i);
-    if (change > kPi) falling_ring_starts.push_back(i);
+    if (std::abs(change) < 0.01f) (change > 0.0f ? rising : falling) += 1;
   }
-  if (falling_ring_starts.size() > ring_starts.size()) ring_starts.swap(falling_ring_starts);
+  const float direction = rising >= falling ? 1.0f : -1.0f;
+  std::vector<Eigen::Index> ring_starts{0};
+  for (Eigen::Index i = 1; i < n; ++i) {
+    if ((azimuth[i] - azimuth[i - 1]) * direction < -kRingJump) ring_starts.push_back(i);
+  }
   ring_starts.push_back(n);
   constexpr std::size_t kMinRings = 16;
   if (ring_starts.size() < kMinRings + 2) return 0;

@@ -120,9 +120,10 @@ struct CurbOptions {
 // Per point: 1 when it lies beyond a kerb on its ring, else 0 (`beyond` is resized). The rings
 // come from the scan's point order: a KITTI HDL-64 scan (raw .bin files, kitti2bag's clouds)
 // stores ring after ring, each once around in azimuth from behind the sensor, so a ring ends
-// where the azimuth jumps from +pi back to -pi (or from -pi to +pi for a lidar spinning the other
-// way, as the synthetic drives'). Returns the number of rings used; a scan with fewer than 16
-// such revolutions (another order, a cropped cloud) flags nothing.
+// where the azimuth jumps back by more than 45 deg (from +pi to -pi, or by the view's width in a
+// cloud cropped to the camera's view; mirrored for a lidar spinning the other way, as the
+// synthetic drives'). Returns the number of rings used; a cloud with fewer than 16 such rings
+// (another order) flags nothing.
 int markPointsBeyondCurbs(const PointMatrixRef& points, const CurbOptions& options,
                           std::vector<std::uint8_t>* beyond);
 
