@@ -243,22 +243,14 @@ std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
   }
   if (config_.label_geometry_check && config_.class_set == "cityscapes") {
     ScopedTimer geometry_timer("semantic_map/label_geometry");
-    perception::LabelGeometryOptions options;
-    options.max_flat_height_m = static_cast<float>(config_.label_geometry_max_flat_height_m);
-    options.min_raised_height_m = static_cast<float>(config_.label_geometry_min_raised_height_m);
-    Eigen::VectorXf heights;
-    perception::heightAboveGround(points_sensor, options.ground, &heights);
-    perception::rejectGeometricallyInconsistentLabels(
-        heights, perception::cityscapesSurfaceKinds(), options, kNoLabel, &label_ids, nullptr,
-        config_.label_geometry_high_terrain_is_vegetation
-            ? &perception::cityscapesHighFlatRelabels()
-            : nullptr);
-    if (config_.label_geometry_curbs) {
-      std::vector<std::uint8_t> beyond;
-      perception::markPointsBeyondCurbs(points_sensor, perception::CurbOptions(), &beyond);
-      perception::relabelBeyondCurbs(beyond, perception::cityscapesBeyondCurbRelabels(),
-                                     &label_ids);
-    }
+    perception::CityscapesLidarChecks checks;
+    checks.geometry.max_flat_height_m =
+        static_cast<float>(config_.label_geometry_max_flat_height_m);
+    checks.geometry.min_raised_height_m =
+        static_cast<float>(config_.label_geometry_min_raised_height_m);
+    checks.high_terrain_is_vegetation = config_.label_geometry_high_terrain_is_vegetation;
+    checks.curbs = config_.label_geometry_curbs;
+    perception::applyCityscapesLidarChecks(points_sensor, checks, kNoLabel, &label_ids);
   }
   for (std::uint32_t& id : label_ids) {
     if (id != kNoLabel) id = evidenceLabel(id);

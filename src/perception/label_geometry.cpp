@@ -441,5 +441,19 @@ void relabelBeyondCurbs(const std::vector<std::uint8_t>& beyond, const RelabelTa
   if (changed) *changed = count;
 }
 
+void applyCityscapesLidarChecks(const PointMatrixRef& points, const CityscapesLidarChecks& checks,
+                                std::uint32_t unknown_label, std::vector<std::uint32_t>* labels) {
+  Eigen::VectorXf heights;
+  heightAboveGround(points, checks.geometry.ground, &heights);
+  rejectGeometricallyInconsistentLabels(
+      heights, cityscapesSurfaceKinds(), checks.geometry, unknown_label, labels, nullptr,
+      checks.high_terrain_is_vegetation ? &cityscapesHighFlatRelabels() : nullptr);
+  if (checks.curbs) {
+    std::vector<std::uint8_t> beyond;
+    markPointsBeyondCurbs(points, checks.curb, &beyond);
+    relabelBeyondCurbs(beyond, cityscapesBeyondCurbRelabels(), labels);
+  }
+}
+
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

@@ -208,17 +208,12 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
   }
   if (options.check_geometry) {
     ScopedTimer timer("labelling/label_geometry");
-    Eigen::VectorXf heights;
-    heightAboveGround(xyzi.topRows<3>(), options.geometry.ground, &heights);
-    rejectGeometricallyInconsistentLabels(
-        heights, cityscapesSurfaceKinds(), options.geometry, cityscapes::kUnlabeled, &labels,
-        nullptr, options.high_terrain_is_vegetation ? &cityscapesHighFlatRelabels() : nullptr);
-  }
-  if (options.check_curbs) {
-    ScopedTimer timer("labelling/curbs");
-    std::vector<std::uint8_t> beyond;
-    markPointsBeyondCurbs(xyzi.topRows<3>(), options.curbs, &beyond);
-    relabelBeyondCurbs(beyond, cityscapesBeyondCurbRelabels(), &labels);
+    CityscapesLidarChecks checks;
+    checks.geometry = options.geometry;
+    checks.high_terrain_is_vegetation = options.high_terrain_is_vegetation;
+    checks.curbs = options.check_curbs;
+    checks.curb = options.curbs;
+    applyCityscapesLidarChecks(xyzi.topRows<3>(), checks, cityscapes::kUnlabeled, &labels);
   }
   return labels;
 }

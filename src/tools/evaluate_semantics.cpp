@@ -332,7 +332,8 @@ int main(int argc, char** argv) {
     ism::mapping::SemanticMappingConfig map_config =
         cli.has("--map-config") ? ism::mapping::loadSemanticMappingConfig(cli.get("--map-config"))
                                 : ism::mapping::SemanticMappingConfig();
-    if (cli.has("--curbs")) map_config.label_geometry_curbs = cli.getInt("--curbs", 1) != 0;
+    map_config.label_geometry_curbs =
+        cli.getInt("--curbs", map_config.label_geometry_curbs ? 1 : 0) != 0;
     if (!cli.has("--no-map")) {
       std::printf(
           "maps: label_geometry %s (max flat %.2f m, min raised %.2f m, high terrain is "

@@ -135,5 +135,18 @@ const RelabelTable& cityscapesBeyondCurbRelabels();
 void relabelBeyondCurbs(const std::vector<std::uint8_t>& beyond, const RelabelTable& relabel,
                         std::vector<std::uint32_t>* labels, std::size_t* changed = nullptr);
 
+// The lidar's checks on one scan's Cityscapes camera labels, as the mapping session and
+// evaluate_semantics apply them: rejectGeometricallyInconsistentLabels (terrain well above the
+// ground becomes vegetation when high_terrain_is_vegetation), then, with curbs, road beyond a
+// kerb becomes sidewalk.
+struct CityscapesLidarChecks {
+  LabelGeometryOptions geometry;
+  bool high_terrain_is_vegetation = true;
+  bool curbs = true;
+  CurbOptions curb;
+};
+void applyCityscapesLidarChecks(const PointMatrixRef& points, const CityscapesLidarChecks& checks,
+                                std::uint32_t unknown_label, std::vector<std::uint32_t>* labels);
+
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

@@ -88,8 +88,8 @@ struct PointLabellingOptions {
   bool check_geometry = true;
   LabelGeometryOptions geometry;
   bool high_terrain_is_vegetation = true;
-  // markPointsBeyondCurbs + relabelBeyondCurbs with cityscapesBeyondCurbRelabels (road beyond a
-  // kerb is sidewalk): the session's default.
+  // ... and then road beyond a kerb is sidewalk (applyCityscapesLidarChecks; with
+  // check_geometry only): the session's default.
   bool check_curbs = true;
   CurbOptions curbs;
 };
