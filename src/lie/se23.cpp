@@ -1,5 +1,7 @@
 #include "inekf_semantic_mapping/lie/se23.h"
 
+#include <cmath>
+
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -71,6 +73,49 @@ Vector9d logSE23(const ExtendedPose& x) {
   xi.segment<3>(3) = jl_inv * x.velocity;
   xi.segment<3>(6) = jl_inv * x.position;
   return xi;
+}
+
+namespace {
+
+// The coupling block Q(phi, u) of SE(3)'s left Jacobian [J_l(phi) 0; Q J_l(phi)] for a tangent
+// (phi, u) (Barfoot, State Estimation for Robotics, eq. 7.86b):
+//   Q = 1/2 U + a (P U + U P + P U P) + b (P P U + U P P - 3 P U P) + c (P U P P + P P U P),
+//   P = phi^, U = u^, a = (t - sin t) / t^3, b = (t^2 + 2 cos t - 2) / (2 t^4),
+//   c = (2 t - 3 sin t + t cos t) / (2 t^5), t = |phi|.
+// Near 0 the three coefficients cancel catastrophically: their Taylor series instead.
+Eigen::Matrix3d couplingSE3(const Eigen::Vector3d& phi, const Eigen::Vector3d& u) {
+  const double t = phi.norm();
+  double a, b, c;
+  if (t < 1e-4) {
+    const double t2 = t * t;
+    a = 1.0 / 6.0 - t2 / 120.0;
+    b = 1.0 / 24.0 - t2 / 720.0;
+    c = 1.0 / 120.0 - t2 / 2520.0;
+  } else {
+    const double s = std::sin(t), co = std::cos(t), t2 = t * t;
+    a = (t - s) / (t2 * t);
+    b = (t2 + 2.0 * co - 2.0) / (2.0 * t2 * t2);
+    c = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
+  }
+  const Eigen::Matrix3d p = hat(phi), uu = hat(u);
+  const Eigen::Matrix3d pu = p * uu, up = uu * p, pup = p * up;
+  return 0.5 * uu + a * (pu + up + pup) + b * (p * pu + up * p - 3.0 * pup) +
+         c * (pup * p + p * pup);
+}
+
+}  // namespace
+
+Matrix9d rightJacobianSE23(const Vector9d& xi) {
+  // J_r(xi) = J_l(-xi); J_l has J_l(phi) on the diagonal and Q(phi, v), Q(phi, p) below.
+  const Eigen::Vector3d phi = -xi.head<3>();
+  const Eigen::Matrix3d jl = leftJacobianSO3(phi);
+  Matrix9d j = Matrix9d::Zero();
+  j.block<3, 3>(0, 0) = jl;
+  j.block<3, 3>(3, 3) = jl;
+  j.block<3, 3>(6, 6) = jl;
+  j.block<3, 3>(3, 0) = couplingSE3(phi, -xi.segment<3>(3));
+  j.block<3, 3>(6, 0) = couplingSE3(phi, -xi.segment<3>(6));
+  return j;
 }
 
 }  // namespace lie
