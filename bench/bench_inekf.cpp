@@ -7,7 +7,7 @@
 #include <filesystem>
 
 #include "inekf_semantic_mapping/estimation/oxts_run.h"
-#include "inekf_semantic_mapping/estimation/pose_graph.h"
+#include "inekf_semantic_mapping/estimation/smoothed_posterior_graph.h"
 
 namespace estimation = inekf_semantic_mapping::estimation;
 namespace kitti = inekf_semantic_mapping::kitti;
@@ -100,24 +100,54 @@ void BM_WholeDriveFilteredAndSmoothed(benchmark::State& state) {
 }
 BENCHMARK(BM_WholeDriveFilteredAndSmoothed)->Unit(benchmark::kMillisecond);
 
-// The loop-closed covariance's marginals (PoseGraph::marginalCovariances, the selected inverse):
-// a chain of N keyframes with odometry and a prior, about what N * 2 m of drive gives.
-void BM_PoseGraphMarginals(benchmark::State& state) {
-  const int nodes = static_cast<int>(state.range(0));
-  estimation::PoseGraph graph;
-  for (int k = 0; k < nodes; ++k) graph.addNode(estimation::Pose3());
-  for (int k = 0; k + 1 < nodes; ++k) {
-    estimation::RelativePoseFactor odometry;
-    odometry.from = k;
-    odometry.to = k + 1;
-    odometry.information = 100.0 * estimation::Matrix6d::Identity();
-    graph.addRelative(odometry);
+// The loop closure's back end on the smoothed drive (estimation/smoothed_posterior_graph.h):
+// keyframes every N frames (20 is about 2 m at the drive's speed), loops between the first
+// keyframes and those half the drive later, each measuring the smoothed relative pose moved by
+// 0.3 m; optimize from the smoothed run, then the posterior states and covariances of every frame.
+void BM_SmoothedPosteriorGraph(benchmark::State& state) {
+  static const estimation::OxtsRunResult run = [] {
+    estimation::OxtsRunOptions options;
+    options.gps = estimation::protocolGps();
+    options.smooth = true;
+    return estimation::runLocalizerOnOxts(benchmarkDrive(), options);
+  }();
+  const int spacing = static_cast<int>(state.range(0));
+  std::vector<int> keyframes;
+  for (int k = run.first_estimated_frame; k < static_cast<int>(run.states.size()); k += spacing) {
+    keyframes.push_back(k);
   }
-  graph.addPrior(estimation::PosePriorFactor());
-  for (auto _ : state) benchmark::DoNotOptimize(graph.marginalCovariances());
-  state.SetLabel(std::to_string(nodes) + " nodes");
+  const int nodes = static_cast<int>(keyframes.size());
+  std::vector<estimation::NavState> states;
+  std::vector<estimation::PoseCovariance> covariances;
+  int iterations = 0;
+  for (auto _ : state) {
+    estimation::SmoothedPosteriorGraph graph(run, keyframes);
+    for (int n = 0; n < 20; ++n) {
+      estimation::RelativePoseFactor loop;
+      loop.from = n;
+      loop.to = n + nodes / 2;
+      const auto pose = [&](int node) {
+        estimation::Pose3 p;
+        p.rotation = run.states[keyframes[node]].rotation;
+        p.position = run.states[keyframes[node]].position_map;
+        return p;
+      };
+      loop.measurement = pose(loop.from).inverse() * pose(loop.to);
+      loop.measurement.position.x() += 0.3;
+      loop.information = 100.0 * estimation::Matrix6d::Identity();
+      loop.kernel = estimation::RobustKernel::kCauchy;
+      loop.kernel_scale = 2.0;
+      graph.addLoop(loop);
+    }
+    iterations = graph.optimize().iterations;
+    graph.posterior(&states, &covariances);
+    benchmark::DoNotOptimize(covariances.data());
+  }
+  state.SetLabel(std::to_string(nodes) + " keyframes, 20 loops, " +
+                 std::to_string(run.states.size()) + " frames, " + std::to_string(iterations) +
+                 " LM iterations");
 }
-BENCHMARK(BM_PoseGraphMarginals)->Arg(500)->Arg(2000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_SmoothedPosteriorGraph)->Arg(20)->Arg(5)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -5,6 +5,7 @@ ism_add_core_library(${PROJECT_NAME}_estimation
   SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
           src/estimation/localizer.cpp src/estimation/lazy_start.cpp
           src/estimation/smoother.cpp src/estimation/pose_graph.cpp
+          src/estimation/selected_inverse.cpp
   LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)
 
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
@@ -19,6 +20,7 @@ ism_add_core_library(${PROJECT_NAME}_localization_session
 # Runs the session over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
 ism_add_core_library(${PROJECT_NAME}_estimation_oxts
   SOURCES src/estimation/oxts_run.cpp src/estimation/loop_closure.cpp
+          src/estimation/smoothed_posterior_graph.cpp
   LINK ${PROJECT_NAME}_localization_session)
 # Lidar scan registration for the loop closure (PCL GICP): the one library that sees PCL.
 ism_add_core_library(${PROJECT_NAME}_registration
@@ -31,6 +33,8 @@ ism_add_gtest(test_smoother SOURCES test/unit/test_smoother.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_pose_graph SOURCES test/unit/test_pose_graph.cpp
   LINK ${PROJECT_NAME}_estimation)
+ism_add_gtest(test_smoothed_posterior_graph SOURCES test/unit/test_smoothed_posterior_graph.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts)
 # Loop closure end to end on a synthetic drive it generates (lidar, 30 s GPS outage).
 ism_add_gtest(test_loop_closure SOURCES test/unit/test_loop_closure.cpp
   LINK ${PROJECT_NAME}_registration ${PROJECT_NAME}_synthetic)

@@ -294,12 +294,12 @@ int main(int argc, char** argv) {
         errors.rotation_rmse_deg, errors.yaw_rmse_deg);
     if (loop_closure) {
       std::printf(
-          "inekf_offline: loop closure: %zu keyframes, %d GPS factors, %zu candidates, %d "
+          "inekf_offline: loop closure: %zu keyframes, %zu candidates, %d "
           "accepted, %d rejected; registration %.2f s, graph %.2f s (%d iterations), covariance "
           "%.3f s; ATE %.3f m -> %.3f m (smoothed -> loop-closed)\n",
-          loops.keyframes.size(), loops.gps_factors, loops.loops.size(), loops.accepted,
-          loops.rejected, loops.seconds_registration, loops.seconds_optimization,
-          loops.summary.iterations, loops.seconds_covariance, smoothed_errors.ate_m, errors.ate_m);
+          loops.keyframes.size(), loops.loops.size(), loops.accepted, loops.rejected,
+          loops.seconds_registration, loops.seconds_optimization, loops.summary.iterations,
+          loops.seconds_covariance, smoothed_errors.ate_m, errors.ate_m);
     }
     if (run.smoothed && options.config.localizer.nonholonomic) {
       // The smoothed velocity is GPS-aided and the constraint's vertical sigma loose, so its
