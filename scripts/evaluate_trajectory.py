@@ -11,17 +11,23 @@ hold one pose per frame, the same frames in the same order.
 
 Usage:
   evaluate_trajectory.py --estimate POSES.txt --truth TRUTH.txt [--timestamps TIMES.txt]
-      [--states STATES.csv] [--json OUT.json] [--plot OUT.png] [--label NAME]
+      [--states STATES.csv] [--loops LOOPS.csv] [--json OUT.json] [--plot OUT.png] [--label NAME]
+
+--loops takes inekf_offline's --output-loops CSV: the summary and the JSON count the accepted and
+rejected loop candidates by reason, and the plot marks each at its later frame (accepted green,
+rejected red) on the top view and the time axis.
 
 Only numpy and matplotlib (Debian packages) are used.
 """
 
 import argparse
 import calendar
+import csv
 import datetime
 import json
 import math
 import os
+import re
 import sys
 
 import numpy as np
@@ -472,6 +478,52 @@ def evaluate(estimate, truth, stamps=None, states=None, states_path="", excluded
     return result, series
 
 
+LOOP_COLUMNS = ["query_frame", "match_frame", "accepted", "reason"]
+
+
+def read_loops(path, frames):
+    """inekf_offline --output-loops: [(query_frame, match_frame, accepted, reason)]. Frames must
+    index the trajectory (`frames` poses)."""
+    loops = []
+    try:
+        with open(path, newline="") as stream:
+            rows = list(csv.reader(stream))
+    except OSError as error:
+        raise TrajectoryFormatError("%s: cannot read (%s)" % (path, error.strerror))
+    if not rows or any(column not in rows[0] for column in LOOP_COLUMNS):
+        raise TrajectoryFormatError("%s:1: not a loops CSV (needs the columns %s)" %
+                                    (path, ", ".join(LOOP_COLUMNS)))
+    index = {name: rows[0].index(name) for name in LOOP_COLUMNS}
+    for number, row in enumerate(rows[1:], start=2):
+        if not row:
+            continue
+        try:
+            query = int(row[index["query_frame"]])
+            match = int(row[index["match_frame"]])
+            accepted = int(row[index["accepted"]]) == 1
+            reason = row[index["reason"]]
+        except (ValueError, IndexError):
+            raise TrajectoryFormatError("%s:%d: expected %d comma-separated fields with integer "
+                                        "frames, got %r" % (path, number, len(rows[0]),
+                                                            ",".join(row)))
+        if not (0 <= query < frames and 0 <= match < frames):
+            raise TrajectoryFormatError("%s:%d: frames %d / %d outside the trajectory's %d poses" %
+                                        (path, number, query, match, frames))
+        loops.append((query, match, accepted, reason))
+    return loops
+
+
+def summarize_loops(loops):
+    """Counts by fate; rejections grouped by the reason's leading words (the numbers vary)."""
+    rejected = {}
+    for _, _, accepted, reason in loops:
+        if not accepted:
+            key = re.match(r"[^0-9:(]*", reason).group(0).strip() or "unknown"
+            rejected[key] = rejected.get(key, 0) + 1
+    return {"candidates": len(loops), "accepted": sum(1 for loop in loops if loop[2]),
+            "rejected": sum(rejected.values()), "rejected_by_reason": rejected}
+
+
 # --------------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------------
@@ -483,7 +535,7 @@ def write_json_atomically(path, data):
     os.replace(temporary, path)
 
 
-def plot(path, label, estimate, truth, series):
+def plot(path, label, estimate, truth, series, loops=()):
     import matplotlib
     matplotlib.use("Agg")  # no display on CI machines
     import matplotlib.pyplot as plt
@@ -494,6 +546,13 @@ def plot(path, label, estimate, truth, series):
     top.plot(truth.positions[:, 0], truth.positions[:, 1], "k-", lw=1.5, label="truth")
     top.plot(estimate.positions[:, 0], estimate.positions[:, 1], "r-", lw=1.0, label=label)
     top.plot(truth.positions[0, 0], truth.positions[0, 1], "go", label="start")
+    # A loop joins two passes of the same place, so its two ends nearly coincide on the map: each
+    # is marked at its later (query) frame, and its frames shown on the time axis below.
+    for fate, marker in ((True, "g^"), (False, "rx")):
+        queries = [query for query, _, accepted, _ in loops if accepted == fate]
+        if queries:
+            top.plot(estimate.positions[queries, 0], estimate.positions[queries, 1], marker, ms=5,
+                     label="loops %s (%d)" % ("accepted" if fate else "rejected", len(queries)))
     top.set_aspect("equal", adjustable="datalim")
     top.set_xlabel("x east [m]")
     top.set_ylabel("y north [m]")
@@ -506,7 +565,12 @@ def plot(path, label, estimate, truth, series):
     yaw_axis = errors.twinx()
     yaw_axis.plot(series["times"], np.abs(series["yaw_errors_deg"]), "m-", lw=0.8)
     yaw_axis.set_ylabel("|yaw error| [deg]", color="m")
-    errors.set_title("error over time")
+    for fate, marker in ((True, "g^"), (False, "rx")):
+        queries = [query for query, _, accepted, _ in loops if accepted == fate]
+        if queries and len(series["times"]) == len(estimate.positions):
+            errors.plot(np.asarray(series["times"])[queries], np.zeros(len(queries)), marker, ms=5,
+                        clip_on=False)
+    errors.set_title("error over time" + (" (loops at their later frame)" if loops else ""))
     if has_nees:
         nees = axes[2]
         nees.semilogy(series["nees_times"], series["nees_pose"], "b.", ms=2, label="NEES pose (6)")
@@ -541,6 +605,13 @@ def format_summary(label, result):
     for rpe in result["rpe"]:
         lines.append("  RPE %d frame(s): %.3f m, %.3f deg" %
                      (rpe["frames"], rpe["translation_rmse_m"], rpe["rotation_rmse_deg"]))
+    if "loops" in result:
+        loops = result["loops"]
+        reasons = ", ".join("%d %s" % (count, reason)
+                            for reason, count in sorted(loops["rejected_by_reason"].items()))
+        lines.append("  loops: %d candidates, %d accepted, %d rejected%s" %
+                     (loops["candidates"], loops["accepted"], loops["rejected"],
+                      " (%s)" % reasons if reasons else ""))
     for key in ("nees_pose", "nees_position"):
         if key in result:
             nees = result[key]
@@ -584,6 +655,7 @@ def main(argv=None):
     parser.add_argument("--truth", required=True, help="ground-truth poses (KITTI or TUM)")
     parser.add_argument("--timestamps", help="one stamp per pose (plain, TUM or KITTI raw)")
     parser.add_argument("--states", help="filter states CSV with the 6x6 pose covariance (NEES)")
+    parser.add_argument("--loops", help="inekf_offline --output-loops CSV: counted and plotted")
     parser.add_argument("--json", help="write the metrics here")
     parser.add_argument("--plot", help="write a PNG plot here")
     parser.add_argument("--label", help="name of the run (default: the estimate's file name)")
@@ -600,17 +672,20 @@ def main(argv=None):
                                                       args.states)
         result, series = evaluate(estimate, truth, stamps, states, args.states or "",
                                   args.exclude_frames)
+        loops = read_loops(args.loops, len(estimate.positions)) if args.loops else []
     except TrajectoryFormatError as error:
         print("evaluate_trajectory: error: %s" % error, file=sys.stderr)
         return 2
     result["label"] = label
     result["estimate"] = os.path.abspath(args.estimate)
     result["truth"] = os.path.abspath(args.truth)
+    if args.loops:
+        result["loops"] = summarize_loops(loops)
     print(format_summary(label, result))
     if args.json:
         write_json_atomically(args.json, result)
     if args.plot:
-        plot(args.plot, label, estimate, truth, series)
+        plot(args.plot, label, estimate, truth, series, loops)
     return 0
 
 

@@ -309,6 +309,42 @@ class FilesAndErrorsTest(unittest.TestCase):
         with self.assertRaisesRegex(et.TrajectoryFormatError, r"short\.txt:7: 3 values"):
             et.read_trajectory(self.path("short.txt"))
 
+    def test_loops_are_counted_by_reason_plotted_and_checked(self):
+        write_kitti(self.path("truth.txt"), self.truth)
+        header = ("query_frame,match_frame,time_gap_s,distance_m,distance_sigma_m,registered,"
+                  "fitness_m2,correction_m,correction_deg,chi2_estimate,chi2_final,accepted,"
+                  "reason\n")
+        rows = ['900,100,80.0,0.5,1.0,1,0.05,0.3,0.2,3.1,1.2,1,"accepted"\n',
+                '950,150,80.0,0.4,1.0,1,0.04,0.2,0.1,2.0,0.8,1,"accepted"\n',
+                '1000,200,80.0,0.6,1.0,1,0.30,0.2,0.1,0.0,0.0,0,"fitness 0.300 m^2 > 0.200"\n',
+                '1050,250,80.0,0.6,1.0,1,0.01,7.6,9.6,28.7,0.0,0,'
+                '"inconsistent with the estimate: chi2 28.7 > 22.5 (7.60 m, 9.64 deg)"\n',
+                '1100,300,80.0,0.6,1.0,1,0.02,0.3,0.2,5.0,40.1,0,'
+                '"residual after the optimization: chi2 40.1 > 16.8"\n']
+        with open(self.path("loops.csv"), "w") as stream:
+            stream.writelines([header] + rows)
+        code = et.main(["--estimate", self.path("truth.txt"), "--truth", self.path("truth.txt"),
+                        "--loops", self.path("loops.csv"), "--json", self.path("out.json"),
+                        "--plot", self.path("out.png")])
+        self.assertEqual(code, 0)
+        with open(self.path("out.json")) as stream:
+            loops = json.load(stream)["loops"]
+        self.assertEqual((loops["candidates"], loops["accepted"], loops["rejected"]), (5, 2, 3))
+        self.assertEqual(loops["rejected_by_reason"],
+                         {"fitness": 1, "inconsistent with the estimate": 1,
+                          "residual after the optimization": 1})
+        self.assertGreater(os.path.getsize(self.path("out.png")), 10000)
+        # A frame beyond the trajectory, and a row that is not numbers: errors naming the line.
+        for bad_row, message in (('5000,100,1,1,1,1,0.1,0,0,0,0,1,"accepted"\n', "outside"),
+                                 ('x,100,1,1,1,1,0.1,0,0,0,0,1,"accepted"\n', "integer")):
+            with open(self.path("bad.csv"), "w") as stream:
+                stream.writelines([header, rows[0], bad_row])
+            with self.assertRaisesRegex(et.TrajectoryFormatError, r"bad\.csv:3: .*" + message):
+                et.read_loops(self.path("bad.csv"), len(self.truth))
+            self.assertEqual(et.main(["--estimate", self.path("truth.txt"),
+                                      "--truth", self.path("truth.txt"),
+                                      "--loops", self.path("bad.csv")]), 2)
+
     def test_mismatched_lengths_are_an_error(self):
         write_kitti(self.path("truth.txt"), self.truth)
         shorter = et.Trajectory(self.truth.positions[:-5], self.truth.rotations[:-5])
