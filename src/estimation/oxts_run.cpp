@@ -201,6 +201,17 @@ TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first, int last)
   return errors;
 }
 
+FixErrorMean meanFixError(const OxtsRunResult& run) {
+  FixErrorMean result;
+  for (const OxtsRunResult::Fix& fix : run.fixes) {
+    if (fix.frame < 0 || fix.frame >= static_cast<int>(run.truth.size())) continue;
+    result.mean += fix.fix.position_map - run.truth[fix.frame].translation();
+    ++result.fixes;
+  }
+  if (result.fixes > 0) result.mean /= result.fixes;
+  return result;
+}
+
 double yawErrorDeg(const OxtsRunResult& run, int frame) {
   return wrapDeg(headingDeg(run.states[frame].rotation) - headingDeg(run.truth[frame].linear()));
 }

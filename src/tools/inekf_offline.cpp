@@ -292,6 +292,18 @@ int main(int argc, char** argv) {
         static_cast<long long>(run.statistics.filter.gps_used),
         static_cast<long long>(run.statistics.filter.gps_rejected), errors.ate_m,
         errors.rotation_rmse_deg, errors.yaw_rmse_deg);
+    const estimation::FixErrorMean fix_error = estimation::meanFixError(run);
+    if (fix_error.fixes > 0 &&
+        (options.gps.sigma_horizontal_m > 0 || options.gps.sigma_vertical_m > 0)) {
+      // What the degraded fixes allow at best: their own mean error (README, smoothing).
+      std::printf(
+          "inekf_offline: the %d fixes' errors against the OXTS truth average (%.3f, %.3f, %.3f) m "
+          "(east, north, up): an estimator that knew the car's relative motion exactly and took "
+          "its "
+          "position from these fixes would have an ATE of %.3f m\n",
+          fix_error.fixes, fix_error.mean.x(), fix_error.mean.y(), fix_error.mean.z(),
+          fix_error.mean.norm());
+    }
     if (loop_closure) {
       std::printf(
           "inekf_offline: loop closure: %zu keyframes, %zu candidates, %d "

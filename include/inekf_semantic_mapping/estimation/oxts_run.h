@@ -78,6 +78,16 @@ struct TrajectoryErrors {
 };
 TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first = 0, int last = -1);
 
+// The mean error of the fixes the filter was given (fix minus the OXTS truth at its frame, map
+// frame, m) and how many. A position averaged over all of them is off by this much: it is the
+// ATE of an estimator that knew the car's relative motion exactly and took its absolute position
+// from these fixes alone, the floor no smoother of this run can beat on average.
+struct FixErrorMean {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  int fixes = 0;
+};
+FixErrorMean meanFixError(const OxtsRunResult& run);
+
 // Signed yaw error (deg, in (-180, 180]) of frame k: heading of the estimate minus the truth's.
 double yawErrorDeg(const OxtsRunResult& run, int frame);
 
