@@ -2,8 +2,8 @@
 // LDL^T factorization and Takahashi's recursion on the factor's pattern, so the marginal
 // covariances of a graph's nodes (the diagonal blocks of the inverse Hessian) and the
 // cross-covariances of nodes a factor connects cost about as much as the factorization, not a
-// dense inverse or one solve per column. Used by the pose graph and by the loop closure's
-// smoothed-posterior graph. ROS-free, Eigen only.
+// dense inverse or one solve per column. Used by the loop closure's smoothed-posterior graph.
+// ROS-free, Eigen only.
 #pragma once
 
 #include <Eigen/Core>
