@@ -126,12 +126,7 @@ void BM_SmoothedPosteriorGraph(benchmark::State& state) {
       estimation::RelativePoseFactor loop;
       loop.from = n;
       loop.to = n + nodes / 2;
-      const auto pose = [&](int node) {
-        estimation::Pose3 p;
-        p.rotation = run.states[keyframes[node]].rotation;
-        p.position = run.states[keyframes[node]].position_map;
-        return p;
-      };
+      const auto pose = [&](int node) { return estimation::poseOf(run.states[keyframes[node]]); };
       loop.measurement = pose(loop.from).inverse() * pose(loop.to);
       loop.measurement.position.x() += 0.3;
       loop.information = 100.0 * estimation::Matrix6d::Identity();

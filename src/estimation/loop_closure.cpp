@@ -19,13 +19,6 @@ namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
 
-Pose3 poseOf(const NavState& state) {
-  Pose3 pose;
-  pose.rotation = state.rotation;
-  pose.position = state.position_map;
-  return pose;
-}
-
 Pose3 poseOf(const Eigen::Isometry3d& t) {
   Pose3 pose;
   pose.rotation = t.linear();

@@ -22,6 +22,13 @@ Pose3 Pose3::operator*(const Pose3& other) const {
   return result;
 }
 
+Pose3 poseOf(const NavState& state) {
+  Pose3 pose;
+  pose.rotation = state.rotation;
+  pose.position = state.position_map;
+  return pose;
+}
+
 RobustKernel robustKernelFromString(const std::string& text) {
   if (text == "none") return RobustKernel::kNone;
   if (text == "huber") return RobustKernel::kHuber;

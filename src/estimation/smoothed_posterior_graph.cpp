@@ -54,13 +54,6 @@ Matrix6x15d poseJacobian(const Eigen::Matrix3d& rotation, const Eigen::Matrix<do
   return j;
 }
 
-Pose3 poseOf(const NavState& state) {
-  Pose3 pose;
-  pose.rotation = state.rotation;
-  pose.position = state.position_map;
-  return pose;
-}
-
 }  // namespace
 
 SmoothedPosteriorGraph::SmoothedPosteriorGraph(const OxtsRunResult& run, std::vector<int> keyframes)

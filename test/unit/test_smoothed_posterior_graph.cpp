@@ -13,7 +13,6 @@
 
 #include "inekf_semantic_mapping/estimation/smoothed_posterior_graph.h"
 #include "inekf_semantic_mapping/estimation/smoother.h"
-#include "inekf_semantic_mapping/lie/se23.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -24,21 +23,21 @@ using Vector15d = Eigen::Matrix<double, 15, 1>;
 constexpr int kFrames = 40;
 constexpr int kFirstEstimated = 2;
 
-// The pose-covariance convention of the run: dp = R rho (map frame), dphi = phi, moved to the
-// estimate X exp(xi) by SE_2(3)'s right Jacobian.
-Eigen::Matrix<double, 6, 15> poseMap(const Eigen::Matrix3d& rotation, const Vector15d& xi) {
-  const lie::Matrix9d jr = lie::rightJacobianSE23(xi.head<9>());
-  Eigen::Matrix<double, 6, 15> e = Eigen::Matrix<double, 6, 15>::Zero();
-  e.block<3, 9>(0, 0) = rotation * jr.block<3, 9>(6, 0);
-  e.block<3, 9>(3, 0) = jr.block<3, 9>(0, 0);
+// d[dp (map), dphi (body)] / d xi of the pose of `state` exp(xi), by central differences: the
+// pose-covariance convention of the run ([position error in the map frame, R_true = R Exp(dphi)]).
+Eigen::Matrix<double, 6, 15> poseMap(const NavState& state, const Vector15d& xi) {
+  const NavState at = applyLeftInvariant(state, xi);
+  Eigen::Matrix<double, 6, 15> e;
+  for (int c = 0; c < 15; ++c) {
+    const double h = 1e-6;
+    const NavState plus = applyLeftInvariant(state, xi + h * Vector15d::Unit(c));
+    const NavState minus = applyLeftInvariant(state, xi - h * Vector15d::Unit(c));
+    e.block<3, 1>(0, c) = (plus.position_map - minus.position_map) / (2 * h);
+    e.block<3, 1>(3, c) = (lie::logSO3(at.rotation.transpose() * plus.rotation) -
+                           lie::logSO3(at.rotation.transpose() * minus.rotation)) /
+                          (2 * h);
+  }
   return e;
-}
-
-Pose3 poseOf(const NavState& s) {
-  Pose3 p;
-  p.rotation = s.rotation;
-  p.position = s.position_map;
-  return p;
 }
 
 // xi_k+1 = F_k xi_k + w_k from frame kFirstEstimated on, with errors of a plausible size per
@@ -90,7 +89,10 @@ ChainRun makeChainRun() {
     run.smoothed_covariances[k] = run.smoothed_covariances[kFirstEstimated];
   }
   for (int k = 0; k < kFrames; ++k) {
-    const Eigen::Matrix<double, 6, 15> e = poseMap(run.states[k].rotation, Vector15d::Zero());
+    // At the estimate itself: dp = R rho, dphi = phi.
+    Eigen::Matrix<double, 6, 15> e = Eigen::Matrix<double, 6, 15>::Zero();
+    e.block<3, 3>(0, 6) = run.states[k].rotation;
+    e.block<3, 3>(3, 0) = Eigen::Matrix3d::Identity();
     run.pose_covariances[k] = e * run.smoothed_covariances[k] * e.transpose();
   }
   const int n = kFrames - kFirstEstimated;
@@ -202,7 +204,7 @@ TEST(SmoothedPosteriorGraph, ALoopGivesTheDenseGaussianPosterior) {
   double worst = 0.0;
   for (int k = kFirstEstimated; k < kFrames; ++k) {
     const int i = 15 * (k - kFirstEstimated);
-    const Eigen::Matrix<double, 6, 15> e = poseMap(states[k].rotation, xi.segment<15>(i));
+    const Eigen::Matrix<double, 6, 15> e = poseMap(run.states[k], xi.segment<15>(i));
     const Matrix6d expected = e * posterior.block<15, 15>(i, i) * e.transpose();
     worst = std::max(worst, (covariances[k] - expected).norm() / expected.norm());
     // The loop shrinks the covariance of the frames it binds.

@@ -15,6 +15,8 @@
 #include <Eigen/SparseCore>
 #include <string>
 
+#include "inekf_semantic_mapping/estimation/types.h"
+
 namespace inekf_semantic_mapping {
 namespace estimation {
 
@@ -28,6 +30,8 @@ struct Pose3 {
   Pose3 inverse() const;
   Pose3 operator*(const Pose3& other) const;
 };
+// The pose part of a navigation state.
+Pose3 poseOf(const NavState& state);
 
 enum class RobustKernel { kNone, kHuber, kCauchy };
 // "none" | "huber" | "cauchy"; throws std::invalid_argument naming the text otherwise.
