@@ -75,11 +75,8 @@ class SmoothedRun {
   // dphi]) from the smoothed marginals and cross-covariance. a > b is allowed (the relative pose
   // backwards in time); a == b gives 0.
   Matrix6d relativeCovariance(int a, int b) const {
-    // Cov(xi_a, xi_b) = G_a..G_b-1 P_b for a <= b, its transpose the other way round.
-    Matrix15d cross = run_.smoothed_covariances[std::max(a, b)];
-    for (int k = std::max(a, b) - 1; k >= std::min(a, b); --k) {
-      cross = run_.smoother_gains[k] * cross;
-    }
+    // Cov(xi_a, xi_b), its transpose for a > b.
+    Matrix15d cross = smoothedCrossCovariance(run_, std::min(a, b), std::max(a, b));
     if (a > b) cross.transposeInPlace();
     const Pose3 ta = poseOf(run_.states[a]), tb = poseOf(run_.states[b]);
     const Pose3 relative = ta.inverse() * tb;

@@ -81,7 +81,7 @@ SmoothedPosteriorGraph::SmoothedPosteriorGraph(const OxtsRunResult& run, std::ve
   for (int n = 0; n + 1 < nodes; ++n) {
     const int a = keyframes_[n], b = keyframes_[n + 1];
     const Matrix15d& pa = run_.smoothed_covariances[a];
-    const Matrix15d cross = crossCovariance(a, b);
+    const Matrix15d cross = smoothedCrossCovariance(run_, a, b);
     const Eigen::LDLT<Matrix15d> pa_ldlt(symmetric(pa));
     if (pa_ldlt.info() != Eigen::Success || !pa_ldlt.isPositive()) {
       throw std::runtime_error("SmoothedPosteriorGraph: the smoothed covariance at frame " +
@@ -100,9 +100,9 @@ SmoothedPosteriorGraph::SmoothedPosteriorGraph(const OxtsRunResult& run, std::ve
   xi_ = Eigen::VectorXd::Zero(15 * nodes);
 }
 
-Matrix15d SmoothedPosteriorGraph::crossCovariance(int a, int b) const {
-  Matrix15d cross = run_.smoothed_covariances[b];
-  for (int k = b - 1; k >= a; --k) cross = run_.smoother_gains[k] * cross;
+Matrix15d smoothedCrossCovariance(const OxtsRunResult& run, int a, int b) {
+  Matrix15d cross = run.smoothed_covariances[b];
+  for (int k = b - 1; k >= a; --k) cross = run.smoother_gains[k] * cross;
   return cross;
 }
 
@@ -270,7 +270,7 @@ void SmoothedPosteriorGraph::posterior(std::vector<NavState>* states,
     const int a = keyframes_[n], b = keyframes_[n + 1];
     if (b - a < 2) continue;
     Matrix30d prior_ab, posterior_ab;
-    const Matrix15d cross_ab = crossCovariance(a, b);
+    const Matrix15d cross_ab = smoothedCrossCovariance(run_, a, b);
     prior_ab << p[a], cross_ab, cross_ab.transpose(), p[b];
     posterior_ab << cov[a], joint(n, n + 1), joint(n, n + 1).transpose(), cov[b];
     const Eigen::LDLT<Matrix30d> prior_ldlt(0.5 * (prior_ab + prior_ab.transpose()));

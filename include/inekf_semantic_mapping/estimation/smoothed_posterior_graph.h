@@ -36,6 +36,9 @@
 namespace inekf_semantic_mapping {
 namespace estimation {
 
+// Cov(xi_a, xi_b) of frames a <= b under a smoothed run: G_a ... G_b-1 P_b|N.
+Matrix15d smoothedCrossCovariance(const OxtsRunResult& run, int a, int b);
+
 class SmoothedPosteriorGraph {
  public:
   // `run` must be smoothed (its covariances and gains) and outlive the graph; `keyframes` its
@@ -76,8 +79,6 @@ class SmoothedPosteriorGraph {
   void normalEquations(const Eigen::VectorXd& xi, double kernel_multiplier,
                        Eigen::SparseMatrix<double>* hessian, Eigen::VectorXd* gradient) const;
   PoseGraphSummary solve(const PoseGraphOptions& options, double kernel_multiplier);
-  // Cov(xi_a, xi_b) of frames a <= b under the smoothed run.
-  Matrix15d crossCovariance(int a, int b) const;
 
   const OxtsRunResult& run_;
   std::vector<int> keyframes_;
