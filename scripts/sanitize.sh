@@ -8,7 +8,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 TESTS=(test_lie test_imu_filters test_localizer test_lazy_start test_kitti_io
        test_kitti_gps_degradation test_input_validation test_cli_args test_atomic_file
        test_projection test_label_geometry test_semantic_octree test_semantic_mapping_session
-       test_pose_graph test_smoothed_posterior_graph)
+       test_pose_graph)
 flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g"
 asan_ws=$ISM_WS/asan
 results=$ISM_WS/build/test_results/inekf_semantic_mapping
