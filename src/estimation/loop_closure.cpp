@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
@@ -212,13 +213,11 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
   const int nodes = static_cast<int>(result.keyframes.size());
   if (nodes < 2) return result;
 
-  SmoothedPosteriorGraph graph(run, result.keyframes);
-
   // Loop candidates, registration and the gate.
   const auto registration_start = std::chrono::steady_clock::now();
   const Matrix6d loop_information = inverseSpd(loopCovariance(options));
-  std::vector<int> loop_factor;  // graph index of the relative factor per accepted loop record
-  std::vector<int> loop_record;  // record index per loop factor
+  std::vector<RelativePoseFactor> loop_factors;  // the loops that passed the gate
+  std::vector<int> loop_record;                  // record index per loop factor
   double last_query_travel = -std::numeric_limits<double>::infinity();
   for (int j = 1; j < nodes; ++j) {
     const int fj = result.keyframes[j];
@@ -290,7 +289,7 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
         factor.information = loop_information;
         factor.kernel = options.kernel;
         factor.kernel_scale = options.kernel_scale;
-        loop_factor.push_back(graph.addLoop(factor));
+        loop_factors.push_back(factor);
         loop_record.push_back(static_cast<int>(result.loops.size()));
         record.accepted = true;  // provisionally: the residual check follows
       }
@@ -299,27 +298,34 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
   }
   result.seconds_registration = seconds(registration_start);
 
-  // Optimize; drop the worst loop whose residual stays above outlier_chi2 and solve again.
+  // Optimize; drop the worst loop whose residual stays above outlier_chi2 and solve again. The
+  // graph is built only when a loop passed the gate: without one the posterior is the smoothed
+  // run, kept bit for bit.
   const auto optimization_start = std::chrono::steady_clock::now();
+  std::optional<SmoothedPosteriorGraph> graph;
+  if (!loop_factors.empty()) {
+    graph.emplace(run, result.keyframes);
+    for (const RelativePoseFactor& factor : loop_factors) graph->addLoop(factor);
+  }
   PoseGraphOptions graph_options;
   graph_options.max_iterations = options.max_iterations;
-  for (int round = 0;; ++round) {
+  for (int round = 0; graph; ++round) {
     // Each round starts from the smoothed trajectory (a dropped loop leaves no trace).
-    graph.reset();
-    result.summary = graph.optimize(graph_options);
+    graph->reset();
+    result.summary = graph->optimize(graph_options);
     int worst = -1;
     double worst_chi2 = options.outlier_chi2;
-    for (std::size_t l = 0; l < loop_factor.size(); ++l) {
-      if (!graph.loop(loop_factor[l]).active) continue;
-      const double chi2 = graph.loopChi2(loop_factor[l]);
+    for (int l = 0; l < graph->numLoops(); ++l) {
+      if (!graph->loop(l).active) continue;
+      const double chi2 = graph->loopChi2(l);
       result.loops[loop_record[l]].chi2_final = chi2;
       if (chi2 > worst_chi2) {
         worst_chi2 = chi2;
-        worst = static_cast<int>(l);
+        worst = l;
       }
     }
     if (worst < 0 || round >= options.max_outlier_rounds) break;
-    graph.setLoopActive(loop_factor[worst], false);
+    graph->setLoopActive(worst, false);
     LoopRecord& record = result.loops[loop_record[worst]];
     record.accepted = false;
     char text[128];
@@ -336,13 +342,11 @@ LoopClosureResult closeLoops(const OxtsRunResult& run, const std::vector<bool>& 
       ++result.rejected;
     }
   }
-
-  // Without a loop the posterior is the smoothed run: keep it bit for bit.
   if (result.accepted == 0) return result;
 
   // Every frame's posterior: states (biases and velocities too) and pose covariances.
   const auto covariance_start = std::chrono::steady_clock::now();
-  graph.posterior(&result.states, &result.pose_covariances);
+  graph->posterior(&result.states, &result.pose_covariances);
   result.seconds_covariance = seconds(covariance_start);
   return result;
 }

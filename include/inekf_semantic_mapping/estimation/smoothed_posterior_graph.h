@@ -53,6 +53,7 @@ class SmoothedPosteriorGraph {
   int addLoop(const RelativePoseFactor& factor);
   void setLoopActive(int index, bool active) { loops_.at(index).active = active; }
   const RelativePoseFactor& loop(int index) const { return loops_.at(index); }
+  int numLoops() const { return static_cast<int>(loops_.size()); }
 
   // Levenberg-Marquardt from the smoothed run (xi = 0) or the last solution.
   PoseGraphSummary optimize(const PoseGraphOptions& options = PoseGraphOptions());
