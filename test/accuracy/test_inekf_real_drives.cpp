@@ -130,7 +130,8 @@ TEST(RealDrives, SmoothingLowersTheAte) {
 // noise it is zero (each fix sits at its own frame's truth: one frame off would be about 1 m at
 // the drive's speed); with vertical noise only, it is the mean of the degrader's own draws,
 // recomputed here from the altitudes it returns. Under the protocol on 0027 that mean is
-// -0.76 m, which bounds any smoother of that run to about 1.8x the filter's ATE.
+// -0.76 m: the best-informed smoother of that run gets no better than about 1.8x the filter's
+// ATE.
 TEST(RealDrives, TheFixesMeanErrorIsTheirNoiseMean) {
   ISM_REQUIRE_SHARED(oxtsDir("2011_09_30_drive_0027"));
   const auto frames = kitti::readOxtsFolder(test::sharedPath(oxtsDir("2011_09_30_drive_0027")));
