@@ -1,6 +1,6 @@
 // Scan insertion speed: SemanticOcTree::insertLabeledScan (batched: endpoints grouped per
 // voxel, free voxels collected in a key set, every voxel updated once, class evidence included)
-// and HashedVoxelGrid::insertLabeledScan (issue 16: hashed 8^3 blocks, per-scan stamps, DDA from
+// and HashedVoxelGrid::insertLabeledScan (hashed 8^3 blocks, per-scan stamps, DDA from
 // the endpoint back, early ray termination) against plain octomap::OcTree::insertPointCloud on
 // the same real HDL-64 scans, 0.2 m resolution, 50 m max range, each insertion into a fresh map.
 // Uses the first 12 scans of the real KITTI raw drive 2011_09_26_0013 in ../shared

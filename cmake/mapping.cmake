@@ -17,7 +17,7 @@ ism_add_core_library(${PROJECT_NAME}_mapping
 ism_add_gtest(test_semantic_octree
   SOURCES test/unit/test_semantic_octree.cpp
   LINK ${PROJECT_NAME}_mapping)
-# Issue 16: the hashed-grid insertion against the octree's (synthetic and real scans).
+# The hashed-grid insertion against the octree's (synthetic and real scans).
 ism_add_gtest(test_hashed_voxel_grid
   SOURCES test/unit/test_hashed_voxel_grid.cpp
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)

@@ -8,7 +8,7 @@
 # was trained on the project's synthetic world only and labels real images wrongly, and a demo
 # that quietly maps with it would look like a broken pipeline.
 # Installs what is missing and builds (scripts/build.sh), converts the drive into a bag with
-# kitti2bag (GPS degraded as in the issue 3 protocol: 1.5 m / 3 m noise, 1 Hz), runs
+# kitti2bag (GPS degraded as in the evaluation protocol: 1.5 m / 3 m noise, 1 Hz), runs
 # launch/kitti_bag.launch with rviz on a virtual display (Xvfb + Mesa), saves the map with
 # ~save_map, and writes output/demo/: trajectory.png, metrics.json, semantic_map.ot,
 # semantic_map.ply, rviz.png (+ logs), and prints a summary (trajectory error against the OXTS

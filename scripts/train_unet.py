@@ -30,7 +30,7 @@ Examples:
   # another, half resolution, 25 minutes on 2 CPU threads.
   scripts/train_unet.py --dataset synthetic --train /tmp/syn_train --val /tmp/syn_val \\
       --resize-factor 0.5 --base 8 --minutes 25 --output models/unet_synthetic.onnx
-  # Real road scenes (issue 12): CamVid's human labels plus ENet pseudo-labels on KITTI frames
+  # Real road scenes: CamVid's human labels plus ENet pseudo-labels on KITTI frames
   # that are NOT the SemanticKITTI 05/08 evaluation frames (raw drive 0013: 50 frames for
   # training; the 2 kitti_object frames, pseudo-labelled the same way, for validation):
   for f in ../shared/data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/image_02/data/*.png; do

@@ -305,7 +305,7 @@ ModelCard builtinEnetCityscapesCard() {
   card.source = "built-in ENet Cityscapes card";
   card.input_width = 1024;
   card.input_height = 512;
-  // Measured on SemanticKITTI 05 / 08 (README, issue 12): stretching KITTI's 3.3:1 frames to
+  // Measured on SemanticKITTI 05 / 08 (docs/results.md): stretching KITTI's 3.3:1 frames to
   // 2:1 distorts every object; scaling them without distortion until they fill the input height
   // (less the bottom margin) and running two overlapping tiles labels more points right.
   // Matching Cityscapes' focal length instead (network_focal_px) needs four tiles for no

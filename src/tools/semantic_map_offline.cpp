@@ -65,7 +65,7 @@ constexpr char kUsage[] =
     "  --octomap-reference  after the run, inserts every scan as inserted (map frame, same\n"
     "             origin, max range and resolution) into a plain octomap::OcTree with\n"
     "             insertPointCloud and prints the whole run's time against that reference's\n"
-    "             (issue 16's ratio; the scans are kept in memory meanwhile)\n";
+    "             (the benchmark's ratio; the scans are kept in memory meanwhile)\n";
 
 // The session config: the YAML file if given, then the flags.
 ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& cli) {

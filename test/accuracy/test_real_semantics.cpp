@@ -1,5 +1,5 @@
 // The class map and point scores (no data needed), and the default camera labelling path on real
-// KITTI data (issue 12): the Cityscapes ENet from ../shared with its built-in card, filterLabels
+// KITTI data: the Cityscapes ENet from ../shared with its built-in card, filterLabels
 // at its defaults and the occlusion test, on the 20 SemanticKITTI frames of ../shared (sequences
 // 05 and 08), scored at the lidar points against the human labels mapped to Cityscapes. The
 // thresholds are the figures measured with evaluate_semantics (README) less a margin for numeric

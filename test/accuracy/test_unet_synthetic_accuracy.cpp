@@ -1,4 +1,4 @@
-// The default U-Net's accuracy target (issue 7: mIoU >= 0.85 on held-out synthetic frames),
+// The default U-Net's accuracy target (mIoU >= 0.85 on held-out synthetic frames),
 // measured the way the pipeline uses it: the C++ Segmenter on full-size rendered images, its
 // label image (at the input resolution) against the renderer's ground truth. The drives are
 // generated here with seeds the model never trained on (8 was its validation seed, 13 was never

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """End-to-end localization on a real KITTI OXTS drive from ../shared (IMU + GPS only).
 
-kitti2bag converts the drive with the issue 3 GPS protocol (1.5 m / 3 m noise, 1 Hz), the bag is
+kitti2bag converts the drive with the evaluation protocol's GPS (1.5 m / 3 m noise, 1 Hz), the bag is
 played through inekf_node, and the odometry is compared with the OXTS ground truth. Skips loudly
 (and passes) when ../shared is absent, as in a fresh clone.
 """

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """End-to-end regression on a short synthetic drive (e2e_synthetic.test starts the nodes).
 
-Generates a short synthetic drive, converts it with kitti2bag (GPS degraded as in the issue 3
+Generates a short synthetic drive, converts it with kitti2bag (GPS degraded as in the evaluation
 protocol), plays it through inekf_node + segmentation_node + semantic_octomap_node, then
 asserts: the odometry follows the ground truth, every stage produced output for most inputs,
 ~save_map writes a .ot and a .ply that load back with the expected classes, the map's mIoU

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Test fixture: writes a KITTI raw drive into a bag the way the Python kitti2bag does
 (tomas789/kitti2bag with pykitti, `kitti2bag -t DATE -r DRIVE raw_synced BASEDIR`), which cannot
-be run here. Every convention of that tool that this package has to cope with (issue 13):
+be run here. Every convention of that tool that this package has to cope with:
 
 - /tf: world -> base_link at every OXTS stamp, the OXTS pose (pykitti T_w_imu: devkit Mercator
   with the scale of the first fix, origin at the first pose, R = Rz(yaw) Ry(pitch) Rx(roll));

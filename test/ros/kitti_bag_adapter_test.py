@@ -4,7 +4,7 @@
 whichever of the two messages arrives first. rosbag play sends them on separate connections:
 a velocity that came before its IMU message used to be dropped ("before any IMU orientation")
 or turned with the previous frame's heading; frame 0's dropped made inekf_node start a frame
-later (issue 13: 47 of 50 scans in the map).
+later (47 of 50 scans in the map).
 
 The adapter is started by this node on a small bag written here (it reads the bag's topics and
 tf frames first); the test then publishes on the remapped inputs as kitti_bag.launch's rosbag

@@ -1,4 +1,4 @@
-// HashedVoxelGrid (issue 16): the hashed-block insertion against SemanticOcTree's insertion
+// HashedVoxelGrid: the hashed-block insertion against SemanticOcTree's insertion
 // (occupancy state and most likely class within 1 % of voxels, synthetic and real HDL-64 scans),
 // per-scan de-duplication, early ray termination, the grid -> tree sync, and the session's
 // hashed_grid path through save and load.

@@ -225,7 +225,7 @@ TEST(ModelCard, DefaultCardFollowsTheModelFile) {
   EXPECT_EQ(enet.output_label_ids[1], cityscapes::kRoad);  // trainId 0
   EXPECT_EQ(enet.output_label_ids[14], cityscapes::kCar);  // trainId 13
   EXPECT_EQ(enet.output_label_ids[19], cityscapes::kBicycle);
-  // The KITTI-tuned fitting (issue 12): undistorted tiles, colours standardized to Cityscapes.
+  // The KITTI-tuned fitting: undistorted tiles, colours standardized to Cityscapes.
   EXPECT_EQ(enet.resize_policy, ResizePolicy::kTiles);
   EXPECT_EQ(enet.color_normalization, ColorNormalization::kStandardize);
   EXPECT_TRUE(enet.suppress_unlabeled);

@@ -1,5 +1,5 @@
 // SemanticOcTree: Bayesian fusion math, free-space carving, label-aware pruning, .ot/.ply I/O,
-// and the fusion target of issue 6 on a ray-cast synthetic scene with 20 % wrong labels.
+// and the fusion target on a ray-cast synthetic scene with 20 % wrong labels.
 #include <gtest/gtest.h>
 #include <octomap/AbstractOcTree.h>
 #include <octomap/ColorOcTree.h>

@@ -1,4 +1,4 @@
-// HashedVoxelGrid: the fast insertion structure of the semantic map (issue 16). Voxels live in
+// HashedVoxelGrid: the fast insertion structure of the semantic map. Voxels live in
 // dense 8^3 blocks in an open-addressing hash map keyed by block coordinates; each voxel holds
 // octomap's float log-odds (the same hit/miss/clamping arithmetic as SemanticOcTree, so the
 // values are bit-equal where the same voxels are updated) and, in blocks with any, the class
@@ -16,7 +16,7 @@
 // The SemanticOcTree stays the saved and published format: syncTo() writes the blocks changed
 // since the last sync into a tree (setLeaves), so the tree follows the grid at save / publish time
 // at a cost proportional to what changed. Why not update the tree per scan: its Morton sort and
-// descent were 36 % of the octree path's time (issue 16), more than the whole grid insertion.
+// descent were 36 % of the octree path's time, more than the whole grid insertion.
 #pragma once
 
 #include <array>

@@ -35,7 +35,7 @@ enum class ColorNormalization {
 // Which labels a map should trust: pixels whose softmax confidence is below min_confidence, or
 // within boundary_radius_px of a label edge, become "unlabeled" (no class evidence). The
 // defaults are the knee of accuracy against coverage measured on SemanticKITTI 05 / 08 with the
-// built-in ENet card (README, issue 12); confidence is calibrated differently by every network,
+// built-in ENet card (docs/results.md); confidence is calibrated differently by every network,
 // so each card carries its own (cards without the key: no filter).
 struct LabelFilterOptions {
   double min_confidence = 0.6;  // 0: keep every confidence

@@ -111,7 +111,7 @@ std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
 // labelled scans: the synthetic drives of the demo and the e2e tests) score maps with it.
 std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vector3f& point_map);
 
-// The map at the lidar points (issue 12's map mIoU): the sequence's scans go through a
+// The map at the lidar points (the map mIoU): the sequence's scans go through a
 // mapping::SemanticMappingSession with the poses of poses.txt (T_w_velo = inv(Tr) P Tr) twice,
 // once with the camera's label images (the node's path: the card's label filter, the session's
 // occlusion test) and once with the human labels of the points in the camera's view (the
