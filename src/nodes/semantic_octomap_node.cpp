@@ -188,8 +188,12 @@ class SemanticOctomapNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "semantic_octomap_node");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start (a bad parameter) would print nothing.
+  ros::NodeHandle nh;
+  ros::NodeHandle private_nh("~");
   try {
-    inekf_semantic_mapping::SemanticOctomapNode node{ros::NodeHandle(), ros::NodeHandle("~")};
+    inekf_semantic_mapping::SemanticOctomapNode node{nh, private_nh};
     ros::spin();
   } catch (const std::exception& e) {
     ROS_FATAL_STREAM("semantic_octomap_node: " << e.what());

@@ -264,6 +264,21 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         again = self.save(os.path.join(self.out_dir, "after_load.ot"), "ot")
         self.assertEqual(again.voxel_count, before.voxel_count)
 
+    def test_7_a_misspelt_parameter_stops_a_second_node_with_its_name(self):
+        # The strict reader refuses the key; the fatal message must reach the terminal (it used
+        # to be lost: rosconsole was shut down with the node's last NodeHandle) and the node must
+        # exit non-zero.
+        import subprocess
+
+        import roslib.packages
+
+        executable = roslib.packages.find_node(PKG, "semantic_octomap_node")[0]
+        result = subprocess.run([executable, "__name:=misspelt_parameter_node",
+                                 "_resolutoin:=0.2"], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, timeout=60)
+        self.assertNotEqual(result.returncode, 0, result.stdout)
+        self.assertIn("resolutoin", result.stdout)
+
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "semantic_octomap_node_test", SemanticOctomapNodeTest)
