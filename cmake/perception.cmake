@@ -39,9 +39,12 @@ endif()
 
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/segmentation_node.test)
+  # The camera adaptation (training/, scripts/adapt_segmentation.sh) on a tiny budget: its ONNX
+  # export through segment_image against PyTorch.
+  add_rostest(test/ros/adapt_segmentation.test DEPENDENCIES segment_image)
 endif()
 
-# Camera labels at lidar points scored against SemanticKITTI's human labels (issue 12).
+# Camera labels at lidar points scored against SemanticKITTI's human labels.
 ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
   SOURCES src/perception/semantic_evaluation.cpp
   LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti

@@ -1,0 +1,172 @@
+#!/usr/bin/python3
+"""Tests of the camera adaptation (training/): the label tables it shares with the C++
+evaluation, the sparse-label and lidar-zone helpers, the C++ Segmenter's preprocessing in numpy,
+and the whole pipeline on a tiny budget (a few steps on a few images of ../shared): its ONNX
+export must load in the C++ Segmenter (segment_image) and label the held-out images as PyTorch
+does. Runs standalone or as the test node of test/ros/adapt_segmentation.test (rostest records
+the result for catkin)."""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import unittest
+
+import numpy as np
+
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+sys.path.insert(0, os.path.join(REPO_ROOT, "training"))
+sys.path.insert(0, os.path.join(REPO_ROOT, "test", "ros"))
+import datasets  # noqa: E402
+import labels  # noqa: E402
+import preprocess  # noqa: E402
+
+try:
+    import torch  # noqa: F401
+
+    HAVE_TORCH = True
+except ImportError:
+    HAVE_TORCH = False
+
+
+def shared_dir():
+    return os.environ.get("ISM_SHARED_DIR") or os.path.join(REPO_ROOT, "..", "shared")
+
+
+def skip_loudly(test, what):
+    print(f"\n*** SKIPPED: {what}\n", file=sys.stderr, flush=True)
+    test.skipTest(what)
+
+
+class LabelTables(unittest.TestCase):
+    def test_semantickitti_classes_map_as_the_cpp_evaluation_scores_them(self):
+        lut = labels.semantickitti_to_train_id_lut()
+        names = labels.train_id_names()
+        expect = {10: "car", 252: "car", 44: "road", 60: "road", 40: "road", 48: "sidewalk",
+                  71: "vegetation", 72: "terrain", 80: "pole", 81: "traffic sign",
+                  253: "rider", 18: "truck", 50: "building", 51: "fence", 30: "person"}
+        for sk, name in expect.items():
+            self.assertEqual(names[lut[sk]], name, sk)
+        for ignored in (0, 1, 20, 49, 52, 99, 259):
+            self.assertEqual(lut[ignored], labels.IGNORE, ignored)
+
+    def test_channels_are_train_ids_then_void(self):
+        ids = labels.train_id_to_label_id()
+        self.assertEqual(len(ids), labels.NUM_CLASSES)
+        self.assertEqual(ids[0], 7)  # road
+        self.assertEqual(ids[13], 26)  # car
+        self.assertEqual(ids[labels.BACKGROUND_CHANNEL], 0)
+        lut = labels.label_id_to_train_id_lut()
+        for channel, label_id in enumerate(ids[:-1]):
+            self.assertEqual(lut[label_id], channel)
+
+
+class SparseLabels(unittest.TestCase):
+    def test_scatter_keeps_every_point_when_upscaling_and_puts_it_in_place(self):
+        sparse = np.full((10, 20), labels.IGNORE, np.uint8)
+        sparse[2, 3], sparse[7, 15], sparse[9, 19] = 0, 13, 8
+        up = datasets.scatter_sparse(sparse, 40, 20)
+        self.assertEqual(int((up != labels.IGNORE).sum()), 3)
+        self.assertEqual(up[5, 7], 0)  # (3.5 * 2, 2.5 * 2) -> column 7, row 5
+        self.assertEqual(up[15, 31], 13)
+        self.assertEqual(up[19, 39], 8)
+
+    def test_lidar_zone_starts_at_the_top_beam_of_nearby_columns(self):
+        import adapt_segmentation as adapt
+
+        target = np.full((100, 200), labels.IGNORE, np.uint8)
+        target[40, ::4] = 0  # the top beam at row 40, a point every 4 columns
+        target[70, :] = 0
+        zone = adapt.lidar_zone_mask(target, margin_px=5, column_window=9)
+        self.assertTrue(zone[35:, :].all())  # from 5 rows above the beam down
+        self.assertFalse(zone[:35, :].any())  # the sky above it is the teacher's
+
+
+class Preprocessing(unittest.TestCase):
+    def test_standardization_reaches_the_target_statistics(self):
+        rng = np.random.default_rng(3)
+        bgr = np.clip(rng.normal([40, 90, 160], [10, 20, 30], (60, 80, 3)), 0, 255).astype(np.uint8)
+        out = preprocess.standardize_colors(bgr)
+        for c in range(3):  # BGR channel c is RGB channel 2 - c
+            self.assertAlmostEqual(out[..., c].mean(), preprocess.CITYSCAPES_RGB_MEAN[2 - c],
+                                   delta=1.0)
+            self.assertAlmostEqual(out[..., c].std(), preprocess.CITYSCAPES_RGB_STD[2 - c],
+                                   delta=1.5)
+
+    def test_gamma_lifts_the_midtones_and_keeps_the_ends(self):
+        ramp = np.arange(256, dtype=np.uint8).reshape(16, 16, 1).repeat(3, axis=2)
+        out = preprocess.apply_gamma(ramp, 0.7)
+        self.assertEqual(out[0, 0, 0], 0)
+        self.assertEqual(out[15, 15, 0], 255)
+        self.assertEqual(out.reshape(-1, 3)[128, 0], round(255 * (128 / 255) ** 0.7))
+
+
+class TinyPipeline(unittest.TestCase):
+    """The whole command on a tiny budget: the export loads in C++ and agrees with PyTorch."""
+
+    def test_a_few_steps_export_a_model_the_cpp_segmenter_runs_like_pytorch(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        shared = shared_dir()
+        needed = ["models/espnetv2-cityscapes/espnetv2_s_2.0_city_1024x512.pth",
+                  "data/kitti_semantics/training", "data/semantickitti_train/sequences/06"]
+        missing = [p for p in needed if not os.path.exists(os.path.join(shared, p))]
+        if missing:
+            skip_loudly(self, "shared data not found: " + ", ".join(missing))
+        import e2e_support
+
+        segment_image = e2e_support.find_executable("segment_image")
+        if segment_image is None:
+            self.fail("segment_image not built (scripts/build.sh all)")
+        out = tempfile.mkdtemp(prefix="ism_adapt_")
+        command = ["/usr/bin/python3", os.path.join(REPO_ROOT, "training", "adapt_segmentation.py"),
+                   "--shared", shared, "--output", out, "--max-steps", "3", "--max-images", "2",
+                   "--input", "512x160", "--crop", "128x256", "--batch", "2",
+                   "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2"]
+        result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, timeout=600)
+        print(result.stdout[-3000:])
+        self.assertEqual(result.returncode, 0, result.stdout[-2000:])
+        for name in ("kitti_adapted.onnx", "kitti_adapted.yaml", "training.png", "summary.json"):
+            self.assertTrue(os.path.exists(os.path.join(out, name)), name)
+        with open(os.path.join(out, "summary.json")) as f:
+            summary = json.load(f)
+        self.assertEqual(summary["steps"], 3)
+        self.assertGreaterEqual(summary["onnx_parity"]["argmax_agreement"], 0.995)
+
+        # The C++ Segmenter, with the card the script wrote, against PyTorch on a held-out image
+        # (labels at the image's own size, trainIds).
+        import cv2
+
+        import adapt_segmentation as adapt
+        import base_networks
+        image_path = os.path.join(shared, "data/semantickitti_train/sequences/06/image_2/000000.jpg")
+        labels_path = os.path.join(out, "cpp_labels.png")
+        run = subprocess.run([segment_image, "--model", os.path.join(out, "kitti_adapted.onnx"),
+                              "--input", image_path, "--output", labels_path, "--ids", "trainid"],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             timeout=120)
+        self.assertEqual(run.returncode, 0, run.stdout[-2000:])
+        cpp = cv2.imread(labels_path, cv2.IMREAD_GRAYSCALE)
+        image = cv2.imread(image_path)
+        model = base_networks.get("espnetv2_s2").build(None)
+        state = torch.load(os.path.join(out, "best.pt"), map_location="cpu")
+        model.load_state_dict(state)
+        prepared = preprocess.resize_to_input(preprocess.card_colors(image, 0.7, True), 512, 160)
+        torch_labels = adapt.predict(model, torch, [prepared])[0]
+        torch_labels = cv2.resize(torch_labels, (image.shape[1], image.shape[0]),
+                                  interpolation=cv2.INTER_NEAREST)
+        self.assertEqual(cpp.shape, torch_labels.shape)
+        agreement = float((cpp == torch_labels).mean())
+        print(f"C++ Segmenter vs PyTorch on {image_path}: {agreement:.5f} of the pixels agree")
+        self.assertGreaterEqual(agreement, 0.99)
+
+
+if __name__ == "__main__":
+    if "--gtest_output" in " ".join(sys.argv) or any(a.startswith("__name:=") for a in sys.argv):
+        import rostest
+
+        rostest.rosrun("inekf_semantic_mapping", "adapt_segmentation", "__main__")
+    else:
+        unittest.main()

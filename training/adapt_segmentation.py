@@ -1,0 +1,440 @@
+#!/usr/bin/python3
+"""Fine-tunes a Cityscapes segmentation network on the KITTI camera and exports it for the C++
+Segmenter (ONNX + model card). The front is scripts/adapt_segmentation.sh.
+
+Data (../shared, read its README): dense human labels (data/kitti_semantics), the human lidar
+labels projected into both cameras (data/semantickitti_train: sparse), optionally CamVid.
+SemanticKITTI 05 and 08 are the evaluation frames: this script refuses them.
+
+Losses: cross-entropy on the human labels (each image weighs the same, sparse or dense), plus
+distillation from the base network's own confident labels where no human label can be (every
+pixel above the lidar's top beam in the sparse images, the unlabelled pixels of the dense ones),
+so the sky and building tops it knew are not forgotten.
+
+Training runs at the network's input scale (the images resized to input width x height, as the
+Segmenter does at run time), so inference needs no upscaling. Deterministic for a given seed and
+step count on one thread count (the time budget decides the step count: --max-steps pins it).
+"""
+
+import argparse
+import csv
+import json
+import math
+import os
+import random
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.realpath(__file__))
+sys.path.insert(0, HERE)
+
+import augment  # noqa: E402
+import base_networks  # noqa: E402
+import datasets  # noqa: E402
+import labels  # noqa: E402
+import preprocess  # noqa: E402
+
+
+def log(message):
+    print(f"[adapt_segmentation] {message}", flush=True)
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--shared", required=True, help="the shared data folder (../shared)")
+    p.add_argument("--output", default="output/models/kitti", help="output folder")
+    p.add_argument("--base", default="espnetv2_s2", choices=base_networks.names(),
+                   help="the Cityscapes network to start from")
+    p.add_argument("--minutes", type=float, default=40.0,
+                   help="training time budget (0 and no --max-steps: export the base network)")
+    p.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (0: time)")
+    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    p.add_argument("--threads", type=int, default=2, help="CPU threads")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--input", default="1024x320", help="network input WxH (multiples of 32)")
+    p.add_argument("--crop", default="320x640", help="training crop HxW")
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--lr", type=float, default=2e-4)
+    p.add_argument("--weight-decay", type=float, default=1e-4)
+    p.add_argument("--distill-weight", type=float, default=0.5)
+    p.add_argument("--teacher-confidence", type=float, default=0.7,
+                   help="the base network's labels below this softmax confidence teach nothing")
+    p.add_argument("--class-weight-power", type=float, default=0.25,
+                   help="class weights (median frequency / frequency)^power, 0: none")
+    p.add_argument("--sparse-sequences", default="01,02,03,09",
+                   help="semantickitti_train sequences to train on")
+    p.add_argument("--val-sequence", default="06", help="semantickitti_train sequence held out")
+    p.add_argument("--dense-val-every", type=int, default=7,
+                   help="every N-th dense frame is held out for validation")
+    p.add_argument("--camvid", type=int, default=0, help="CamVid frames to add (0: none)")
+    p.add_argument("--max-images", type=int, default=0,
+                   help="use at most this many images of each source (0: all; CI uses a few)")
+    p.add_argument("--val-interval", type=float, default=5.0, help="minutes between validations")
+    p.add_argument("--gamma", type=float, default=0.7, help="the card's tone curve")
+    p.add_argument("--no-standardize", action="store_true",
+                   help="no per-image colour standardisation in the card")
+    return p.parse_args(argv)
+
+
+def seed_everything(seed, threads, torch):
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(False)
+
+
+def size_arg(text, name):
+    try:
+        a, b = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"--{name} '{text}': expected AxB (integers)")
+    return a, b
+
+
+def lidar_zone_mask(target, margin_px=6, column_window=41):
+    """True where a sparse image's pixel lies at or below the lidar's top beam in its column
+    (the top beam's row, smoothed over neighbouring columns, less a margin)."""
+    h, w = target.shape
+    labelled = target != labels.IGNORE
+    top = np.where(labelled.any(axis=0), labelled.argmax(axis=0), h)
+    # Columns between scan points: the highest beam nearby.
+    pad = column_window // 2
+    padded = np.pad(top, pad, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, column_window)
+    top = windows.min(axis=1) - margin_px
+    return np.arange(h)[:, None] >= top[None, :]
+
+
+def teacher_targets(samples, model, torch, confidence, batch=2):
+    """The base network's confident labels, where they may teach (outside the human labels)."""
+    model.eval()
+    with torch.no_grad():
+        for i in range(0, len(samples), batch):
+            chunk = samples[i:i + batch]
+            x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
+            prob = torch.softmax(model(x), dim=1)
+            conf, arg = prob.max(dim=1)
+            for s, c, a in zip(chunk, conf.numpy(), arg.numpy().astype(np.uint8)):
+                t = np.where((c >= confidence) & (a != labels.BACKGROUND_CHANNEL), a, labels.IGNORE)
+                t = t.astype(np.uint8)
+                if s.kind == "sparse":
+                    t[lidar_zone_mask(s.target)] = labels.IGNORE
+                t[s.target != labels.IGNORE] = labels.IGNORE
+                s.teacher = t
+
+
+def class_weights(samples, power):
+    freq = np.zeros(labels.NUM_CLASSES)
+    for s in samples:
+        counts = np.bincount(s.target[s.target != labels.IGNORE].ravel(),
+                             minlength=labels.NUM_CLASSES)[:labels.NUM_CLASSES]
+        if counts.sum():
+            freq += counts / counts.sum()  # each image weighs the same
+    weights = np.ones(labels.NUM_CLASSES)
+    if power > 0:
+        seen = freq > 0
+        median = np.median(freq[seen])
+        weights[seen] = np.clip((median / freq[seen]) ** power, 0.5, 2.5)
+    return weights
+
+
+class Scorer:
+    """Confusion over the 19 trainIds: pixel accuracy and mIoU (classes present in truth)."""
+
+    def __init__(self):
+        self.confusion = np.zeros((labels.NUM_TRAIN_IDS, labels.NUM_TRAIN_IDS), np.int64)
+
+    def add(self, truth, predicted):
+        keep = truth != labels.IGNORE
+        t = truth[keep].astype(np.int64)
+        p = np.minimum(predicted[keep].astype(np.int64), labels.NUM_TRAIN_IDS - 1)
+        np.add.at(self.confusion, (t, p), 1)
+
+    def accuracy(self):
+        total = self.confusion.sum()
+        return float(np.trace(self.confusion) / total) if total else float("nan")
+
+    def miou(self):
+        tp = np.diag(self.confusion).astype(float)
+        union = self.confusion.sum(0) + self.confusion.sum(1) - tp
+        present = self.confusion.sum(1) > 0
+        return float(np.mean(tp[present] / union[present])) if present.any() else float("nan")
+
+
+def predict(model, torch, images, batch=2, suppress_background=True):
+    """argmax trainIds (background never wins, as the card's suppress_unlabeled)."""
+    model.eval()
+    out = []
+    with torch.no_grad():
+        for i in range(0, len(images), batch):
+            logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:i + batch])))
+            if suppress_background:
+                logits[:, labels.BACKGROUND_CHANNEL] = -1e9
+            out.extend(logits.argmax(dim=1).numpy().astype(np.uint8))
+    return out
+
+
+def validate(model, torch, val):
+    scores = {"dense": Scorer(), "sparse": Scorer(), "all": Scorer()}
+    predictions = predict(model, torch, [s.image for s in val])
+    for s, p in zip(val, predictions):
+        scores[s.kind].add(s.target, p)
+        scores["all"].add(s.target, p)
+    return {
+        "dense_pixel_accuracy": scores["dense"].accuracy(),
+        "sparse_point_accuracy": scores["sparse"].accuracy(),
+        "miou": scores["all"].miou(),
+    }
+
+
+def write_card(path, base, width, height, gamma, standardize, summary):
+    lines = [
+        f"# Model card for {os.path.basename(path)[:-5]}.onnx, written by",
+        "# training/adapt_segmentation.py (scripts/adapt_segmentation.sh). The network was",
+        f"# fine-tuned from {base.description} on the KITTI camera, at this input size:",
+        "# the Segmenter gives it each image resized to input width x height after the same",
+        "# tone curve and colour standardisation as in training.",
+        f"name: kitti_adapted_{base.name}",
+        f"input: {{width: {width}, height: {height}}}",
+        "resize_policy: pad_to_multiple  # INTER_AREA to the input size (the training resize)",
+        "pad_multiple: 32",
+        "mean: [0, 0, 0]  # the network normalises inside (ImageNet mean / std)",
+        "scale: 0.00392156862745098  # 1/255",
+        "swap_rb: true  # the network takes RGB",
+        f"gamma: {gamma}",
+        f"color_normalization: {'standardize' if standardize else 'none'}",
+        "color_mean: [{:.2f}, {:.2f}, {:.2f}]".format(*preprocess.CITYSCAPES_RGB_MEAN),
+        "color_std: [{:.2f}, {:.2f}, {:.2f}]".format(*preprocess.CITYSCAPES_RGB_STD),
+        "suppress_unlabeled: true  # the last channel is Cityscapes' void",
+        "label_filter: {min_confidence: 0.6, boundary_radius_px: 2}",
+        f"num_output_channels: {labels.NUM_CLASSES}",
+        "output_label_ids: [{}]  # channel -> Cityscapes labelId".format(
+            ", ".join(str(v) for v in labels.train_id_to_label_id())),
+        f"validation_miou: {summary['best_validation']['miou']:.4f}",
+    ]
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    os.replace(tmp, path)
+
+
+def plot_history(history, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
+    steps = [h["step"] for h in history["train"]]
+    a.plot(steps, [h["loss"] for h in history["train"]], lw=0.8, label="total")
+    a.plot(steps, [h["label_loss"] for h in history["train"]], lw=0.8, label="human labels")
+    a.plot(steps, [h["distill_loss"] for h in history["train"]], lw=0.8, label="distillation")
+    a.set_xlabel("step")
+    a.set_ylabel("loss (running mean)")
+    a.legend()
+    a.grid(alpha=0.3)
+    vsteps = [v["step"] for v in history["val"]]
+    for key, name in (("dense_pixel_accuracy", "dense pixel accuracy"),
+                      ("sparse_point_accuracy", "lidar point accuracy"), ("miou", "mIoU")):
+        b.plot(vsteps, [v[key] for v in history["val"]], marker="o", label=name)
+    b.set_xlabel("step")
+    b.set_ylabel("validation (held-out KITTI frames)")
+    b.legend()
+    b.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path + ".tmp.png", dpi=110)
+    os.replace(path + ".tmp.png", path)
+    plt.close(fig)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    import torch
+    import torch.nn.functional as F
+
+    seed_everything(args.seed, args.threads, torch)
+    device = torch.device(args.device)
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: this PyTorch sees no CUDA device")
+    width, height = size_arg(args.input, "input")
+    crop_h, crop_w = size_arg(args.crop, "crop")
+    if width % 32 or height % 32:
+        raise SystemExit(f"--input {args.input}: width and height must be multiples of 32")
+    crop_h, crop_w = min(crop_h, height), min(crop_w, width)
+    os.makedirs(args.output, exist_ok=True)
+    standardize = not args.no_standardize
+    base = base_networks.get(args.base)
+    shared = os.path.abspath(args.shared)
+    limit = args.max_images or None
+
+    t0 = time.time()
+    val_sequence = [args.val_sequence] if args.val_sequence else []
+    sparse_train = [s for s in args.sparse_sequences.split(",") if s]
+    for seq in sparse_train + val_sequence:
+        if seq in datasets.EVALUATION_SEQUENCES:
+            raise SystemExit(f"SemanticKITTI {seq} is an evaluation sequence: never trained on")
+    try:
+        dense = datasets.load_dense(os.path.join(shared, "data", "kitti_semantics", "training"),
+                                    width, height, args.gamma, standardize, limit)
+        sparse = datasets.load_sparse(os.path.join(shared, "data", "semantickitti_train"),
+                                      sparse_train, width, height, args.gamma, standardize, limit)
+        sparse_val = datasets.load_sparse(os.path.join(shared, "data", "semantickitti_train"),
+                                          val_sequence, width, height, args.gamma, standardize,
+                                          limit) if val_sequence else []
+        camvid = datasets.load_camvid(os.path.join(shared, "data", "camvid"), width, height,
+                                      args.gamma, standardize, args.camvid) if args.camvid else []
+    except datasets.DatasetError as e:
+        raise SystemExit(f"[adapt_segmentation] {e}")
+    train, val = datasets.split_validation(dense, args.dense_val_every)
+    train += sparse + camvid
+    val += sparse_val
+    log(f"{len(train)} training images ({sum(s.kind == 'dense' for s in train)} dense, "
+        f"{sum(s.kind == 'sparse' for s in train)} sparse, {len(camvid)} CamVid), "
+        f"{len(val)} validation images, at {width}x{height}, loaded in {time.time() - t0:.0f} s")
+
+    model = base.build(os.path.join(shared, base.weights))
+    teacher_t0 = time.time()
+    # --minutes 0 without --max-steps: the base network exported with the card, untrained (the
+    # starting point, measured by the same tools as the adapted one).
+    train_at_all = args.max_steps > 0 or args.minutes > 0
+    if train_at_all:
+        teacher_targets(train, model, torch, args.teacher_confidence)
+        log(f"base network's labels for distillation in {time.time() - teacher_t0:.0f} s")
+    before = validate(model, torch, val)
+    log("before fine-tuning: " + ", ".join(f"{k} {v:.4f}" for k, v in before.items()))
+
+    weights = torch.tensor(class_weights(train, args.class_weight_power), dtype=torch.float32,
+                           device=device)
+    model.to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr,
+                                  weight_decay=args.weight_decay)
+    rng = np.random.default_rng(args.seed)
+    history = {"train": [], "val": [dict(step=0, **before)]}
+    best = dict(step=0, **before)
+    best_path = os.path.join(args.output, "best.pt")
+    torch.save(model.state_dict(), best_path)
+
+    budget_s = args.minutes * 60.0
+    start = time.time()
+    last_val = start
+    step = 0
+    running = None
+    order = []
+    while train_at_all:
+        elapsed = time.time() - start
+        progress = elapsed / budget_s if not args.max_steps else step / args.max_steps
+        if progress >= 1.0:
+            break
+        # Linear warm-up over 20 steps, then cosine decay to 5 % over the budget.
+        lr = args.lr * min(1.0, (step + 1) / 20) * (0.05 + 0.95 * 0.5 * (1 + math.cos(
+            math.pi * min(progress, 1.0))))
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        images, targets, teachers = [], [], []
+        for _ in range(args.batch):
+            if not order:
+                order = list(rng.permutation(len(train)))
+            s = train[order.pop()]
+            image, target, teacher = augment.random_crop(s, lambda x: x.teacher, rng, crop_h,
+                                                         crop_w)
+            images.append(image)
+            targets.append(target)
+            teachers.append(teacher)
+        x = preprocess.to_tensor_rgb01(np.stack(images)).to(device)
+        target = torch.from_numpy(np.stack(targets).astype(np.int64)).to(device)
+        teacher = torch.from_numpy(np.stack(teachers).astype(np.int64)).to(device)
+        model.train()
+        logits = model(x)
+        # Per-image means: a sparse image's few thousand labels weigh as much as a dense one.
+        ce = F.cross_entropy(logits, target, weight=weights, ignore_index=labels.IGNORE,
+                             reduction="none")
+        kd = F.cross_entropy(logits, teacher, ignore_index=labels.IGNORE, reduction="none")
+        n_label = (target != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
+        n_teach = (teacher != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
+        label_loss = (ce.flatten(1).sum(1) / n_label).mean()
+        distill_loss = (kd.flatten(1).sum(1) / n_teach).mean()
+        loss = label_loss + args.distill_weight * distill_loss
+        if not torch.isfinite(loss):
+            raise SystemExit(f"[adapt_segmentation] step {step}: loss is {loss.item()}")
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        step += 1
+        values = np.array([loss.item(), label_loss.item(), distill_loss.item()])
+        running = values if running is None else 0.95 * running + 0.05 * values
+        if step % 10 == 0 or step == 1:
+            history["train"].append(dict(step=step, loss=running[0], label_loss=running[1],
+                                         distill_loss=running[2], lr=lr))
+            elapsed = time.time() - start
+            left = (f"{(budget_s - elapsed) / 60:.1f} min left" if not args.max_steps else
+                    f"{args.max_steps - step} steps left")
+            log(f"step {step}: loss {running[0]:.3f} (labels {running[1]:.3f}, distillation "
+                f"{running[2]:.3f}), lr {lr:.2e}, {elapsed / step:.2f} s/step, {left}")
+        now = time.time()
+        if now - last_val >= args.val_interval * 60:
+            last_val = now
+            scores = dict(step=step, **validate(model, torch, val))
+            history["val"].append(scores)
+            log(f"validation at step {step}: " + ", ".join(
+                f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
+            if scores["miou"] > best["miou"]:
+                best = scores
+                torch.save(model.state_dict(), best_path)
+            plot_history(history, os.path.join(args.output, "training.png"))
+
+    if history["val"][-1]["step"] != step:
+        scores = dict(step=step, **validate(model, torch, val))
+        history["val"].append(scores)
+        log(f"validation at step {step}: " + ", ".join(
+            f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
+        if scores["miou"] > best["miou"]:
+            best = scores
+            torch.save(model.state_dict(), best_path)
+    model.load_state_dict(torch.load(best_path, map_location="cpu"))
+    model.to("cpu").eval()
+    log(f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})")
+
+    import onnx_export
+
+    stem = os.path.join(args.output, "kitti_adapted")
+    onnx_export.export_onnx(model, stem + ".onnx", width, height)
+    parity = onnx_export.check_onnx_against_torch(model, stem + ".onnx", [s.image for s in val],
+                                                  width, height, args.threads)
+    log(f"ONNX through OpenCV dnn against PyTorch on {len(val)} validation images: argmax "
+        f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
+        f"{parity['max_abs_diff']:.2e}")
+    summary = {
+        "base": base.name,
+        "input": [width, height],
+        "seed": args.seed,
+        "steps": step,
+        "minutes": (time.time() - start) / 60,
+        "train_images": len(train),
+        "val_images": len(val),
+        "before": before,
+        "best_validation": best,
+        "onnx_parity": parity,
+        "args": vars(args),
+    }
+    write_card(stem + ".yaml", base, width, height, args.gamma, standardize, summary)
+    with open(os.path.join(args.output, "history.csv"), "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["step", "loss", "label_loss", "distill_loss", "lr"])
+        for h in history["train"]:
+            w.writerow([h["step"], h["loss"], h["label_loss"], h["distill_loss"], h["lr"]])
+    with open(os.path.join(args.output, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=2)
+    plot_history(history, os.path.join(args.output, "training.png"))
+    log(f"wrote {stem}.onnx, {stem}.yaml, training.png, summary.json in {args.output}")
+    if parity["argmax_agreement"] < 0.995:
+        raise SystemExit("[adapt_segmentation] the ONNX export disagrees with PyTorch on "
+                         f"{1 - parity['argmax_agreement']:.2%} of the validation pixels")
+    return summary
+
+
+if __name__ == "__main__":
+    main()

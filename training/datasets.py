@@ -1,0 +1,159 @@
+"""The KITTI camera's training data in ../shared, prepared at the network's input scale:
+dense human labels (kitti_semantics), the human lidar labels projected into both cameras
+(semantickitti_train: sparse) and, optionally, CamVid. SemanticKITTI 05 and 08 are the
+evaluation frames and are refused here."""
+
+import glob
+import os
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+import labels
+import preprocess
+
+EVALUATION_SEQUENCES = ("05", "08")
+SPARSE_SEQUENCES = ("01", "02", "03", "06", "09")
+
+
+class DatasetError(RuntimeError):
+    pass
+
+
+@dataclass
+class Sample:
+    name: str
+    kind: str  # "dense", "sparse" or "camvid"
+    image: np.ndarray  # H x W x 3 uint8 BGR, the card's colours, at the network's input size
+    target: np.ndarray  # H x W uint8 trainIds, 255 where no human label
+    teacher: np.ndarray = field(default=None)  # H x W uint8 trainIds of the base network, 255 unsure
+
+
+def _read_image(path):
+    image = cv2.imread(path, cv2.IMREAD_COLOR)
+    if image is None:
+        raise DatasetError(f"cannot read image {path}")
+    return image
+
+
+def _read_label(path, flags):
+    label = cv2.imread(path, flags)
+    if label is None:
+        raise DatasetError(f"cannot read label image {path}")
+    return label
+
+
+def _check_same_size(image, label, image_path, label_path):
+    if image.shape[:2] != label.shape[:2]:
+        raise DatasetError(
+            f"label image {label_path} is {label.shape[1]}x{label.shape[0]} but its image "
+            f"{image_path} is {image.shape[1]}x{image.shape[0]}")
+
+
+def scatter_sparse(train_ids, width, height):
+    """A sparse label image at another size: every labelled pixel lands on its scaled position
+    (nearest-neighbour resizing would drop most of the 1-pixel lidar labels)."""
+    out = np.full((height, width), labels.IGNORE, np.uint8)
+    v, u = np.nonzero(train_ids != labels.IGNORE)
+    sx, sy = width / train_ids.shape[1], height / train_ids.shape[0]
+    uu = np.clip(((u + 0.5) * sx).astype(int), 0, width - 1)
+    vv = np.clip(((v + 0.5) * sy).astype(int), 0, height - 1)
+    out[vv, uu] = train_ids[v, u]
+    return out
+
+
+def _prepare(image, width, height, gamma, standardize):
+    return preprocess.resize_to_input(preprocess.card_colors(image, gamma, standardize), width,
+                                      height)
+
+
+def load_dense(root, width, height, gamma, standardize, limit=None):
+    """kitti_semantics/training: image_2/*.jpg|png with semantic/*.png (Cityscapes labelIds)."""
+    image_dir, label_dir = os.path.join(root, "image_2"), os.path.join(root, "semantic")
+    if not os.path.isdir(image_dir) or not os.path.isdir(label_dir):
+        raise DatasetError(f"{root}: expected image_2/ and semantic/ (KITTI semantics layout)")
+    lut = labels.label_id_to_train_id_lut()
+    samples = []
+    for label_path in sorted(glob.glob(os.path.join(label_dir, "*.png")))[:limit]:
+        stem = os.path.splitext(os.path.basename(label_path))[0]
+        candidates = [os.path.join(image_dir, stem + e) for e in (".png", ".jpg")]
+        image_path = next((p for p in candidates if os.path.exists(p)), None)
+        if image_path is None:
+            raise DatasetError(f"{label_path}: no image {stem}.png|jpg in {image_dir}")
+        image = _read_image(image_path)
+        label = _read_label(label_path, cv2.IMREAD_GRAYSCALE)
+        _check_same_size(image, label, image_path, label_path)
+        target = cv2.resize(lut[label], (width, height), interpolation=cv2.INTER_NEAREST)
+        samples.append(Sample(f"kitti_semantics/{stem}", "dense",
+                              _prepare(image, width, height, gamma, standardize), target))
+    if not samples:
+        raise DatasetError(f"{label_dir}: no label images")
+    return samples
+
+
+def load_sparse(root, sequences, width, height, gamma, standardize, limit=None):
+    """semantickitti_train/sequences/NN: image_{2,3}/*.jpg with labels_{2,3}/*.png (16-bit
+    SemanticKITTI classes of the lidar points seen at that pixel, 0 where none)."""
+    lut = labels.semantickitti_to_train_id_lut()
+    samples = []
+    for seq in sequences:
+        if seq in EVALUATION_SEQUENCES:
+            raise DatasetError(f"SemanticKITTI {seq} is an evaluation sequence: never trained on")
+        seq_dir = os.path.join(root, "sequences", seq)
+        if not os.path.isdir(seq_dir):
+            raise DatasetError(f"{seq_dir}: no such sequence folder")
+        for cam in ("2", "3"):
+            for label_path in sorted(glob.glob(os.path.join(seq_dir, f"labels_{cam}", "*.png"))):
+                stem = os.path.splitext(os.path.basename(label_path))[0]
+                image_path = os.path.join(seq_dir, f"image_{cam}", stem + ".jpg")
+                if not os.path.exists(image_path):
+                    image_path = os.path.join(seq_dir, f"image_{cam}", stem + ".png")
+                image = _read_image(image_path)
+                label = _read_label(label_path, cv2.IMREAD_UNCHANGED)
+                if label.dtype != np.uint16 or label.ndim != 2:
+                    raise DatasetError(f"{label_path}: expected a 16-bit one-channel label image")
+                _check_same_size(image, label, image_path, label_path)
+                target = scatter_sparse(lut[label], width, height)
+                samples.append(Sample(f"semantickitti_train/{seq}/image_{cam}/{stem}", "sparse",
+                                      _prepare(image, width, height, gamma, standardize), target))
+    if limit is not None:
+        samples = samples[:limit]
+    return samples
+
+
+def load_camvid(root, width, height, gamma, standardize, limit=None):
+    """CamVid (SegNet layout): train/*.png|jpg with trainannot/*.png (11 classes)."""
+    lut = labels.camvid_to_train_id_lut()
+    samples = []
+    for label_path in sorted(glob.glob(os.path.join(root, "trainannot", "*.png")))[:limit]:
+        stem = os.path.splitext(os.path.basename(label_path))[0]
+        candidates = [os.path.join(root, "train", stem + e) for e in (".jpg", ".png")]
+        image_path = next((p for p in candidates if os.path.exists(p)), None)
+        if image_path is None:
+            raise DatasetError(f"{label_path}: no image for it in {root}/train")
+        image = _read_image(image_path)
+        label = _read_label(label_path, cv2.IMREAD_GRAYSCALE)
+        _check_same_size(image, label, image_path, label_path)
+        # CamVid's 4:3 frames at the KITTI input's height; crops take KITTI-wide windows.
+        h = height
+        w = int(round(image.shape[1] * h / image.shape[0]))
+        prepared = preprocess.resize_to_input(preprocess.card_colors(image, gamma, standardize),
+                                              w, h)
+        target = cv2.resize(lut[label], (w, h), interpolation=cv2.INTER_NEAREST)
+        samples.append(Sample(f"camvid/{stem}", "camvid", prepared, target))
+    return samples
+
+
+def split_validation(samples, every):
+    """Every `every`-th dense frame and every sample of the held-out sparse sequence go to
+    validation (the caller passes which); returns (train, val)."""
+    train, val = [], []
+    dense_index = 0
+    for s in samples:
+        if s.kind == "dense":
+            (val if dense_index % every == every - 1 else train).append(s)
+            dense_index += 1
+        else:
+            train.append(s)
+    return train, val
