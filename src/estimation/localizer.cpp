@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/estimation/imu_filters.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -107,6 +108,10 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   reader->read("heading.from_track", &config.heading_from_track);
   positive("heading.track_window_s", &config.heading_track_window_s);
   positive("heading.track_min_speed_mps", &config.heading_track_min_speed_mps);
+  non_negative("heading.track_min_chord_m", &config.heading_track_min_chord_m);
+  positive("heading.track_max_chord_s", &config.heading_track_max_chord_s);
+  positive("heading.track_max_turn_deg", &config.heading_track_max_turn_deg);
+  non_negative("heading.track_turn_weight", &config.heading_track_turn_weight);
   non_negative("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg);
   const auto count = [reader](const std::string& key, int* out, int min) {
     reader->read(key, out);
@@ -122,6 +127,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   count("heading.reopen_after_rejected_fixes", &config.heading_reopen_after_rejected_fixes, 0);
   count("heading.nis_window_fixes", &config.heading_nis_window_fixes, 0);
   positive("heading.nis_window_max", &config.heading_nis_window_max);
+  reader->read("heading.hold_unknown_yaw", &config.heading_hold_unknown_yaw);
   return config;
 }
 
@@ -459,6 +465,10 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     }
   }
 
+  const bool hold_yaw = config_.heading_from_track && config_.heading_hold_unknown_yaw;
+  if (hold_yaw && !(yawSigma() <= config_.heading_align_above_sigma_deg * kDegToRad)) {
+    decorrelateYaw();
+  }
   const Eigen::Vector3d innovation = used.position_map - filter_->state().position_map;
   double horizontal_nis = 0.0;
   {
@@ -510,6 +520,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
       reopenHeading(gated_out ? innovation : Eigen::Vector3d::Zero(), reopen_why);
       horizontal_nis_.clear();
       if (gated_out) {
+        if (hold_yaw) decorrelateYaw();
         result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
         gated_out =
             !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
@@ -553,6 +564,31 @@ void Localizer::noteHeadingChange(double heading_before_rad) {
   heading_correction_rad_ += wrapRad(headingOf(filter_->state().rotation) - heading_before_rad);
 }
 
+void Localizer::decorrelateYaw() {
+  // In the left-invariant error xi = [xi_R, xi_v, xi_p, ...] (X_true = X_est Exp(xi)) the yaw
+  // about the map z axis is u^T xi_R with u = R^T e_z, and a rotation about the map z axis
+  // through the current position that leaves the map velocity and position alone is the
+  // direction w = [u; 0; 0]. With the projector Q = I - w w^T (w^T w = 1) the error splits into
+  // w * yaw + Q xi; P' = Q P Q^T + (w^T P w) w w^T keeps the yaw's variance and the covariance
+  // of Q xi (every map-frame velocity, position and bias error: none of them sees w) and drops
+  // only their cross-covariance. A position fix (H w = 0) then has no gain on the yaw.
+  const auto* base = dynamic_cast<const ImuFilterBase*>(filter_.get());
+  if (!base) return;
+  const NavState& state = filter_->state();
+  const Matrix15d to_left = base->leftFromError(state);
+  const Matrix15d from_left = base->errorFromLeft(state);
+  const ErrorCovariance left = to_left * filter_->covariance() * to_left.transpose();
+  Eigen::Matrix<double, 15, 1> w = Eigen::Matrix<double, 15, 1>::Zero();
+  w.head<3>() = state.rotation.transpose() * Eigen::Vector3d::UnitZ();
+  const Matrix15d q = Matrix15d::Identity() - w * w.transpose();
+  const double yaw_variance = w.dot(left * w);
+  ErrorCovariance held = q * left * q.transpose() + yaw_variance * w * w.transpose();
+  held = from_left * held * from_left.transpose();
+  held = 0.5 * (held + held.transpose());
+  if (!held.allFinite()) return;
+  filter_->initialize(state, held);
+}
+
 void Localizer::noteHeadingEvent(const std::string& what) {
   if (!heading_event_.empty()) heading_event_ += "; ";
   heading_event_ += what;
@@ -579,27 +615,61 @@ void Localizer::addToTrack(const PositionFix& fix) {
   current.variance = 0.5 * fix.covariance_map.topLeftCorner<2, 2>().trace();
   current.gyro_heading_rad = headingOf(filter_->state().rotation) - heading_correction_rad_;
   if (!current.position.allFinite() || !std::isfinite(current.variance)) return;
-  // The chord from the fix before last to this one (two intervals: four times the information
-  // of one at the same noise), against the gyro heading of the fix between them: its middle.
-  if (track_fixes_.size() >= 2) {
-    const TrackFix& previous = track_fixes_[track_fixes_.size() - 2];
-    const TrackFix& middle = track_fixes_.back();
-    const double dt = current.stamp_s - previous.stamp_s;
-    const double first_half = middle.stamp_s - previous.stamp_s;
-    const Eigen::Vector2d chord = current.position - previous.position;
+  // A chord from an earlier fix to this one, at least two fix intervals and
+  // heading_track_min_chord_m long (1.5 m fixes: a 12 m chord is worth ~10 deg, a 6 m one ~20;
+  // a slow car gets longer chords in time), within heading_track_max_chord_s, against the gyro
+  // heading at its middle instant (on a circular arc driven at constant speed the chord is
+  // parallel to the tangent there), interpolated between the fixes around it.
+  const double floor = config_.heading_track_chord_floor_deg * kDegToRad;
+  for (std::size_t k = track_fixes_.size(); k >= 2; --k) {
+    const TrackFix& start = track_fixes_[k - 2];
+    const double dt = current.stamp_s - start.stamp_s;
+    if (!(dt <= config_.heading_track_max_chord_s)) break;
+    const Eigen::Vector2d chord = current.position - start.position;
     const double length = chord.norm();
-    // Fixes close in time (not across an outage), evenly spaced (the middle fix is the chord's
-    // middle), of a car moving but not impossibly fast.
-    if (dt > kDuplicateStampS && dt <= 3.0 && std::abs(first_half - 0.5 * dt) <= 0.15 * dt &&
-        length >= config_.heading_track_min_speed_mps * dt &&
-        length <= config_.max_reacquisition_speed_mps * dt) {
-      Chord c;
-      c.stamp_s = current.stamp_s;
-      c.offset_rad = wrapRad(std::atan2(chord.y(), chord.x()) - middle.gyro_heading_rad);
-      const double floor = config_.heading_track_chord_floor_deg * kDegToRad;
-      c.variance = (previous.variance + current.variance) / (length * length) + floor * floor;
-      chords_.push_back(c);
+    if (length < config_.heading_track_min_chord_m) continue;
+    // Not across an outage (no gap over 3 s), of a car moving but not impossibly fast.
+    const bool two_intervals = k == track_fixes_.size();
+    bool gap = two_intervals && dt > 3.0;
+    for (std::size_t j = k - 1; j <= track_fixes_.size() && !gap; ++j) {
+      const double next_s = j < track_fixes_.size() ? track_fixes_[j].stamp_s : current.stamp_s;
+      gap = next_s - track_fixes_[j - 1].stamp_s > 3.0;
     }
+    if (gap || !(dt > kDuplicateStampS) || length < config_.heading_track_min_speed_mps * dt ||
+        length > config_.max_reacquisition_speed_mps * dt) {
+      break;
+    }
+    double middle_heading = 0.0, turn = 0.0;
+    if (two_intervals) {
+      // The fix between them must be the chord's middle (evenly spaced fixes).
+      const TrackFix& middle = track_fixes_.back();
+      if (std::abs(middle.stamp_s - start.stamp_s - 0.5 * dt) > 0.15 * dt) break;
+      middle_heading = middle.gyro_heading_rad;
+    } else {
+      const double middle_s = start.stamp_s + 0.5 * dt;
+      middle_heading = current.gyro_heading_rad;
+      for (std::size_t j = k - 2; j < track_fixes_.size(); ++j) {
+        const TrackFix& a = track_fixes_[j];
+        const TrackFix& b = j + 1 < track_fixes_.size() ? track_fixes_[j + 1] : current;
+        if (b.stamp_s >= middle_s) {
+          const double f =
+              b.stamp_s > a.stamp_s ? (middle_s - a.stamp_s) / (b.stamp_s - a.stamp_s) : 0.0;
+          middle_heading =
+              a.gyro_heading_rad + f * wrapRad(b.gyro_heading_rad - a.gyro_heading_rad);
+          break;
+        }
+      }
+      // A turn along a long chord: the tangent-at-the-middle rule holds only on a circle.
+      turn = wrapRad(current.gyro_heading_rad - start.gyro_heading_rad);
+      if (std::abs(turn) > config_.heading_track_max_turn_deg * kDegToRad) break;
+    }
+    Chord c;
+    c.stamp_s = current.stamp_s;
+    c.offset_rad = wrapRad(std::atan2(chord.y(), chord.x()) - middle_heading);
+    c.variance = (start.variance + current.variance) / (length * length) + floor * floor +
+                 std::pow(config_.heading_track_turn_weight * turn, 2);
+    chords_.push_back(c);
+    break;
   }
   track_fixes_.push_back(current);
   const double oldest = current.stamp_s - config_.heading_track_window_s;
