@@ -5,8 +5,11 @@
 namespace inekf_semantic_mapping {
 namespace estimation {
 
-void LazyStart::offerOrientation(const Eigen::Matrix3d& body_to_map) {
-  if (body_to_map.allFinite()) orientation_ = body_to_map;
+void LazyStart::offerOrientation(const Eigen::Matrix3d& body_to_map,
+                                 const std::optional<Eigen::Matrix3d>& covariance) {
+  if (!body_to_map.allFinite()) return;
+  orientation_ = body_to_map;
+  orientation_covariance_ = covariance;
 }
 
 void LazyStart::offerVelocity(double stamp_s, const Eigen::Vector3d& velocity, bool in_body_frame) {
@@ -38,6 +41,7 @@ std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_sour
   pending_fix_.reset();
   if (config_.use_reference && orientation_) {
     start.orientation = orientation_;
+    start.orientation_covariance = orientation_covariance_;
     start.velocity_map = velocity;
   }
   return start;
@@ -46,6 +50,7 @@ std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_sour
 void LazyStart::reset() {
   pending_fix_.reset();
   orientation_.reset();
+  orientation_covariance_.reset();
   velocity_stamp_s_.reset();
 }
 

@@ -85,6 +85,13 @@ std::string LocalizationSession::summary() const {
          << s.filter.nonholonomic_rejected << " rejected / " << s.filter.nonholonomic_skipped
          << " waiting for the heading; ";
   }
+  const std::int64_t heading_events =
+      s.filter.heading_alignments + s.filter.heading_recoveries + s.filter.heading_reopens;
+  if (heading_events > 0) {
+    line << "heading " << s.filter.heading_alignments << " aligned / "
+         << s.filter.heading_recoveries << " recovered / " << s.filter.heading_reopens
+         << " re-opened; ";
+  }
   line << s.resets << " resets";
   return line.str();
 }
@@ -144,7 +151,9 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
     return update;
   }
   latest_angular_velocity_ = sample.angular_velocity;
-  if (!started() && event.orientation) lazy_start_.offerOrientation(*event.orientation);
+  if (!started() && event.orientation) {
+    lazy_start_.offerOrientation(*event.orientation, event.orientation_covariance);
+  }
   Localizer::ImuStatus status = localizer_.addImu(sample);
   if (status == Localizer::ImuStatus::kNotInitialized) {
     tryStart(sample.stamp_s, &update);
@@ -226,13 +235,20 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
 void LocalizationSession::correct(const PositionFix& fix, Update* update) {
   update->correction = localizer_.addPositionFix(fix);
   last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
+  std::ostringstream note;
   if (!update->correction->accepted) {
-    std::ostringstream note;
     note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s
          << " s rejected: " << update->correction->reason << " (d^2 = " << std::setprecision(1)
          << last_mahalanobis_squared_ << ")";
-    update->note = note.str();
   }
+  // The heading monitor's alignments, recoveries and re-opens: once each, with the reason.
+  const std::string heading = localizer_.takeHeadingEvent();
+  if (!heading.empty()) {
+    if (!note.str().empty()) note << "; ";
+    note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s << " s: " << heading;
+    update->heading_event = true;
+  }
+  if (!note.str().empty()) update->note = note.str();
 }
 
 void LocalizationSession::releaseWaitingFixes(Update* update) {
@@ -263,7 +279,10 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
   if (started()) return;
   const std::optional<LazyStart::Start> start = lazy_start_.poll(now_s, gps_velocity_expected_);
   if (!start) return;
-  if (start->orientation) localizer_.setInitialReference(*start->orientation, start->velocity_map);
+  if (start->orientation) {
+    localizer_.setInitialReference(*start->orientation, start->velocity_map,
+                                   start->orientation_covariance);
+  }
   update->correction = localizer_.addPositionFix(start->fix);
   last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
   std::ostringstream note;
@@ -284,6 +303,16 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
        << " m, yaw " << std::setprecision(1) << yaw_deg << " deg (";
   if (start->orientation) {
     note << "orientation from the IMU";
+    const std::optional<Eigen::Matrix3d>& stated = start->orientation_covariance;
+    if (stated && stated->allFinite() && stated->diagonal().maxCoeff() > 0.0) {
+      note << ", stated yaw sigma " << std::setprecision(2)
+           << (stated->diagonal()(2) > 0.0 ? std::sqrt(stated->diagonal()(2)) * 180.0 / M_PI
+                                           : config_.localizer.initial_yaw_sigma_deg)
+           << " deg" << std::setprecision(1);
+    } else {
+      note << ", no stated covariance: yaw sigma " << config_.localizer.initial_yaw_sigma_deg
+           << " deg";
+    }
   } else {
     note << "levelled from gravity, yaw unknown (sigma " << config_.localizer.unknown_yaw_sigma_deg
          << " deg)";

@@ -4,11 +4,13 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <set>
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/estimation/imu_filters.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -17,6 +19,13 @@ namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
 constexpr double kDuplicateStampS = Localizer::kDuplicateStampS;
+
+double wrapRad(double angle) { return std::atan2(std::sin(angle), std::cos(angle)); }
+
+// Heading of the body x axis in the map frame.
+double headingOf(const Eigen::Matrix3d& rotation) {
+  return std::atan2(rotation(1, 0), rotation(0, 0));
+}
 
 }  // namespace
 
@@ -96,6 +105,29 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   mounting_angle("nonholonomic.vehicle_pitch_deg", &config.nonholonomic_vehicle_pitch_deg);
   mounting_angle("nonholonomic.vehicle_yaw_deg", &config.nonholonomic_vehicle_yaw_deg);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
+  reader->read("heading.from_track", &config.heading_from_track);
+  positive("heading.track_window_s", &config.heading_track_window_s);
+  positive("heading.track_min_speed_mps", &config.heading_track_min_speed_mps);
+  non_negative("heading.track_min_chord_m", &config.heading_track_min_chord_m);
+  positive("heading.track_max_chord_s", &config.heading_track_max_chord_s);
+  positive("heading.track_max_turn_deg", &config.heading_track_max_turn_deg);
+  non_negative("heading.track_turn_weight", &config.heading_track_turn_weight);
+  non_negative("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg);
+  const auto count = [reader](const std::string& key, int* out, int min) {
+    reader->read(key, out);
+    if (*out < min || *out > 1000000) {
+      reader->fail(key, "must be an integer in [" + std::to_string(min) + ", 1000000]");
+    }
+  };
+  count("heading.track_min_chords", &config.heading_track_min_chords, 1);
+  positive("heading.align_above_sigma_deg", &config.heading_align_above_sigma_deg);
+  positive("heading.align_max_sigma_deg", &config.heading_align_max_sigma_deg);
+  positive("heading.check_sigmas", &config.heading_check_sigmas);
+  non_negative("heading.check_min_deg", &config.heading_check_min_deg);
+  count("heading.reopen_after_rejected_fixes", &config.heading_reopen_after_rejected_fixes, 0);
+  count("heading.nis_window_fixes", &config.heading_nis_window_fixes, 0);
+  positive("heading.nis_window_max", &config.heading_nis_window_max);
+  reader->read("heading.hold_unknown_yaw", &config.heading_hold_unknown_yaw);
   return config;
 }
 
@@ -142,6 +174,10 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   last_accepted_fix_s_ = initial.stamp_s;
   clearHistory();
   last_fix_stamp_s_ = -std::numeric_limits<double>::infinity();
+  heading_correction_rad_ = 0.0;
+  track_fixes_.clear();
+  chords_.clear();
+  horizontal_nis_.clear();
   recordStep(ImuStep());  // the initial state: dt 0, nothing to replay
 }
 
@@ -159,15 +195,22 @@ void Localizer::propagate(const ImuStep& step) {
       ++statistics_.nonholonomic_skipped;
       return;
     }
+    if (consecutive_rejected_fixes_ > 0) {
+      // The fixes reject this heading: the constraint would only hold it.
+      ++statistics_.nonholonomic_suspended;
+      return;
+    }
+    const double heading_before = headingOf(filter_->state().rotation);
     const CorrectionResult result = filter_->correctNonholonomic(
         nonholonomic_model_, config_.nonholonomic_gate_mahalanobis_squared);
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
+    if (result.accepted) noteHeadingChange(heading_before);
   }
 }
 
 void Localizer::recordStep(const ImuStep& step) {
   if (!(config_.fix_history_s > 0.0)) return;
-  history_.push_back({step, filter_->state(), filter_->covariance()});
+  history_.push_back({step, filter_->state(), filter_->covariance(), heading_correction_rad_});
   const double oldest_kept_s = history_.back().state.stamp_s - config_.fix_history_s;
   // Keep the newest step at or before the horizon: a fix exactly fix_history_s late rewinds to it.
   while (history_.size() - history_begin_ > 1 &&
@@ -202,6 +245,7 @@ std::ptrdiff_t Localizer::lateFixStep(double stamp_s) const {
 
 CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdiff_t step) {
   filter_->initialize(history_[step].state, history_[step].covariance);
+  heading_correction_rad_ = history_[step].heading_correction_rad;
   const double into_next = fix.stamp_s - history_[step].state.stamp_s;
   if (into_next > kDuplicateStampS) {
     // The fix falls inside the next step: split that step at the fix's time (its sample holds
@@ -211,26 +255,35 @@ CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdi
     propagate(first_part);
     history_[step + 1].step.dt -= into_next;
     history_.insert(history_.begin() + step + 1,
-                    {first_part, filter_->state(), filter_->covariance()});
+                    {first_part, filter_->state(), filter_->covariance(), heading_correction_rad_});
     ++step;
   }
   const CorrectionResult result = applyFix(fix);
   history_[step].state = filter_->state();
   history_[step].covariance = filter_->covariance();
+  history_[step].heading_correction_rad = heading_correction_rad_;
   for (std::size_t k = static_cast<std::size_t>(step) + 1; k < history_.size(); ++k) {
     propagate(history_[k].step);
     history_[k].state = filter_->state();
     history_[k].covariance = filter_->covariance();
+    history_[k].heading_correction_rad = heading_correction_rad_;
   }
   return result;
 }
 
 void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
-                                    const std::optional<Eigen::Vector3d>& velocity_map) {
+                                    const std::optional<Eigen::Vector3d>& velocity_map,
+                                    const std::optional<Eigen::Matrix3d>& rotation_covariance) {
   if (!rotation.allFinite()) return;
   reference_rotation_ = lie::normalizeRotation(rotation);
   reference_velocity_.reset();
+  reference_rotation_covariance_.reset();
   if (velocity_map && velocity_map->allFinite()) reference_velocity_ = *velocity_map;
+  if (rotation_covariance && rotation_covariance->allFinite() &&
+      rotation_covariance->diagonal().minCoeff() >= 0.0) {
+    reference_rotation_covariance_ =
+        0.5 * (*rotation_covariance + rotation_covariance->transpose());
+  }
 }
 
 Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
@@ -328,6 +381,18 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
     ErrorCovariance world = initialWorldCovariance();
     world.block<3, 3>(6, 6) = used.covariance_map;
     const bool yaw_known = config_.init_orientation_from_reference && reference_rotation_;
+    if (yaw_known && reference_rotation_covariance_) {
+      // The orientation's own stated covariance; an axis it states as 0 (sensor_msgs: "not
+      // known") keeps the configured sigma.
+      const Eigen::Matrix3d& stated = *reference_rotation_covariance_;
+      for (int i = 0; i < 3; ++i) {
+        if (!(stated(i, i) > 0.0)) continue;
+        world(i, i) = stated(i, i);
+        for (int j = 0; j < 3; ++j) {
+          if (j != i && stated(j, j) > 0.0) world(i, j) = stated(i, j);
+        }
+      }
+    }
     if (!yaw_known) {
       // Levelled from gravity: the yaw of 0 is a guess, not a measurement.
       const double yaw_sigma = config_.unknown_yaw_sigma_deg * kDegToRad;
@@ -370,14 +435,101 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   used.covariance_map += Eigen::Matrix3d::Identity() * moved * moved;
   used.stamp_s = filter_->state().stamp_s;
 
+  // The heading monitor, before the correction: the track including this fix.
+  if (config_.heading_from_track) {
+    addToTrack(used);
+    const TrackHeading track = trackHeading();
+    if (track.valid && track.sigma_rad <= config_.heading_align_max_sigma_deg * kDegToRad) {
+      const double yaw_sigma = yawSigma();
+      const double delta = wrapRad(track.offset_rad - heading_correction_rad_);
+      char why[160];
+      if (!(yaw_sigma <= config_.heading_align_above_sigma_deg * kDegToRad)) {
+        std::snprintf(why, sizeof(why),
+                      "heading unknown (sigma %.0f deg): aligned to the GPS track of %d chords "
+                      "(%+.1f deg, sigma %.1f deg)",
+                      yaw_sigma / kDegToRad, track.chords, delta / kDegToRad,
+                      track.sigma_rad / kDegToRad);
+        ++statistics_.heading_alignments;
+        realignHeading(track, why);
+      } else if (std::abs(delta) >
+                 std::max(config_.heading_check_min_deg * kDegToRad,
+                          config_.heading_check_sigmas * std::hypot(yaw_sigma, track.sigma_rad))) {
+        std::snprintf(why, sizeof(why),
+                      "heading %.1f deg off the GPS track's (%d chords, sigma %.1f deg; the "
+                      "filter's sigma %.1f deg): re-initialised from the track",
+                      -delta / kDegToRad, track.chords, track.sigma_rad / kDegToRad,
+                      yaw_sigma / kDegToRad);
+        ++statistics_.heading_recoveries;
+        realignHeading(track, why);
+      }
+    }
+  }
+
+  const bool hold_yaw = config_.heading_from_track && config_.heading_hold_unknown_yaw;
+  if (hold_yaw && !(yawSigma() <= config_.heading_align_above_sigma_deg * kDegToRad)) {
+    decorrelateYaw();
+  }
+  const Eigen::Vector3d innovation = used.position_map - filter_->state().position_map;
+  double horizontal_nis = 0.0;
+  {
+    const Eigen::Matrix2d s =
+        filter_->poseCovariance().topLeftCorner<2, 2>() + used.covariance_map.topLeftCorner<2, 2>();
+    const Eigen::Vector2d e = innovation.head<2>();
+    const Eigen::LLT<Eigen::Matrix2d> llt(s);
+    if (llt.info() == Eigen::Success && e.allFinite()) horizontal_nis = e.dot(llt.solve(e));
+  }
+  double heading_before = headingOf(filter_->state().rotation);
   result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
-  const bool gated_out =
+  bool gated_out =
       !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
+  if (gated_out) ++consecutive_rejected_fixes_;
+  // The fixes keep disagreeing: the heading (and with it velocity) may be what is wrong.
+  std::string reopen_why;
+  if (gated_out && config_.heading_reopen_after_rejected_fixes > 0 &&
+      consecutive_rejected_fixes_ == config_.heading_reopen_after_rejected_fixes) {
+    reopen_why = std::to_string(consecutive_rejected_fixes_) + " fixes in a row failed the gate";
+  }
+  if (config_.heading_nis_window_fixes > 0 && std::isfinite(horizontal_nis)) {
+    // Clipped, so that one real outlier (a 100 m jump) cannot re-open the heading alone.
+    horizontal_nis_.push_back(std::min(horizontal_nis, config_.gps_gate_mahalanobis_squared));
+    while (static_cast<int>(horizontal_nis_.size()) > config_.heading_nis_window_fixes) {
+      horizontal_nis_.pop_front();
+    }
+    if (static_cast<int>(horizontal_nis_.size()) == config_.heading_nis_window_fixes) {
+      double mean = 0.0;
+      for (double d2 : horizontal_nis_) mean += d2;
+      mean /= static_cast<double>(horizontal_nis_.size());
+      if (mean > config_.heading_nis_window_max && reopen_why.empty()) {
+        char why[128];
+        std::snprintf(why, sizeof(why), "the last %d fixes' mean horizontal NIS is %.1f (> %.1f)",
+                      config_.heading_nis_window_fixes, mean, config_.heading_nis_window_max);
+        reopen_why = why;
+      }
+    }
+  }
+  const double since_last_fix_s = std::max(1.0, filter_->state().stamp_s - last_accepted_fix_s_);
+  if (!reopen_why.empty()) {
+    if (innovation.norm() > config_.max_reacquisition_speed_mps * since_last_fix_s) {
+      reopen_why.clear();  // a broken receiver, not a wrong heading: the gate keeps rejecting
+    } else {
+      if (result.accepted) {
+        // Undo nothing: the accepted fix stands; re-open around the corrected state.
+        noteHeadingChange(heading_before);
+        heading_before = headingOf(filter_->state().rotation);
+      }
+      reopenHeading(gated_out ? innovation : Eigen::Vector3d::Zero(), reopen_why);
+      horizontal_nis_.clear();
+      if (gated_out) {
+        if (hold_yaw) decorrelateYaw();
+        result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
+        gated_out =
+            !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
+      }
+    }
+  }
   if (gated_out && config_.max_consecutive_rejected_fixes > 0 &&
-      ++consecutive_rejected_fixes_ >= config_.max_consecutive_rejected_fixes) {
+      consecutive_rejected_fixes_ >= config_.max_consecutive_rejected_fixes) {
     const NavState& state = filter_->state();
-    const Eigen::Vector3d innovation = used.position_map - state.position_map;
-    const double since_last_fix_s = std::max(1.0, state.stamp_s - last_accepted_fix_s_);
     if (innovation.norm() > config_.max_reacquisition_speed_mps * since_last_fix_s) {
       result.reason = "re-acquisition refused: the fix is " + std::to_string(innovation.norm()) +
                       " m away, more than a car moves in " + std::to_string(since_last_fix_s) +
@@ -396,6 +548,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   }
   statistics_.last_mahalanobis_squared = result.mahalanobis_squared;
   if (result.accepted) {
+    noteHeadingChange(heading_before);
     consecutive_rejected_fixes_ = 0;
     last_accepted_fix_s_ = filter_->state().stamp_s;
   }
@@ -407,11 +560,266 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   return result;
 }
 
+void Localizer::noteHeadingChange(double heading_before_rad) {
+  heading_correction_rad_ += wrapRad(headingOf(filter_->state().rotation) - heading_before_rad);
+}
+
+void Localizer::decorrelateYaw() {
+  // In the left-invariant error xi = [xi_R, xi_v, xi_p, ...] (X_true = X_est Exp(xi)) the yaw
+  // about the map z axis is u^T xi_R with u = R^T e_z, and a rotation about the map z axis
+  // through the current position that leaves the map velocity and position alone is the
+  // direction w = [u; 0; 0]. With the projector Q = I - w w^T (w^T w = 1) the error splits into
+  // w * yaw + Q xi; P' = Q P Q^T + (w^T P w) w w^T keeps the yaw's variance and the covariance
+  // of Q xi (every map-frame velocity, position and bias error: none of them sees w) and drops
+  // only their cross-covariance. A position fix (H w = 0) then has no gain on the yaw.
+  const auto* base = dynamic_cast<const ImuFilterBase*>(filter_.get());
+  if (!base) return;
+  const NavState& state = filter_->state();
+  const Matrix15d to_left = base->leftFromError(state);
+  const Matrix15d from_left = base->errorFromLeft(state);
+  const ErrorCovariance left = to_left * filter_->covariance() * to_left.transpose();
+  Eigen::Matrix<double, 15, 1> w = Eigen::Matrix<double, 15, 1>::Zero();
+  w.head<3>() = state.rotation.transpose() * Eigen::Vector3d::UnitZ();
+  const Matrix15d q = Matrix15d::Identity() - w * w.transpose();
+  const double yaw_variance = w.dot(left * w);
+  ErrorCovariance held = q * left * q.transpose() + yaw_variance * w * w.transpose();
+  held = from_left * held * from_left.transpose();
+  held = 0.5 * (held + held.transpose());
+  if (!held.allFinite()) return;
+  filter_->initialize(state, held);
+}
+
+void Localizer::noteHeadingEvent(const std::string& what) {
+  if (!heading_event_.empty()) heading_event_ += "; ";
+  heading_event_ += what;
+}
+
+std::string Localizer::takeHeadingEvent() {
+  std::string event;
+  event.swap(heading_event_);
+  return event;
+}
+
+double Localizer::yawSigma() const {
+  if (!initialized_) return std::numeric_limits<double>::infinity();
+  const Eigen::Matrix3d& r = filter_->state().rotation;
+  const Eigen::Matrix3d world =
+      r * filter_->poseCovariance().bottomRightCorner<3, 3>() * r.transpose();
+  return std::sqrt(std::max(0.0, world(2, 2)));
+}
+
+void Localizer::addToTrack(const PositionFix& fix) {
+  TrackFix current;
+  current.stamp_s = fix.stamp_s;
+  current.position = fix.position_map.head<2>();
+  current.variance = 0.5 * fix.covariance_map.topLeftCorner<2, 2>().trace();
+  current.gyro_heading_rad = headingOf(filter_->state().rotation) - heading_correction_rad_;
+  if (!current.position.allFinite() || !std::isfinite(current.variance)) return;
+  // A chord from an earlier fix to this one, at least two fix intervals and
+  // heading_track_min_chord_m long (1.5 m fixes: a 12 m chord is worth ~10 deg, a 6 m one ~20;
+  // a slow car gets longer chords in time), within heading_track_max_chord_s, against the gyro
+  // heading at its middle instant (on a circular arc driven at constant speed the chord is
+  // parallel to the tangent there), interpolated between the fixes around it.
+  const double floor = config_.heading_track_chord_floor_deg * kDegToRad;
+  for (std::size_t k = track_fixes_.size(); k >= 2; --k) {
+    const TrackFix& start = track_fixes_[k - 2];
+    const double dt = current.stamp_s - start.stamp_s;
+    if (!(dt <= config_.heading_track_max_chord_s)) break;
+    const Eigen::Vector2d chord = current.position - start.position;
+    const double length = chord.norm();
+    if (length < config_.heading_track_min_chord_m) continue;
+    // Not across an outage (no gap over 3 s), of a car moving but not impossibly fast.
+    const bool two_intervals = k == track_fixes_.size();
+    bool gap = two_intervals && dt > 3.0;
+    for (std::size_t j = k - 1; j <= track_fixes_.size() && !gap; ++j) {
+      const double next_s = j < track_fixes_.size() ? track_fixes_[j].stamp_s : current.stamp_s;
+      gap = next_s - track_fixes_[j - 1].stamp_s > 3.0;
+    }
+    if (gap || !(dt > kDuplicateStampS) || length < config_.heading_track_min_speed_mps * dt ||
+        length > config_.max_reacquisition_speed_mps * dt) {
+      break;
+    }
+    double middle_heading = 0.0, turn = 0.0;
+    if (two_intervals) {
+      // The fix between them must be the chord's middle (evenly spaced fixes).
+      const TrackFix& middle = track_fixes_.back();
+      if (std::abs(middle.stamp_s - start.stamp_s - 0.5 * dt) > 0.15 * dt) break;
+      middle_heading = middle.gyro_heading_rad;
+    } else {
+      const double middle_s = start.stamp_s + 0.5 * dt;
+      middle_heading = current.gyro_heading_rad;
+      for (std::size_t j = k - 2; j < track_fixes_.size(); ++j) {
+        const TrackFix& a = track_fixes_[j];
+        const TrackFix& b = j + 1 < track_fixes_.size() ? track_fixes_[j + 1] : current;
+        if (b.stamp_s >= middle_s) {
+          const double f =
+              b.stamp_s > a.stamp_s ? (middle_s - a.stamp_s) / (b.stamp_s - a.stamp_s) : 0.0;
+          middle_heading =
+              a.gyro_heading_rad + f * wrapRad(b.gyro_heading_rad - a.gyro_heading_rad);
+          break;
+        }
+      }
+      // A turn along a long chord: the tangent-at-the-middle rule holds only on a circle.
+      turn = wrapRad(current.gyro_heading_rad - start.gyro_heading_rad);
+      if (std::abs(turn) > config_.heading_track_max_turn_deg * kDegToRad) break;
+    }
+    Chord c;
+    c.stamp_s = current.stamp_s;
+    c.offset_rad = wrapRad(std::atan2(chord.y(), chord.x()) - middle_heading);
+    c.variance = (start.variance + current.variance) / (length * length) + floor * floor +
+                 std::pow(config_.heading_track_turn_weight * turn, 2);
+    chords_.push_back(c);
+    break;
+  }
+  track_fixes_.push_back(current);
+  const double oldest = current.stamp_s - config_.heading_track_window_s;
+  while (!track_fixes_.empty() && track_fixes_.front().stamp_s < oldest) track_fixes_.pop_front();
+  while (!chords_.empty() && chords_.front().stamp_s < oldest) chords_.pop_front();
+}
+
+Localizer::TrackHeading Localizer::trackHeading() const {
+  TrackHeading track;
+  if (static_cast<int>(chords_.size()) < config_.heading_track_min_chords) return track;
+  // Weighted circular mean, then once more without the chords more than 3 sigma from it (a
+  // receiver jump, a stretch driven in reverse).
+  const auto mean = [this](const double* centre, int* used, double* information) {
+    double s = 0.0, c = 0.0;
+    *used = 0;
+    *information = 0.0;
+    for (const Chord& chord : chords_) {
+      if (centre &&
+          std::abs(wrapRad(chord.offset_rad - *centre)) > 3.0 * std::sqrt(chord.variance)) {
+        continue;
+      }
+      const double w = 1.0 / chord.variance;
+      s += w * std::sin(chord.offset_rad);
+      c += w * std::cos(chord.offset_rad);
+      *information += w;
+      ++*used;
+    }
+    return std::atan2(s, c);
+  };
+  int used = 0;
+  double information = 0.0;
+  const double first = mean(nullptr, &used, &information);
+  const double offset = mean(&first, &used, &information);
+  if (used < config_.heading_track_min_chords || !(information > 0.0)) return track;
+  // Most chords must agree: otherwise the car reversed or the track is not a heading.
+  if (2 * used <= static_cast<int>(chords_.size())) return track;
+  double chi2 = 0.0;
+  for (const Chord& chord : chords_) {
+    const double r = wrapRad(chord.offset_rad - offset);
+    if (std::abs(r) <= 3.0 * std::sqrt(chord.variance)) chi2 += r * r / chord.variance;
+  }
+  if (chi2 > 3.0 * used) return track;
+  track.valid = std::isfinite(offset);
+  track.offset_rad = offset;
+  track.sigma_rad = 1.0 / std::sqrt(information);
+  track.chords = used;
+  return track;
+}
+
+Eigen::Vector2d Localizer::trackVelocity(double* variance) const {
+  // Least-squares slope of the fixes of the last 3 s (constant velocity).
+  *variance = std::numeric_limits<double>::infinity();
+  if (track_fixes_.size() < 2) return Eigen::Vector2d::Zero();
+  const double newest = track_fixes_.back().stamp_s;
+  double t_mean = 0.0, n = 0.0, noise = 0.0;
+  Eigen::Vector2d p_mean = Eigen::Vector2d::Zero();
+  for (const TrackFix& f : track_fixes_) {
+    if (f.stamp_s < newest - 3.0 - kDuplicateStampS) continue;
+    t_mean += f.stamp_s;
+    p_mean += f.position;
+    noise = std::max(noise, f.variance);
+    n += 1.0;
+  }
+  if (n < 2.0) return Eigen::Vector2d::Zero();
+  t_mean /= n;
+  p_mean /= n;
+  double stt = 0.0;
+  Eigen::Vector2d stp = Eigen::Vector2d::Zero();
+  for (const TrackFix& f : track_fixes_) {
+    if (f.stamp_s < newest - 3.0 - kDuplicateStampS) continue;
+    stt += (f.stamp_s - t_mean) * (f.stamp_s - t_mean);
+    stp += (f.stamp_s - t_mean) * (f.position - p_mean);
+  }
+  if (!(stt > 1e-6)) return Eigen::Vector2d::Zero();
+  *variance = noise / stt;
+  return stp / stt;
+}
+
+void Localizer::realignHeading(const TrackHeading& track, const std::string& why) {
+  const NavState before = filter_->state();
+  const double delta = wrapRad(track.offset_rad - heading_correction_rad_);
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(delta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  NavState state = before;
+  state.rotation = lie::normalizeRotation(turn * before.rotation);
+  // The world-frame covariance of the re-initialised state: roll, pitch, position and biases as
+  // the filter had them, yaw from the track, the horizontal velocity from the fixes of the last
+  // seconds (the dead-reckoned one was integrated with the wrong heading).
+  const PoseCovariance pose = filter_->poseCovariance();
+  const ErrorCovariance old = filter_->covariance();
+  ErrorCovariance world = ErrorCovariance::Zero();
+  world.block<3, 3>(0, 0) =
+      before.rotation * pose.bottomRightCorner<3, 3>() * before.rotation.transpose();
+  world.block<1, 3>(2, 0).setZero();
+  world.block<3, 1>(0, 2).setZero();
+  world(2, 2) = track.sigma_rad * track.sigma_rad;
+  double velocity_variance = 0.0;
+  const Eigen::Vector2d velocity = trackVelocity(&velocity_variance);
+  const double floor = 1.0;  // m/s: the car's acceleration over the fitted seconds
+  if (std::isfinite(velocity_variance)) {
+    state.velocity_map.head<2>() = velocity;
+    world.block<2, 2>(3, 3) = Eigen::Matrix2d::Identity() * (velocity_variance + floor * floor);
+  } else {
+    state.velocity_map = turn * before.velocity_map;
+    const double v2 = before.velocity_map.head<2>().squaredNorm() + floor * floor;
+    world.block<2, 2>(3, 3) = Eigen::Matrix2d::Identity() * v2;
+  }
+  world(5, 5) = std::max(floor * floor,
+                         config_.initial_velocity_sigma_mps * config_.initial_velocity_sigma_mps);
+  world.block<3, 3>(6, 6) = pose.topLeftCorner<3, 3>();
+  world.block<6, 6>(9, 9) = old.block<6, 6>(9, 9);  // bias errors: additive in every filter
+  if (!world.allFinite() || !state.rotation.allFinite() || !state.velocity_map.allFinite()) return;
+  filter_->initialize(state, filter_->fromWorldCovariance(state, world));
+  heading_correction_rad_ += delta;
+  consecutive_rejected_fixes_ = 0;
+  horizontal_nis_.clear();
+  noteHeadingEvent(why);
+}
+
+void Localizer::reopenHeading(const Eigen::Vector3d& innovation, const std::string& why) {
+  const NavState& state = filter_->state();
+  const double since_last_fix_s = std::max(1.0, state.stamp_s - last_accepted_fix_s_);
+  // A rotation about the map z axis through the current position, in the filter's own error
+  // coordinates (left-invariant: sigma^2 u u^T on the rotation block, u = R^T e_z); the map
+  // velocity may be off by as much as the car's speed, the position by the innovation.
+  ErrorCovariance world = ErrorCovariance::Zero();
+  const double yaw_sigma = config_.unknown_yaw_sigma_deg * kDegToRad;
+  world(2, 2) = yaw_sigma * yaw_sigma;
+  const double speed2 = state.velocity_map.head<2>().squaredNorm() +
+                        std::pow(innovation.head<2>().norm() / since_last_fix_s, 2);
+  world(3, 3) = world(4, 4) = speed2;
+  world(6, 6) = world(7, 7) = innovation.head<2>().squaredNorm();
+  const ErrorCovariance inflated =
+      filter_->covariance() + filter_->fromWorldCovariance(state, world);
+  if (!inflated.allFinite()) return;
+  filter_->initialize(state, inflated);
+  ++statistics_.heading_reopens;
+  char text[64];
+  std::snprintf(text, sizeof(text), " at t=%.2f s", state.stamp_s);
+  noteHeadingEvent(why + ": heading re-opened (sigma " +
+                   std::to_string(static_cast<int>(config_.unknown_yaw_sigma_deg)) + " deg)" +
+                   text);
+}
+
 void Localizer::reset() {
   initialized_ = false;
   last_imu_.reset();
   reference_rotation_.reset();
   reference_velocity_.reset();
+  reference_rotation_covariance_.reset();
   interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
   clearHistory();

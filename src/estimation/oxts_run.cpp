@@ -92,7 +92,9 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
 
   const double t0 = frames.front().stampSeconds();
   for (std::size_t k = 0; k < frames.size(); ++k) {
-    const kitti::OxtsRecord& record = frames[k].record;
+    const kitti::OxtsRecord record =
+        options.imu_gps_only ? kitti::withoutAttitude(frames[k].record) : frames[k].record;
+    const bool has_attitude = kitti::carriesAttitude(record);
     const double stamp_s = frames[k].stampSeconds();
     ImuEvent imu;
     imu.sample.stamp_s = stamp_s;
@@ -100,13 +102,18 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
     imu.sample.specific_force = Eigen::Vector3d(record.ax, record.ay, record.az);
     // The interval (k-1, k] touches an interpolated frame at either end.
     imu.sample.interpolated = record.posmode < 0 || (k > 0 && frames[k - 1].record.posmode < 0);
-    imu.orientation = kitti::rotationFromRollPitchYaw(
-        record.roll, record.pitch, record.yaw + options.init_yaw_error_deg * kDegToRad);
+    if (has_attitude) {
+      imu.orientation = kitti::rotationFromRollPitchYaw(
+          record.roll, record.pitch, record.yaw + options.init_yaw_error_deg * kDegToRad);
+    }
+    // Without a velocity in the frame there is none to wait for (the start does not wait).
+    session.setGpsVelocityExpected(has_attitude);
     const bool started_before = session.started();
     const std::int64_t resets_before = session.statistics().resets;
     {
       ScopedTimer timer("oxts_run.propagate");
-      session.addImu(imu);
+      const LocalizationSession::Update update = session.addImu(imu);
+      if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
     }
     ForwardEpoch epoch;
     if (options.smooth && started_before && session.started() && !epochs.empty() &&
@@ -115,17 +122,20 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                          config.localizer.imu_noise.gravity_mps2);
       if (!epoch.has_step) ++run.smoother_breaks;
     }
-    GpsVelocityEvent velocity;
-    velocity.stamp_s = stamp_s;
-    velocity.velocity = Eigen::Vector3d(record.ve, record.vn, record.vu);
-    session.addGpsVelocity(velocity);
+    if (has_attitude) {
+      GpsVelocityEvent velocity;
+      velocity.stamp_s = stamp_s;
+      velocity.velocity = Eigen::Vector3d(record.ve, record.vn, record.vu);
+      session.addGpsVelocity(velocity);
+    }
     if (const std::optional<kitti::GeodeticFix> geodetic =
-            degrader.degrade(k, stamp_s - t0, record)) {
+            degrader.degrade(k, stamp_s - t0, frames[k].record)) {
       ScopedTimer timer("oxts_run.correct");
       ++run.fixes_offered;
       const GeodeticFixEvent event = fixEventFromDegraded(*geodetic, stamp_s);
       const bool was_started = session.started();
       const LocalizationSession::Update update = session.addFix(event);
+      if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
       if (was_started && (!update.correction || update.correction->accepted)) {
         OxtsRunResult::Fix fix;  // the session's conversion, for the loop closure's GPS factors
         fix.frame = static_cast<int>(k);

@@ -73,8 +73,8 @@ class InekfNode {
       const LocalizationSession::Update update = event();
       report(update);
       // The start's pose at the first fix's stamp, whichever message completed the start: a scan
-      // between it and the next IMU sample has a pose (issue 13: before, the first pose came with
-      // the next IMU sample, 0.1 s later on KITTI, and such scans stayed out of the map).
+      // between it and the next IMU sample has a pose (otherwise the first pose would come with
+      // the next IMU sample, 0.1 s later on KITTI, and such scans would stay out of the map).
       if (const auto& start = update.start_estimate) {
         output_.publish(startStamp(start->state.stamp_s), start->state, start->pose_covariance,
                         session_.latestAngularVelocity());
@@ -93,6 +93,9 @@ class InekfNode {
       output_.clearPath();
     } else if (update.started) {
       ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " " << update.note);
+    } else if (update.heading_event) {
+      // Each alignment, recovery or re-open of the heading: once, never throttled away.
+      ROS_WARN_STREAM("inekf_node: " << update.note);
     } else if (!update.note.empty()) {
       ROS_WARN_STREAM_THROTTLE(5.0, "inekf_node: " << update.note);
     }

@@ -67,6 +67,9 @@ sensor_msgs::Imu toImuMessage(const kitti::OxtsRecord& r, const ros::Time& stamp
   msg.linear_acceleration.z = r.az;
   const double rp = noise.roll_pitch_rad * noise.roll_pitch_rad;
   msg.orientation_covariance = {rp, 0, 0, 0, rp, 0, 0, 0, noise.yaw_rad * noise.yaw_rad};
+  // A frame without an INS solution (attitude and velocity columns all zero) has no
+  // orientation: sensor_msgs/Imu says so with -1, and inekf_node then levels from gravity.
+  if (!kitti::carriesAttitude(r)) msg.orientation_covariance[0] = -1.0;
   const double g = noise.gyro_rad_s * noise.gyro_rad_s;
   msg.angular_velocity_covariance = {g, 0, 0, 0, g, 0, 0, 0, g};
   const double a = noise.accel_m_s2 * noise.accel_m_s2;

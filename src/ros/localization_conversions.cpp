@@ -109,6 +109,10 @@ estimation::ImuEvent imuEvent(const sensor_msgs::Imu& message) {
   event.sample.angular_velocity = toEigen(message.angular_velocity);
   event.sample.specific_force = toEigen(message.linear_acceleration);
   event.orientation = imuOrientation(message);
+  if (event.orientation) {
+    event.orientation_covariance = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+        message.orientation_covariance.data());
+  }
   return event;
 }
 
@@ -249,6 +253,10 @@ FilterStatus filterStatus(const estimation::LocalizationSession& session) {
   status.imu_samples = static_cast<uint32_t>(statistics.filter.imu_used);
   status.imu_samples_dropped =
       static_cast<uint32_t>(statistics.filter.imu_dropped + statistics.imu_invalid);
+  status.heading_alignments = static_cast<uint32_t>(statistics.filter.heading_alignments);
+  status.heading_recoveries = static_cast<uint32_t>(statistics.filter.heading_recoveries +
+                                                    statistics.filter.heading_reopens);
+  status.resets = static_cast<uint32_t>(statistics.resets);
   return status;
 }
 

@@ -38,7 +38,7 @@ constexpr char kUsage[] =
     "                     [--gps-every N] [--filter left|right|ekf] [--config FILE]\n"
     "                     [--init-yaw-sigma-deg DEG] [--init-yaw-error-deg DEG]\n"
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
-    "                     [--seed S] [--smooth] [--loop-closure [--scans DIR]\n"
+    "                     [--seed S] [--imu-gps-only] [--smooth] [--loop-closure [--scans DIR]\n"
     "                     [--loop-config FILE] [--output-loops LOOPS.csv]]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
     "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major "
@@ -53,6 +53,10 @@ constexpr char kUsage[] =
     "  --config          YAML as config/inekf.yaml (default: built-in defaults)\n"
     "  --filter          overrides the config's filter\n"
     "  --gps-*, --seed   degrade the OXTS fix before the filter sees it (default: unchanged)\n"
+    "  --imu-gps-only    drop the OXTS solution's attitude and velocity columns: the filter\n"
+    "                    starts levelled from gravity with an unknown yaw (as for a frame whose\n"
+    "                    attitude and velocity columns are all zero) and the heading monitor\n"
+    "                    aligns it from the GPS track\n"
     "  --smooth          after the causal run, a Rauch-Tung-Striebel pass on the left-invariant\n"
     "                    error (filter left): every --output-* holds the smoothed estimate\n"
     "  --loop-closure    after --smooth: lidar loop closures (revisits by the smoothed estimate\n"
@@ -116,7 +120,7 @@ int main(int argc, char** argv) {
                                        "--output-states", "--filter", "--config",
                                        "--init-yaw-sigma-deg", "--init-yaw-error-deg", "--scans",
                                        "--loop-config", "--output-loops"}),
-        {"--smooth", "--loop-closure"}, ism::tools::kGpsRepeatableFlags);
+        {"--smooth", "--loop-closure", "--imu-gps-only"}, ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
@@ -157,6 +161,7 @@ int main(int argc, char** argv) {
           cli.getDouble("--init-yaw-error-deg", options.init_yaw_error_deg);
       ism::tools::readGpsDegradationFlags(cli, &options.gps);
       options.smooth = cli.has("--smooth");
+      options.imu_gps_only = cli.has("--imu-gps-only");
       if (options.smooth &&
           options.config.localizer.filter_type != estimation::FilterType::kLeftInvariant) {
         throw UsageError("--smooth needs the left-invariant filter (--filter left)");
@@ -326,6 +331,21 @@ int main(int argc, char** argv) {
             options.config.localizer.nonholonomic_vehicle_pitch_deg,
             options.config.localizer.nonholonomic_vehicle_yaw_deg);
       }
+    }
+    for (const std::string& note : run.heading_notes) {
+      std::printf("inekf_offline: %s\n", note.c_str());
+    }
+    {
+      const auto& f = run.statistics.filter;
+      std::printf(
+          "inekf_offline: heading monitor: %lld aligned from the GPS track, %lld recovered, %lld "
+          "re-opened; land-vehicle constraint %lld used / %lld skipped (heading unknown) / %lld "
+          "suspended (fix rejected)\n",
+          static_cast<long long>(f.heading_alignments),
+          static_cast<long long>(f.heading_recoveries), static_cast<long long>(f.heading_reopens),
+          static_cast<long long>(f.nonholonomic_used),
+          static_cast<long long>(f.nonholonomic_skipped),
+          static_cast<long long>(f.nonholonomic_suspended));
     }
     if (run.smoother_breaks > 0) {
       std::printf("inekf_offline: the smoother restarted at %d IMU steps it could not reproduce\n",

@@ -10,6 +10,9 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <optional>
+#include <random>
+#include <string>
 #include <vector>
 
 #include "inekf_semantic_mapping/estimation/localization_session.h"
@@ -68,7 +71,7 @@ TEST(LocalizationSession, AFixBeforeItsImuWaitsForTheOrientationAndVelocity) {
   EXPECT_NEAR(session.state().stamp_s, 10.0, 1e-12);
   EXPECT_NE(update.note.find("orientation from the IMU"), std::string::npos) << update.note;
   // The start is an estimate to publish, at the fix's stamp, although the velocity completed it
-  // (issue 13: a scan between the fix and the next sample had no pose).
+  // (otherwise a scan between the fix and the next sample would have no pose).
   ASSERT_TRUE(update.start_estimate.has_value());
   EXPECT_FALSE(update.new_estimate);
   EXPECT_NEAR(update.start_estimate->state.stamp_s, 10.0, 1e-12);
@@ -488,6 +491,175 @@ TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
   EXPECT_LT(worst_m, 1e-6);
   std::printf("[ MEASURED ] node stream vs offline run: %d poses, largest difference %.3g m\n",
               compared, worst_m);
+}
+
+// The start's yaw sigma about the map z axis (deg).
+double startYawSigmaDeg(const LocalizationSession& session) {
+  const Eigen::Matrix3d& r = session.state().rotation;
+  const Eigen::Matrix3d world =
+      r * session.poseCovariance().bottomRightCorner<3, 3>() * r.transpose();
+  return std::sqrt(world(2, 2)) * 180.0 / M_PI;
+}
+
+// An orientation is used only with the covariance its message states; where it states zeros
+// (sensor_msgs: unknown) the configured sigma; no orientation: levelled, yaw unknown.
+TEST(LocalizationSession, TheStartTakesTheOrientationsStatedCovarianceOrTheConfiguredSigma) {
+  const double yaw_sigma_rad = 5.0 * M_PI / 180.0;
+  struct Case {
+    std::optional<Eigen::Matrix3d> covariance;
+    bool with_orientation;
+    double expected_yaw_sigma_deg;
+  };
+  const Case cases[] = {
+      {Eigen::Vector3d(1e-4, 1e-4, yaw_sigma_rad * yaw_sigma_rad).asDiagonal().toDenseMatrix(),
+       true, 5.0},
+      {Eigen::Matrix3d::Zero(), true, 1.0},  // stated as unknown: initial_sigma.yaw_deg
+      {std::nullopt, true, 1.0},
+      {std::nullopt, false, 180.0},  // no orientation: initial_sigma.unknown_yaw_deg
+  };
+  for (const Case& c : cases) {
+    LocalizationSession session(originConfig());
+    session.setGpsVelocityExpected(false);
+    ImuEvent imu = restingImu(10.0, c.with_orientation);
+    imu.orientation_covariance = c.covariance;
+    session.addImu(imu);
+    session.addFix(fixAt(10.0));
+    session.addImu(restingImu(10.3, c.with_orientation));
+    ASSERT_TRUE(session.started());
+    // Up to the 0.3 s of gyro noise propagated since the start.
+    EXPECT_NEAR(startYawSigmaDeg(session), c.expected_yaw_sigma_deg,
+                1e-3 * c.expected_yaw_sigma_deg);
+    if (c.with_orientation) {
+      const Eigen::Matrix3d error = session.state().rotation.transpose() * kHeading;
+      EXPECT_LT(Eigen::AngleAxisd(error).angle(), 1e-9);
+    }
+  }
+}
+
+// A car on a gentle curve at 10 m/s, flat, exact IMU (sample k holds over (t_{k-1}, t_k]), and
+// 1 Hz fixes with 1.5 m noise: what the heading monitor sees on a road.
+struct CurveDrive {
+  double t0 = 100.0, speed = 10.0, yaw0 = 2.3, yaw_rate = 0.02;
+  double yaw(double t) const { return yaw0 + yaw_rate * (t - t0); }
+  Eigen::Vector3d position(double t) const {
+    const double r = speed / yaw_rate;
+    return Eigen::Vector3d(r * (std::sin(yaw(t)) - std::sin(yaw0)),
+                           -r * (std::cos(yaw(t)) - std::cos(yaw0)), 0.0);
+  }
+  Eigen::Matrix3d rotation(double t) const {
+    return Eigen::AngleAxisd(yaw(t), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  }
+  Eigen::Vector3d velocity(double t) const {
+    return speed * Eigen::Vector3d(std::cos(yaw(t)), std::sin(yaw(t)), 0.0);
+  }
+};
+
+double wrapDeg(double deg) { return std::remainder(deg, 360.0); }
+
+struct CurveRun {
+  std::vector<std::string> heading_notes;
+  double worst_yaw_error_after_deg = 0.0;  // after `settle_s`
+  LocalizationSession::Statistics statistics;
+  bool finite = true;
+};
+
+// Runs `seconds` of the drive; with_orientation: the IMU reports the truth's yaw plus
+// yaw_error_deg with a stated (1 deg)^2 yaw covariance (and the GPS velocity is given).
+CurveRun runCurve(double seconds, bool with_orientation, double yaw_error_deg, double settle_s,
+                  int outlier_at_s = -1) {
+  const CurveDrive drive;
+  const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
+  LocalizationSession session(originConfig());
+  session.setGpsVelocityExpected(with_orientation);
+  std::mt19937 random(7);
+  std::normal_distribution<double> noise(0.0, 1.5);
+  CurveRun run;
+  const int steps = static_cast<int>(seconds * 10.0);
+  for (int k = 0; k <= steps; ++k) {
+    const double t = drive.t0 + 0.1 * k;
+    ImuEvent imu;
+    imu.sample.stamp_s = t;
+    imu.sample.angular_velocity = Eigen::Vector3d(0.0, 0.0, drive.yaw_rate);
+    imu.sample.specific_force = Eigen::Vector3d(0.0, drive.yaw_rate * drive.speed, 9.81);
+    if (with_orientation) {
+      imu.orientation =
+          Eigen::AngleAxisd(drive.yaw(t) + yaw_error_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ())
+              .toRotationMatrix();
+      const double s = M_PI / 180.0;
+      imu.orientation_covariance = Eigen::Vector3d(0.25 * s * s, 0.25 * s * s, s * s).asDiagonal();
+    }
+    std::vector<LocalizationSession::Update> updates{session.addImu(imu)};
+    if (with_orientation) {
+      GpsVelocityEvent velocity;
+      velocity.stamp_s = t;
+      velocity.velocity = drive.velocity(t);
+      updates.push_back(session.addGpsVelocity(velocity));
+    }
+    if (k % 10 == 0) {
+      Eigen::Vector3d p = drive.position(t) + Eigen::Vector3d(noise(random), noise(random), 0.0);
+      if (k / 10 == outlier_at_s) p += Eigen::Vector3d(100.0, 0.0, 0.0);  // a receiver jump
+      GeodeticFixEvent fix;
+      fix.stamp_s = t;
+      projection.toGeodetic(p, &fix.lat_deg, &fix.lon_deg, &fix.alt_m);
+      fix.covariance_enu = Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal();
+      updates.push_back(session.addFix(fix));
+    }
+    for (const auto& update : updates) {
+      if (update.heading_event) run.heading_notes.push_back(update.note);
+    }
+    if (!session.started()) continue;
+    run.finite = run.finite && session.state().rotation.allFinite() &&
+                 session.state().position_map.allFinite() && session.poseCovariance().allFinite();
+    const Eigen::Matrix3d& r = session.state().rotation;
+    const double yaw_error = wrapDeg((std::atan2(r(1, 0), r(0, 0)) - drive.yaw(t)) * 180.0 / M_PI);
+    if (t - drive.t0 >= settle_s) {
+      run.worst_yaw_error_after_deg = std::max(run.worst_yaw_error_after_deg, std::abs(yaw_error));
+    }
+  }
+  run.statistics = session.statistics();
+  return run;
+}
+
+TEST(LocalizationSession, WithoutAnOrientationTheHeadingIsAlignedFromTheGpsTrack) {
+  const CurveRun run = runCurve(60.0, false, 0.0, 30.0);
+  EXPECT_TRUE(run.finite);
+  EXPECT_EQ(run.statistics.filter.heading_alignments, 1);
+  EXPECT_EQ(run.statistics.filter.heading_recoveries, 0);
+  EXPECT_EQ(run.statistics.filter.heading_reopens, 0);
+  ASSERT_EQ(run.heading_notes.size(), 1u);  // logged once, with its reason
+  EXPECT_NE(run.heading_notes[0].find("aligned to the GPS track"), std::string::npos)
+      << run.heading_notes[0];
+  EXPECT_LT(run.worst_yaw_error_after_deg, 2.0);
+  EXPECT_EQ(run.statistics.filter.gps_rejected, 0);
+}
+
+// A reference heading 60 / 120 / 180 deg off claiming 1 deg: the fixes disagree, the monitor
+// notices (logged and counted) and the heading is right again well within a minute.
+TEST(LocalizationSession, AWrongReferenceHeadingIsNoticedAndRecovered) {
+  for (double error_deg : {60.0, 120.0, 180.0}) {
+    const CurveRun run = runCurve(90.0, true, error_deg, 40.0);
+    EXPECT_TRUE(run.finite) << error_deg;
+    const auto& f = run.statistics.filter;
+    EXPECT_GE(f.heading_recoveries + f.heading_reopens, 1) << error_deg;
+    EXPECT_EQ(static_cast<std::int64_t>(run.heading_notes.size()) > 0, true) << error_deg;
+    EXPECT_LT(run.worst_yaw_error_after_deg, 2.0) << error_deg;
+    std::printf(
+        "[ HEADING  ] reference %.0f deg off: %lld recoveries, %lld re-opens, worst yaw "
+        "error after 40 s %.2f deg; first note: %s\n",
+        error_deg, static_cast<long long>(f.heading_recoveries),
+        static_cast<long long>(f.heading_reopens), run.worst_yaw_error_after_deg,
+        run.heading_notes.empty() ? "" : run.heading_notes[0].c_str());
+  }
+}
+
+// A real outlier is still rejected and touches neither the heading nor the monitor.
+TEST(LocalizationSession, AHundredMetreJumpIsRejectedAndTheHeadingKept) {
+  const CurveRun run = runCurve(60.0, true, 0.0, 0.0, 30);
+  EXPECT_EQ(run.statistics.filter.gps_rejected, 1);
+  EXPECT_EQ(run.statistics.filter.heading_recoveries, 0);
+  EXPECT_EQ(run.statistics.filter.heading_reopens, 0);
+  EXPECT_TRUE(run.heading_notes.empty());
+  EXPECT_LT(run.worst_yaw_error_after_deg, 1.0);
 }
 
 }  // namespace

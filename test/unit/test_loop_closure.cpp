@@ -1,4 +1,4 @@
-// Loop closure on top of the smoothed InEKF (issue 15 item 2), end to end on a synthetic drive
+// Loop closure on top of the smoothed InEKF, end to end on a synthetic drive
 // the test writes: three times around the town block with lidar (32 beams), GPS under the
 // protocol (1.5 m / 3 m at 1 Hz) and a 30 s outage that covers a revisit of places seen with
 // GPS. Loop closure (GICP of the scans, loop factors on the smoothed run's posterior over

@@ -27,6 +27,9 @@ class LazyStart {
   struct Start {
     PositionFix fix;
     std::optional<Eigen::Matrix3d> orientation;  // body -> map
+    // The orientation's stated covariance (rad^2, small angles about the map axes, as
+    // sensor_msgs/Imu); nullopt or all zeros: not stated (the Localizer's configured sigmas).
+    std::optional<Eigen::Matrix3d> orientation_covariance;
     std::optional<Eigen::Vector3d> velocity_map;
   };
 
@@ -34,8 +37,10 @@ class LazyStart {
 
   // The newest fix replaces one still waiting.
   void offerFix(const PositionFix& fix) { pending_fix_ = fix; }
-  // The orientation (body -> map) of the latest IMU message.
-  void offerOrientation(const Eigen::Matrix3d& body_to_map);
+  // The orientation (body -> map) of the latest IMU message that has one, with its stated
+  // covariance (nullopt: none stated).
+  void offerOrientation(const Eigen::Matrix3d& body_to_map,
+                        const std::optional<Eigen::Matrix3d>& covariance = std::nullopt);
   // A GPS velocity, in the map frame or, with in_body_frame, in the body frame (rotated by the
   // orientation the start is made with).
   void offerVelocity(double stamp_s, const Eigen::Vector3d& velocity, bool in_body_frame);
@@ -56,6 +61,7 @@ class LazyStart {
   Config config_;
   std::optional<PositionFix> pending_fix_;
   std::optional<Eigen::Matrix3d> orientation_;
+  std::optional<Eigen::Matrix3d> orientation_covariance_;
   std::optional<double> velocity_stamp_s_;
   Eigen::Vector3d velocity_ = Eigen::Vector3d::Zero();
   bool velocity_in_body_frame_ = false;

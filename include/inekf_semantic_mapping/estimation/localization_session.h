@@ -1,9 +1,16 @@
 // LocalizationSession: the whole streaming localization behind inekf_node and inekf_offline (one
 // pipeline, two faces). It takes timestamped events (IMU samples, geodetic fixes, GPS velocities,
 // the clock) in arrival order and owns every policy between them and the Localizer:
-//  - the start: at the newest usable fix, with the orientation of the latest IMU sample and the
-//    GPS velocity of the fix's instant, once they have arrived or a message start.max_wait_s
-//    newer shows that they are not coming (LazyStart);
+//  - the start: at the newest usable fix, with the orientation of the latest IMU sample that has
+//    one (and only with the covariance it states; the configured initial sigmas where it states
+//    zeros) and the GPS velocity of the fix's instant, once they have arrived or a message
+//    start.max_wait_s newer shows that they are not coming (LazyStart). Without an orientation
+//    the filter levels roll and pitch from gravity and starts with an unknown yaw (sigma
+//    initial_sigma.unknown_yaw_deg), which the Localizer's heading monitor aligns from the GPS
+//    track once the car has moved; without a GPS velocity it starts at zero speed with the
+//    unknown_velocity sigmas;
+//  - heading alignments, recoveries and re-opens (the Localizer's heading monitor) are noted
+//    once each in the Update and counted in the statistics;
 //  - the map origin: the configured one, else Mercator (KITTI devkit) at the first usable fix;
 //  - fix covariance: the receiver's, or the default sigmas when it gives none; the only floor is
 //    the Localizer's gps.min_sigma_m;
@@ -61,10 +68,14 @@ struct LocalizationSessionConfig {
   static LocalizationSessionConfig fromYamlFile(const std::string& path);
 };
 
-// An IMU sample; orientation (body -> map), when the sensor reports one, is used for the start.
+// An IMU sample; orientation (body -> map), when the sensor reports one, is used for the start,
+// with orientation_covariance (rad^2 about the map axes, sensor_msgs/Imu's; nullopt or zeros:
+// not stated, the configured initial sigmas). No orientation: the start levels from gravity with
+// an unknown yaw.
 struct ImuEvent {
   ImuSample sample;
   std::optional<Eigen::Matrix3d> orientation;
+  std::optional<Eigen::Matrix3d> orientation_covariance;
 };
 
 struct GeodeticFixEvent {
@@ -112,6 +123,8 @@ class LocalizationSession {
     bool reset = false;                              // the session started over during this event
     std::optional<Localizer::ImuStatus> imu_status;  // IMU events that reached the filter
     std::optional<CorrectionResult> correction;      // fixes (and starts) that reached it
+    // The heading monitor aligned, recovered or re-opened the heading (the note says why).
+    bool heading_event = false;
     // For the log, "" when all went as expected: why it reset, how it started, or why a sample
     // or a fix was not used (dropped, gap bridged, rejected).
     std::string note;

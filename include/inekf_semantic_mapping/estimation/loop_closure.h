@@ -1,4 +1,4 @@
-// Loop closure on top of the smoothed InEKF run (issue 15 item 2): revisits found by the
+// Loop closure on top of the smoothed InEKF run: revisits found by the
 // smoothed estimate and its uncertainty, confirmed by registering the two lidar scans, and
 // loop factors between keyframes whose posterior is carried back onto every frame. ROS-free and
 // PCL-free: the scan registration is a function given by the caller

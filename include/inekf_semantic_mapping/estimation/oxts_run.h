@@ -6,12 +6,16 @@
 // orientation roll/pitch/yaw, plus an optional injected yaw error), the GPS velocity (ve, vn,
 // vu, map frame) and the (degraded) lat/lon/alt fix. The session starts the filter at the first
 // fix with that frame's orientation and velocity, as the node does; after the start only the
-// IMU samples and the fixes are used. The map origin is frame 0's OXTS position (the truth's).
-// Frames with posmode < 0 (KITTI filled them by interpolation) are fed as `interpolated`
-// samples, so their IMU noise is inflated.
+// IMU samples and the fixes are used. A frame that carries no attitude (kitti::carriesAttitude:
+// its attitude and velocity columns all exactly zero, or imu_gps_only) gives an IMU sample
+// without an orientation and no GPS velocity: the filter starts levelled from gravity with an
+// unknown yaw, as inekf_node does for an Imu message without orientation. The map origin is frame
+// 0's OXTS position (the truth's). Frames with posmode < 0 (KITTI filled them by interpolation) are
+// fed as `interpolated` samples, so their IMU noise is inflated.
 #pragma once
 
 #include <Eigen/Geometry>
+#include <string>
 #include <vector>
 
 #include "inekf_semantic_mapping/estimation/error_dynamics.h"
@@ -26,6 +30,9 @@ struct OxtsRunOptions {
   LocalizationSessionConfig config;  // its origin is replaced by frame 0's
   kitti::GpsDegradationOptions gps;
   double init_yaw_error_deg = 0.0;  // added to frame 0's yaw (tests convergence)
+  // The OXTS solution's attitude and velocity columns are dropped (zeroed) before the session
+  // sees them: only the IMU and the GPS position are left (inekf_offline --imu-gps-only).
+  bool imu_gps_only = false;
   // After the causal run, a Rauch-Tung-Striebel pass over it (estimation/smoother.h): states and
   // pose covariances become the smoothed ones. Needs the left-invariant filter.
   bool smooth = false;
@@ -54,6 +61,9 @@ struct OxtsRunResult {
     PositionFix fix;
   };
   std::vector<Fix> fixes;
+  // The session's notes of its heading alignments, recoveries and re-opens and of its resets,
+  // once each, in order (inekf_offline prints them; inekf_node logs them).
+  std::vector<std::string> heading_notes;
 };
 
 // The evaluation protocol's GPS (scripts/run_inekf_protocol.sh): the OXTS fix plus N(0, 1.5 m)

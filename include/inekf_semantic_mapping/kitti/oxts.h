@@ -30,6 +30,22 @@ struct OxtsFrame {
 
 constexpr int kOxtsFieldCount = 30;
 
+// Whether the frame carries an INS solution's attitude and velocity: a frame whose roll, pitch,
+// yaw and velocity columns (vn ve vf vl vu) are all exactly zero has none (an IMU without an
+// INS behind it, or a file with those columns blanked). A real solution is never exactly zero in
+// all eight: even a car at rest on a level road has some roll and pitch.
+inline bool carriesAttitude(const OxtsRecord& r) {
+  return !(r.roll == 0.0 && r.pitch == 0.0 && r.yaw == 0.0 && r.vn == 0.0 && r.ve == 0.0 &&
+           r.vf == 0.0 && r.vl == 0.0 && r.vu == 0.0);
+}
+
+// The frame as an IMU without an INS gives it: attitude and velocity columns zero.
+inline OxtsRecord withoutAttitude(OxtsRecord r) {
+  r.roll = r.pitch = r.yaw = 0.0;
+  r.vn = r.ve = r.vf = r.vl = r.vu = 0.0;
+  return r;
+}
+
 // Parses one line of 30 whitespace-separated numbers. The integer flags are accepted as
 // "4" or "4.00000000000000" (2011_10_03 files) but not as "4.5". Throws KittiFormatError
 // naming file_for_errors:line_number and the field on a short line, an extra value or a
