@@ -3,7 +3,11 @@
 // softmax confidence, crop, back to the image size. Models: the Cityscapes ENet from ../shared
 // (skipped when absent) with its built-in card (colour standardization, two undistorted tiles)
 // and, for comparison, with the former card (one pass on the image stretched to 1024x512); the
-// committed default U-Net. filterLabels: the confidence / boundary filter at its defaults.
+// committed default U-Net; the network adapted to the KITTI camera (scripts/adapt_segmentation.sh:
+// $ISM_ADAPTED_MODEL, else output/models/kitti/kitti_adapted.onnx, else
+// ../shared/models/kitti-adapted/kitti_adapted.onnx; skipped when there is none) with its card.
+// Compare BM_KittiAdaptedKittiFrame with BM_EnetCityscapesKittiFrame: the ratio of their times.
+// filterLabels: the confidence / boundary filter at its defaults.
 // Threads: 2 (the machine).
 //
 //   bench_segmentation [--benchmark_min_time=5]
@@ -96,6 +100,25 @@ void BM_UnetSyntheticKittiFrame(benchmark::State& state) {
   runSegmenter(state, model, perception::defaultModelCardFor(model));
 }
 
+// The adapted network: the first of the places scripts/adapt_segmentation.sh's output is kept.
+std::string adaptedModelPath() {
+  const char* from_env = std::getenv("ISM_ADAPTED_MODEL");
+  if (from_env && *from_env) return from_env;
+  const std::string in_repo =
+      std::string(ISM_REPO_ROOT) + "/output/models/kitti/kitti_adapted.onnx";
+  if (std::filesystem::exists(in_repo)) return in_repo;
+  return sharedDir() + "/models/kitti-adapted/kitti_adapted.onnx";
+}
+
+void BM_KittiAdaptedKittiFrame(benchmark::State& state) {
+  const std::string model = adaptedModelPath();
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError(("no adapted model (scripts/adapt_segmentation.sh): " + model).c_str());
+    return;
+  }
+  runSegmenter(state, model, perception::defaultModelCardFor(model));
+}
+
 void BM_FilterLabelsKittiFrame(benchmark::State& state) {
   perception::Segmentation segmentation;
   segmentation.label_ids.create(375, 1242, CV_8UC1);
@@ -130,6 +153,7 @@ BENCHMARK(BM_EnetCityscapesKittiFrameStretched)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_UnetSyntheticKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_KittiAdaptedKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_FilterLabelsKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OverlayKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -27,6 +27,17 @@ inline std::string repoPath(const std::string& relative) {
   return std::string(ISM_REPO_ROOT) + "/" + relative;
 }
 
+// The network adapted to the KITTI camera (scripts/adapt_segmentation.sh) where one is kept:
+// $ISM_ADAPTED_MODEL, output/models/kitti/ in the repository, ../shared/models/kitti-adapted/.
+// The last candidate when there is none (the caller skips on a missing file).
+inline std::string adaptedModelPath() {
+  const char* from_env = std::getenv("ISM_ADAPTED_MODEL");
+  if (from_env && *from_env) return from_env;
+  const std::string in_repo = repoPath("output/models/kitti/kitti_adapted.onnx");
+  if (std::filesystem::exists(in_repo)) return in_repo;
+  return sharedPath("models/kitti-adapted/kitti_adapted.onnx");
+}
+
 // A fresh temporary directory for one test; removed by the caller if it wants to.
 inline std::string makeTempDir(const std::string& tag) {
   namespace fs = std::filesystem;
