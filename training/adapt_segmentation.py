@@ -60,6 +60,9 @@ def parse_args(argv=None):
     p.add_argument("--lr", type=float, default=2e-4)
     p.add_argument("--weight-decay", type=float, default=1e-4)
     p.add_argument("--distill-weight", type=float, default=0.5)
+    p.add_argument("--distill-zone", default="outside-lidar", choices=["outside-lidar", "unlabelled"],
+                   help="where the base network teaches in the sparse images: above the lidar's "
+                        "top beam only, or at every pixel without a human label")
     p.add_argument("--teacher-confidence", type=float, default=0.7,
                    help="the base network's labels below this softmax confidence teach nothing")
     p.add_argument("--class-weight-power", type=float, default=0.25,
@@ -109,7 +112,7 @@ def lidar_zone_mask(target, margin_px=6, column_window=41):
     return np.arange(h)[:, None] >= top[None, :]
 
 
-def teacher_targets(samples, model, torch, confidence, batch=2):
+def teacher_targets(samples, model, torch, confidence, outside_lidar_only, batch=2):
     """The base network's confident labels, where they may teach (outside the human labels)."""
     model.eval()
     with torch.no_grad():
@@ -121,7 +124,7 @@ def teacher_targets(samples, model, torch, confidence, batch=2):
             for s, c, a in zip(chunk, conf.numpy(), arg.numpy().astype(np.uint8)):
                 t = np.where((c >= confidence) & (a != labels.BACKGROUND_CHANNEL), a, labels.IGNORE)
                 t = t.astype(np.uint8)
-                if s.kind == "sparse":
+                if s.kind == "sparse" and outside_lidar_only:
                     t[lidar_zone_mask(s.target)] = labels.IGNORE
                 t[s.target != labels.IGNORE] = labels.IGNORE
                 s.teacher = t
@@ -189,6 +192,36 @@ def validate(model, torch, val):
         "sparse_point_accuracy": scores["sparse"].accuracy(),
         "miou": scores["all"].miou(),
     }
+
+
+def cityscapes_sample_accuracy(model, torch, shared, gamma, standardize):
+    """Pixel accuracy on the shared Cityscapes frame at the networks' Cityscapes scale (1024x512):
+    whether the adapted network still knows the city it came from. None without the sample."""
+    import cv2
+
+    root = os.path.join(shared, "data", "cityscapes")
+    images = sorted(glob_files(root, "_leftImg8bit.png"))
+    truths = sorted(glob_files(root, "_gtFine_labelTrainIds.png"))
+    if not images or len(images) != len(truths):
+        return None
+    scorer = Scorer()
+    for image_path, truth_path in zip(images, truths):
+        image = cv2.imread(image_path, cv2.IMREAD_COLOR)
+        truth = cv2.imread(truth_path, cv2.IMREAD_GRAYSCALE)
+        prepared = cv2.resize(preprocess.card_colors(image, gamma, standardize), (1024, 512),
+                              interpolation=cv2.INTER_LINEAR)
+        predicted = predict(model, torch, [prepared])[0]
+        predicted = cv2.resize(predicted, (truth.shape[1], truth.shape[0]),
+                               interpolation=cv2.INTER_NEAREST)
+        scorer.add(truth, predicted)
+    return scorer.accuracy()
+
+
+def glob_files(root, suffix):
+    out = []
+    for folder, _, files in os.walk(root):
+        out += [os.path.join(folder, f) for f in files if f.endswith(suffix)]
+    return out
 
 
 def write_card(path, base, width, height, gamma, standardize, summary):
@@ -302,7 +335,8 @@ def main(argv=None):
     # starting point, measured by the same tools as the adapted one).
     train_at_all = args.max_steps > 0 or args.minutes > 0
     if train_at_all:
-        teacher_targets(train, model, torch, args.teacher_confidence)
+        teacher_targets(train, model, torch, args.teacher_confidence,
+                        args.distill_zone == "outside-lidar")
         log(f"base network's labels for distillation in {time.time() - teacher_t0:.0f} s")
     before = validate(model, torch, val)
     log("before fine-tuning: " + ", ".join(f"{k} {v:.4f}" for k, v in before.items()))
@@ -374,10 +408,9 @@ def main(argv=None):
                     f"{args.max_steps - step} steps left")
             log(f"step {step}: loss {running[0]:.3f} (labels {running[1]:.3f}, distillation "
                 f"{running[2]:.3f}), lr {lr:.2e}, {elapsed / step:.2f} s/step, {left}")
-        now = time.time()
-        if now - last_val >= args.val_interval * 60:
-            last_val = now
+        if time.time() - last_val >= args.val_interval * 60:
             scores = dict(step=step, **validate(model, torch, val))
+            last_val = time.time()  # the interval is of training time, not of validations
             history["val"].append(scores)
             log(f"validation at step {step}: " + ", ".join(
                 f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
@@ -407,7 +440,11 @@ def main(argv=None):
     log(f"ONNX through OpenCV dnn against PyTorch on {len(val)} validation images: argmax "
         f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
+    cityscapes = cityscapes_sample_accuracy(model, torch, shared, args.gamma, standardize)
+    if cityscapes is not None:
+        log(f"the shared Cityscapes frame at 1024x512: pixel accuracy {cityscapes:.4f}")
     summary = {
+        "cityscapes_sample_pixel_accuracy": cityscapes,
         "base": base.name,
         "input": [width, height],
         "seed": args.seed,
