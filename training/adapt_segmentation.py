@@ -224,6 +224,19 @@ def glob_files(root, suffix):
     return out
 
 
+def validate_and_keep(model, torch, val, step, history, best, best_path):
+    """Scores the model on the validation images, logs it, and saves its weights when they beat
+    the best so far; returns the best scores."""
+    scores = dict(step=step, **validate(model, torch, val))
+    history["val"].append(scores)
+    log(f"validation at step {step}: " + ", ".join(
+        f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
+    if scores["miou"] > best["miou"]:
+        torch.save(model.state_dict(), best_path)
+        return scores
+    return best
+
+
 def write_card(path, base, width, height, gamma, standardize, summary):
     lines = [
         f"# Model card for {os.path.basename(path)[:-5]}.onnx, written by",
@@ -409,24 +422,12 @@ def main(argv=None):
             log(f"step {step}: loss {running[0]:.3f} (labels {running[1]:.3f}, distillation "
                 f"{running[2]:.3f}), lr {lr:.2e}, {elapsed / step:.2f} s/step, {left}")
         if time.time() - last_val >= args.val_interval * 60:
-            scores = dict(step=step, **validate(model, torch, val))
+            best = validate_and_keep(model, torch, val, step, history, best, best_path)
             last_val = time.time()  # the interval is of training time, not of validations
-            history["val"].append(scores)
-            log(f"validation at step {step}: " + ", ".join(
-                f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
-            if scores["miou"] > best["miou"]:
-                best = scores
-                torch.save(model.state_dict(), best_path)
             plot_history(history, os.path.join(args.output, "training.png"))
 
     if history["val"][-1]["step"] != step:
-        scores = dict(step=step, **validate(model, torch, val))
-        history["val"].append(scores)
-        log(f"validation at step {step}: " + ", ".join(
-            f"{k} {v:.4f}" for k, v in scores.items() if k != "step"))
-        if scores["miou"] > best["miou"]:
-            best = scores
-            torch.save(model.state_dict(), best_path)
+        best = validate_and_keep(model, torch, val, step, history, best, best_path)
     model.load_state_dict(torch.load(best_path, map_location="cpu"))
     model.to("cpu").eval()
     log(f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})")
