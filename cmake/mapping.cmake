@@ -8,6 +8,7 @@ ism_add_core_library(${PROJECT_NAME}_mapping
     src/mapping/hashed_voxel_grid.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
+    src/mapping/map_label_images.cpp
     src/mapping/semantic_mapping_session.cpp
     src/mapping/grid_projection.cpp
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
@@ -26,6 +27,9 @@ ism_add_gtest(test_grid_projection
   LINK ${PROJECT_NAME}_mapping)
 ism_add_gtest(test_semantic_mapping_session
   SOURCES test/unit/test_semantic_mapping_session.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_map_label_images
+  SOURCES test/unit/test_map_label_images.cpp
   LINK ${PROJECT_NAME}_mapping)
 
 ism_add_tool(project_cloud

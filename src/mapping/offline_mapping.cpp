@@ -148,8 +148,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   }
 }
 
-void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
-                 const CameraLabelSource* camera_labels, std::ostream* progress) {
+void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit) {
   const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
   if (!raw.hasVelodyne()) throw std::runtime_error(drive.drive_dir + ": no velodyne_points/");
   if (!raw.hasCalibration()) {
@@ -170,11 +169,11 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
   }
   std::size_t frames = raw.velodyne().size();
   if (drive.max_scans >= 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  const std::string poses_source =
+      drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path;
   if (frames > T_map_imu.size()) {
-    throw std::runtime_error(
-        (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) + ": " +
-        std::to_string(T_map_imu.size()) + " poses for " + std::to_string(frames) +
-        " velodyne frames");
+    throw std::runtime_error(poses_source + ": " + std::to_string(T_map_imu.size()) +
+                             " poses for " + std::to_string(frames) + " velodyne frames");
   }
   const kitti::CameraProjection projection = calibration.projection(drive.camera_index);
   for (std::size_t frame = 0; frame < frames; ++frame) {
@@ -185,35 +184,41 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
     }
     const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
         velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
-    const Eigen::Isometry3d T_map_velo = T_map_imu[frame] * T_imu_velo;
-    char stem[16];
+    char stem[24];
     std::snprintf(stem, sizeof(stem), "%010zu", frame);
-    OwnedLabelImage image;
-    std::string evidence = "no labels";
+    RawDriveScan scan{stem,      frame, frames, buffer.topRows<3>(), T_map_imu[frame] * T_imu_velo,
+                      projection};
     try {
-      if (camera_labels && (*camera_labels)(stem, &image)) {
-        const LabelImageView view{image.pixels.data(), image.width, image.height,
-                                  static_cast<std::size_t>(image.width)};
-        const CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
-                                 image.width, image.height};
-        session->insertScan(buffer.topRows<3>(), T_map_velo, &view, &camera);
-        evidence = "camera labels";
-      } else {
-        session->insertScan(buffer.topRows<3>(), T_map_velo);
-      }
+      visit(scan);
     } catch (const std::out_of_range& e) {
       // A scan far outside the map: its pose is wrong.
-      throw std::runtime_error(
-          (drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path) +
-          ": pose of frame " + stem + ": " + e.what());
-    }
-    if (drive.on_scan_inserted) drive.on_scan_inserted(T_map_velo);
-    if (progress) {
-      *progress << "[semantic_map_offline] scan " << (frame + 1) << "/" << frames << " ("
-                << velodyne.size() << " points, " << evidence << "), map " << session->mapSizeText()
-                << "\n";
+      throw std::runtime_error(poses_source + ": pose of frame " + stem + ": " + e.what());
     }
   }
+}
+
+void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
+                 const CameraLabelSource* camera_labels, std::ostream* progress) {
+  forEachRawDriveScan(drive, [&](const RawDriveScan& scan) {
+    OwnedLabelImage image;
+    std::string evidence = "no labels";
+    if (camera_labels && (*camera_labels)(scan.stem, &image)) {
+      const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                static_cast<std::size_t>(image.width)};
+      const CameraModel camera{scan.camera.P_rect, scan.camera.R_rect, scan.camera.T_cam0_velo,
+                               image.width, image.height};
+      session->insertScan(scan.points, scan.T_map_velo, &view, &camera);
+      evidence = "camera labels";
+    } else {
+      session->insertScan(scan.points, scan.T_map_velo);
+    }
+    if (drive.on_scan_inserted) drive.on_scan_inserted(scan.T_map_velo);
+    if (progress) {
+      *progress << "[semantic_map_offline] scan " << (scan.index + 1) << "/" << scan.count << " ("
+                << scan.points.cols() << " points, " << evidence << "), map "
+                << session->mapSizeText() << "\n";
+    }
+  });
   finishRun(session, progress);
 }
 

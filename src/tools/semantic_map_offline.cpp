@@ -11,11 +11,13 @@
 //       [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes] [--prob-hit P]
 //       [--prob-miss P] [--grazing-truncation VOXELS] [--max-scans N] [--export-ply MAP.ply]
 //       [--color-ot MAP_COLOR.ot] [--threads N] [--grid STEM]
+//       [--label-images DIR [--label-min-probability P]]
 #include <octomap/OcTree.h>
 #include <time.h>
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
@@ -23,10 +25,12 @@
 #include <utility>
 #include <vector>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/mapping/grid_projection.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/map_label_images.h"
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
@@ -48,6 +52,7 @@ constexpr char kUsage[] =
     "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
     "         [--grid STEM] [--insertion octree|hashed_grid] [--early-termination N]\n"
     "         [--octomap-reference]\n"
+    "       with --drive: [--label-images DIR [--label-min-probability P (0)]]\n"
     "  --labels   per-point labels DIR/NNNNNN.label (SemanticKITTI ids; default classes\n"
     "             semantickitti)\n"
     "  --images   camera images DIR/NNNNNN.png, segmented with MODEL (Cityscapes labelIds;\n"
@@ -65,7 +70,13 @@ constexpr char kUsage[] =
     "  --octomap-reference  after the run, inserts every scan as inserted (map frame, same\n"
     "             origin, max range and resolution) into a plain octomap::OcTree with\n"
     "             insertPointCloud and prints the whole run's time against that reference's\n"
-    "             (the benchmark's ratio; the scans are kept in memory meanwhile)\n";
+    "             (the benchmark's ratio; the scans are kept in memory meanwhile)\n"
+    "  --label-images  after the map is built, the map's classes at each frame's lidar points\n"
+    "             as the camera sees them (occlusion test, nearest point per pixel): "
+    "DIR/<frame>.png,\n"
+    "             8-bit labelIds of the map's class set, 0 where none (pseudo-labels for\n"
+    "             training the camera: scripts/adapt_segmentation.sh --pseudo-labels); voxels\n"
+    "             whose class posterior is below --label-min-probability label nothing\n";
 
 // The session config: the YAML file if given, then the flags.
 ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& cli) {
@@ -118,6 +129,46 @@ ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
   };
 }
 
+// --label-images: the finished map's classes in each frame's camera, DIR/<stem>.png.
+void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
+                         const ism::mapping::OfflineRawDrive& drive, const std::string& dir,
+                         const ism::mapping::MapLabelImageOptions& options) {
+  namespace mapping = ism::mapping;
+  std::filesystem::create_directories(dir);
+  const std::string images = drive.drive_dir + "/image_" + (drive.camera_index < 10 ? "0" : "") +
+                             std::to_string(drive.camera_index) + "/data";
+  std::size_t frames = 0, labelled = 0, in_view = 0, hidden = 0;
+  ism::ScopedTimer timer("semantic_map/label_images");
+  mapping::forEachRawDriveScan(drive, [&](const mapping::RawDriveScan& scan) {
+    // The image's own size: the rectified size in the calibration is not always the image's.
+    const std::string image_path = images + "/" + scan.stem + ".png";
+    const cv::Mat image = cv::imread(image_path, cv::IMREAD_UNCHANGED);
+    if (image.empty()) {
+      std::cerr << "[semantic_map_offline] " << image_path << ": no readable image, no label "
+                << "image for frame " << scan.stem << "\n";
+      return;
+    }
+    const mapping::CameraModel camera{scan.camera.P_rect, scan.camera.R_rect,
+                                      scan.camera.T_cam0_velo, image.cols, image.rows};
+    mapping::MapLabelImageStats stats;
+    const mapping::OwnedLabelImage labels =
+        mapping::mapLabelImage(tree, scan.points, scan.T_map_velo, camera, options, &stats);
+    const cv::Mat view(labels.height, labels.width, CV_8UC1,
+                       const_cast<std::uint8_t*>(labels.pixels.data()));
+    const std::string path = dir + "/" + scan.stem + ".png";
+    ism::common::commitFileAtomically(path, [&](const std::string& tmp) {
+      if (!cv::imwrite(tmp, view)) throw std::runtime_error(path + ": cannot write PNG");
+    });
+    ++frames;
+    labelled += stats.labelled;
+    in_view += stats.points_in_view;
+    hidden += stats.hidden;
+  });
+  std::cerr << "[semantic_map_offline] wrote " << frames << " label images in " << dir << " ("
+            << (frames ? labelled / frames : 0) << " labelled pixels per image; of " << in_view
+            << " points in view, " << hidden << " hidden from the camera)\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -150,7 +201,9 @@ int main(int argc, char** argv) {
                                         "--threads",
                                         "--grid",
                                         "--insertion",
-                                        "--early-termination"},
+                                        "--early-termination",
+                                        "--label-images",
+                                        "--label-min-probability"},
                                        {"--octomap-reference"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     const bool raw_drive = cli.has("--drive");
@@ -162,6 +215,10 @@ int main(int argc, char** argv) {
       throw UsageError("--images and --model go together");
     }
     const std::string output = cli.require("--output");
+    if (cli.has("--label-images") && !raw_drive) throw UsageError("--label-images needs --drive");
+    if (cli.has("--label-min-probability") && !cli.has("--label-images")) {
+      throw UsageError("--label-min-probability goes with --label-images");
+    }
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {
@@ -216,8 +273,8 @@ int main(int argc, char** argv) {
       camera_labels = segmentingSource(images, net);
     }
     const mapping::CameraLabelSource* labels_source = camera_labels ? &camera_labels : nullptr;
+    mapping::OfflineRawDrive drive;
     if (raw_drive) {
-      mapping::OfflineRawDrive drive;
       drive.drive_dir = cli.get("--drive");
       drive.calib_dir = cli.get("--calib-dir");
       drive.poses_path = cli.get("--poses");
@@ -285,6 +342,12 @@ int main(int argc, char** argv) {
                   << name << ": " << grid->width << " x " << grid->height << " cells, " << counts[0]
                   << " free, " << counts[1] << " occupied, " << counts[2] << " unknown)\n";
       }
+    }
+    if (cli.has("--label-images")) {
+      ism::mapping::MapLabelImageOptions options;
+      options.min_class_probability = cli.getDouble("--label-min-probability", 0.0);
+      drive.on_scan_inserted = nullptr;
+      writeMapLabelImages(session.tree(), drive, cli.get("--label-images"), options);
     }
     if (octomap_reference) {
       const double wall_s =

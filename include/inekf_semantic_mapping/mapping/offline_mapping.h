@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 
 namespace inekf_semantic_mapping {
@@ -60,6 +61,22 @@ struct OfflineRawDrive {
   // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
   std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
 };
+
+// One velodyne frame of a raw drive, as mapRawDrive inserts it.
+struct RawDriveScan {
+  std::string stem;       // the 10-digit frame number (image_0N/data/<stem>.png)
+  std::size_t index = 0;  // 0-based, of `count` visited
+  std::size_t count = 0;
+  Eigen::Matrix3Xf points;  // velodyne frame
+  Eigen::Isometry3d T_map_velo;
+  kitti::CameraProjection camera;  // the drive's camera_index
+};
+using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
+
+// Visits every velodyne frame of the drive in order (at most max_scans) with its pose
+// T_map_velo = T_map_imu * inv(T_velo_imu). Throws on missing inputs (the message names the
+// folder or file); an std::out_of_range from `visit` becomes an error naming the frame's pose.
+void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit);
 
 // Inserts every velodyne frame of the drive at T_map_velo = T_map_imu * inv(T_velo_imu), with
 // camera labels from `camera_labels` (stem = the 10-digit frame number, image

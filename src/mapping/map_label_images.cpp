@@ -1,0 +1,80 @@
+#include "inekf_semantic_mapping/mapping/map_label_images.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/perception/projection.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+
+OwnedLabelImage mapLabelImage(const SemanticOcTree& tree, const Eigen::Matrix3Xf& points_sensor,
+                              const Eigen::Isometry3d& T_map_sensor, const CameraModel& camera,
+                              const MapLabelImageOptions& options, MapLabelImageStats* stats) {
+  if (camera.width <= 0 || camera.height <= 0) {
+    throw std::invalid_argument("mapLabelImage: camera image size " + std::to_string(camera.width) +
+                                "x" + std::to_string(camera.height) + " is not positive");
+  }
+  if (options.none_label > 255) {
+    throw std::invalid_argument("mapLabelImage: none_label " + std::to_string(options.none_label) +
+                                " does not fit an 8-bit label image");
+  }
+  const perception::PointProjector projector(camera.P, camera.R_rect, camera.T_camera_sensor,
+                                             camera.width, camera.height);
+  perception::ProjectedPoints projected;
+  projector.project(points_sensor, &projected);
+
+  // The map's class at every point in view; points the camera cannot see take none.
+  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  std::vector<std::uint32_t> labels(projected.size(), kNone);
+  const Eigen::Matrix3Xf points_map = (T_map_sensor.cast<float>() * points_sensor).eval();
+  const int num_classes = static_cast<int>(tree.classSet().size());
+  MapLabelImageStats local;
+  for (std::size_t i = 0; i < projected.size(); ++i) {
+    if (!projected.valid[i]) continue;
+    ++local.points_in_view;
+    const Eigen::Vector3f& p = points_map.col(static_cast<Eigen::Index>(i));
+    const SemanticOcTreeNode* node = tree.search(p.x(), p.y(), p.z());
+    if (!node || !tree.isNodeOccupied(node)) continue;
+    const ClassIndex index = node->mostLikelyClass();
+    if (index == kNoClass || static_cast<int>(index) >= num_classes) continue;
+    if (options.min_class_probability > 0.0 &&
+        node->classProbability(index, tree.fusionModel(), num_classes) <
+            options.min_class_probability) {
+      continue;
+    }
+    labels[i] = tree.classSet().info(index).label_id;
+  }
+  std::size_t hidden = 0;
+  perception::rejectOccludedPoints(projected, camera.width, camera.height,
+                                   perception::OcclusionOptions(), kNone, &labels, &hidden);
+  local.hidden = hidden;
+
+  OwnedLabelImage image;
+  image.width = camera.width;
+  image.height = camera.height;
+  image.pixels.assign(static_cast<std::size_t>(camera.width) * camera.height,
+                      static_cast<std::uint8_t>(options.none_label));
+  std::vector<float> nearest(image.pixels.size(), std::numeric_limits<float>::infinity());
+  for (std::size_t i = 0; i < projected.size(); ++i) {
+    if (!projected.valid[i] || labels[i] == kNone || labels[i] > 255) continue;
+    // The pixel labelPointsFromImage reads for the point (centres at integers).
+    const int u = std::min(static_cast<int>(std::lround(projected.u[i])), camera.width - 1);
+    const int v = std::min(static_cast<int>(std::lround(projected.v[i])), camera.height - 1);
+    if (u < 0 || v < 0) continue;
+    const std::size_t pixel = static_cast<std::size_t>(v) * camera.width + u;
+    if (projected.depth[i] >= nearest[pixel]) continue;
+    if (nearest[pixel] == std::numeric_limits<float>::infinity()) ++local.labelled;
+    nearest[pixel] = projected.depth[i];
+    image.pixels[pixel] = static_cast<std::uint8_t>(labels[i]);
+  }
+  if (stats) *stats = local;
+  return image;
+}
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
