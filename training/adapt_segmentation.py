@@ -7,9 +7,11 @@ labels projected into both cameras (data/semantickitti_train: sparse), optionall
 SemanticKITTI 05 and 08 are the evaluation frames: this script refuses them.
 
 Losses: cross-entropy on the human labels (each image weighs the same, sparse or dense), plus
-distillation from the base network's own confident labels where no human label can be (every
-pixel above the lidar's top beam in the sparse images, the unlabelled pixels of the dense ones),
-so the sky and building tops it knew are not forgotten.
+distillation from the base network where no human label is (by default its whole class
+distribution, KL at a temperature, at every unlabelled pixel: between the lidar's beams and above
+them in the sparse images, the unlabelled pixels of the dense ones), so that the sky, building
+tops and the rare classes it knew are not forgotten. Batch normalisation keeps the base
+network's statistics by default (small KITTI batches would replace them).
 
 Training runs at the network's input scale (the images resized to input width x height, as the
 Segmenter does at run time), so inference needs no upscaling. Deterministic for a given seed and
@@ -58,9 +60,16 @@ def parse_args(argv=None):
     p.add_argument("--crop", default="320x640", help="training crop HxW")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-4)
+    p.add_argument("--bn-stats", default="frozen", choices=["frozen", "update"],
+                   help="frozen: batch normalisation keeps the base network's statistics (the "
+                        "affine terms still train); update: they follow the KITTI batches")
     p.add_argument("--weight-decay", type=float, default=1e-4)
-    p.add_argument("--distill-weight", type=float, default=0.5)
-    p.add_argument("--distill-zone", default="outside-lidar", choices=["outside-lidar", "unlabelled"],
+    p.add_argument("--distill", default="soft", choices=["soft", "hard"],
+                   help="soft: the base network's whole class distribution (KL at --temperature) "
+                        "at every pixel of the zone; hard: its confident argmax as a label")
+    p.add_argument("--temperature", type=float, default=2.0, help="soft distillation temperature")
+    p.add_argument("--distill-weight", type=float, default=1.0)
+    p.add_argument("--distill-zone", default="unlabelled", choices=["outside-lidar", "unlabelled"],
                    help="where the base network teaches in the sparse images: above the lidar's "
                         "top beam only, or at every pixel without a human label")
     p.add_argument("--teacher-confidence", type=float, default=0.7,
@@ -73,6 +82,14 @@ def parse_args(argv=None):
     p.add_argument("--dense-val-every", type=int, default=7,
                    help="every N-th dense frame is held out for validation")
     p.add_argument("--camvid", type=int, default=0, help="CamVid frames to add (0: none)")
+    p.add_argument("--pseudo-labels", default="",
+                   help="the fused map's labels of a drive nobody labelled (semantic_map_offline "
+                        "--label-images DIR), trained on as sparse labels")
+    p.add_argument("--pseudo-images", default="",
+                   help="the images of --pseudo-labels (the drive's image_02/data)")
+    p.add_argument("--init", default="",
+                   help="start from these weights (a best.pt of an earlier round) instead of "
+                        "the base network's; the base network still teaches")
     p.add_argument("--max-images", type=int, default=0,
                    help="use at most this many images of each source (0: all; CI uses a few)")
     p.add_argument("--val-interval", type=float, default=5.0, help="minutes between validations")
@@ -112,22 +129,56 @@ def lidar_zone_mask(target, margin_px=6, column_window=41):
     return np.arange(h)[:, None] >= top[None, :]
 
 
-def teacher_targets(samples, model, torch, confidence, outside_lidar_only, batch=2):
-    """The base network's confident labels, where they may teach (outside the human labels)."""
+def distillation_zone(sample, outside_lidar_only):
+    """True where the base network may teach: no human label, and for a sparse image with
+    outside_lidar_only, above the lidar's top beam."""
+    zone = sample.target == labels.IGNORE
+    if sample.kind == "sparse" and outside_lidar_only:
+        zone &= ~lidar_zone_mask(sample.target)
+    return zone
+
+
+def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft, batch=2):
+    """What the base network teaches in its zone. Hard: its labels where its softmax confidence
+    is >= confidence (H x W trainIds, IGNORE elsewhere). Soft: its logits with the zone as a last
+    channel (H x W x (C + 1), float16: the whole distribution, confident or not)."""
     model.eval()
     with torch.no_grad():
         for i in range(0, len(samples), batch):
             chunk = samples[i:i + batch]
             x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
-            prob = torch.softmax(model(x), dim=1)
+            logits = model(x)
+            if soft:
+                for s, z in zip(chunk, logits.numpy()):
+                    zone = distillation_zone(s, outside_lidar_only)
+                    s.teacher = np.concatenate(
+                        [z.transpose(1, 2, 0), zone[..., None]], axis=2).astype(np.float16)
+                continue
+            prob = torch.softmax(logits, dim=1)
             conf, arg = prob.max(dim=1)
             for s, c, a in zip(chunk, conf.numpy(), arg.numpy().astype(np.uint8)):
                 t = np.where((c >= confidence) & (a != labels.BACKGROUND_CHANNEL), a, labels.IGNORE)
                 t = t.astype(np.uint8)
-                if s.kind == "sparse" and outside_lidar_only:
-                    t[lidar_zone_mask(s.target)] = labels.IGNORE
-                t[s.target != labels.IGNORE] = labels.IGNORE
+                t[~distillation_zone(s, outside_lidar_only)] = labels.IGNORE
                 s.teacher = t
+
+
+def freeze_batchnorm_statistics(model, torch):
+    """Batch normalisation layers in eval mode: their running statistics stay the base
+    network's (re-estimating them on KITTI batches, AdaBN, lowered the ENet card's accuracy)."""
+    for m in model.modules():
+        if isinstance(m, torch.nn.modules.batchnorm._BatchNorm):
+            m.eval()
+
+
+def soft_distillation_loss(logits, teacher, temperature, F):
+    """Per-image mean over the zone of KL(teacher || student) at the temperature, times T^2
+    (Hinton et al. 2015); teacher is N x (C + 1) x H x W, the last channel the zone."""
+    zone = teacher[:, -1]
+    t = temperature
+    kl = F.kl_div(F.log_softmax(logits / t, dim=1), F.softmax(teacher[:, :-1] / t, dim=1),
+                  reduction="none").sum(1) * (t * t)
+    return ((kl * zone).flatten(1).sum(1) / zone.flatten(1).sum(1).clamp(min=1)).mean()
 
 
 def class_weights(samples, power):
@@ -333,13 +384,19 @@ def main(argv=None):
                                           limit) if val_sequence else []
         camvid = datasets.load_camvid(os.path.join(shared, "data", "camvid"), width, height,
                                       args.gamma, standardize, args.camvid) if args.camvid else []
+        pseudo = []
+        if args.pseudo_labels:
+            if not args.pseudo_images:
+                raise SystemExit("--pseudo-labels needs --pseudo-images (the drive's image_02/data)")
+            pseudo = datasets.load_pseudo(args.pseudo_labels, args.pseudo_images, width, height,
+                                          args.gamma, standardize, limit)
     except datasets.DatasetError as e:
         raise SystemExit(f"[adapt_segmentation] {e}")
     train, val = datasets.split_validation(dense, args.dense_val_every)
-    train += sparse + camvid
+    train += sparse + pseudo + camvid
     val += sparse_val
     log(f"{len(train)} training images ({sum(s.kind == 'dense' for s in train)} dense, "
-        f"{sum(s.kind == 'sparse' for s in train)} sparse, {len(camvid)} CamVid), "
+        f"{len(sparse)} sparse, {len(pseudo)} map pseudo-labels, {len(camvid)} CamVid), "
         f"{len(val)} validation images, at {width}x{height}, loaded in {time.time() - t0:.0f} s")
 
     model = base.build(os.path.join(shared, base.weights))
@@ -347,10 +404,14 @@ def main(argv=None):
     # --minutes 0 without --max-steps: the base network exported with the card, untrained (the
     # starting point, measured by the same tools as the adapted one).
     train_at_all = args.max_steps > 0 or args.minutes > 0
+    soft = args.distill == "soft"
     if train_at_all:
         teacher_targets(train, model, torch, args.teacher_confidence,
-                        args.distill_zone == "outside-lidar")
+                        args.distill_zone == "outside-lidar", args.distill == "soft")
         log(f"base network's labels for distillation in {time.time() - teacher_t0:.0f} s")
+    if args.init:
+        model.load_state_dict(torch.load(args.init, map_location="cpu"))
+        log(f"starting from {args.init}")
     before = validate(model, torch, val)
     log("before fine-tuning: " + ", ".join(f"{k} {v:.4f}" for k, v in before.items()))
 
@@ -386,24 +447,33 @@ def main(argv=None):
             if not order:
                 order = list(rng.permutation(len(train)))
             s = train[order.pop()]
-            image, target, teacher = augment.random_crop(s, lambda x: x.teacher, rng, crop_h,
-                                                         crop_w)
+            image, target, teacher = augment.random_crop(
+                s, lambda x: x.teacher.astype(np.float32) if soft else x.teacher, rng, crop_h,
+                crop_w)
             images.append(image)
             targets.append(target)
             teachers.append(teacher)
         x = preprocess.to_tensor_rgb01(np.stack(images)).to(device)
         target = torch.from_numpy(np.stack(targets).astype(np.int64)).to(device)
-        teacher = torch.from_numpy(np.stack(teachers).astype(np.int64)).to(device)
+        if soft:
+            teacher = torch.from_numpy(np.stack(teachers).transpose(0, 3, 1, 2).copy()).to(device)
+        else:
+            teacher = torch.from_numpy(np.stack(teachers).astype(np.int64)).to(device)
         model.train()
+        if args.bn_stats == "frozen":
+            freeze_batchnorm_statistics(model, torch)
         logits = model(x)
         # Per-image means: a sparse image's few thousand labels weigh as much as a dense one.
         ce = F.cross_entropy(logits, target, weight=weights, ignore_index=labels.IGNORE,
                              reduction="none")
-        kd = F.cross_entropy(logits, teacher, ignore_index=labels.IGNORE, reduction="none")
         n_label = (target != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
-        n_teach = (teacher != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
         label_loss = (ce.flatten(1).sum(1) / n_label).mean()
-        distill_loss = (kd.flatten(1).sum(1) / n_teach).mean()
+        if soft:
+            distill_loss = soft_distillation_loss(logits, teacher, args.temperature, F)
+        else:
+            kd = F.cross_entropy(logits, teacher, ignore_index=labels.IGNORE, reduction="none")
+            n_teach = (teacher != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
+            distill_loss = (kd.flatten(1).sum(1) / n_teach).mean()
         loss = label_loss + args.distill_weight * distill_loss
         if not torch.isfinite(loss):
             raise SystemExit(f"[adapt_segmentation] step {step}: loss is {loss.item()}")

@@ -17,8 +17,18 @@ def _resize_labels(target, width, height, sparse):
     return cv2.resize(target, (width, height), interpolation=cv2.INTER_NEAREST)
 
 
+def _pad_teacher(teacher, pad_h, pad_w):
+    """Pads what the base network teaches with 'nothing taught': IGNORE in a label map, zeros
+    (a zero mask channel) in a soft target (H x W x C; numpy, as cv2 pads at most 4 channels)."""
+    if teacher.ndim == 2:
+        return cv2.copyMakeBorder(teacher, 0, pad_h, 0, pad_w, cv2.BORDER_CONSTANT,
+                                  value=labels.IGNORE)
+    return np.pad(teacher, ((0, pad_h), (0, pad_w), (0, 0)))
+
+
 def random_crop(sample, teacher_mask_fn, rng, crop_h, crop_w, scale_range=(0.8, 1.25)):
-    """(image, target, teacher) crop of crop_h x crop_w after a random rescale and mirror."""
+    """(image, target, teacher) crop of crop_h x crop_w after a random rescale and mirror. The
+    teacher is an H x W label map or an H x W x C soft target (resized nearest, padded empty)."""
     s = rng.uniform(*scale_range)
     h0, w0 = sample.image.shape[:2]
     h, w = max(8, int(round(h0 * s))), max(8, int(round(w0 * s)))
@@ -32,8 +42,7 @@ def random_crop(sample, teacher_mask_fn, rng, crop_h, crop_w, scale_range=(0.8, 
         image = cv2.copyMakeBorder(image, 0, pad_h, 0, pad_w, cv2.BORDER_REFLECT_101)
         target = cv2.copyMakeBorder(target, 0, pad_h, 0, pad_w, cv2.BORDER_CONSTANT,
                                     value=labels.IGNORE)
-        teacher = cv2.copyMakeBorder(teacher, 0, pad_h, 0, pad_w, cv2.BORDER_CONSTANT,
-                                     value=labels.IGNORE)
+        teacher = _pad_teacher(teacher, pad_h, pad_w)
         h, w = image.shape[:2]
     y = rng.integers(0, h - crop_h + 1)
     x = rng.integers(0, w - crop_w + 1)

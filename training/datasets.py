@@ -122,6 +122,33 @@ def load_sparse(root, sequences, width, height, gamma, standardize, limit=None):
     return samples
 
 
+def load_pseudo(labels_dir, images_dir, width, height, gamma, standardize, limit=None):
+    """Pseudo-labels: the fused map's classes at each frame's lidar points as its camera sees
+    them (semantic_map_offline --label-images: labels_dir/<stem>.png, 8-bit Cityscapes labelIds,
+    0 where none), for the images images_dir/<stem>.png of a drive nobody labelled. Sparse, as
+    the projected lidar labels are."""
+    if not os.path.isdir(labels_dir):
+        raise DatasetError(f"{labels_dir}: no such pseudo-label folder")
+    lut = labels.label_id_to_train_id_lut()
+    samples = []
+    for label_path in sorted(glob.glob(os.path.join(labels_dir, "*.png")))[:limit]:
+        stem = os.path.splitext(os.path.basename(label_path))[0]
+        image_path = os.path.join(images_dir, stem + ".png")
+        if not os.path.exists(image_path):
+            raise DatasetError(f"{label_path}: no image {image_path}")
+        image = _read_image(image_path)
+        label = _read_label(label_path, cv2.IMREAD_UNCHANGED)
+        if label.dtype != np.uint8 or label.ndim != 2:
+            raise DatasetError(f"{label_path}: expected an 8-bit one-channel label image")
+        _check_same_size(image, label, image_path, label_path)
+        target = scatter_sparse(lut[label], width, height)
+        samples.append(Sample(f"pseudo/{stem}", "sparse",
+                              _prepare(image, width, height, gamma, standardize), target))
+    if not samples:
+        raise DatasetError(f"{labels_dir}: no label images")
+    return samples
+
+
 def load_camvid(root, width, height, gamma, standardize, limit=None):
     """CamVid (SegNet layout): train/*.png|jpg with trainannot/*.png (11 classes)."""
     lut = labels.camvid_to_train_id_lut()

@@ -83,6 +83,79 @@ class SparseLabels(unittest.TestCase):
         self.assertFalse(zone[:35, :].any())  # the sky above it is the teacher's
 
 
+class PseudoLabels(unittest.TestCase):
+    """The map's label images (semantic_map_offline --label-images) as sparse training labels."""
+
+    def test_label_ids_become_train_ids_at_their_scaled_pixels(self):
+        import cv2
+
+        with tempfile.TemporaryDirectory() as tmp:
+            os.makedirs(os.path.join(tmp, "labels"))
+            os.makedirs(os.path.join(tmp, "images"))
+            label = np.zeros((40, 80), np.uint8)  # labelId 0: none
+            label[30, 10], label[35, 60] = 7, 26  # road, car
+            cv2.imwrite(os.path.join(tmp, "labels", "0000000003.png"), label)
+            cv2.imwrite(os.path.join(tmp, "images", "0000000003.png"),
+                        np.full((40, 80, 3), 120, np.uint8))
+            [sample] = datasets.load_pseudo(os.path.join(tmp, "labels"),
+                                            os.path.join(tmp, "images"), 160, 80, 0.7, True)
+            lut = labels.label_id_to_train_id_lut()
+            self.assertEqual(sample.kind, "sparse")
+            self.assertEqual(sample.target.shape, (80, 160))
+            self.assertEqual(int((sample.target != labels.IGNORE).sum()), 2)
+            self.assertEqual(sample.target[61, 21], lut[7])
+            self.assertEqual(sample.target[71, 121], lut[26])
+
+    def test_a_label_without_its_image_names_both(self):
+        import cv2
+
+        with tempfile.TemporaryDirectory() as tmp:
+            os.makedirs(os.path.join(tmp, "labels"))
+            cv2.imwrite(os.path.join(tmp, "labels", "0000000001.png"), np.zeros((4, 4), np.uint8))
+            with self.assertRaisesRegex(datasets.DatasetError, "0000000001.png.*no image"):
+                datasets.load_pseudo(os.path.join(tmp, "labels"), os.path.join(tmp, "images"),
+                                     32, 32, 0.7, True)
+
+
+class Distillation(unittest.TestCase):
+    def test_soft_loss_is_zero_for_the_teacher_and_ignores_pixels_outside_the_zone(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        import torch
+        import torch.nn.functional as F
+        import adapt_segmentation as adapt
+
+        torch.manual_seed(0)
+        logits = torch.randn(2, 5, 4, 6)
+        zone = torch.zeros(2, 1, 4, 6)
+        zone[:, :, :2] = 1
+        teacher = torch.cat([logits.clone(), zone], dim=1)
+        self.assertAlmostEqual(adapt.soft_distillation_loss(logits, teacher, 2.0, F).item(), 0.0,
+                               places=5)
+        other = logits.clone()
+        other[:, :, 2:] = torch.randn(2, 5, 2, 6)  # outside the zone: no effect
+        self.assertAlmostEqual(adapt.soft_distillation_loss(other, teacher, 2.0, F).item(), 0.0,
+                               places=5)
+        other[:, :, :2] = torch.randn(2, 5, 2, 6)  # inside: a positive KL
+        self.assertGreater(adapt.soft_distillation_loss(other, teacher, 2.0, F).item(), 0.01)
+
+    def test_frozen_batch_norm_keeps_its_statistics_while_training(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        import torch
+        import adapt_segmentation as adapt
+
+        model = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1), torch.nn.BatchNorm2d(4))
+        before = model[1].running_mean.clone()
+        model.train()
+        adapt.freeze_batchnorm_statistics(model, torch)
+        model(torch.randn(2, 3, 8, 8) + 5.0)
+        self.assertTrue(torch.equal(model[1].running_mean, before))
+        model.train()  # without the freeze they move
+        model(torch.randn(2, 3, 8, 8) + 5.0)
+        self.assertFalse(torch.equal(model[1].running_mean, before))
+
+
 class Preprocessing(unittest.TestCase):
     def test_standardization_reaches_the_target_statistics(self):
         # Two colours, half the pixels each: every channel maps to exactly mean -+ std, inside
