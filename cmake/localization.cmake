@@ -6,7 +6,7 @@
 ism_add_ros_library(${PROJECT_NAME}_localization_ros
   SOURCES src/ros/localization_conversions.cpp src/ros/kitti_bag_conventions.cpp
     src/ros/odometry_output.cpp
-  LINK ${PROJECT_NAME}_localization_session)
+  LINK ${PROJECT_NAME}_localization_session ${PROJECT_NAME}_node_ros)
 
 ism_add_ros_executable(inekf_node
   SOURCES src/nodes/inekf_node.cpp

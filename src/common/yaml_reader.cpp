@@ -109,6 +109,12 @@ void YamlReader::read(const std::string& key, std::vector<std::string>* out) {
 
 void YamlReader::allow(const std::string& key) { used_.insert(key); }
 
+void YamlReader::renamed(const std::string& old_key, const std::string& new_key) {
+  if (lookup(old_key).IsDefined()) fail(old_key, "was renamed to '" + new_key + "'");
+}
+
+bool YamlReader::has(const std::string& key) { return lookup(key).IsDefined(); }
+
 void YamlReader::collectKeys(const YAML::Node& node, const std::string& prefix,
                              std::vector<std::string>* keys) const {
   for (const auto& entry : node) {

@@ -6,7 +6,7 @@
 //
 // Parameters (private):
 //   config_file (string, default $(find inekf_semantic_mapping)/config/inekf.yaml)
-//   filter | filter_type (string, left | right | ekf; overrides the config file)
+//   filter (string, left | right | ekf; overrides the config file; filter_type is refused)
 //   init_orientation_from_imu (bool; overrides init_orientation_from_reference)
 //   origin_lat, origin_lon, origin_alt (double; all three or none: the map origin, else the first
 //     usable fix)
@@ -17,6 +17,8 @@
 //     pose; odometry and tf are of base_frame, through the static base_frame -> imu_frame of tf
 //     (identity, with one warning, while tf has none: a bag whose IMU is the body)
 //   max_path_length (5000 poses), path_publish_period_s (1.0)
+// Any other private parameter, or one of the wrong type, stops the node naming it
+// (ros/node_parameters.h).
 #include <geometry_msgs/TwistStamped.h>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -33,6 +35,7 @@
 #include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 #include "inekf_semantic_mapping/ros/odometry_output.h"
 
 namespace inekf_semantic_mapping {
@@ -40,13 +43,30 @@ namespace {
 
 using estimation::LocalizationSession;
 
+// Every private parameter, read (and checked) before anything is advertised.
+struct InekfNodeParameters {
+  std::string config_file;
+  estimation::LocalizationSessionConfig session;
+  ros_conversions::OdometryOutputOptions output;
+};
+
+InekfNodeParameters readParameters(const ros::NodeHandle& private_nh) {
+  common::YamlReader reader = ros_conversions::privateParameterReader(private_nh);
+  InekfNodeParameters parameters;
+  parameters.session = ros_conversions::sessionConfigFromParameters(
+      &reader, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
+      &parameters.config_file);
+  parameters.output = ros_conversions::readOdometryOutputOptions(&reader);
+  reader.rejectUnknown();
+  return parameters;
+}
+
 class InekfNode {
  public:
-  InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
-      : session_(ros_conversions::sessionConfigFromParameters(
-            private_nh, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
-            &config_file_)),
-        output_(nh, private_nh) {
+  InekfNode(ros::NodeHandle& nh, const InekfNodeParameters& parameters)
+      : config_file_(parameters.config_file),
+        session_(parameters.session),
+        output_(nh, parameters.output) {
     status_publisher_ = nh.advertise<FilterStatus>(topics::kFilterStatus, 10);
     imu_subscriber_ = nh.subscribe(topics::kImu, 400, &InekfNode::onImu, this,
                                    ros::TransportHints().tcpNoDelay());
@@ -176,10 +196,12 @@ class InekfNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "inekf_node");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start (a bad parameter) would print nothing.
   ros::NodeHandle nh;
   ros::NodeHandle private_nh("~");
   try {
-    inekf_semantic_mapping::InekfNode node(nh, private_nh);
+    inekf_semantic_mapping::InekfNode node(nh, inekf_semantic_mapping::readParameters(private_nh));
     ros::spin();
   } catch (const std::exception& error) {
     ROS_FATAL_STREAM("inekf_node: " << error.what());

@@ -17,7 +17,8 @@
 //   /kitti_bag/camera_color_left/camera_info -> /kitti/camera_color_left/camera_info
 //       (kitti2bag_py: the rectified camera, baseline once)
 //
-// Parameters (private): bag (string, required), convention (auto | ism | kitti2bag_py, auto).
+// Parameters (private): bag (string, required), convention (auto | ism | kitti2bag_py, auto);
+// any other, or one of the wrong type, stops the node naming it.
 // Exits with an error naming the bag, the topic and what was expected when the bag fits neither.
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
@@ -41,6 +42,7 @@
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -106,11 +108,12 @@ bool sameTransform(const geometry_msgs::Transform& a, const geometry_msgs::Trans
 class KittiBagAdapter {
  public:
   KittiBagAdapter(ros::NodeHandle& nh, ros::NodeHandle& private_nh) {
+    common::YamlReader parameters = conv::privateParameterReader(private_nh);
     std::string bag_path, convention = "auto";
-    if (!private_nh.getParam("bag", bag_path) || bag_path.empty()) {
-      throw std::invalid_argument("~bag (the bag kitti_bag.launch plays) is not set");
-    }
-    private_nh.param<std::string>("convention", convention, convention);
+    parameters.read("bag", &bag_path);
+    parameters.read("convention", &convention);
+    parameters.rejectUnknown();
+    if (bag_path.empty()) parameters.fail("bag", "is not set (the bag kitti_bag.launch plays)");
     const BagStart start = readBagStart(bag_path);
     if (convention == "auto") {
       convention_ = conv::detectBagConvention(start.contents);

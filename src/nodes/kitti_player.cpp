@@ -1,6 +1,7 @@
 // kitti_player: publishes a KITTI raw drive (OXTS IMU/GPS, ground truth, velodyne, color
 // camera, /tf_static) at `~rate` times real time, paced by WALL time so that it can itself
-// publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml.
+// publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml; any
+// other private parameter, or one of the wrong type, stops the player naming it.
 #include <ros/ros.h>
 #include <rosgraph_msgs/Clock.h>
 #include <std_srvs/SetBool.h>
@@ -16,6 +17,7 @@
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -23,16 +25,16 @@ namespace {
 namespace conv = ros_conversions;
 using kitti::DriveSensor;
 
-kitti::GpsDegradationOptions readGpsOptions(ros::NodeHandle& pnh) {
+kitti::GpsDegradationOptions readGpsOptions(common::YamlReader* reader) {
   kitti::GpsDegradationOptions options;
-  pnh.param("gps_sigma_horizontal_m", options.sigma_horizontal_m, 0.0);
-  pnh.param("gps_sigma_vertical_m", options.sigma_vertical_m, 0.0);
-  pnh.param("gps_every_n_frames", options.every_n_frames, 1);
+  reader->read("gps_sigma_horizontal_m", &options.sigma_horizontal_m);
+  reader->read("gps_sigma_vertical_m", &options.sigma_vertical_m);
+  reader->read("gps_every_n_frames", &options.every_n_frames);
   int seed = 0;
-  pnh.param("gps_seed", seed, 0);
+  reader->read("gps_seed", &seed);
   options.seed = static_cast<std::uint64_t>(seed);
   std::vector<std::string> outages;
-  pnh.param("gps_outages", outages, {});  // ["START:DURATION", ...] seconds since first frame
+  reader->read("gps_outages", &outages);  // ["START:DURATION", ...] seconds since first frame
   for (const std::string& outage : outages) {
     options.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(outage));
   }
@@ -46,26 +48,28 @@ constexpr double kExitFlushSeconds = 1.0;
 class KittiPlayer {
  public:
   KittiPlayer(ros::NodeHandle& nh, ros::NodeHandle& pnh) : pnh_(pnh) {
+    common::YamlReader parameters = conv::privateParameterReader(pnh);
     std::string drive_dir, calib_dir;
-    if (!pnh.getParam("drive_dir", drive_dir) || drive_dir.empty()) {
-      throw std::invalid_argument("parameter ~drive_dir is required (a <date>_drive_<n>_sync)");
-    }
-    pnh.param<std::string>("calib_dir", calib_dir, "");
-    pnh.param("rate", rate_, 1.0);
-    if (!(rate_ > 0)) throw std::invalid_argument("~rate must be > 0");
-    pnh.param("start_offset_s", timeline_options_.start_offset_s, 0.0);
-    pnh.param("duration_s", timeline_options_.duration_s, 0.0);
-    pnh.param("loop", loop_, false);
-    pnh.param("publish_clock", publish_clock_, false);
-    pnh.param("exit_when_done", exit_when_done_, false);
     bool paused = false;
-    pnh.param("paused", paused, false);
+    parameters.read("drive_dir", &drive_dir);
+    parameters.read("calib_dir", &calib_dir);
+    parameters.read("rate", &rate_);
+    parameters.read("start_offset_s", &timeline_options_.start_offset_s);
+    parameters.read("duration_s", &timeline_options_.duration_s);
+    parameters.read("loop", &loop_);
+    parameters.read("publish_clock", &publish_clock_);
+    parameters.read("exit_when_done", &exit_when_done_);
+    parameters.read("paused", &paused);
+    parameters.read("publish_velodyne", &timeline_options_.velodyne);
+    parameters.read("publish_camera", &timeline_options_.cameras[2]);
+    const kitti::GpsDegradationOptions gps = readGpsOptions(&parameters);
+    parameters.rejectUnknown();
+    if (drive_dir.empty()) parameters.fail("drive_dir", "is required (a <date>_drive_<n>_sync)");
+    if (!(rate_ > 0)) parameters.fail("rate", "must be > 0");
     paused_ = paused;
-    pnh.param("publish_velodyne", timeline_options_.velodyne, true);
-    pnh.param("publish_camera", timeline_options_.cameras[2], true);
 
     drive_ = std::make_unique<kitti::RawDrive>(drive_dir, calib_dir);
-    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, readGpsOptions(pnh));
+    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, gps);
     const auto missing = drive_->missingParts();
     if (!missing.empty()) {
       std::ostringstream text;
@@ -241,6 +245,8 @@ class KittiPlayer {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "kitti_player");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a player that could not start would print nothing.
   ros::NodeHandle nh, pnh("~");
   // Services are served on their own thread while the main thread paces the replay.
   ros::AsyncSpinner spinner(1);

@@ -5,7 +5,8 @@
 // is slower than the camera, stale frames are dropped (and counted) instead of queueing latency.
 //
 // Parameters (~, see config/segmentation.yaml): model, model_card ("" = the model's default
-// card), image_topic, publish_overlay, overlay_alpha, num_threads, rate_log_period_s.
+// card), image_topic, publish_overlay, overlay_alpha, num_threads, rate_log_period_s. Any other
+// private parameter, or one of the wrong type, stops the node naming it (ros/node_parameters.h).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
@@ -23,6 +24,7 @@
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -37,15 +39,19 @@ struct Frame {
 class SegmentationNode {
  public:
   SegmentationNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : transport_(nh) {
-    const std::string model = pnh.param<std::string>("model", "");
-    const std::string card_path = pnh.param<std::string>("model_card", "");
-    const std::string image_topic =
-        pnh.param<std::string>("image_topic", topics::kCameraColorLeftImage);
-    publish_overlay_ = pnh.param("publish_overlay", true);
-    overlay_alpha_ = pnh.param("overlay_alpha", 0.5);
-    const int num_threads = pnh.param("num_threads", 2);
-    rate_log_period_s_ = pnh.param("rate_log_period_s", 10.0);
-    if (model.empty()) throw std::runtime_error("parameter ~model is not set");
+    common::YamlReader parameters = ros_conversions::privateParameterReader(pnh);
+    std::string model, card_path, image_topic = topics::kCameraColorLeftImage;
+    int num_threads = 2;
+    parameters.read("model", &model);
+    parameters.read("model_card", &card_path);
+    parameters.read("image_topic", &image_topic);
+    parameters.read("publish_overlay", &publish_overlay_);
+    parameters.read("overlay_alpha", &overlay_alpha_);
+    parameters.read("num_threads", &num_threads);
+    parameters.read("rate_log_period_s", &rate_log_period_s_);
+    parameters.allow("image_transport");  // image_transport's own choice of transport
+    parameters.rejectUnknown();
+    if (model.empty()) parameters.fail("model", "is not set (the segmentation network)");
 
     const perception::ModelCard card = card_path.empty() ? perception::defaultModelCardFor(model)
                                                          : perception::loadModelCard(card_path);
@@ -161,6 +167,8 @@ class SegmentationNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "segmentation_node");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start would print nothing.
   ros::NodeHandle nh;
   ros::NodeHandle pnh("~");
   try {

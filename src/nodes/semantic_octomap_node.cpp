@@ -9,8 +9,8 @@
 // Publishes /semantic_map/markers, /semantic_map/labeled_cloud, /semantic_map/info
 // (SemanticMapInfo), /semantic_map/projected_map and /semantic_map/drivable_map
 // (nav_msgs/OccupancyGrid, mapping/grid_projection.h); services ~save_map, ~load_map, ~reset;
-// ~map_file resumes from a saved map, ~autosave_path saves periodically and at shutdown.
-// Parameters: config/semantic_mapping.yaml.
+// ~map_file resumes from a saved map, ~autosave_path saves every ~autosave_period_s and at
+// shutdown. Parameters: config/semantic_mapping.yaml.
 #include <ros/ros.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
@@ -27,6 +27,7 @@
 #include "inekf_semantic_mapping/ros/map_services.h"
 #include "inekf_semantic_mapping/ros/mapping_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -49,7 +50,7 @@ class SemanticOctomapNode {
  public:
   SemanticOctomapNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
     const YAML::Node parameters = conv::privateParametersAsYaml(pnh_);
-    const std::string source = "ROS parameters of " + pnh_.getNamespace();
+    const std::string source = conv::parameterSource(pnh_);
     common::YamlReader reader(source, parameters);
     reader.read("map_frame", &options_.display.map_frame);
     reader.read("marker_rate", &options_.marker_rate_hz);
@@ -59,8 +60,8 @@ class SemanticOctomapNode {
     reader.read("camera_index", &options_.camera_index);
     reader.read("map_file", &options_.map_file);
     reader.read("autosave_path", &options_.autosave_path);
-    reader.read("autosave_period", &options_.autosave_period_s);
-    reader.read("log_period", &options_.log_period_s);
+    reader.read("autosave_period_s", &options_.autosave_period_s);
+    reader.read("log_period_s", &options_.log_period_s);
     session_ = std::make_unique<mapping::SemanticMappingSession>(
         mapping::readSemanticMappingConfig(parameters, source));
     display_ = std::make_unique<conv::MapDisplay>(
