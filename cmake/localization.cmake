@@ -5,7 +5,7 @@
 # and its test; with the bag conventions kitti_bag_adapter turns into the nodes' one.
 ism_add_ros_library(${PROJECT_NAME}_localization_ros
   SOURCES src/ros/localization_conversions.cpp src/ros/kitti_bag_conventions.cpp
-    src/ros/odometry_output.cpp
+    src/ros/odometry_output.cpp src/ros/levelled_velocity_pairing.cpp
   LINK ${PROJECT_NAME}_localization_session ${PROJECT_NAME}_node_ros)
 
 ism_add_ros_executable(inekf_node

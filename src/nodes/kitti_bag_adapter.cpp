@@ -11,9 +11,7 @@
 //       parent of base_link next to inekf_node's map
 //   /kitti_bag/oxts/imu  -> /kitti/oxts/imu (kitti2bag_py: levelled vectors into the body frame)
 //   /kitti_bag/oxts/gps/vel -> /kitti/oxts/gps/vel (kitti2bag_py: levelled (vf, vl, vu) -> map
-//       with the heading of the IMU message of the same stamp: a velocity that arrives before
-//       that message (a separate connection) waits for it, no longer; dropped only while no IMU
-//       message comes at all, beyond 50 waiting)
+//       with the heading of the IMU message of the same stamp, ros/levelled_velocity_pairing.h)
 //   /kitti_bag/camera_color_left/camera_info -> /kitti/camera_color_left/camera_info
 //       (kitti2bag_py: the rectified camera, baseline once)
 //
@@ -23,23 +21,17 @@
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
-#include <rosbag/bag.h>
-#include <rosbag/view.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Imu.h>
 #include <tf2_msgs/TFMessage.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
 
-#include <cmath>
-#include <deque>
-#include <limits>
-#include <map>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
+#include "inekf_semantic_mapping/ros/levelled_velocity_pairing.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
 #include "inekf_semantic_mapping/ros/node_parameters.h"
@@ -56,54 +48,6 @@ constexpr char kRawTfStatic[] = "/kitti_bag/tf_static";
 constexpr char kRawImu[] = "/kitti_bag/oxts/imu";
 constexpr char kRawGpsVelocity[] = "/kitti_bag/oxts/gps/vel";
 constexpr char kRawCameraInfo[] = "/kitti_bag/camera_color_left/camera_info";
-// How many /tf + /tf_static messages of the bag file are read to learn its frames (the frames
-// of both conventions are all in the first frame's messages).
-constexpr int kTfMessagesToRead = 200;
-
-struct BagStart {
-  conv::BagContents contents;
-  std::vector<geometry_msgs::TransformStamped> first_static;  // the first of each pair
-};
-
-BagStart readBagStart(const std::string& path) {
-  BagStart start;
-  start.contents.path = path;
-  rosbag::Bag bag(path, rosbag::bagmode::Read);
-  rosbag::View all(bag);
-  for (const rosbag::ConnectionInfo* connection : all.getConnections()) {
-    start.contents.topic_types[connection->topic] = connection->datatype;
-  }
-  rosbag::View tf(bag, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
-  int read = 0;
-  for (const rosbag::MessageInstance& instance : tf) {
-    if (++read > kTfMessagesToRead) break;
-    const auto message = instance.instantiate<tf2_msgs::TFMessage>();
-    if (!message) {
-      throw std::runtime_error("bag " + path + ": topic " + instance.getTopic() + " is " +
-                               instance.getDataType() + ", expected tf2_msgs/TFMessage");
-    }
-    const bool is_static = instance.getTopic() == "/tf_static";
-    for (const geometry_msgs::TransformStamped& transform : message->transforms) {
-      const std::pair<std::string, std::string> pair{transform.header.frame_id,
-                                                     transform.child_frame_id};
-      if (is_static) {
-        if (start.contents.static_frames.insert(pair).second) {
-          start.first_static.push_back(transform);
-        }
-      } else {
-        start.contents.dynamic_frames.insert(pair);
-      }
-    }
-  }
-  return start;
-}
-
-bool sameTransform(const geometry_msgs::Transform& a, const geometry_msgs::Transform& b) {
-  return a.translation.x == b.translation.x && a.translation.y == b.translation.y &&
-         a.translation.z == b.translation.z && a.rotation.x == b.rotation.x &&
-         a.rotation.y == b.rotation.y && a.rotation.z == b.rotation.z &&
-         a.rotation.w == b.rotation.w;
-}
 
 class KittiBagAdapter {
  public:
@@ -114,7 +58,7 @@ class KittiBagAdapter {
     parameters.read("convention", &convention);
     parameters.rejectUnknown();
     if (bag_path.empty()) parameters.fail("bag", "is not set (the bag kitti_bag.launch plays)");
-    const BagStart start = readBagStart(bag_path);
+    const conv::BagStart start = conv::readBagStart(bag_path);
     if (convention == "auto") {
       convention_ = conv::detectBagConvention(start.contents);
     } else {
@@ -145,24 +89,14 @@ class KittiBagAdapter {
  private:
   bool levelled() const { return convention_ == BagConvention::kKitti2bagPy; }
 
-  // Sends the static transforms again only when one is new or changed: the Python kitti2bag
-  // re-publishes them with every frame.
+  // Sends the static transforms again only when one is new or changed.
   void addStatic(const std::vector<geometry_msgs::TransformStamped>& transforms) {
-    std::vector<geometry_msgs::TransformStamped> changed;
-    for (const geometry_msgs::TransformStamped& transform : transforms) {
-      const std::pair<std::string, std::string> key{transform.header.frame_id,
-                                                    transform.child_frame_id};
-      const auto found = static_.find(key);
-      if (found != static_.end() && sameTransform(found->second.transform, transform.transform)) {
-        continue;
-      }
-      static_[key] = transform;
-      changed.push_back(transform);
-      if (key == std::pair<std::string, std::string>{frames::kBaseLink, frames::kImu}) {
-        T_imu_base_ = conv::toIsometry(transform.transform).inverse();
-      }
+    const std::vector<geometry_msgs::TransformStamped> changed = static_.add(transforms);
+    if (changed.empty()) return;
+    if (const auto* base_imu = static_.find(frames::kBaseLink, frames::kImu)) {
+      T_imu_base_ = conv::toIsometry(base_imu->transform).inverse();
     }
-    if (!changed.empty()) static_broadcaster_.sendTransform(changed);
+    static_broadcaster_.sendTransform(changed);
   }
 
   void onTfStatic(const tf2_msgs::TFMessage& message) { addStatic(message.transforms); }
@@ -194,19 +128,9 @@ class KittiBagAdapter {
                                                              "into the body frame, dropped");
       return;
     }
-    if (!orientations_.empty() && message.header.stamp < orientations_.back().first) {
-      // The bag looped (or the player restarted): the old orientations are of another time, and
-      // velocities waiting from before the jump will never be reached.
-      orientations_.clear();
-      while (!pending_velocities_.empty() && pending_velocities_.front().header.stamp >
-                                                 message.header.stamp + ros::Duration(kLoopJumpS)) {
-        pending_velocities_.pop_front();
-      }
-    }
-    orientations_.emplace_back(message.header.stamp, *conv::imuOrientation(message));
-    while (orientations_.size() > 200) orientations_.pop_front();
     imu_publisher_.publish(*body);
-    releaseVelocities();
+    publishVelocities(
+        pairing_.addOrientation(message.header.stamp, *conv::imuOrientation(message)));
   }
 
   void onVelocity(const geometry_msgs::TwistStamped& message) {
@@ -214,42 +138,19 @@ class KittiBagAdapter {
       velocity_publisher_.publish(message);
       return;
     }
-    // Its levelled vector needs the heading of its instant (the bag writes IMU and gps/vel with
-    // equal stamps), which travels on the IMU's connection: rosbag play's messages of one
-    // instant can arrive in either order. Dropping a velocity that came first (as before) could
-    // lose the first frame's, and inekf_node's start waits for it: the start came a frame later.
-    if (!pending_velocities_.empty() &&
-        message.header.stamp < pending_velocities_.back().header.stamp) {
-      pending_velocities_.clear();  // the bag looped: those wait for an IMU of another time
-    }
-    pending_velocities_.push_back(message);
-    releaseVelocities();
-    while (pending_velocities_.size() > kMaxPendingVelocities) {
+    const std::size_t dropped_before = pairing_.dropped();
+    publishVelocities(pairing_.addVelocity(message));
+    if (pairing_.dropped() > dropped_before) {
       ROS_WARN_STREAM_THROTTLE(5.0, "kitti_bag_adapter: no IMU orientation on "
                                         << kRawImu << " up to the stamp of " << kRawGpsVelocity
-                                        << " at " << pending_velocities_.front().header.stamp
+                                        << " at " << pairing_.lastDroppedStamp()
                                         << ": dropped (its levelled velocity needs the heading)");
-      pending_velocities_.pop_front();
     }
   }
 
-  // Publishes the waiting velocities the IMU has reached (an orientation at or after their
-  // stamp), each with the orientation nearest to its stamp (the same stamp on KITTI).
-  void releaseVelocities() {
-    while (!pending_velocities_.empty() && !orientations_.empty() &&
-           pending_velocities_.front().header.stamp <= orientations_.back().first) {
-      const geometry_msgs::TwistStamped& velocity = pending_velocities_.front();
-      const Eigen::Matrix3d* R_map_body = &orientations_.back().second;
-      double nearest_s = std::numeric_limits<double>::infinity();
-      for (const auto& [stamp, rotation] : orientations_) {
-        const double gap_s = std::abs((stamp - velocity.header.stamp).toSec());
-        if (gap_s < nearest_s) {
-          nearest_s = gap_s;
-          R_map_body = &rotation;
-        }
-      }
-      velocity_publisher_.publish(conv::velocityLevelledToMap(velocity, *R_map_body, frames::kMap));
-      pending_velocities_.pop_front();
+  void publishVelocities(const std::vector<geometry_msgs::TwistStamped>& velocities) {
+    for (const geometry_msgs::TwistStamped& velocity : velocities) {
+      velocity_publisher_.publish(velocity);
     }
   }
 
@@ -268,12 +169,8 @@ class KittiBagAdapter {
 
   BagConvention convention_ = BagConvention::kIsm;
   Eigen::Isometry3d T_imu_base_ = Eigen::Isometry3d::Identity();
-  std::map<std::pair<std::string, std::string>, geometry_msgs::TransformStamped> static_;
-  std::deque<std::pair<ros::Time, Eigen::Matrix3d>> orientations_;
-  // Levelled velocities waiting for the IMU orientation of their stamp (releaseVelocities).
-  static constexpr std::size_t kMaxPendingVelocities = 50;
-  static constexpr double kLoopJumpS = 1.0;  // waiting velocities this much newer: another loop
-  std::deque<geometry_msgs::TwistStamped> pending_velocities_;
+  conv::StaticTransformSet static_;
+  conv::LevelledVelocityPairing pairing_{frames::kMap};
   ros::Publisher imu_publisher_, velocity_publisher_, camera_info_publisher_,
       ground_truth_publisher_;
   std::vector<ros::Subscriber> subscribers_;
@@ -286,6 +183,8 @@ class KittiBagAdapter {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "kitti_bag_adapter");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start would print nothing.
   ros::NodeHandle nh;
   ros::NodeHandle private_nh("~");
   try {

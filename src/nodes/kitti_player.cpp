@@ -3,20 +3,20 @@
 // publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml; any
 // other private parameter, or one of the wrong type, stops the player naming it.
 #include <ros/ros.h>
-#include <rosgraph_msgs/Clock.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 
+#include <algorithm>
 #include <atomic>
-#include <mutex>
+#include <memory>
 #include <sstream>
-#include <thread>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
+#include "inekf_semantic_mapping/ros/drive_publishers.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
-#include "inekf_semantic_mapping/ros/names.h"
 #include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
@@ -25,23 +25,6 @@ namespace {
 namespace conv = ros_conversions;
 using kitti::DriveSensor;
 
-kitti::GpsDegradationOptions readGpsOptions(common::YamlReader* reader) {
-  kitti::GpsDegradationOptions options;
-  reader->read("gps_sigma_horizontal_m", &options.sigma_horizontal_m);
-  reader->read("gps_sigma_vertical_m", &options.sigma_vertical_m);
-  reader->read("gps_every_n_frames", &options.every_n_frames);
-  int seed = 0;
-  reader->read("gps_seed", &seed);
-  options.seed = static_cast<std::uint64_t>(seed);
-  std::vector<std::string> outages;
-  reader->read("gps_outages", &outages);  // ["START:DURATION", ...] seconds since first frame
-  for (const std::string& outage : outages) {
-    options.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(outage));
-  }
-  options.validate();
-  return options;
-}
-
 // How long the player stays up after the last message when ~exit_when_done is set.
 constexpr double kExitFlushSeconds = 1.0;
 
@@ -49,27 +32,10 @@ class KittiPlayer {
  public:
   KittiPlayer(ros::NodeHandle& nh, ros::NodeHandle& pnh) : pnh_(pnh) {
     common::YamlReader parameters = conv::privateParameterReader(pnh);
-    std::string drive_dir, calib_dir;
-    bool paused = false;
-    parameters.read("drive_dir", &drive_dir);
-    parameters.read("calib_dir", &calib_dir);
-    parameters.read("rate", &rate_);
-    parameters.read("start_offset_s", &timeline_options_.start_offset_s);
-    parameters.read("duration_s", &timeline_options_.duration_s);
-    parameters.read("loop", &loop_);
-    parameters.read("publish_clock", &publish_clock_);
-    parameters.read("exit_when_done", &exit_when_done_);
-    parameters.read("paused", &paused);
-    parameters.read("publish_velodyne", &timeline_options_.velodyne);
-    parameters.read("publish_camera", &timeline_options_.cameras[2]);
-    const kitti::GpsDegradationOptions gps = readGpsOptions(&parameters);
-    parameters.rejectUnknown();
-    if (drive_dir.empty()) parameters.fail("drive_dir", "is required (a <date>_drive_<n>_sync)");
-    if (!(rate_ > 0)) parameters.fail("rate", "must be > 0");
-    paused_ = paused;
-
-    drive_ = std::make_unique<kitti::RawDrive>(drive_dir, calib_dir);
-    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, gps);
+    options_ = conv::readKittiPlayerOptions(&parameters);
+    paused_ = options_.paused;
+    drive_ = std::make_unique<kitti::RawDrive>(options_.drive_dir, options_.calib_dir);
+    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, options_.gps);
     const auto missing = drive_->missingParts();
     if (!missing.empty()) {
       std::ostringstream text;
@@ -79,29 +45,19 @@ class KittiPlayer {
     }
     if (drive_->hasCamera(2) && !drive_->hasCalibration()) {
       ROS_WARN("kitti_player: image_02 present but no calibration: camera not published");
-      timeline_options_.cameras[2] = false;
+      options_.timeline.cameras[2] = false;
     }
-    timeline_ = kitti::buildDriveTimeline(*drive_, timeline_options_);
+    timeline_ = kitti::buildDriveTimeline(*drive_, options_.timeline);
     if (timeline_.empty()) throw std::invalid_argument("nothing to play in the chosen window");
-    conv::checkTimelineFitsRosTime(drive_dir, timeline_.front().stamp_ns,
+    conv::checkTimelineFitsRosTime(options_.drive_dir, timeline_.front().stamp_ns,
                                    timeline_.back().stamp_ns);
-
-    imu_pub_ = nh.advertise<sensor_msgs::Imu>(topics::kImu, 200);
-    fix_pub_ = nh.advertise<sensor_msgs::NavSatFix>(topics::kGpsFix, 50);
-    velocity_pub_ = nh.advertise<geometry_msgs::TwistStamped>(topics::kGpsVelocity, 50);
-    ground_truth_pub_ = nh.advertise<nav_msgs::Odometry>(topics::kGroundTruthOdometry, 50);
-    if (drive_->hasVelodyne() && timeline_options_.velodyne) {
-      velodyne_pub_ = nh.advertise<sensor_msgs::PointCloud2>(topics::kVelodyne, 5);
-    }
-    if (timeline_options_.cameras[2] && drive_->hasCamera(2)) {
-      image_pub_ = nh.advertise<sensor_msgs::Image>(topics::kCameraColorLeftImage, 5);
-      camera_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>(topics::kCameraColorLeftInfo, 5);
-    }
-    if (publish_clock_) clock_pub_ = nh.advertise<rosgraph_msgs::Clock>("/clock", 100);
+    publishers_ = std::make_unique<conv::DrivePublishers>(nh, factory_.get(), options_.timeline,
+                                                          options_.publish_clock);
     pause_service_ = pnh.advertiseService("pause", &KittiPlayer::onPause, this);
     step_service_ = pnh.advertiseService("step", &KittiPlayer::onStep, this);
-    ROS_INFO("kitti_player: %s, %zu events over %.1f s at rate %.2f%s%s", drive_dir.c_str(),
-             timeline_.size(), spanSeconds(), rate_, loop_ ? ", looping" : "",
+    ROS_INFO("kitti_player: %s, %zu events over %.1f s at rate %.2f%s%s",
+             options_.drive_dir.c_str(), timeline_.size(), spanSeconds(), options_.rate,
+             options_.loop ? ", looping" : "",
              paused_ ? ", PAUSED (call ~pause false or ~step)" : "");
   }
 
@@ -111,10 +67,10 @@ class KittiPlayer {
     do {
       factory_->restart();
       if (!playOnce()) return;
-      if (loop_) ROS_INFO("kitti_player: end of drive, looping");
-    } while (loop_ && ros::ok());
-    ROS_INFO("kitti_player: finished (%zu events)", published_events_);
-    if (!exit_when_done_) {
+      if (options_.loop) ROS_INFO("kitti_player: end of drive, looping");
+    } while (options_.loop && ros::ok());
+    ROS_INFO("kitti_player: finished (%zu events)", publishers_->published());
+    if (!options_.exit_when_done) {
       ros::waitForShutdown();
       return;
     }
@@ -169,73 +125,29 @@ class KittiPlayer {
         }
         if (stepping) break;
         const ros::WallTime due =
-            wall_anchor +
-            ros::WallDuration(kitti::secondsBetween(data_anchor_ns, event.stamp_ns) / rate_);
+            wall_anchor + ros::WallDuration(kitti::secondsBetween(data_anchor_ns, event.stamp_ns) /
+                                            options_.rate);
         const ros::WallTime now = ros::WallTime::now();
         if (now >= due) break;
         ros::WallDuration(std::min((due - now).toSec(), 0.01)).sleep();
       }
-      publish(event);
+      publishers_->publish(event);
       if (stepping && event.sensor == DriveSensor::kOxts) stepping = false;
       ROS_INFO_THROTTLE(5.0, "kitti_player: %.1f / %.1f s, %zu events published",
                         kitti::secondsBetween(timeline_.front().stamp_ns, event.stamp_ns),
-                        spanSeconds(), published_events_);
+                        spanSeconds(), publishers_->published());
     }
     return true;
   }
 
-  void publish(const kitti::TimelineEvent& event) {
-    const ros::Time stamp = conv::toRosTime(event.stamp_ns);
-    if (publish_clock_) {
-      rosgraph_msgs::Clock clock;
-      clock.clock = stamp;
-      clock_pub_.publish(clock);
-    }
-    try {
-      switch (event.sensor) {
-        case DriveSensor::kOxts: {
-          ScopedTimer timer("kitti_player/oxts");
-          const conv::OxtsMessages messages = factory_->oxtsMessages(event.frame);
-          imu_pub_.publish(messages.imu);
-          if (messages.gps_fix) fix_pub_.publish(*messages.gps_fix);
-          velocity_pub_.publish(messages.gps_velocity);
-          ground_truth_pub_.publish(messages.ground_truth);
-          break;
-        }
-        case DriveSensor::kVelodyne: {
-          ScopedTimer timer("kitti_player/velodyne");
-          velodyne_pub_.publish(factory_->velodyneMessage(event.frame));
-          break;
-        }
-        case DriveSensor::kCamera2: {
-          ScopedTimer timer("kitti_player/camera");
-          const auto [image, info] = factory_->cameraMessages(2, event.frame);
-          image_pub_.publish(image);
-          camera_info_pub_.publish(info);
-          break;
-        }
-        default:
-          break;
-      }
-      ++published_events_;
-    } catch (const std::exception& error) {
-      // One bad file must not stop the replay: report it and go on with the next frame.
-      ROS_ERROR_STREAM("kitti_player: skipping frame " << event.frame << ": " << error.what());
-    }
-  }
-
   ros::NodeHandle pnh_;
-  double rate_ = 1.0;
-  bool loop_ = false, publish_clock_ = false, exit_when_done_ = false;
+  conv::KittiPlayerOptions options_;
   std::atomic<bool> paused_{false};
   std::atomic<int> pending_steps_{0};
-  kitti::TimelineOptions timeline_options_;
   std::unique_ptr<kitti::RawDrive> drive_;
   std::unique_ptr<conv::DriveMessageFactory> factory_;
   std::vector<kitti::TimelineEvent> timeline_;
-  std::size_t published_events_ = 0;
-  ros::Publisher imu_pub_, fix_pub_, velocity_pub_, ground_truth_pub_, velodyne_pub_, image_pub_,
-      camera_info_pub_, clock_pub_;
+  std::unique_ptr<conv::DrivePublishers> publishers_;
   ros::ServiceServer pause_service_, step_service_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
 };
