@@ -75,11 +75,12 @@ void SemanticMappingConfig::validate() const {
 }
 
 const std::vector<std::string>& semanticMappingNodeKeys() {
+  // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does.
   static const std::vector<std::string> keys = {
       "map_frame",    "marker_rate",   "max_display_cpu_fraction",
       "marker_depth", "calib_dir",     "camera_index",
       "map_file",     "autosave_path", "autosave_period_s",
-      "log_period_s", "grid.*"};  // grid.*: readGridProjectionConfig checks it
+      "log_period_s", "grid.*",        "diagnostics.*"};
   return keys;
 }
 

@@ -1,23 +1,14 @@
 // kitti_bag_adapter: lets kitti_bag.launch play a KITTI bag of either convention unchanged
 // (ros/kitti_bag_conventions.h): this package's kitti2bag ("ism") or the Python kitti2bag
-// (tomas789/kitti2bag, "kitti2bag_py"). kitti_bag.launch plays the bag with /tf, /tf_static,
-// the IMU, gps/vel and camera_info remapped under /kitti_bag/; this node reads the bag file
-// first (its topics and tf frames: the convention, or a clear error when it fits neither), then
-// republishes them in this package's convention:
-//   /kitti_bag/tf_static -> tf static (latched; sent again only when a transform changes, and
-//       already before the bag plays: the bag's first static transforms are read from the file)
-//   /kitti_bag/tf        -> /tf, except kitti2bag_py's world -> base_link (the OXTS pose), which
-//       becomes /kitti/oxts/ground_truth (nav_msgs/Odometry of base_link in map): never a second
-//       parent of base_link next to inekf_node's map
-//   /kitti_bag/oxts/imu  -> /kitti/oxts/imu (kitti2bag_py: levelled vectors into the body frame)
-//   /kitti_bag/oxts/gps/vel -> /kitti/oxts/gps/vel (kitti2bag_py: levelled (vf, vl, vu) -> map
-//       with the heading of the IMU message of the same stamp, ros/levelled_velocity_pairing.h)
-//   /kitti_bag/camera_color_left/camera_info -> /kitti/camera_color_left/camera_info
-//       (kitti2bag_py: the rectified camera, baseline once)
-//
-// Parameters (private): bag (string, required), convention (auto | ism | kitti2bag_py, auto);
-// any other, or one of the wrong type, stops the node naming it.
-// Exits with an error naming the bag, the topic and what was expected when the bag fits neither.
+// (tomas789/kitti2bag, "kitti2bag_py"). The bag plays with /tf, /tf_static, the IMU, gps/vel and
+// camera_info remapped under /kitti_bag/; this node reads the bag file first (the convention, or
+// an error naming the bag, the topic and what was expected), then republishes them: tf_static
+// latched and only when a transform changes; /tf, less kitti2bag_py's world -> base_link (the
+// OXTS pose), which becomes the ground-truth odometry instead of a second parent of base_link;
+// for kitti2bag_py the levelled IMU vectors in the body frame, the levelled velocity in map axes
+// with the heading of its own instant (ros/levelled_velocity_pairing.h), the rectified camera.
+// Parameters (private): bag (required), convention (auto | ism | kitti2bag_py; auto); any other
+// stops the node naming it. /diagnostics: convention, play rate, forwarded and dropped messages.
 #include <geometry_msgs/TwistStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
@@ -30,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/ros/diagnostics.h"
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/levelled_velocity_pairing.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
@@ -51,7 +43,7 @@ constexpr char kRawCameraInfo[] = "/kitti_bag/camera_color_left/camera_info";
 
 class KittiBagAdapter {
  public:
-  KittiBagAdapter(ros::NodeHandle& nh, ros::NodeHandle& private_nh) {
+  KittiBagAdapter(ros::NodeHandle& nh, ros::NodeHandle& private_nh) : diagnostics_(nh, private_nh) {
     common::YamlReader parameters = conv::privateParameterReader(private_nh);
     std::string bag_path, convention = "auto";
     parameters.read("bag", &bag_path);
@@ -69,7 +61,11 @@ class KittiBagAdapter {
                                           << conv::bagConventionName(convention_)
                                           << (convention == "auto" ? " (detected)" : " (chosen)"));
     addStatic(start.first_static);
-
+    diagnostics_.add("bag adapter", [this, bag_path](auto& status) {
+      playback_.fill(conv::wallNow(), 0.0, &status);
+      status.add("bag convention", conv::bagConventionName(convention_));
+      status.add("bag", bag_path);
+    });
     imu_publisher_ = nh.advertise<sensor_msgs::Imu>(topics::kImu, 400);
     velocity_publisher_ = nh.advertise<geometry_msgs::TwistStamped>(topics::kGpsVelocity, 50);
     camera_info_publisher_ = nh.advertise<sensor_msgs::CameraInfo>(topics::kCameraColorLeftInfo, 5);
@@ -115,6 +111,7 @@ class KittiBagAdapter {
   }
 
   void onImu(const sensor_msgs::Imu& message) {
+    playback_.noteData(message.header.stamp.toSec(), conv::wallNow(), "published imu");
     if (!levelled()) {
       imu_publisher_.publish(message);
       return;
@@ -126,6 +123,7 @@ class KittiBagAdapter {
                                                           << " has no usable orientation: its "
                                                              "levelled vectors cannot be turned "
                                                              "into the body frame, dropped");
+      playback_.count("dropped imu", conv::wallNow());
       return;
     }
     imu_publisher_.publish(*body);
@@ -141,6 +139,7 @@ class KittiBagAdapter {
     const std::size_t dropped_before = pairing_.dropped();
     publishVelocities(pairing_.addVelocity(message));
     if (pairing_.dropped() > dropped_before) {
+      playback_.count("dropped velocity", conv::wallNow(), pairing_.dropped() - dropped_before);
       ROS_WARN_STREAM_THROTTLE(5.0, "kitti_bag_adapter: no IMU orientation on "
                                         << kRawImu << " up to the stamp of " << kRawGpsVelocity
                                         << " at " << pairing_.lastDroppedStamp()
@@ -164,6 +163,7 @@ class KittiBagAdapter {
     } catch (const std::exception& error) {
       ROS_WARN_STREAM_THROTTLE(
           5.0, "kitti_bag_adapter: " << kRawCameraInfo << ": " << error.what() << ", dropped");
+      playback_.count("dropped camera_info", conv::wallNow());
     }
   }
 
@@ -176,6 +176,8 @@ class KittiBagAdapter {
   std::vector<ros::Subscriber> subscribers_;
   tf2_ros::TransformBroadcaster broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
+  conv::PlaybackMonitor playback_{10.0, {"dropped imu", "dropped velocity", "dropped camera_info"}};
+  conv::NodeDiagnostics diagnostics_;
 };
 
 }  // namespace

@@ -1,7 +1,8 @@
 // kitti_player: publishes a KITTI raw drive (OXTS IMU/GPS, ground truth, velodyne, color
 // camera, /tf_static) at `~rate` times real time, paced by WALL time so that it can itself
 // publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml; any
-// other private parameter, or one of the wrong type, stops the player naming it.
+// other private parameter, or one of the wrong type, stops the player naming it. /diagnostics:
+// the play rate against the requested one, events published, frames skipped (unreadable files).
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -15,6 +16,7 @@
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
 #include "inekf_semantic_mapping/ros/drive_publishers.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
 #include "inekf_semantic_mapping/ros/node_parameters.h"
@@ -55,6 +57,13 @@ class KittiPlayer {
                                                           options_.publish_clock);
     pause_service_ = pnh.advertiseService("pause", &KittiPlayer::onPause, this);
     step_service_ = pnh.advertiseService("step", &KittiPlayer::onStep, this);
+    diagnostics_ = std::make_unique<conv::NodeDiagnostics>(nh, pnh);
+    diagnostics_->add("player", [this](auto& status) {
+      playback_.fill(conv::wallNow(), paused_ ? 0.0 : options_.rate, &status);
+      if (paused_) status.summary(diagnostic_msgs::DiagnosticStatus::OK, "paused");
+      status.add("drive", options_.drive_dir);
+      status.add("paused", paused_ ? "yes" : "no");
+    });
     ROS_INFO("kitti_player: %s, %zu events over %.1f s at rate %.2f%s%s",
              options_.drive_dir.c_str(), timeline_.size(), spanSeconds(), options_.rate,
              options_.loop ? ", looping" : "",
@@ -131,7 +140,9 @@ class KittiPlayer {
         if (now >= due) break;
         ros::WallDuration(std::min((due - now).toSec(), 0.01)).sleep();
       }
-      publishers_->publish(event);
+      const bool published = publishers_->publish(event);
+      playback_.noteData(kitti::secondsBetween(0, event.stamp_ns), conv::wallNow(),
+                         published ? "published events" : "dropped frames (unreadable)");
       if (stepping && event.sensor == DriveSensor::kOxts) stepping = false;
       ROS_INFO_THROTTLE(5.0, "kitti_player: %.1f / %.1f s, %zu events published",
                         kitti::secondsBetween(timeline_.front().stamp_ns, event.stamp_ns),
@@ -149,6 +160,8 @@ class KittiPlayer {
   std::vector<kitti::TimelineEvent> timeline_;
   std::unique_ptr<conv::DrivePublishers> publishers_;
   ros::ServiceServer pause_service_, step_service_;
+  conv::PlaybackMonitor playback_{10.0, {"published events", "dropped frames (unreadable)"}};
+  std::unique_ptr<conv::NodeDiagnostics> diagnostics_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
 };
 

@@ -46,7 +46,9 @@ std::string parameterSource(const ros::NodeHandle& private_nh) {
 }
 
 common::YamlReader privateParameterReader(const ros::NodeHandle& private_nh) {
-  return common::YamlReader(parameterSource(private_nh), privateParametersAsYaml(private_nh));
+  common::YamlReader reader(parameterSource(private_nh), privateParametersAsYaml(private_nh));
+  reader.allow("diagnostic_period");  // diagnostic_updater's own (ros/diagnostics.h)
+  return reader;
 }
 
 }  // namespace ros_conversions

@@ -40,6 +40,16 @@ TEST(YamlReader, UnknownAndMistypedKeysNameTheKey) {
             std::string::npos);
 }
 
+TEST(YamlReader, AMissingSectionIsAnEmptyMap) {
+  const YAML::Node root = YAML::Load("resolution: 0.2");
+  const YAML::Node& const_root = root;  // operator[] of a const map: an invalid node
+  YamlReader reader("test, diagnostics", const_root["diagnostics"]);
+  double window_s = 10.0;
+  reader.read("window_s", &window_s);
+  EXPECT_EQ(window_s, 10.0);
+  EXPECT_NO_THROW(reader.rejectUnknown());
+}
+
 TEST(YamlReader, HasMarksTheKeyRead) {
   YamlReader reader("test", YAML::Load("origin_lat: 49.0"));
   EXPECT_TRUE(reader.has("origin_lat"));

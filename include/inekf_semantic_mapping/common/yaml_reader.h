@@ -20,7 +20,7 @@ class ConfigError : public std::invalid_argument {
 
 class YamlReader {
  public:
-  // `root` must be a map (or null: an empty file).
+  // `root` must be a map (or null: an empty file; or missing: a section that is not there).
   YamlReader(std::string source, YAML::Node root);
   // Parses a file; throws ConfigError naming it when it cannot be read or is not a YAML map.
   static YamlReader fromFile(const std::string& path);
