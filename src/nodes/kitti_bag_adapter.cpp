@@ -35,11 +35,11 @@ namespace conv = ros_conversions;
 using conv::BagConvention;
 
 // The remapped inputs (kitti_bag.launch remaps rosbag play's topics here).
-constexpr char kRawTf[] = "/kitti_bag/tf";
-constexpr char kRawTfStatic[] = "/kitti_bag/tf_static";
-constexpr char kRawImu[] = "/kitti_bag/oxts/imu";
-constexpr char kRawGpsVelocity[] = "/kitti_bag/oxts/gps/vel";
-constexpr char kRawCameraInfo[] = "/kitti_bag/camera_color_left/camera_info";
+constexpr const char* kRawTf = topics::kBagTf;
+constexpr const char* kRawTfStatic = topics::kBagTfStatic;
+constexpr const char* kRawImu = topics::kBagImu;
+constexpr const char* kRawGpsVelocity = topics::kBagGpsVelocity;
+constexpr const char* kRawCameraInfo = topics::kBagCameraInfo;
 
 class KittiBagAdapter {
  public:

@@ -91,8 +91,8 @@ BagConvention bagConventionFromString(const std::string& name) {
 }
 
 BagConvention detectBagConvention(const BagContents& bag) {
-  requireTopic(bag, topics::kImu, "sensor_msgs/Imu");
-  requireTopic(bag, topics::kGpsFix, "sensor_msgs/NavSatFix");
+  requireTopic(bag, bag_topics::kImu, "sensor_msgs/Imu");
+  requireTopic(bag, bag_topics::kGpsFix, "sensor_msgs/NavSatFix");
   const auto parents = dynamicParentsOfBase(bag);
   if (parents.count({kWorld, frames::kBaseLink})) return BagConvention::kKitti2bagPy;
   if (!parents.empty()) {
@@ -108,8 +108,8 @@ BagConvention detectBagConvention(const BagContents& bag) {
 }
 
 void checkBagConvention(const BagContents& bag, BagConvention convention) {
-  requireTopic(bag, topics::kImu, "sensor_msgs/Imu");
-  requireTopic(bag, topics::kGpsFix, "sensor_msgs/NavSatFix");
+  requireTopic(bag, bag_topics::kImu, "sensor_msgs/Imu");
+  requireTopic(bag, bag_topics::kGpsFix, "sensor_msgs/NavSatFix");
   const auto parents = dynamicParentsOfBase(bag);
   if (convention == BagConvention::kIsm && !parents.empty()) {
     throw std::runtime_error("bag " + bag.path + " played as bag_convention ism, but its /tf " +
