@@ -3,3 +3,9 @@
 ism_add_core_library(${PROJECT_NAME}_common
   SOURCES src/common/yaml_reader.cpp
   LINK yaml-cpp)
+
+# Every node's private parameters through the strict reader (ros/node_parameters.h).
+ism_add_ros_library(${PROJECT_NAME}_node_ros
+  SOURCES src/ros/node_parameters.cpp src/ros/diagnostics.cpp
+  LINK ${PROJECT_NAME}_common yaml-cpp)
+ism_add_gtest(test_yaml_reader SOURCES test/unit/test_yaml_reader.cpp LINK ${PROJECT_NAME}_common)

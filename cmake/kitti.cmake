@@ -17,8 +17,8 @@ ism_add_gtest(test_kitti_gps_degradation
 
 # KITTI -> ROS message conversions shared by kitti_player and kitti2bag (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_kitti_ros
-  SOURCES src/ros/kitti_conversions.cpp
-  LINK ${PROJECT_NAME}_kitti opencv_core opencv_imgcodecs
+  SOURCES src/ros/kitti_conversions.cpp src/ros/drive_publishers.cpp
+  LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_node_ros opencv_core opencv_imgcodecs
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
 ism_add_ros_executable(kitti_player SOURCES src/nodes/kitti_player.cpp

@@ -5,8 +5,9 @@
 # and its test; with the bag conventions kitti_bag_adapter turns into the nodes' one.
 ism_add_ros_library(${PROJECT_NAME}_localization_ros
   SOURCES src/ros/localization_conversions.cpp src/ros/kitti_bag_conventions.cpp
-    src/ros/odometry_output.cpp
-  LINK ${PROJECT_NAME}_localization_session)
+    src/ros/odometry_output.cpp src/ros/levelled_velocity_pairing.cpp
+    src/ros/localization_diagnostics.cpp
+  LINK ${PROJECT_NAME}_localization_session ${PROJECT_NAME}_node_ros)
 
 ism_add_ros_executable(inekf_node
   SOURCES src/nodes/inekf_node.cpp
@@ -34,6 +35,8 @@ if(CATKIN_ENABLE_TESTING)
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   add_rostest(test/ros/inekf_node_robustness.test
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+  # /diagnostics without fixes: WARN, then ERROR (seconds).
+  add_rostest(test/ros/inekf_node_diagnostics.test DEPENDENCIES inekf_node)
   add_rostest(test/ros/inekf_node_kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR}
     DEPENDENCIES inekf_node kitti_player ${PROJECT_NAME}_generate_messages_py)
 endif()

@@ -73,8 +73,8 @@ endif()
 # Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_mapping_ros
   SOURCES src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-    src/ros/label_input.cpp
-  LINK ${PROJECT_NAME}_mapping yaml-cpp)
+    src/ros/label_input.cpp src/ros/mapping_diagnostics.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_node_ros yaml-cpp)
 
 ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp

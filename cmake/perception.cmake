@@ -27,7 +27,7 @@ ism_add_gtest(test_segmenter_frame_buffer
 
 ism_add_ros_executable(segmentation_node
   SOURCES src/nodes/segmentation_node.cpp
-  LINK ${PROJECT_NAME}_perception)
+  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_node_ros)
 
 if(benchmark_FOUND)
   ism_add_tool(bench_segmentation

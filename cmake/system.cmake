@@ -10,6 +10,8 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/e2e_synthetic.test
     DEPENDENCIES ${ISM_PIPELINE_TARGETS} evaluate_map)
   add_rostest(test/ros/e2e_real_oxts.test DEPENDENCIES kitti2bag inekf_node)
+  # Two pipelines in two namespaces on one master, each on its own bag (occupancy only).
+  add_rostest(test/ros/two_pipelines.test DEPENDENCIES ${ISM_PIPELINE_TARGETS})
   # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
   add_rostest(test/ros/e2e_real_drive.test
     DEPENDENCIES kitti2bag inekf_node segmentation_node semantic_octomap_node)

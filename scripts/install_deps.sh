@@ -19,6 +19,9 @@ PACKAGES=(
   libvisualization-msgs-dev ros-visualization-msgs python3-visualization-msgs
   libstd-srvs-dev ros-std-srvs python3-std-srvs
   libros-rosgraph-msgs-dev ros-rosgraph-msgs python3-rosgraph-msgs
+  libdiagnostic-msgs-dev ros-diagnostic-msgs python3-diagnostic-msgs
+  # /diagnostics of every node (diagnostic_updater)
+  libdiagnostic-updater-dev
   # tf, bags, sync, images, clouds
   libtf2-ros-dev python3-tf2-ros tf2-tools libtf2-eigen-dev libtf2-geometry-msgs-dev
   librosbag-dev python3-rosbag libmessage-filters-dev

@@ -7,12 +7,15 @@
 namespace inekf_semantic_mapping {
 namespace common {
 
-YamlReader::YamlReader(std::string source, YAML::Node root)
-    : source_(std::move(source)), root_(std::move(root)) {
-  if (root_.IsNull() || !root_.IsDefined()) {
-    root_ = YAML::Node(YAML::NodeType::Map);
-  } else if (!root_.IsMap()) {
+YamlReader::YamlReader(std::string source, YAML::Node root) : source_(std::move(source)) {
+  // IsDefined first and reset(), not operator=: a missing section of a const map is an invalid
+  // node, which throws on IsNull and on assignment (and assigning would write into `root`).
+  if (!root.IsDefined() || root.IsNull()) {
+    root_.reset(YAML::Node(YAML::NodeType::Map));
+  } else if (!root.IsMap()) {
     throw ConfigError(source_ + ": expected a map of keys to values at the top level");
+  } else {
+    root_.reset(root);
   }
 }
 
@@ -108,6 +111,12 @@ void YamlReader::read(const std::string& key, std::vector<std::string>* out) {
 }
 
 void YamlReader::allow(const std::string& key) { used_.insert(key); }
+
+void YamlReader::renamed(const std::string& old_key, const std::string& new_key) {
+  if (lookup(old_key).IsDefined()) fail(old_key, "was renamed to '" + new_key + "'");
+}
+
+bool YamlReader::has(const std::string& key) { return lookup(key).IsDefined(); }
 
 void YamlReader::collectKeys(const YAML::Node& node, const std::string& prefix,
                              std::vector<std::string>* keys) const {

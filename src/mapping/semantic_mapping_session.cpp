@@ -48,7 +48,7 @@ void require(bool ok, const std::string& key, const std::string& what) {
 
 void SemanticMappingConfig::validate() const {
   require(resolution_m > 0 && resolution_m <= 100, "resolution", "must be in (0, 100] m");
-  require(max_range_m >= 0, "max_range", "must be >= 0 (0: unlimited)");
+  require(max_range_m >= 0, "max_range_m", "must be >= 0 (0: unlimited)");
   require(prob_hit > 0.5 && prob_hit < 1, "sensor_model.hit", "must be in (0.5, 1)");
   require(prob_miss > 0 && prob_miss < 0.5, "sensor_model.miss", "must be in (0, 0.5)");
   require(clamping_min > 0 && clamping_min < clamping_max && clamping_max < 1,
@@ -68,18 +68,30 @@ void SemanticMappingConfig::validate() const {
           "label_geometry.max_flat_height", "must be in (0, 10] m");
   require(label_geometry_min_raised_height_m >= 0 && label_geometry_min_raised_height_m <= 10,
           "label_geometry.min_raised_height", "must be in [0, 10] m");
-  require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance",
+  require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance_s",
           "must be in [0, 1] s");
-  require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait", "must be in [0, 30] s");
-  require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait", "must be in [0, 30] s");
+  require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait_s", "must be in [0, 30] s");
+  require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait_s", "must be in [0, 30] s");
 }
 
 const std::vector<std::string>& semanticMappingNodeKeys() {
+  // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does.
   static const std::vector<std::string> keys = {
       "map_frame",    "marker_rate",   "max_display_cpu_fraction",
       "marker_depth", "calib_dir",     "camera_index",
-      "map_file",     "autosave_path", "autosave_period",
-      "log_period",   "grid.*"};  // grid.*: readGridProjectionConfig checks it
+      "map_file",     "autosave_path", "autosave_period_s",
+      "log_period_s", "grid.*",        "diagnostics.*"};
+  return keys;
+}
+
+const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKeys() {
+  static const std::vector<std::pair<std::string, std::string>> keys = {
+      {"max_range", "max_range_m"},
+      {"label_stamp_tolerance", "label_stamp_tolerance_s"},
+      {"label_wait", "label_wait_s"},
+      {"pose_wait", "pose_wait_s"},
+      {"autosave_period", "autosave_period_s"},
+      {"log_period", "log_period_s"}};
   return keys;
 }
 
@@ -87,7 +99,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   common::YamlReader reader(source, root);
   SemanticMappingConfig config;
   reader.read("resolution", &config.resolution_m);
-  reader.read("max_range", &config.max_range_m);
+  reader.read("max_range_m", &config.max_range_m);
   reader.read("sensor_model.hit", &config.prob_hit);
   reader.read("sensor_model.miss", &config.prob_miss);
   reader.read("sensor_model.clamping_min", &config.clamping_min);
@@ -116,9 +128,13 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("label_geometry.high_terrain_is_vegetation",
               &config.label_geometry_high_terrain_is_vegetation);
   reader.read("label_geometry.curbs", &config.label_geometry_curbs);
-  reader.read("label_stamp_tolerance", &config.label_stamp_tolerance_s);
-  reader.read("label_wait", &config.label_wait_s);
-  reader.read("pose_wait", &config.pose_wait_s);
+  reader.read("label_stamp_tolerance_s", &config.label_stamp_tolerance_s);
+  reader.read("label_wait_s", &config.label_wait_s);
+  reader.read("pose_wait_s", &config.pose_wait_s);
+  // Times and lengths carry their unit in the name; the old names fail with the new one.
+  for (const auto& [old_key, new_key] : renamedSemanticMappingKeys()) {
+    reader.renamed(old_key, new_key);
+  }
   for (const std::string& key : semanticMappingNodeKeys()) reader.allow(key);
   reader.rejectUnknown();
   try {

@@ -6,7 +6,7 @@
 //
 // Parameters (private):
 //   config_file (string, default $(find inekf_semantic_mapping)/config/inekf.yaml)
-//   filter | filter_type (string, left | right | ekf; overrides the config file)
+//   filter (string, left | right | ekf; overrides the config file; filter_type is refused)
 //   init_orientation_from_imu (bool; overrides init_orientation_from_reference)
 //   origin_lat, origin_lon, origin_alt (double; all three or none: the map origin, else the first
 //     usable fix)
@@ -17,22 +17,31 @@
 //     pose; odometry and tf are of base_frame, through the static base_frame -> imu_frame of tf
 //     (identity, with one warning, while tf has none: a bag whose IMU is the body)
 //   max_path_length (5000 poses), path_publish_period_s (1.0)
+//   diagnostics/* (over the config file's node.diagnostics.*, ros/localization_diagnostics.h)
+// /diagnostics: one status at 1 Hz (filter state, input rates, fix age and rejections, sigmas).
+// Any other private parameter, or one of the wrong type, stops the node naming it
+// (ros/node_parameters.h).
 #include <geometry_msgs/TwistStamped.h>
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
+#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <string>
 
 #include "inekf_semantic_mapping/FilterStatus.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/estimation/localization_session.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
+#include "inekf_semantic_mapping/ros/localization_diagnostics.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 #include "inekf_semantic_mapping/ros/odometry_output.h"
 
 namespace inekf_semantic_mapping {
@@ -40,13 +49,46 @@ namespace {
 
 using estimation::LocalizationSession;
 
+// Every private parameter, read (and checked) before anything is advertised.
+struct InekfNodeParameters {
+  std::string config_file;
+  estimation::LocalizationSessionConfig session;
+  ros_conversions::OdometryOutputOptions output;
+  ros_conversions::LocalizationDiagnosticsOptions diagnostics;
+};
+
+InekfNodeParameters readParameters(const ros::NodeHandle& private_nh) {
+  common::YamlReader reader = ros_conversions::privateParameterReader(private_nh);
+  InekfNodeParameters parameters;
+  parameters.session = ros_conversions::sessionConfigFromParameters(
+      &reader, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
+      &parameters.config_file);
+  parameters.output = ros_conversions::readOdometryOutputOptions(&reader);
+  if (std::filesystem::is_regular_file(parameters.config_file)) {
+    // The config file's node-only section (LocalizationSessionConfig leaves it alone).
+    common::YamlReader file(parameters.config_file + " (section node)",
+                            YAML::LoadFile(parameters.config_file)["node"]);
+    ros_conversions::readLocalizationDiagnosticsOptions(&file, "diagnostics.",
+                                                        &parameters.diagnostics);
+    file.rejectUnknown();
+  }
+  ros_conversions::readLocalizationDiagnosticsOptions(&reader, "diagnostics.",
+                                                      &parameters.diagnostics);
+  reader.rejectUnknown();
+  return parameters;
+}
+
 class InekfNode {
  public:
-  InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
-      : session_(ros_conversions::sessionConfigFromParameters(
-            private_nh, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
-            &config_file_)),
-        output_(nh, private_nh) {
+  InekfNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh, const InekfNodeParameters& parameters)
+      : config_file_(parameters.config_file),
+        session_(parameters.session),
+        output_(nh, parameters.output),
+        monitor_(parameters.diagnostics),
+        diagnostics_(nh, private_nh) {
+    diagnostics_.add("localization", [this](auto& status) {
+      monitor_.fill(session_, ros_conversions::wallNow(), &status);
+    });
     status_publisher_ = nh.advertise<FilterStatus>(topics::kFilterStatus, 10);
     imu_subscriber_ = nh.subscribe(topics::kImu, 400, &InekfNode::onImu, this,
                                    ros::TransportHints().tcpNoDelay());
@@ -105,6 +147,7 @@ class InekfNode {
     output_.noteImuFrame(message->header.frame_id);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(ros_conversions::imuEvent(*message)); });
+    monitor_.noteImu(message->header.stamp.toSec(), ros_conversions::wallNow(), session_);
   }
 
   void onFix(const sensor_msgs::NavSatFix::ConstPtr& message) {
@@ -124,6 +167,7 @@ class InekfNode {
     while (recent_fix_stamps_.size() > kRecentFixStamps) recent_fix_stamps_.pop_front();
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(ros_conversions::fixEvent(*message)); });
+    monitor_.noteFix(message->header.stamp.toSec(), ros_conversions::wallNow(), session_);
   }
 
   void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
@@ -169,6 +213,8 @@ class InekfNode {
   std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received (startStamp)
   ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
+  ros_conversions::LocalizationMonitor monitor_;
+  ros_conversions::NodeDiagnostics diagnostics_;
 };
 
 }  // namespace
@@ -176,10 +222,13 @@ class InekfNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "inekf_node");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start (a bad parameter) would print nothing.
   ros::NodeHandle nh;
   ros::NodeHandle private_nh("~");
   try {
-    inekf_semantic_mapping::InekfNode node(nh, private_nh);
+    inekf_semantic_mapping::InekfNode node(nh, private_nh,
+                                           inekf_semantic_mapping::readParameters(private_nh));
     ros::spin();
   } catch (const std::exception& error) {
     ROS_FATAL_STREAM("inekf_node: " << error.what());

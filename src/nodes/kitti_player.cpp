@@ -1,21 +1,25 @@
 // kitti_player: publishes a KITTI raw drive (OXTS IMU/GPS, ground truth, velodyne, color
 // camera, /tf_static) at `~rate` times real time, paced by WALL time so that it can itself
-// publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml.
+// publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml; any
+// other private parameter, or one of the wrong type, stops the player naming it. /diagnostics:
+// the play rate against the requested one, events published, frames skipped (unreadable files).
 #include <ros/ros.h>
-#include <rosgraph_msgs/Clock.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 
+#include <algorithm>
 #include <atomic>
-#include <mutex>
+#include <memory>
 #include <sstream>
-#include <thread>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
+#include "inekf_semantic_mapping/ros/drive_publishers.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
-#include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -23,49 +27,17 @@ namespace {
 namespace conv = ros_conversions;
 using kitti::DriveSensor;
 
-kitti::GpsDegradationOptions readGpsOptions(ros::NodeHandle& pnh) {
-  kitti::GpsDegradationOptions options;
-  pnh.param("gps_sigma_horizontal_m", options.sigma_horizontal_m, 0.0);
-  pnh.param("gps_sigma_vertical_m", options.sigma_vertical_m, 0.0);
-  pnh.param("gps_every_n_frames", options.every_n_frames, 1);
-  int seed = 0;
-  pnh.param("gps_seed", seed, 0);
-  options.seed = static_cast<std::uint64_t>(seed);
-  std::vector<std::string> outages;
-  pnh.param("gps_outages", outages, {});  // ["START:DURATION", ...] seconds since first frame
-  for (const std::string& outage : outages) {
-    options.outages_s.push_back(kitti::GpsDegradationOptions::parseOutage(outage));
-  }
-  options.validate();
-  return options;
-}
-
 // How long the player stays up after the last message when ~exit_when_done is set.
 constexpr double kExitFlushSeconds = 1.0;
 
 class KittiPlayer {
  public:
   KittiPlayer(ros::NodeHandle& nh, ros::NodeHandle& pnh) : pnh_(pnh) {
-    std::string drive_dir, calib_dir;
-    if (!pnh.getParam("drive_dir", drive_dir) || drive_dir.empty()) {
-      throw std::invalid_argument("parameter ~drive_dir is required (a <date>_drive_<n>_sync)");
-    }
-    pnh.param<std::string>("calib_dir", calib_dir, "");
-    pnh.param("rate", rate_, 1.0);
-    if (!(rate_ > 0)) throw std::invalid_argument("~rate must be > 0");
-    pnh.param("start_offset_s", timeline_options_.start_offset_s, 0.0);
-    pnh.param("duration_s", timeline_options_.duration_s, 0.0);
-    pnh.param("loop", loop_, false);
-    pnh.param("publish_clock", publish_clock_, false);
-    pnh.param("exit_when_done", exit_when_done_, false);
-    bool paused = false;
-    pnh.param("paused", paused, false);
-    paused_ = paused;
-    pnh.param("publish_velodyne", timeline_options_.velodyne, true);
-    pnh.param("publish_camera", timeline_options_.cameras[2], true);
-
-    drive_ = std::make_unique<kitti::RawDrive>(drive_dir, calib_dir);
-    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, readGpsOptions(pnh));
+    common::YamlReader parameters = conv::privateParameterReader(pnh);
+    options_ = conv::readKittiPlayerOptions(&parameters);
+    paused_ = options_.paused;
+    drive_ = std::make_unique<kitti::RawDrive>(options_.drive_dir, options_.calib_dir);
+    factory_ = std::make_unique<conv::DriveMessageFactory>(*drive_, options_.gps);
     const auto missing = drive_->missingParts();
     if (!missing.empty()) {
       std::ostringstream text;
@@ -75,29 +47,26 @@ class KittiPlayer {
     }
     if (drive_->hasCamera(2) && !drive_->hasCalibration()) {
       ROS_WARN("kitti_player: image_02 present but no calibration: camera not published");
-      timeline_options_.cameras[2] = false;
+      options_.timeline.cameras[2] = false;
     }
-    timeline_ = kitti::buildDriveTimeline(*drive_, timeline_options_);
+    timeline_ = kitti::buildDriveTimeline(*drive_, options_.timeline);
     if (timeline_.empty()) throw std::invalid_argument("nothing to play in the chosen window");
-    conv::checkTimelineFitsRosTime(drive_dir, timeline_.front().stamp_ns,
+    conv::checkTimelineFitsRosTime(options_.drive_dir, timeline_.front().stamp_ns,
                                    timeline_.back().stamp_ns);
-
-    imu_pub_ = nh.advertise<sensor_msgs::Imu>(topics::kImu, 200);
-    fix_pub_ = nh.advertise<sensor_msgs::NavSatFix>(topics::kGpsFix, 50);
-    velocity_pub_ = nh.advertise<geometry_msgs::TwistStamped>(topics::kGpsVelocity, 50);
-    ground_truth_pub_ = nh.advertise<nav_msgs::Odometry>(topics::kGroundTruthOdometry, 50);
-    if (drive_->hasVelodyne() && timeline_options_.velodyne) {
-      velodyne_pub_ = nh.advertise<sensor_msgs::PointCloud2>(topics::kVelodyne, 5);
-    }
-    if (timeline_options_.cameras[2] && drive_->hasCamera(2)) {
-      image_pub_ = nh.advertise<sensor_msgs::Image>(topics::kCameraColorLeftImage, 5);
-      camera_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>(topics::kCameraColorLeftInfo, 5);
-    }
-    if (publish_clock_) clock_pub_ = nh.advertise<rosgraph_msgs::Clock>("/clock", 100);
+    publishers_ = std::make_unique<conv::DrivePublishers>(nh, factory_.get(), options_.timeline,
+                                                          options_.publish_clock);
     pause_service_ = pnh.advertiseService("pause", &KittiPlayer::onPause, this);
     step_service_ = pnh.advertiseService("step", &KittiPlayer::onStep, this);
-    ROS_INFO("kitti_player: %s, %zu events over %.1f s at rate %.2f%s%s", drive_dir.c_str(),
-             timeline_.size(), spanSeconds(), rate_, loop_ ? ", looping" : "",
+    diagnostics_ = std::make_unique<conv::NodeDiagnostics>(nh, pnh);
+    diagnostics_->add("player", [this](auto& status) {
+      playback_.fill(conv::wallNow(), paused_ ? 0.0 : options_.rate, &status);
+      if (paused_) status.summary(diagnostic_msgs::DiagnosticStatus::OK, "paused");
+      status.add("drive", options_.drive_dir);
+      status.add("paused", paused_ ? "yes" : "no");
+    });
+    ROS_INFO("kitti_player: %s, %zu events over %.1f s at rate %.2f%s%s",
+             options_.drive_dir.c_str(), timeline_.size(), spanSeconds(), options_.rate,
+             options_.loop ? ", looping" : "",
              paused_ ? ", PAUSED (call ~pause false or ~step)" : "");
   }
 
@@ -107,10 +76,10 @@ class KittiPlayer {
     do {
       factory_->restart();
       if (!playOnce()) return;
-      if (loop_) ROS_INFO("kitti_player: end of drive, looping");
-    } while (loop_ && ros::ok());
-    ROS_INFO("kitti_player: finished (%zu events)", published_events_);
-    if (!exit_when_done_) {
+      if (options_.loop) ROS_INFO("kitti_player: end of drive, looping");
+    } while (options_.loop && ros::ok());
+    ROS_INFO("kitti_player: finished (%zu events)", publishers_->published());
+    if (!options_.exit_when_done) {
       ros::waitForShutdown();
       return;
     }
@@ -165,74 +134,34 @@ class KittiPlayer {
         }
         if (stepping) break;
         const ros::WallTime due =
-            wall_anchor +
-            ros::WallDuration(kitti::secondsBetween(data_anchor_ns, event.stamp_ns) / rate_);
+            wall_anchor + ros::WallDuration(kitti::secondsBetween(data_anchor_ns, event.stamp_ns) /
+                                            options_.rate);
         const ros::WallTime now = ros::WallTime::now();
         if (now >= due) break;
         ros::WallDuration(std::min((due - now).toSec(), 0.01)).sleep();
       }
-      publish(event);
+      const bool published = publishers_->publish(event);
+      playback_.noteData(kitti::secondsBetween(0, event.stamp_ns), conv::wallNow(),
+                         published ? "published events" : "dropped frames (unreadable)");
       if (stepping && event.sensor == DriveSensor::kOxts) stepping = false;
       ROS_INFO_THROTTLE(5.0, "kitti_player: %.1f / %.1f s, %zu events published",
                         kitti::secondsBetween(timeline_.front().stamp_ns, event.stamp_ns),
-                        spanSeconds(), published_events_);
+                        spanSeconds(), publishers_->published());
     }
     return true;
   }
 
-  void publish(const kitti::TimelineEvent& event) {
-    const ros::Time stamp = conv::toRosTime(event.stamp_ns);
-    if (publish_clock_) {
-      rosgraph_msgs::Clock clock;
-      clock.clock = stamp;
-      clock_pub_.publish(clock);
-    }
-    try {
-      switch (event.sensor) {
-        case DriveSensor::kOxts: {
-          ScopedTimer timer("kitti_player/oxts");
-          const conv::OxtsMessages messages = factory_->oxtsMessages(event.frame);
-          imu_pub_.publish(messages.imu);
-          if (messages.gps_fix) fix_pub_.publish(*messages.gps_fix);
-          velocity_pub_.publish(messages.gps_velocity);
-          ground_truth_pub_.publish(messages.ground_truth);
-          break;
-        }
-        case DriveSensor::kVelodyne: {
-          ScopedTimer timer("kitti_player/velodyne");
-          velodyne_pub_.publish(factory_->velodyneMessage(event.frame));
-          break;
-        }
-        case DriveSensor::kCamera2: {
-          ScopedTimer timer("kitti_player/camera");
-          const auto [image, info] = factory_->cameraMessages(2, event.frame);
-          image_pub_.publish(image);
-          camera_info_pub_.publish(info);
-          break;
-        }
-        default:
-          break;
-      }
-      ++published_events_;
-    } catch (const std::exception& error) {
-      // One bad file must not stop the replay: report it and go on with the next frame.
-      ROS_ERROR_STREAM("kitti_player: skipping frame " << event.frame << ": " << error.what());
-    }
-  }
-
   ros::NodeHandle pnh_;
-  double rate_ = 1.0;
-  bool loop_ = false, publish_clock_ = false, exit_when_done_ = false;
+  conv::KittiPlayerOptions options_;
   std::atomic<bool> paused_{false};
   std::atomic<int> pending_steps_{0};
-  kitti::TimelineOptions timeline_options_;
   std::unique_ptr<kitti::RawDrive> drive_;
   std::unique_ptr<conv::DriveMessageFactory> factory_;
   std::vector<kitti::TimelineEvent> timeline_;
-  std::size_t published_events_ = 0;
-  ros::Publisher imu_pub_, fix_pub_, velocity_pub_, ground_truth_pub_, velodyne_pub_, image_pub_,
-      camera_info_pub_, clock_pub_;
+  std::unique_ptr<conv::DrivePublishers> publishers_;
   ros::ServiceServer pause_service_, step_service_;
+  conv::PlaybackMonitor playback_{10.0, {"published events", "dropped frames (unreadable)"}};
+  std::unique_ptr<conv::NodeDiagnostics> diagnostics_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
 };
 
@@ -241,6 +170,8 @@ class KittiPlayer {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "kitti_player");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a player that could not start would print nothing.
   ros::NodeHandle nh, pnh("~");
   // Services are served on their own thread while the main thread paces the replay.
   ros::AsyncSpinner spinner(1);

@@ -5,7 +5,9 @@
 // is slower than the camera, stale frames are dropped (and counted) instead of queueing latency.
 //
 // Parameters (~, see config/segmentation.yaml): model, model_card ("" = the model's default
-// card), image_topic, publish_overlay, overlay_alpha, num_threads, rate_log_period_s.
+// card), image_topic, publish_overlay, overlay_alpha, num_threads, rate_log_period_s. Any other
+// private parameter, or one of the wrong type, stops the node naming it (ros/node_parameters.h).
+// /diagnostics: model, input size, frame rate, latency, dropped stale and failed frames.
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
@@ -14,6 +16,7 @@
 #include <atomic>
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <thread>
@@ -22,7 +25,9 @@
 #include "inekf_semantic_mapping/perception/latest_frame_buffer.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -36,16 +41,22 @@ struct Frame {
 
 class SegmentationNode {
  public:
-  SegmentationNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : transport_(nh) {
-    const std::string model = pnh.param<std::string>("model", "");
-    const std::string card_path = pnh.param<std::string>("model_card", "");
-    const std::string image_topic =
-        pnh.param<std::string>("image_topic", topics::kCameraColorLeftImage);
-    publish_overlay_ = pnh.param("publish_overlay", true);
-    overlay_alpha_ = pnh.param("overlay_alpha", 0.5);
-    const int num_threads = pnh.param("num_threads", 2);
-    rate_log_period_s_ = pnh.param("rate_log_period_s", 10.0);
-    if (model.empty()) throw std::runtime_error("parameter ~model is not set");
+  SegmentationNode(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : transport_(nh), diagnostics_(nh, pnh) {
+    common::YamlReader parameters = ros_conversions::privateParameterReader(pnh);
+    std::string model, card_path, image_topic = topics::kCameraColorLeftImage;
+    int num_threads = 2;
+    parameters.read("model", &model);
+    parameters.read("model_card", &card_path);
+    parameters.read("image_topic", &image_topic);
+    parameters.read("publish_overlay", &publish_overlay_);
+    parameters.read("overlay_alpha", &overlay_alpha_);
+    parameters.read("num_threads", &num_threads);
+    parameters.read("rate_log_period_s", &rate_log_period_s_);
+    parameters.read("diagnostics.latency_warn_s", &latency_warn_s_);
+    parameters.allow("image_transport");  // image_transport's own choice of transport
+    parameters.rejectUnknown();
+    if (model.empty()) parameters.fail("model", "is not set (the segmentation network)");
 
     const perception::ModelCard card = card_path.empty() ? perception::defaultModelCardFor(model)
                                                          : perception::loadModelCard(card_path);
@@ -54,6 +65,7 @@ class SegmentationNode {
                     << model << ", card " << card.source << " (" << card.numOutputChannels()
                     << " classes, " << perception::resizePolicyName(card.resize_policy) << ")");
 
+    diagnostics_.add("segmentation", [this, model](auto& status) { fillStatus(model, &status); });
     labels_publisher_ = transport_.advertise(topics::kSegmentationLabels, 1);
     overlay_publisher_ = transport_.advertise(topics::kSegmentationOverlay, 1);
     worker_ = std::thread([this] { inferenceLoop(); });
@@ -101,15 +113,22 @@ class SegmentationNode {
     double inference_s_since_log = 0.0;
     while (std::optional<Frame> frame = frames_.take()) {
       const auto start = std::chrono::steady_clock::now();
+      bool ok = false;
       try {
         segmentAndPublish(*frame);
+        ok = true;
       } catch (const std::exception& e) {
         ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: frame at "
                                            << frame->header.stamp << " (" << frame->image.cols
                                            << "x" << frame->image.rows << "): " << e.what());
       }
       const auto now = std::chrono::steady_clock::now();
-      inference_s_since_log += std::chrono::duration<double>(now - start).count();
+      const double frame_s = std::chrono::duration<double>(now - start).count();
+      {
+        std::lock_guard<std::mutex> lock(window_mutex_);
+        (ok ? frames_done_ : frames_failed_).add(ros_conversions::wallNow(), frame_s);
+      }
+      inference_s_since_log += frame_s;
       ++processed_since_log;
       const double since_log_s = std::chrono::duration<double>(now - last_log).count();
       if (since_log_s >= rate_log_period_s_) {
@@ -126,6 +145,39 @@ class SegmentationNode {
         inference_s_since_log = 0.0;
       }
     }
+  }
+
+  // Level: every frame of the window failed: ERROR; latency p95 above diagnostics/latency_warn_s
+  // or some frames failed: WARN. Dropping stale frames is the design (the newest frame wins).
+  void fillStatus(const std::string& model, diagnostic_updater::DiagnosticStatusWrapper* status) {
+    std::lock_guard<std::mutex> lock(window_mutex_);
+    const double now = ros_conversions::wallNow();
+    frames_done_.expire(now);
+    frames_failed_.expire(now);
+    const double p95_s = frames_done_.percentile(0.95);
+    using diagnostic_msgs::DiagnosticStatus;
+    if (frames_failed_.count() > 0 && frames_done_.count() == 0) {
+      status->summary(DiagnosticStatus::ERROR, "every frame failed");
+    } else if (frames_failed_.count() > 0) {
+      status->summary(DiagnosticStatus::WARN, "some frames failed");
+    } else if (p95_s > latency_warn_s_) {
+      status->summary(DiagnosticStatus::WARN, "slow: latency p95 above the limit");
+    } else {
+      status->summary(DiagnosticStatus::OK,
+                      frames_.putCount() == 0 ? "waiting for images" : "segmenting");
+    }
+    const perception::ModelCard& card = segmenter_->card();
+    status->add("model", model);
+    status->add("input size", std::to_string(card.input_width) + "x" +
+                                  std::to_string(card.input_height) + " (" +
+                                  perception::resizePolicyName(card.resize_policy) + ")");
+    status->add("image topic", image_subscriber_.getTopic());
+    status->addf("frame rate (Hz)", "%.2f", frames_done_.rateOverWindowHz(now));
+    status->addf("latency mean (ms)", "%.1f", 1e3 * frames_done_.mean());
+    status->addf("latency p95 (ms)", "%.1f", 1e3 * p95_s);
+    status->add("frames received", frames_.putCount());
+    status->add("dropped stale frames", frames_.droppedCount());
+    status->add("failed frames in window", frames_failed_.count());
   }
 
   void segmentAndPublish(const Frame& frame) {
@@ -154,6 +206,10 @@ class SegmentationNode {
   bool publish_overlay_ = true;
   double overlay_alpha_ = 0.5;
   double rate_log_period_s_ = 10.0;
+  double latency_warn_s_ = 2.0;
+  std::mutex window_mutex_;  // the windows: written by the worker, read by the diagnostics
+  ros_conversions::EventWindow frames_done_, frames_failed_;  // wall time, latency (s)
+  ros_conversions::NodeDiagnostics diagnostics_;
 };
 
 }  // namespace
@@ -161,6 +217,8 @@ class SegmentationNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "segmentation_node");
+  // Held outside the try: when the last NodeHandle goes, roscpp shuts rosconsole down, and the
+  // fatal message of a node that could not start would print nothing.
   ros::NodeHandle nh;
   ros::NodeHandle pnh("~");
   try {

@@ -9,8 +9,9 @@
 // Publishes /semantic_map/markers, /semantic_map/labeled_cloud, /semantic_map/info
 // (SemanticMapInfo), /semantic_map/projected_map and /semantic_map/drivable_map
 // (nav_msgs/OccupancyGrid, mapping/grid_projection.h); services ~save_map, ~load_map, ~reset;
-// ~map_file resumes from a saved map, ~autosave_path saves periodically and at shutdown.
-// Parameters: config/semantic_mapping.yaml.
+// ~map_file resumes from a saved map, ~autosave_path saves every ~autosave_period_s and at
+// shutdown. Parameters: config/semantic_mapping.yaml. /diagnostics: "map" and "labels" statuses
+// at 1 Hz (ros/mapping_diagnostics.h).
 #include <ros/ros.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
@@ -26,7 +27,9 @@
 #include "inekf_semantic_mapping/ros/map_display.h"
 #include "inekf_semantic_mapping/ros/map_services.h"
 #include "inekf_semantic_mapping/ros/mapping_conversions.h"
+#include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 #include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
 namespace {
@@ -43,13 +46,14 @@ struct NodeOptions {
   std::string autosave_path;  // saved every autosave_period and at shutdown when set
   double autosave_period_s = 30.0;
   double log_period_s = 10.0;
+  conv::MappingDiagnosticsOptions diagnostics;
 };
 
 class SemanticOctomapNode {
  public:
   SemanticOctomapNode(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
     const YAML::Node parameters = conv::privateParametersAsYaml(pnh_);
-    const std::string source = "ROS parameters of " + pnh_.getNamespace();
+    const std::string source = conv::parameterSource(pnh_);
     common::YamlReader reader(source, parameters);
     reader.read("map_frame", &options_.display.map_frame);
     reader.read("marker_rate", &options_.marker_rate_hz);
@@ -59,8 +63,13 @@ class SemanticOctomapNode {
     reader.read("camera_index", &options_.camera_index);
     reader.read("map_file", &options_.map_file);
     reader.read("autosave_path", &options_.autosave_path);
-    reader.read("autosave_period", &options_.autosave_period_s);
-    reader.read("log_period", &options_.log_period_s);
+    reader.read("autosave_period_s", &options_.autosave_period_s);
+    reader.read("log_period_s", &options_.log_period_s);
+    const YAML::Node& all = parameters;  // const: operator[] must not add the key
+    common::YamlReader diagnostics_reader(source + ", diagnostics", all["diagnostics"]);
+    conv::readMappingDiagnosticsOptions(&diagnostics_reader, &options_.diagnostics);
+    diagnostics_reader.rejectUnknown();
+    monitor_ = std::make_unique<conv::MappingMonitor>(options_.diagnostics);
     session_ = std::make_unique<mapping::SemanticMappingSession>(
         mapping::readSemanticMappingConfig(parameters, source));
     display_ = std::make_unique<conv::MapDisplay>(
@@ -74,6 +83,7 @@ class SemanticOctomapNode {
       return pose;
     });
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
+      monitor_->noteInserted(stamp, conv::wallNow());
       display_->scanInserted(scan);
       if (cloud_pub_.getNumSubscribers() == 0) return;
       cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->classSet(),
@@ -112,6 +122,16 @@ class SemanticOctomapNode {
     log_timer_ = nh_.createWallTimer(ros::WallDuration(options_.log_period_s), [this](auto&) {
       ROS_INFO_STREAM("semantic_octomap_node: " << conv::mappingStatusLine(*session_));
     });
+    diagnostics_ = std::make_unique<conv::NodeDiagnostics>(nh_, pnh_);
+    diagnostics_->add("map", [this](auto& status) {
+      monitor_->fillMap(*session_, services_->lastSave(), services_->lastAutosave(),
+                        conv::wallNow(), &status);
+    });
+    diagnostics_->add("labels", [this](auto& status) {
+      const bool expected =
+          labels_sub_.getNumPublishers() > 0 || session_->statistics().label_images_received > 0;
+      monitor_->fillLabels(*session_, expected, conv::wallNow(), &status);
+    });
     const mapping::SemanticMappingConfig& c = session_->config();
     ROS_INFO_STREAM("semantic_octomap_node: resolution "
                     << c.resolution_m << " m, max range " << c.max_range_m << " m, classes "
@@ -123,6 +143,7 @@ class SemanticOctomapNode {
     try {
       ScopedTimer timer("semantic_map/scan");
       detectClockJump();
+      monitor_->noteScan(cloud->header.stamp.toSec(), conv::wallNow());
       labels_->setLidarFrame(cloud->header.frame_id);
       if (!session_->hasCameraView()) labels_->setCameraViewOf(*session_);
       session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
@@ -136,6 +157,7 @@ class SemanticOctomapNode {
   }
 
   void onLabels(const sensor_msgs::ImageConstPtr& labels) {
+    monitor_->noteLabelImage(conv::wallNow());
     try {
       labels_->push(labels);
     } catch (const std::exception& e) {
@@ -173,12 +195,14 @@ class SemanticOctomapNode {
   NodeOptions options_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_{tf_buffer_};
+  std::unique_ptr<conv::MappingMonitor> monitor_;  // before the session: its callback notes
   std::unique_ptr<mapping::SemanticMappingSession> session_;
   std::unique_ptr<conv::MapDisplay> display_;
   std::unique_ptr<conv::LabelInput> labels_;
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher cloud_pub_;
   std::unique_ptr<conv::MapServices> services_;  // after the session: autosaves at shutdown
+  std::unique_ptr<conv::NodeDiagnostics> diagnostics_;
   ros::WallTimer clock_timer_, display_timer_, log_timer_;
   ros::Time last_clock_;
 };

@@ -1,6 +1,9 @@
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
 #include <tf2_eigen/tf2_eigen.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <cmath>
 #include <sstream>
@@ -21,6 +24,13 @@ const char kBothConventions[] =
     "/tf) or of the Python kitti2bag, tomas789/kitti2bag (/tf world -> base_link)";
 
 Eigen::Vector3d toEigen(const geometry_msgs::Vector3& v) { return {v.x, v.y, v.z}; }
+
+bool sameTransform(const geometry_msgs::Transform& a, const geometry_msgs::Transform& b) {
+  return a.translation.x == b.translation.x && a.translation.y == b.translation.y &&
+         a.translation.z == b.translation.z && a.rotation.x == b.rotation.x &&
+         a.rotation.y == b.rotation.y && a.rotation.z == b.rotation.z &&
+         a.rotation.w == b.rotation.w;
+}
 
 geometry_msgs::Vector3 toVector3(const Eigen::Vector3d& v) {
   geometry_msgs::Vector3 out;
@@ -81,8 +91,8 @@ BagConvention bagConventionFromString(const std::string& name) {
 }
 
 BagConvention detectBagConvention(const BagContents& bag) {
-  requireTopic(bag, topics::kImu, "sensor_msgs/Imu");
-  requireTopic(bag, topics::kGpsFix, "sensor_msgs/NavSatFix");
+  requireTopic(bag, bag_topics::kImu, "sensor_msgs/Imu");
+  requireTopic(bag, bag_topics::kGpsFix, "sensor_msgs/NavSatFix");
   const auto parents = dynamicParentsOfBase(bag);
   if (parents.count({kWorld, frames::kBaseLink})) return BagConvention::kKitti2bagPy;
   if (!parents.empty()) {
@@ -98,8 +108,8 @@ BagConvention detectBagConvention(const BagContents& bag) {
 }
 
 void checkBagConvention(const BagContents& bag, BagConvention convention) {
-  requireTopic(bag, topics::kImu, "sensor_msgs/Imu");
-  requireTopic(bag, topics::kGpsFix, "sensor_msgs/NavSatFix");
+  requireTopic(bag, bag_topics::kImu, "sensor_msgs/Imu");
+  requireTopic(bag, bag_topics::kGpsFix, "sensor_msgs/NavSatFix");
   const auto parents = dynamicParentsOfBase(bag);
   if (convention == BagConvention::kIsm && !parents.empty()) {
     throw std::runtime_error("bag " + bag.path + " played as bag_convention ism, but its /tf " +
@@ -185,6 +195,61 @@ nav_msgs::Odometry groundTruthOfBase(const geometry_msgs::TransformStamped& worl
   odometry.child_frame_id = base_frame;
   odometry.pose.pose = tf2::toMsg(T_map_base);
   return odometry;
+}
+
+BagStart readBagStart(const std::string& path) {
+  BagStart start;
+  start.contents.path = path;
+  rosbag::Bag bag(path, rosbag::bagmode::Read);
+  rosbag::View all(bag);
+  for (const rosbag::ConnectionInfo* connection : all.getConnections()) {
+    start.contents.topic_types[connection->topic] = connection->datatype;
+  }
+  rosbag::View tf(bag, rosbag::TopicQuery(std::vector<std::string>{"/tf", "/tf_static"}));
+  int read = 0;
+  for (const rosbag::MessageInstance& instance : tf) {
+    if (++read > BagStart::kTfMessagesToRead) break;
+    const auto message = instance.instantiate<tf2_msgs::TFMessage>();
+    if (!message) {
+      throw std::runtime_error("bag " + path + ": topic " + instance.getTopic() + " is " +
+                               instance.getDataType() + ", expected tf2_msgs/TFMessage");
+    }
+    const bool is_static = instance.getTopic() == "/tf_static";
+    for (const geometry_msgs::TransformStamped& transform : message->transforms) {
+      const std::pair<std::string, std::string> pair{transform.header.frame_id,
+                                                     transform.child_frame_id};
+      if (is_static) {
+        if (start.contents.static_frames.insert(pair).second) {
+          start.first_static.push_back(transform);
+        }
+      } else {
+        start.contents.dynamic_frames.insert(pair);
+      }
+    }
+  }
+  return start;
+}
+
+std::vector<geometry_msgs::TransformStamped> StaticTransformSet::add(
+    const std::vector<geometry_msgs::TransformStamped>& transforms) {
+  std::vector<geometry_msgs::TransformStamped> changed;
+  for (const geometry_msgs::TransformStamped& transform : transforms) {
+    const std::pair<std::string, std::string> key{transform.header.frame_id,
+                                                  transform.child_frame_id};
+    const auto found = transforms_.find(key);
+    if (found != transforms_.end() && sameTransform(found->second.transform, transform.transform)) {
+      continue;
+    }
+    transforms_[key] = transform;
+    changed.push_back(transform);
+  }
+  return changed;
+}
+
+const geometry_msgs::TransformStamped* StaticTransformSet::find(const std::string& parent,
+                                                                const std::string& child) const {
+  const auto found = transforms_.find({parent, child});
+  return found == transforms_.end() ? nullptr : &found->second;
 }
 
 }  // namespace ros_conversions

@@ -21,40 +21,47 @@ Eigen::Vector3d toEigen(const geometry_msgs::Vector3& v) { return {v.x, v.y, v.z
 
 }  // namespace
 
-estimation::LocalizationSessionConfig sessionConfigFromParameters(const ros::NodeHandle& nh,
+estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlReader* reader,
                                                                   const std::string& default_file,
                                                                   std::string* config_file) {
   // An explicitly given config file must load (a bad one is fatal: the error names the file and
   // the key); without the parameter a missing default file means the built-in defaults.
   estimation::LocalizationSessionConfig config;
-  if (nh.getParam("config_file", *config_file) || std::ifstream(default_file).good()) {
+  config_file->clear();
+  reader->read("config_file", config_file);
+  if (!config_file->empty() || std::ifstream(default_file).good()) {
     if (config_file->empty()) *config_file = default_file;
     config = estimation::LocalizationSessionConfig::fromYamlFile(*config_file);
   } else {
     *config_file = "built-in defaults (" + default_file + " not found)";
   }
+  // One name for the filter, the config file's own key; the other one used to be accepted too.
+  reader->renamed("filter_type", "filter");
   std::string filter;
-  if (nh.getParam("filter_type", filter) || nh.getParam("filter", filter)) {
-    config.localizer.filter_type = estimation::filterTypeFromString(filter);
+  reader->read("filter", &filter);
+  if (!filter.empty()) {
+    try {
+      config.localizer.filter_type = estimation::filterTypeFromString(filter);
+    } catch (const std::exception& error) {
+      reader->fail("filter", error.what());
+    }
   }
   estimation::LocalizerConfig& localizer = config.localizer;
-  nh.param("init_orientation_from_imu", localizer.init_orientation_from_reference,
-           localizer.init_orientation_from_reference);
-  for (const auto& [name, value] :
-       {std::pair{"min_fix_sigma_m", &localizer.min_gps_sigma_m},
-        {"default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m},
-        {"default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m},
-        {"time_jump_back_s", &config.time_jump_back_s}}) {
-    nh.param(name, *value, *value);
-  }
+  reader->read("init_orientation_from_imu", &localizer.init_orientation_from_reference);
+  reader->read("min_fix_sigma_m", &localizer.min_gps_sigma_m);
+  reader->read("default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
+  reader->read("default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
+  reader->read("time_jump_back_s", &config.time_jump_back_s);
   estimation::GeodeticOrigin origin;
-  const int origin_parts = nh.getParam("origin_lat", origin.lat_deg) +
-                           nh.getParam("origin_lon", origin.lon_deg) +
-                           nh.getParam("origin_alt", origin.alt_m);
+  const int origin_parts =
+      reader->has("origin_lat") + reader->has("origin_lon") + reader->has("origin_alt");
+  reader->read("origin_lat", &origin.lat_deg);
+  reader->read("origin_lon", &origin.lon_deg);
+  reader->read("origin_alt", &origin.alt_m);
   if (origin_parts == 3) {
     config.origin = origin;
   } else if (origin_parts != 0) {
-    throw std::invalid_argument("set all three of ~origin_lat, ~origin_lon, ~origin_alt or none");
+    reader->fail("origin_lat", "set all three of origin_lat, origin_lon, origin_alt or none");
   }
   return config;
 }

@@ -26,14 +26,18 @@ MapServices::MapServices(ros::NodeHandle& nh, ros::NodeHandle& private_nh,
 
 void MapServices::autosave() {
   if (autosave_path_.empty() || session_.statistics().scans_inserted == 0) return;
+  last_autosave_ = SaveRecord{autosave_path_, wallNow(), true, ""};
   try {
     session_.save(autosave_path_, mapping::MapFormat::kSemanticOt);
   } catch (const std::exception& e) {
+    last_autosave_.ok = false;
+    last_autosave_.error = e.what();
     ROS_ERROR_STREAM_THROTTLE(60, "semantic_octomap_node: autosave failed: " << e.what());
   }
 }
 
 bool MapServices::onSave(SaveMap::Request& request, SaveMap::Response& response) {
+  last_save_ = SaveRecord{request.path, wallNow(), true, ""};
   try {
     const mapping::MapFormat format = mapping::parseMapFormat(request.format, request.path);
     response.voxel_count = session_.save(request.path, format);
@@ -46,6 +50,8 @@ bool MapServices::onSave(SaveMap::Request& request, SaveMap::Response& response)
     response.success = false;
     response.voxel_count = 0;
     response.message = e.what();
+    last_save_.ok = false;
+    last_save_.error = e.what();
     ROS_ERROR_STREAM("semantic_octomap_node: save_map failed: " << e.what());
   }
   return true;  // the failure is in the response, the node keeps running

@@ -124,43 +124,6 @@ mapping::CameraModel cameraModelFromInfo(const sensor_msgs::CameraInfo& info,
   return camera;
 }
 
-namespace {
-
-YAML::Node toYaml(const XmlRpc::XmlRpcValue& value) {
-  // XmlRpcValue's conversions are non-const.
-  XmlRpc::XmlRpcValue& v = const_cast<XmlRpc::XmlRpcValue&>(value);
-  switch (v.getType()) {
-    case XmlRpc::XmlRpcValue::TypeBoolean:
-      return YAML::Node(static_cast<bool>(v));
-    case XmlRpc::XmlRpcValue::TypeInt:
-      return YAML::Node(static_cast<int>(v));
-    case XmlRpc::XmlRpcValue::TypeDouble:
-      return YAML::Node(static_cast<double>(v));
-    case XmlRpc::XmlRpcValue::TypeString:
-      return YAML::Node(static_cast<std::string>(v));
-    case XmlRpc::XmlRpcValue::TypeArray: {
-      YAML::Node list(YAML::NodeType::Sequence);
-      for (int i = 0; i < v.size(); ++i) list.push_back(toYaml(v[i]));
-      return list;
-    }
-    case XmlRpc::XmlRpcValue::TypeStruct: {
-      YAML::Node map(YAML::NodeType::Map);
-      for (auto it = v.begin(); it != v.end(); ++it) map[it->first] = toYaml(it->second);
-      return map;
-    }
-    default:
-      return YAML::Node(v.toXml());
-  }
-}
-
-}  // namespace
-
-YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh) {
-  XmlRpc::XmlRpcValue all;
-  if (!private_nh.getParam(private_nh.getNamespace(), all)) return YAML::Node(YAML::NodeType::Map);
-  return toYaml(all);
-}
-
 nav_msgs::OccupancyGrid occupancyGridMessage(const mapping::Grid2D& grid, const std::string& frame,
                                              const ros::Time& stamp) {
   nav_msgs::OccupancyGrid message;

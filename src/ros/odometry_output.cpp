@@ -11,14 +11,24 @@
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
-OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const ros::NodeHandle& private_nh) {
-  private_nh.param("publish_tf", publish_tf_, true);
-  private_nh.param<std::string>("map_frame", path_.header.frame_id, frames::kMap);
-  private_nh.param<std::string>("base_frame", base_frame_, frames::kBaseLink);
-  private_nh.param<std::string>("imu_frame", imu_frame_, "");
-  private_nh.param("max_path_length", max_path_length_, 5000);
-  private_nh.param("path_publish_period_s", path_publish_period_s_, 1.0);
-  max_path_length_ = std::max(max_path_length_, 1);
+OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader) {
+  OdometryOutputOptions options;
+  reader->read("publish_tf", &options.publish_tf);
+  reader->read("map_frame", &options.map_frame);
+  reader->read("base_frame", &options.base_frame);
+  reader->read("imu_frame", &options.imu_frame);
+  reader->read("max_path_length", &options.max_path_length);
+  reader->read("path_publish_period_s", &options.path_publish_period_s);
+  return options;
+}
+
+OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions& options)
+    : publish_tf_(options.publish_tf),
+      base_frame_(options.base_frame),
+      imu_frame_(options.imu_frame),
+      max_path_length_(std::max(options.max_path_length, 1)),
+      path_publish_period_s_(options.path_publish_period_s) {
+  path_.header.frame_id = options.map_frame;
   odometry_publisher_ = nh.advertise<nav_msgs::Odometry>(topics::kOdometry, 50);
   path_publisher_ = nh.advertise<nav_msgs::Path>(topics::kPath, 1, /*latch=*/true);
 }

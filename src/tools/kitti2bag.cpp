@@ -133,24 +133,24 @@ int run(const Arguments& args) {
               case kitti::DriveSensor::kOxts: {
                 ScopedTimer timer("kitti2bag/oxts");
                 const conv::OxtsMessages oxts = factory.oxtsMessages(event.frame);
-                bag.write(topics::kImu, stamp, oxts.imu);
-                if (oxts.gps_fix) bag.write(topics::kGpsFix, stamp, *oxts.gps_fix);
-                bag.write(topics::kGpsVelocity, stamp, oxts.gps_velocity);
-                bag.write(topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
+                bag.write(bag_topics::kImu, stamp, oxts.imu);
+                if (oxts.gps_fix) bag.write(bag_topics::kGpsFix, stamp, *oxts.gps_fix);
+                bag.write(bag_topics::kGpsVelocity, stamp, oxts.gps_velocity);
+                bag.write(bag_topics::kGroundTruthOdometry, stamp, oxts.ground_truth);
                 messages += oxts.gps_fix ? 4 : 3;
                 break;
               }
               case kitti::DriveSensor::kVelodyne: {
                 ScopedTimer timer("kitti2bag/velodyne");
-                bag.write(topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
+                bag.write(bag_topics::kVelodyne, stamp, factory.velodyneMessage(event.frame));
                 ++messages;
                 break;
               }
               case kitti::DriveSensor::kCamera2: {
                 ScopedTimer timer("kitti2bag/camera");
                 const auto [image, info] = factory.cameraMessages(2, event.frame);
-                bag.write(topics::kCameraColorLeftImage, stamp, image);
-                bag.write(topics::kCameraColorLeftInfo, stamp, info);
+                bag.write(bag_topics::kCameraColorLeftImage, stamp, image);
+                bag.write(bag_topics::kCameraColorLeftInfo, stamp, info);
                 messages += 2;
                 break;
               }

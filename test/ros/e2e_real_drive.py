@@ -118,7 +118,7 @@ class EndToEndRealDrive(unittest.TestCase):
             return monitor.summary()["topics"]["/segmentation/labels"]["messages"]
 
         with e2e.ClockAfterBag(bag):
-            # The last images are still being segmented, the last scans wait (label_wait, data
+            # The last images are still being segmented, the last scans wait (label_wait_s, data
             # time) for label images that will not come: wait until every scan is either in the
             # map or dropped and every label image published has reached the map node.
             def settled():

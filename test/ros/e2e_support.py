@@ -216,6 +216,38 @@ def wait_for_subscribers(topics, timeout=30.0):
     return False
 
 
+class DiagnosticsRecorder:
+    """Records /diagnostics while it lives: per status name the worst level, the fewest key/values
+    and the last message (0 OK, 1 WARN, 2 ERROR, 3 STALE)."""
+
+    def __init__(self):
+        from diagnostic_msgs.msg import DiagnosticArray
+        import threading
+        self._lock = threading.Lock()
+        self._statuses = {}
+        self._subscriber = rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_array,
+                                            queue_size=100)
+
+    def _on_array(self, array):
+        with self._lock:
+            for status in array.status:
+                if status.message == "Node starting up":
+                    continue  # diagnostic_updater's placeholder when a task is added
+                entry = self._statuses.setdefault(status.name, {
+                    "max_level": 0, "min_values": len(status.values), "messages": 0})
+                entry["max_level"] = max(entry["max_level"], ord(status.level)
+                                         if isinstance(status.level, bytes) else status.level)
+                entry["min_values"] = min(entry["min_values"], len(status.values))
+                entry["messages"] += 1
+                entry["last_message"] = status.message
+                if entry["max_level"] >= 2 and "error_message" not in entry:
+                    entry["error_message"] = status.message
+
+    def summary(self):
+        with self._lock:
+            return {name: dict(entry) for name, entry in self._statuses.items()}
+
+
 def wait_until(predicate, timeout, period=0.2):
     deadline = time.time() + timeout
     while time.time() < deadline:

@@ -49,6 +49,7 @@ class EndToEndSynthetic(unittest.TestCase):
         for topic in ("/semantic_map/drivable_map", "/semantic_map/projected_map"):
             rospy.Subscriber(topic, OccupancyGrid,
                              lambda msg, topic=topic: grids.__setitem__(topic, msg))
+        diagnostics = e2e.DiagnosticsRecorder()
         needed = ["/kitti/oxts/imu", "/kitti/oxts/gps/fix", "/kitti/velo/pointcloud",
                   "/kitti/camera_color_left/image_raw", "/segmentation/labels"]
         if not e2e.wait_for_subscribers(needed, timeout=60):
@@ -65,6 +66,7 @@ class EndToEndSynthetic(unittest.TestCase):
                 response = e2e.save_map(path, fmt)
                 results["saves"][fmt] = {"path": path, "success": response.success,
                                          "message": response.message, "voxel_count": response.voxel_count}
+        results["diagnostics"] = diagnostics.summary()
         summary = monitor.write(out_dir)
         results["monitor"] = summary
         estimate = e2e.metrics.read_tum(os.path.join(out_dir, "estimate_tum.txt"))
@@ -130,6 +132,17 @@ class EndToEndSynthetic(unittest.TestCase):
         self.assertGreaterEqual(topics["/semantic_map/labeled_cloud"]["messages"], min_fraction * scans * 0.5,
                                 messages)
         self.assertEqual(messages["dropped"].get("scans_in_bag_not_received", 0), 0, messages)
+
+    def test_every_node_reports_its_health_on_diagnostics(self):
+        statuses = self.results["diagnostics"]
+        for node in ("inekf_node", "segmentation_node", "semantic_octomap_node"):
+            mine = {name: s for name, s in statuses.items() if name.startswith("/" + node + ":")
+                    or name.startswith(node + ":")}
+            self.assertTrue(mine, "no /diagnostics status from %s: %s" % (node, sorted(statuses)))
+            for name, status in mine.items():
+                self.assertGreaterEqual(status["min_values"], 3, (name, status))
+                self.assertLess(status["max_level"], 2, "%s at ERROR during the run: %s"
+                                % (name, status))
 
     def test_saved_maps_load_back(self):
         for fmt, save in self.results["saves"].items():

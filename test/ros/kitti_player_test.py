@@ -99,6 +99,15 @@ class KittiPlayerTest(unittest.TestCase):
             time.sleep(0.05)
         return condition()
 
+    def test_a_misspelt_parameter_stops_a_second_player_with_its_name(self):
+        """Needs no ../shared: the parameters are checked before the drive is read."""
+        from strict_parameters import run_with_parameters
+        code, output = run_with_parameters("kitti_player", "misspelt_parameter_player",
+                                           {"drive_dir": "/nonexistent", "rtae": 2.0})
+        self.assertNotEqual(code, 0, output)
+        self.assertIn("rtae", output)
+        self.assertIn("misspelt_parameter_player", output)
+
     def test_synthetic_drive_with_lidar_and_camera(self):
         """Needs no ../shared: a second player on a drive the test writes, topics remapped."""
         root = tempfile.mkdtemp(prefix='ism_kitti_player_')

@@ -115,6 +115,15 @@ class SegmentationNodeTest(unittest.TestCase):
         reply, stamp = self.publish_until_answered("bgr8", "cam_after_bad", 5)
         self.check_labels(reply, stamp, "cam_after_bad")
 
+    def test_4_a_misspelt_parameter_stops_a_second_node_with_its_name(self):
+        from strict_parameters import run_with_parameters
+        code, output = run_with_parameters("segmentation_node", "misspelt_parameter_segmentation",
+                                           {"model": rospy.get_param("~model"),
+                                            "overlay_alhpa": 0.3})
+        self.assertNotEqual(code, 0, output)
+        self.assertIn("overlay_alhpa", output)
+        self.assertIn("misspelt_parameter_segmentation", output)
+
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "segmentation_node_test", SegmentationNodeTest, sys.argv)

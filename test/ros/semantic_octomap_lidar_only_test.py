@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""rostest: semantic_octomap_node maps scans when no label image comes for a whole ~label_wait
+"""rostest: semantic_octomap_node maps scans when no label image comes for a whole ~label_wait_s
 (lidar-only runs); the voxels carry no class (PLY label 0, markers 'unlabeled')."""
 import os
 import shutil

@@ -202,7 +202,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         cloud.header.frame_id = "frame_without_tf"
         self.cloud_pub.publish(cloud)
         self.labels_pub.publish(label_image(stamp))
-        # Nothing blocks on the missing pose: the scan waits (label_wait + pose_wait), then it is
+        # Nothing blocks on the missing pose: the scan waits (label_wait_s + pose_wait_s), then it is
         # dropped and counted.
         self.assertTrue(self.wait_for(lambda: self.info.scans_without_pose >= 1, timeout=10),
                         "info: %s" % self.info)

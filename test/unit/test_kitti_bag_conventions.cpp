@@ -10,6 +10,7 @@
 
 #include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
+#include "inekf_semantic_mapping/ros/levelled_velocity_pairing.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "test_data.h"
 
@@ -302,6 +303,59 @@ TEST(KittiBagConventions, ABagOfNeitherConventionIsAClearError) {
   EXPECT_NE(error.find("world -> base_link"), std::string::npos) << error;
   error = errorOf([&] { conv::checkBagConvention(ismBag(), conv::BagConvention::kKitti2bagPy); });
   EXPECT_NE(error.find("no world -> base_link"), std::string::npos) << error;
+}
+
+geometry_msgs::TwistStamped levelledVelocity(double stamp_s, double forward_mps) {
+  geometry_msgs::TwistStamped velocity;
+  velocity.header.stamp = ros::Time(stamp_s);
+  velocity.header.frame_id = "imu_link";
+  velocity.twist.linear.x = forward_mps;
+  return velocity;
+}
+
+// kitti_bag_adapter's pairing of a levelled velocity with the heading of its own instant,
+// whichever of the two messages arrives first.
+TEST(LevelledVelocityPairing, AVelocityTakesTheHeadingOfItsOwnStampInEitherOrder) {
+  const Eigen::Matrix3d east = rpy(0, 0, 0), north = rpy(0, 0, M_PI / 2);
+  conv::LevelledVelocityPairing pairing("map");
+  // The IMU first: the velocity leaves at once, with that instant's heading.
+  EXPECT_TRUE(pairing.addOrientation(ros::Time(10.0), east).empty());
+  auto released = pairing.addVelocity(levelledVelocity(10.0, 5.0));
+  ASSERT_EQ(released.size(), 1u);
+  EXPECT_NEAR(released[0].twist.linear.x, 5.0, 1e-12);
+  EXPECT_EQ(released[0].header.frame_id, "map");
+  // The velocity first: it waits for the IMU message of its stamp, not the previous one's.
+  EXPECT_TRUE(pairing.addVelocity(levelledVelocity(10.1, 5.0)).empty());
+  EXPECT_EQ(pairing.pending(), 1u);
+  released = pairing.addOrientation(ros::Time(10.1), north);
+  ASSERT_EQ(released.size(), 1u);
+  EXPECT_NEAR(released[0].twist.linear.y, 5.0, 1e-12);
+  EXPECT_NEAR(released[0].twist.linear.x, 0.0, 1e-12);
+  EXPECT_EQ(pairing.pending(), 0u);
+  EXPECT_EQ(pairing.dropped(), 0u);
+}
+
+TEST(LevelledVelocityPairing, WithoutAnyImuOnlyTheNewestVelocitiesWait) {
+  conv::LevelledVelocityPairing pairing("map");
+  const std::size_t extra = 7;
+  for (std::size_t i = 0; i < conv::LevelledVelocityPairing::kMaxPendingVelocities + extra; ++i) {
+    EXPECT_TRUE(pairing.addVelocity(levelledVelocity(1.0 + 0.1 * i, 1.0)).empty());
+  }
+  EXPECT_EQ(pairing.pending(), conv::LevelledVelocityPairing::kMaxPendingVelocities);
+  EXPECT_EQ(pairing.dropped(), extra);
+  EXPECT_NEAR(pairing.lastDroppedStamp().toSec(), 1.0 + 0.1 * (extra - 1), 1e-6);
+}
+
+TEST(LevelledVelocityPairing, ABagLoopForgetsTheOtherTimeline) {
+  conv::LevelledVelocityPairing pairing("map");
+  pairing.addOrientation(ros::Time(100.0), rpy(0, 0, 0));
+  // A velocity of the old timeline's future waits...
+  EXPECT_TRUE(pairing.addVelocity(levelledVelocity(100.5, 1.0)).empty());
+  // ... and is forgotten when the IMU jumps back more than kLoopJumpS before it.
+  EXPECT_TRUE(pairing.addOrientation(ros::Time(10.0), rpy(0, 0, 0)).empty());
+  EXPECT_EQ(pairing.pending(), 0u);
+  // The new timeline pairs as before.
+  EXPECT_EQ(pairing.addVelocity(levelledVelocity(10.0, 1.0)).size(), 1u);
 }
 
 }  // namespace

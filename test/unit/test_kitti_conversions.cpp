@@ -251,24 +251,24 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
       ASSERT_TRUE(tf);
       // base->imu, imu->velo, velo->4 cameras.
       EXPECT_EQ(tf->transforms.size(), 6u);
-    } else if (m.getTopic() == topics::kImu) {
+    } else if (m.getTopic() == bag_topics::kImu) {
       const auto imu = m.instantiate<sensor_msgs::Imu>();
       const int frame = static_cast<int>(
           std::lround((imu->header.stamp.toSec() - ros::Time(1293876000, 5).toSec()) / 0.1));
       EXPECT_NEAR(imu->linear_acceleration.x, recordAt(frame).ax, 1e-6) << frame;
       EXPECT_EQ(imu->header.stamp, m.getTime());
-    } else if (m.getTopic() == topics::kGpsFix) {
+    } else if (m.getTopic() == bag_topics::kGpsFix) {
       fixes.push_back(*m.instantiate<sensor_msgs::NavSatFix>());
-    } else if (m.getTopic() == topics::kVelodyne) {
+    } else if (m.getTopic() == bag_topics::kVelodyne) {
       const auto cloud = m.instantiate<sensor_msgs::PointCloud2>();
       EXPECT_EQ(cloud->width, 108u);
-    } else if (m.getTopic() == topics::kCameraColorLeftImage) {
+    } else if (m.getTopic() == bag_topics::kCameraColorLeftImage) {
       const auto image = m.instantiate<sensor_msgs::Image>();
       EXPECT_EQ(image->encoding, "bgr8");
       EXPECT_EQ(image->width, 40u);
       EXPECT_EQ(image->height, 30u);
       EXPECT_EQ(image->header.frame_id, frames::kCameraColorLeft);
-    } else if (m.getTopic() == topics::kCameraColorLeftInfo) {
+    } else if (m.getTopic() == bag_topics::kCameraColorLeftInfo) {
       const auto info = m.instantiate<sensor_msgs::CameraInfo>();
       EXPECT_EQ(info->P[0], 400);
       EXPECT_EQ(info->P[3], 0);  // the baseline is in the tf
@@ -276,12 +276,12 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
     }
   }
   EXPECT_EQ(counts["/tf_static"], 1);
-  EXPECT_EQ(counts[topics::kImu], 5);
-  EXPECT_EQ(counts[topics::kGroundTruthOdometry], 5);
-  EXPECT_EQ(counts[topics::kGpsVelocity], 5);
-  EXPECT_EQ(counts[topics::kVelodyne], 5);
-  EXPECT_EQ(counts[topics::kCameraColorLeftImage], 5);
-  EXPECT_EQ(counts[topics::kCameraColorLeftInfo], 5);
+  EXPECT_EQ(counts[bag_topics::kImu], 5);
+  EXPECT_EQ(counts[bag_topics::kGroundTruthOdometry], 5);
+  EXPECT_EQ(counts[bag_topics::kGpsVelocity], 5);
+  EXPECT_EQ(counts[bag_topics::kVelodyne], 5);
+  EXPECT_EQ(counts[bag_topics::kCameraColorLeftImage], 5);
+  EXPECT_EQ(counts[bag_topics::kCameraColorLeftInfo], 5);
   // --gps-every 2: frames 0, 2, 4; frame 2 has posmode 0 -> NO_FIX.
   ASSERT_EQ(fixes.size(), 3u);
   EXPECT_EQ(fixes[0].status.status, sensor_msgs::NavSatStatus::STATUS_GBAS_FIX);

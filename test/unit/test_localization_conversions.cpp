@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
+#include "inekf_semantic_mapping/ros/localization_diagnostics.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -216,6 +217,71 @@ TEST(FilterStatus, CountsTheSessionsDropsWithTheFiltersOwn) {
   EXPECT_EQ(status.imu_samples_dropped, 1u);
   EXPECT_EQ(status.gps_fixes_rejected, 1u);
   EXPECT_EQ(status.gps_fixes_used, 0u);
+}
+
+// inekf_node's /diagnostics: IMU without fixes turns the status WARN, then ERROR, after the
+// configured data time; fixes that are accepted bring it back to OK.
+estimation::ImuEvent stillImu(double stamp_s) {
+  estimation::ImuEvent event;
+  event.sample.stamp_s = stamp_s;
+  event.sample.angular_velocity.setZero();
+  event.sample.specific_force = Eigen::Vector3d(0, 0, 9.81);
+  event.orientation = Eigen::Matrix3d::Identity();
+  event.orientation_covariance = Eigen::Matrix3d::Identity() * 1e-6;
+  return event;
+}
+
+std::string valueOf(const diagnostic_updater::DiagnosticStatusWrapper& status,
+                    const std::string& key) {
+  for (const auto& value : status.values) {
+    if (value.key == key) return value.value;
+  }
+  return "(missing)";
+}
+
+TEST(LocalizationMonitor, WithoutFixesTheStatusTurnsWarnThenError) {
+  LocalizationDiagnosticsOptions options;
+  options.fix_warn_after_s = 2.0;
+  options.fix_error_after_s = 4.0;
+  estimation::LocalizationSession session{estimation::LocalizationSessionConfig{}};
+  LocalizationMonitor monitor(options);
+  using diagnostic_msgs::DiagnosticStatus;
+  const auto levelAt = [&](double until_s, double* t) {
+    for (; *t <= until_s + 1e-9; *t += 0.1) {
+      session.addImu(stillImu(*t));
+      monitor.noteImu(*t, /*wall_s=*/*t, session);
+    }
+    diagnostic_updater::DiagnosticStatusWrapper status;
+    monitor.fill(session, /*wall_s=*/*t, &status);
+    EXPECT_GE(status.values.size(), 3u);
+    EXPECT_EQ(valueOf(status, "state"), "waiting");
+    return status.level;
+  };
+  double t = 100.0;
+  EXPECT_EQ(levelAt(101.0, &t), DiagnosticStatus::OK);
+  EXPECT_EQ(levelAt(102.5, &t), DiagnosticStatus::WARN);
+  EXPECT_EQ(levelAt(104.5, &t), DiagnosticStatus::ERROR);
+  // The IMU rate is of the stamps, whatever the wall clock did.
+  diagnostic_updater::DiagnosticStatusWrapper status;
+  monitor.fill(session, t, &status);
+  EXPECT_NEAR(std::stod(valueOf(status, "IMU rate (Hz)")), 10.0, 0.1);
+  EXPECT_EQ(valueOf(status, "filter"), "left");
+  // The IMU stops: on the wall clock that is a WARN of its own (the fix ERROR stays).
+  diagnostic_updater::DiagnosticStatusWrapper later;
+  monitor.fill(session, t + 10.0, &later);
+  EXPECT_EQ(later.level, DiagnosticStatus::ERROR);
+}
+
+TEST(LocalizationMonitor, OptionsAreCheckedNamingTheKey) {
+  LocalizationDiagnosticsOptions options;
+  common::YamlReader reader("test", YAML::Load("diagnostics: {fix_warn_after_s: 9, "
+                                               "fix_error_after_s: 3}"));
+  try {
+    readLocalizationDiagnosticsOptions(&reader, "diagnostics.", &options);
+    FAIL() << "an error timeout below the warning one was accepted";
+  } catch (const common::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("diagnostics.fix_error_after_s"), std::string::npos);
+  }
 }
 
 }  // namespace

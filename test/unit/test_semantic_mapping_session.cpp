@@ -118,12 +118,17 @@ TEST(SemanticMappingConfigTest, ErrorsNameTheSourceAndTheKey) {
             std::string::npos);
   EXPECT_NE(message("sensor_model: {hit: 0.3}").find("sensor_model.hit"), std::string::npos);
   EXPECT_NE(message("sensor_model: {hitt: 0.7}").find("'sensor_model.hitt'"), std::string::npos);
-  EXPECT_NE(message("max_range: fifty").find("'max_range' is not a number"), std::string::npos);
-  EXPECT_NE(message("label_wait: [1, 2]").find("'label_wait'"), std::string::npos);
+  EXPECT_NE(message("max_range_m: fifty").find("'max_range_m' is not a number"), std::string::npos);
+  EXPECT_NE(message("label_wait_s: [1, 2]").find("'label_wait_s'"), std::string::npos);
   EXPECT_NE(message("ray_casting_threads: 1.5").find("'ray_casting_threads'"), std::string::npos);
   EXPECT_NE(message("class_set: coco").find("class_set"), std::string::npos);
   EXPECT_NE(message("fusion_rule: vote").find("fusion_rule"), std::string::npos);
-  EXPECT_EQ(message("resolution: 0.1\nlabel_wait: 0.5"), "no error");
+  EXPECT_EQ(message("resolution: 0.1\nlabel_wait_s: 0.5"), "no error");
+  // Keys that gained their unit: the old name is refused with the new one.
+  EXPECT_NE(message("label_wait: 0.5").find("'label_wait' was renamed to 'label_wait_s'"),
+            std::string::npos);
+  EXPECT_NE(message("max_range: 50").find("'max_range_m'"), std::string::npos);
+  EXPECT_NE(message("autosave_period: 5").find("'autosave_period_s'"), std::string::npos);
   EXPECT_THROW(loadSemanticMappingConfig("/nonexistent/semantic_mapping.yaml"),
                common::ConfigError);
 }

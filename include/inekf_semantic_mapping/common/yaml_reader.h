@@ -20,7 +20,7 @@ class ConfigError : public std::invalid_argument {
 
 class YamlReader {
  public:
-  // `root` must be a map (or null: an empty file).
+  // `root` must be a map (or null: an empty file; or missing: a section that is not there).
   YamlReader(std::string source, YAML::Node root);
   // Parses a file; throws ConfigError naming it when it cannot be read or is not a YAML map.
   static YamlReader fromFile(const std::string& path);
@@ -33,6 +33,11 @@ class YamlReader {
   void read(const std::string& key, std::vector<std::string>* out);  // a list of strings
   // Keys (or whole sections: "name.*") that are valid but read elsewhere.
   void allow(const std::string& key);
+  // Throws ConfigError naming `new_key` when the retired `old_key` is set (a key that gained its
+  // unit, e.g. label_wait -> label_wait_s): an old file fails loudly instead of being ignored.
+  void renamed(const std::string& old_key, const std::string& new_key);
+  // Whether `key` is set (marks it read).
+  bool has(const std::string& key);
   // Throws ConfigError for the first key that was neither read nor allowed.
   void rejectUnknown() const;
 

@@ -17,6 +17,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "inekf_semantic_mapping/mapping/hashed_voxel_grid.h"
@@ -83,6 +84,9 @@ struct SemanticMappingConfig {
 
 // The keys of the same YAML that semantic_octomap_node reads itself (display, frames, files).
 const std::vector<std::string>& semanticMappingNodeKeys();
+// Retired keys and their names with a unit (old, new): setting an old one is an error naming the
+// new one.
+const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKeys();
 
 // Reads the keys above from a YAML map (the node's keys are allowed and left alone); unknown keys
 // and bad values throw std::invalid_argument (common::ConfigError) naming `source` and the key.

@@ -25,6 +25,7 @@
 #include <set>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -42,6 +43,30 @@ struct BagContents {
   std::string path;  // for messages
   std::map<std::string, std::string> topic_types;
   std::set<std::pair<std::string, std::string>> dynamic_frames, static_frames;
+};
+
+// The start of a bag file: its topics and the tf frames of its first kTfMessagesToRead /tf and
+// /tf_static messages (the frames of both conventions are all in the first frame's messages),
+// and the first transform of each static pair (broadcast before the bag plays). Throws
+// std::runtime_error naming the bag and the topic when a tf topic is not tf2_msgs/TFMessage.
+struct BagStart {
+  static constexpr int kTfMessagesToRead = 200;
+  BagContents contents;
+  std::vector<geometry_msgs::TransformStamped> first_static;
+};
+BagStart readBagStart(const std::string& path);
+
+// The static transforms seen so far, by (parent, child). The Python kitti2bag re-publishes them
+// with every frame: add() returns only those that are new or changed (to be sent again).
+class StaticTransformSet {
+ public:
+  std::vector<geometry_msgs::TransformStamped> add(
+      const std::vector<geometry_msgs::TransformStamped>& transforms);
+  const geometry_msgs::TransformStamped* find(const std::string& parent,
+                                              const std::string& child) const;
+
+ private:
+  std::map<std::pair<std::string, std::string>, geometry_msgs::TransformStamped> transforms_;
 };
 
 // The convention of a bag: kitti2bag_py when /tf carries world -> base_link, ism when /tf_static

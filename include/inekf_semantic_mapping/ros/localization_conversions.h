@@ -18,18 +18,21 @@
 #include <string>
 
 #include "inekf_semantic_mapping/FilterStatus.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/estimation/types.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
-// The session's configuration from a node's private parameters: ~config_file (else
-// default_file, else the built-in defaults; *config_file says which), then ~filter |
-// ~filter_type, ~init_orientation_from_imu, ~min_fix_sigma_m (gps.min_sigma_m),
+// The session's configuration from a node's private parameters (a reader of them,
+// ros/node_parameters.h): ~config_file (else default_file, else the built-in defaults;
+// *config_file says which), then ~filter (left | right | ekf; ~filter_type is refused, naming
+// ~filter), ~init_orientation_from_imu, ~min_fix_sigma_m (gps.min_sigma_m),
 // ~default_fix_sigma_horizontal_m / _vertical_m, ~time_jump_back_s override it, and
-// ~origin_lat/lon/alt (all three or none) set the map origin. Throws on a bad file or origin.
-estimation::LocalizationSessionConfig sessionConfigFromParameters(const ros::NodeHandle& nh,
+// ~origin_lat/lon/alt (all three or none) set the map origin. Throws common::ConfigError on a
+// bad file, value or origin.
+estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlReader* reader,
                                                                   const std::string& default_file,
                                                                   std::string* config_file);
 

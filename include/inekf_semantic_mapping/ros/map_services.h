@@ -17,6 +17,7 @@
 #include "inekf_semantic_mapping/SaveMap.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/ros/map_display.h"
+#include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -31,6 +32,9 @@ class MapServices {
 
   // Saves to autosave_path when it is set and the map has scans; errors are logged.
   void autosave();
+  // The last ~save_map and autosave (for /diagnostics).
+  const SaveRecord& lastSave() const { return last_save_; }
+  const SaveRecord& lastAutosave() const { return last_autosave_; }
 
  private:
   bool onSave(SaveMap::Request& request, SaveMap::Response& response);
@@ -42,6 +46,7 @@ class MapServices {
   std::string autosave_path_;
   ros::ServiceServer save_srv_, load_srv_, reset_srv_;
   ros::WallTimer autosave_timer_;
+  SaveRecord last_save_, last_autosave_;
 };
 
 // The node's periodic log line: scans in the map, with labels, pending, without pose; label

@@ -35,10 +35,6 @@ mapping::LabelImageView labelImageView(const sensor_msgs::Image& image);
 mapping::CameraModel cameraModelFromInfo(const sensor_msgs::CameraInfo& info,
                                          const Eigen::Isometry3d& T_camera_sensor);
 
-// All parameters in a node's private namespace as a YAML map, for the strict config reader
-// (so the node and the offline tools check the same keys the same way).
-YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh);
-
 inekf_semantic_mapping::SemanticMapInfo mapInfoMessage(
     const mapping::SemanticMappingSession& session, const std::string& frame,
     const ros::Time& stamp);

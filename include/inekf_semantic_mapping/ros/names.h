@@ -1,11 +1,16 @@
-// One place for every topic and frame name (cartographer_ros style). Topic names follow
-// kitti2bag so that bags made by kitti2bag play into these nodes unchanged. Plain constants:
-// no ROS header is needed to use them.
+// One place for every topic and frame name (cartographer_ros style). Plain constants: no ROS
+// header is needed to use them.
+//
+// The nodes use RELATIVE topic names, resolved in the node's namespace: in the root namespace
+// "kitti/oxts/imu" is kitti2bag's /kitti/oxts/imu, so bags made by kitti2bag play into the nodes
+// unchanged, and a pipeline started in a namespace (<group ns="car_a">) reads and writes only
+// /car_a/... (with /tf remapped to tf: docs/ros_interfaces.md, "Names"). Bags carry kitti2bag's
+// absolute names (bag_topics), the nodes' defaults are the same names without the leading slash.
 #pragma once
 
 namespace inekf_semantic_mapping {
-namespace topics {
-// Sensors (kitti_player / kitti2bag).
+namespace bag_topics {
+// The topics of a KITTI bag (this package's kitti2bag and the Python kitti2bag).
 constexpr char kImu[] = "/kitti/oxts/imu";
 constexpr char kGpsFix[] = "/kitti/oxts/gps/fix";
 constexpr char kGpsVelocity[] = "/kitti/oxts/gps/vel";
@@ -13,20 +18,38 @@ constexpr char kGroundTruthOdometry[] = "/kitti/oxts/ground_truth";  // evaluati
 constexpr char kVelodyne[] = "/kitti/velo/pointcloud";
 constexpr char kCameraColorLeftImage[] = "/kitti/camera_color_left/image_raw";
 constexpr char kCameraColorLeftInfo[] = "/kitti/camera_color_left/camera_info";
+}  // namespace bag_topics
+
+namespace topics {
+// Sensors (kitti_player, kitti_bag_adapter / a bag): the bag's names, relative.
+constexpr const char* kImu = &bag_topics::kImu[1];
+constexpr const char* kGpsFix = &bag_topics::kGpsFix[1];
+constexpr const char* kGpsVelocity = &bag_topics::kGpsVelocity[1];
+constexpr const char* kGroundTruthOdometry = &bag_topics::kGroundTruthOdometry[1];
+constexpr const char* kVelodyne = &bag_topics::kVelodyne[1];
+constexpr const char* kCameraColorLeftImage = &bag_topics::kCameraColorLeftImage[1];
+constexpr const char* kCameraColorLeftInfo = &bag_topics::kCameraColorLeftInfo[1];
 // Localization (inekf_node).
-constexpr char kOdometry[] = "/inekf/odometry";
-constexpr char kPath[] = "/inekf/path";
-constexpr char kFilterStatus[] = "/inekf/status";
+constexpr char kOdometry[] = "inekf/odometry";
+constexpr char kPath[] = "inekf/path";
+constexpr char kFilterStatus[] = "inekf/status";
 // Segmentation (segmentation_node).
-constexpr char kSegmentationLabels[] = "/segmentation/labels";    // mono8 Cityscapes labelIds
-constexpr char kSegmentationOverlay[] = "/segmentation/overlay";  // rgb8
+constexpr char kSegmentationLabels[] = "segmentation/labels";    // mono8 Cityscapes labelIds
+constexpr char kSegmentationOverlay[] = "segmentation/overlay";  // rgb8
 // Semantic map (semantic_octomap_node).
-constexpr char kMapMarkers[] = "/semantic_map/markers";
-constexpr char kLabeledCloud[] = "/semantic_map/labeled_cloud";
-constexpr char kMapInfo[] = "/semantic_map/info";
+constexpr char kMapMarkers[] = "semantic_map/markers";
+constexpr char kLabeledCloud[] = "semantic_map/labeled_cloud";
+constexpr char kMapInfo[] = "semantic_map/info";
 // nav_msgs/OccupancyGrid: octomap_server's projected_map, and the drivable surface.
-constexpr char kProjectedMap[] = "/semantic_map/projected_map";
-constexpr char kDrivableMap[] = "/semantic_map/drivable_map";
+constexpr char kProjectedMap[] = "semantic_map/projected_map";
+constexpr char kDrivableMap[] = "semantic_map/drivable_map";
+// kitti_bag.launch plays a bag's tf, IMU, gps/vel and camera_info here; kitti_bag_adapter
+// republishes them in this package's convention.
+constexpr char kBagTf[] = "kitti_bag/tf";
+constexpr char kBagTfStatic[] = "kitti_bag/tf_static";
+constexpr char kBagImu[] = "kitti_bag/oxts/imu";
+constexpr char kBagGpsVelocity[] = "kitti_bag/oxts/gps/vel";
+constexpr char kBagCameraInfo[] = "kitti_bag/camera_color_left/camera_info";
 }  // namespace topics
 
 namespace frames {

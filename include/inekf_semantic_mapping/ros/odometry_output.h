@@ -16,17 +16,30 @@
 #include <optional>
 #include <string>
 
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/estimation/types.h"
+#include "inekf_semantic_mapping/ros/names.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
+struct OdometryOutputOptions {
+  bool publish_tf = true;
+  std::string map_frame = frames::kMap;
+  std::string base_frame = frames::kBaseLink;
+  std::string imu_frame;  // empty: the IMU messages' frame_id (see OdometryOutput::noteImuFrame)
+  int max_path_length = 5000;  // poses
+  double path_publish_period_s = 1.0;
+};
+
+// The private parameters publish_tf, map_frame, base_frame, imu_frame, max_path_length and
+// path_publish_period_s (defaults above).
+OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader);
+
 class OdometryOutput {
  public:
-  // Reads the private parameters publish_tf (true), map_frame (map), base_frame (base_link),
-  // imu_frame (default: the IMU messages' frame_id, see noteImuFrame), max_path_length (5000
-  // poses) and path_publish_period_s (1.0), and advertises the odometry and path topics on nh.
-  OdometryOutput(ros::NodeHandle& nh, const ros::NodeHandle& private_nh);
+  // Advertises the odometry and path topics on nh.
+  OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions& options);
 
   // The frame the filter estimates, from the first IMU message that names one (unless the
   // imu_frame parameter set it).

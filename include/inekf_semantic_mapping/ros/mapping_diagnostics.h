@@ -1,0 +1,57 @@
+// semantic_octomap_node's /diagnostics: a "map" status (scans in and into the map, pending,
+// without pose, insertion latency, the map's size and memory, the last save and autosave) and a
+// "labels" status (label images received, used, late; a segmentation that stalled while scans
+// keep coming turns it WARN). Rates and latencies on the wall clock: they say whether the node
+// keeps up with what arrives. ROS-facing (src/ros): only nodes and their tests include this.
+#pragma once
+
+#include <diagnostic_updater/DiagnosticStatusWrapper.h>
+
+#include <map>
+#include <string>
+
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+
+struct MappingDiagnosticsOptions {
+  double window_s = 10.0;            // rates and latency percentiles over this many wall seconds
+  double label_stall_warn_s = 10.0;  // no label image for this long while scans come: WARN
+  double max_latency_warn_s = 5.0;   // insertion latency p95 above it: WARN (falling behind)
+};
+
+// window_s, label_stall_warn_s, max_latency_warn_s of a reader of ~diagnostics/.
+void readMappingDiagnosticsOptions(common::YamlReader* reader, MappingDiagnosticsOptions* options);
+
+struct SaveRecord {
+  std::string path;
+  double wall_s = -1.0;  // < 0: never
+  bool ok = false;
+  std::string error;
+};
+
+class MappingMonitor {
+ public:
+  explicit MappingMonitor(MappingDiagnosticsOptions options);
+  void noteScan(double stamp_s, double wall_s);
+  void noteInserted(double stamp_s, double wall_s);  // latency: since its scan arrived
+  void noteLabelImage(double wall_s);
+  // labels_expected: a label publisher is connected or label images came before.
+  void fillMap(const mapping::SemanticMappingSession& session, const SaveRecord& save,
+               const SaveRecord& autosave, double wall_s,
+               diagnostic_updater::DiagnosticStatusWrapper* status);
+  void fillLabels(const mapping::SemanticMappingSession& session, bool labels_expected,
+                  double wall_s, diagnostic_updater::DiagnosticStatusWrapper* status);
+
+ private:
+  MappingDiagnosticsOptions options_;
+  EventWindow scans_in_, scans_inserted_;    // wall times; inserted values: latency (s)
+  std::map<double, double> arrival_wall_s_;  // by scan stamp, until inserted (bounded)
+  double first_scan_wall_s_ = -1.0, last_scan_wall_s_ = -1.0, last_label_wall_s_ = -1.0;
+};
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,114 @@
+#include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
+
+#include <utility>
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+
+namespace {
+using diagnostic_msgs::DiagnosticStatus;
+constexpr std::size_t kMaxWaitingStamps = 500;
+
+std::string saveText(const SaveRecord& record, double wall_s) {
+  if (record.wall_s < 0) return "never";
+  char ago[32];
+  std::snprintf(ago, sizeof ago, "%.0f s ago", wall_s - record.wall_s);
+  return record.path + ", " + ago + (record.ok ? "" : ", FAILED: " + record.error);
+}
+}  // namespace
+
+void readMappingDiagnosticsOptions(common::YamlReader* reader, MappingDiagnosticsOptions* options) {
+  for (const auto& [key, value] : {std::pair{"window_s", &options->window_s},
+                                   {"label_stall_warn_s", &options->label_stall_warn_s},
+                                   {"max_latency_warn_s", &options->max_latency_warn_s}}) {
+    reader->read(key, value);
+    if (!(*value > 0)) reader->fail(key, "must be > 0");
+  }
+}
+
+MappingMonitor::MappingMonitor(MappingDiagnosticsOptions options)
+    : options_(options), scans_in_(options.window_s), scans_inserted_(options.window_s) {}
+
+void MappingMonitor::noteScan(double stamp_s, double wall_s) {
+  scans_in_.add(wall_s);
+  if (first_scan_wall_s_ < 0) first_scan_wall_s_ = wall_s;
+  last_scan_wall_s_ = wall_s;
+  arrival_wall_s_[stamp_s] = wall_s;
+  while (arrival_wall_s_.size() > kMaxWaitingStamps) arrival_wall_s_.erase(arrival_wall_s_.begin());
+}
+
+void MappingMonitor::noteInserted(double stamp_s, double wall_s) {
+  const auto found = arrival_wall_s_.find(stamp_s);
+  const double latency_s = found == arrival_wall_s_.end() ? 0.0 : wall_s - found->second;
+  if (found != arrival_wall_s_.end()) arrival_wall_s_.erase(found);
+  scans_inserted_.add(wall_s, latency_s);
+}
+
+void MappingMonitor::noteLabelImage(double wall_s) { last_label_wall_s_ = wall_s; }
+
+void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, const SaveRecord& save,
+                             const SaveRecord& autosave, double wall_s,
+                             diagnostic_updater::DiagnosticStatusWrapper* status) {
+  scans_in_.expire(wall_s);
+  scans_inserted_.expire(wall_s);
+  const mapping::MappingStatistics& stats = session.statistics();
+  const double p95_s = scans_inserted_.percentile(0.95);
+  unsigned char level = DiagnosticStatus::OK;
+  std::string message = stats.scans_received == 0 ? "waiting for scans" : "mapping";
+  if (p95_s > options_.max_latency_warn_s) {
+    level = DiagnosticStatus::WARN;
+    message = "falling behind: insertion latency p95 above " +
+              std::to_string(options_.max_latency_warn_s) + " s";
+  }
+  if ((save.wall_s >= 0 && !save.ok) || (autosave.wall_s >= 0 && !autosave.ok)) {
+    level = DiagnosticStatus::WARN;
+    message = "the last save failed";
+  }
+  if (stats.scans_received >= 5 && stats.scans_without_pose * 2 > stats.scans_received) {
+    level = DiagnosticStatus::ERROR;
+    message = "most scans dropped without a pose (map -> sensor not in tf)";
+  }
+  status->summary(level, message);
+  status->addf("scan rate in (Hz)", "%.2f", scans_in_.rateOverWindowHz(wall_s));
+  status->addf("scan rate into the map (Hz)", "%.2f", scans_inserted_.rateOverWindowHz(wall_s));
+  status->add("scans received", stats.scans_received);
+  status->add("scans inserted", stats.scans_inserted);
+  status->add("pending scans", session.pendingScans());
+  status->add("scans without pose", stats.scans_without_pose);
+  status->addf("insertion latency p50 (s)", "%.3f", scans_inserted_.percentile(0.5));
+  status->addf("insertion latency p95 (s)", "%.3f", p95_s);
+  status->add("map size", session.mapSizeText());
+  status->addf("map memory (MB)", "%.1f", session.mapMemoryUsage() / 1e6);
+  status->add("last save", saveText(save, wall_s));
+  status->add("last autosave", saveText(autosave, wall_s));
+}
+
+void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
+                                bool labels_expected, double wall_s,
+                                diagnostic_updater::DiagnosticStatusWrapper* status) {
+  const mapping::MappingStatistics& stats = session.statistics();
+  const double since_label_s = last_label_wall_s_ >= 0   ? wall_s - last_label_wall_s_
+                               : first_scan_wall_s_ >= 0 ? wall_s - first_scan_wall_s_
+                                                         : 0.0;
+  const bool scans_coming =
+      last_scan_wall_s_ >= 0 && wall_s - last_scan_wall_s_ < options_.label_stall_warn_s;
+  if (!labels_expected) {
+    status->summary(DiagnosticStatus::OK, "no label publisher (occupancy only)");
+  } else if (scans_coming && since_label_s > options_.label_stall_warn_s) {
+    status->summary(DiagnosticStatus::WARN, "segmentation stalled: no label image for " +
+                                                std::to_string(static_cast<int>(since_label_s)) +
+                                                " s while scans arrive");
+  } else {
+    status->summary(DiagnosticStatus::OK, "labels arriving");
+  }
+  status->add("labels expected", labels_expected ? "yes" : "no");
+  status->add("label images received", stats.label_images_received);
+  status->add("label images used", stats.label_images_used);
+  status->add("label images late", stats.label_images_late);
+  status->add("label images unmatched", stats.label_images_unmatched);
+  status->add("scans with labels", stats.scans_with_labels);
+  status->addf("since last label image (s)", "%.1f", since_label_s);
+}
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping
