@@ -183,10 +183,12 @@ TEST(RealSemantics, KittiAdaptedNetworkOnSemanticKitti) {
     const char* sequence;
     double min_raw_accuracy, min_map_miou;
   };
-  // Measured (docs/segmentation_adaptation.md, the 40-minute CPU run of the default command, seed
-  // 1): raw accuracy 0.865 / 0.791 (the built-in ENet card 0.841 / 0.712), map mIoU 0.459 / 0.477.
-  // Margins: 0.025 on accuracy, 0.04 on mIoU.
-  const AdaptedExpectation expectations[] = {{"05", 0.84, 0.42}, {"08", 0.765, 0.435}};
+  // Measured (docs/segmentation_adaptation.md, CPU runs of the command, seed 1): the default
+  // (soft distillation, frozen batch norm, 66 steps) raw accuracy 0.865 / 0.734, map mIoU
+  // 0.463 / 0.512; the first version (hard distillation, 132 steps) 0.865 / 0.791 and
+  // 0.459 / 0.477; the built-in ENet card 0.841 / 0.712. Margins: 0.025 on accuracy below the
+  // lower of the two, 0.04 on mIoU.
+  const AdaptedExpectation expectations[] = {{"05", 0.84, 0.42}, {"08", 0.71, 0.435}};
   for (const AdaptedExpectation& expected : expectations) {
     const std::string dir = test::sharedPath(kSequences) + "/" + expected.sequence;
     const PointLabelScore score = scoreSequence(&segmenter, dir, raw);
