@@ -68,6 +68,19 @@ def _prepare(image, width, height, gamma, standardize):
                                       height)
 
 
+def _sparse_sample(name, image_path, label_path, dtype, lut, width, height, gamma, standardize):
+    """A sparse sample: a one-channel label image of `dtype` (0 where none), mapped through lut
+    and scattered to the input size."""
+    image = _read_image(image_path)
+    label = _read_label(label_path, cv2.IMREAD_UNCHANGED)
+    if label.dtype != dtype or label.ndim != 2:
+        bits = 8 * np.dtype(dtype).itemsize
+        raise DatasetError(f"{label_path}: expected a {bits}-bit one-channel label image")
+    _check_same_size(image, label, image_path, label_path)
+    return Sample(name, "sparse", _prepare(image, width, height, gamma, standardize),
+                  scatter_sparse(lut[label], width, height))
+
+
 def load_dense(root, width, height, gamma, standardize, limit=None):
     """kitti_semantics/training: image_2/*.jpg|png with semantic/*.png (Cityscapes labelIds)."""
     image_dir, label_dir = os.path.join(root, "image_2"), os.path.join(root, "semantic")
@@ -109,14 +122,9 @@ def load_sparse(root, sequences, width, height, gamma, standardize, limit=None):
                 image_path = os.path.join(seq_dir, f"image_{cam}", stem + ".jpg")
                 if not os.path.exists(image_path):
                     image_path = os.path.join(seq_dir, f"image_{cam}", stem + ".png")
-                image = _read_image(image_path)
-                label = _read_label(label_path, cv2.IMREAD_UNCHANGED)
-                if label.dtype != np.uint16 or label.ndim != 2:
-                    raise DatasetError(f"{label_path}: expected a 16-bit one-channel label image")
-                _check_same_size(image, label, image_path, label_path)
-                target = scatter_sparse(lut[label], width, height)
-                samples.append(Sample(f"semantickitti_train/{seq}/image_{cam}/{stem}", "sparse",
-                                      _prepare(image, width, height, gamma, standardize), target))
+                samples.append(_sparse_sample(
+                    f"semantickitti_train/{seq}/image_{cam}/{stem}", image_path, label_path,
+                    np.uint16, lut, width, height, gamma, standardize))
     if limit is not None:
         samples = samples[:limit]
     return samples
@@ -136,14 +144,8 @@ def load_pseudo(labels_dir, images_dir, width, height, gamma, standardize, limit
         image_path = os.path.join(images_dir, stem + ".png")
         if not os.path.exists(image_path):
             raise DatasetError(f"{label_path}: no image {image_path}")
-        image = _read_image(image_path)
-        label = _read_label(label_path, cv2.IMREAD_UNCHANGED)
-        if label.dtype != np.uint8 or label.ndim != 2:
-            raise DatasetError(f"{label_path}: expected an 8-bit one-channel label image")
-        _check_same_size(image, label, image_path, label_path)
-        target = scatter_sparse(lut[label], width, height)
-        samples.append(Sample(f"pseudo/{stem}", "sparse",
-                              _prepare(image, width, height, gamma, standardize), target))
+        samples.append(_sparse_sample(f"pseudo/{stem}", image_path, label_path, np.uint8, lut,
+                                      width, height, gamma, standardize))
     if not samples:
         raise DatasetError(f"{labels_dir}: no label images")
     return samples

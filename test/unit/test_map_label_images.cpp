@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "camera_test_scene.h"
 #include "inekf_semantic_mapping/mapping/map_label_images.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 
@@ -12,14 +13,8 @@ namespace inekf_semantic_mapping {
 namespace mapping {
 namespace {
 
-// A 100 x 100 pinhole camera at the sensor origin looking along +z.
-CameraModel testCamera() {
-  CameraModel camera;
-  camera.P << 50, 0, 50, 0, 0, 50, 50, 0, 0, 0, 1, 0;
-  camera.width = 100;
-  camera.height = 100;
-  return camera;
-}
+using test_scene::testCamera;
+using test_scene::testLabels;
 
 // A wall 10 m ahead (x in [-2, 2], y in [-1, 1]).
 Eigen::Matrix3Xf wall(float z = 10.05f) {
@@ -31,15 +26,6 @@ Eigen::Matrix3Xf wall(float z = 10.05f) {
   for (std::size_t i = 0; i < points.size(); ++i)
     matrix.col(static_cast<Eigen::Index>(i)) = points[i];
   return matrix;
-}
-
-// Left half road (7), right half building (11), the top rows "unlabeled" (0: no evidence).
-std::vector<std::uint8_t> testLabels() {
-  std::vector<std::uint8_t> pixels(100 * 100);
-  for (int r = 0; r < 100; ++r) {
-    for (int c = 0; c < 100; ++c) pixels[r * 100 + c] = r < 48 ? 0 : (c < 50 ? 7 : 11);
-  }
-  return pixels;
 }
 
 SemanticMappingSession mappedWall() {
