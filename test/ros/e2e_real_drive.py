@@ -103,6 +103,7 @@ class EndToEndRealDrive(unittest.TestCase):
                 return f.read()[-3000:]
 
         monitor = e2e.pipeline_monitor.PipelineMonitor()
+        diagnostics = e2e.DiagnosticsRecorder()
         needed = ["/kitti/oxts/imu", "/kitti/oxts/gps/fix", "/kitti/velo/pointcloud",
                   "/kitti/camera_color_left/image_raw", "/segmentation/labels"]
         self.assertTrue(e2e.wait_for_subscribers(needed, timeout=p("start_timeout_s", 40)),
@@ -129,6 +130,7 @@ class EndToEndRealDrive(unittest.TestCase):
             e2e.wait_until(settled, timeout=p("settle_timeout_s", 20.0), period=0.5)
             ply_path = os.path.join(out_dir, "semantic_map.ply")
             response = e2e.save_map(ply_path, "ply")
+        statuses = diagnostics.summary()
         self.assertIsNone(launch.poll(), "a node died; launch log:\n" + launch_tail())
         self.assertTrue(response.success, response.message)
         summary = monitor.write(out_dir)
@@ -160,6 +162,8 @@ class EndToEndRealDrive(unittest.TestCase):
             "map_classes": {e2e.metrics.CITYSCAPES_NAMES.get(k, k): n for k, n in histogram.items()},
             "ground_classes": {e2e.metrics.CITYSCAPES_NAMES.get(k, k): n
                                for k, n in ground_histogram.items()},
+            "diagnostics": {name: (status["max_level"], status["min_values"])
+                            for name, status in statuses.items()},
             "out_dir": out_dir,
         }
         rospy.loginfo("%s: %s", NAME, record)
@@ -191,6 +195,16 @@ class EndToEndRealDrive(unittest.TestCase):
             self.assertGreaterEqual(histogram.get(label, 0), min_voxels,
                                     "%s: %d voxels (< %d): %s" % (name, histogram.get(label, 0),
                                                                   min_voxels, record))
+        # Each main node reports its health on /diagnostics: several figures, never ERROR on a
+        # normal drive (WARN may come and go, e.g. labels late while ENet warms up).
+        for node in ("inekf_node", "segmentation_node", "semantic_octomap_node"):
+            mine = {name: st for name, st in statuses.items()
+                    if name.lstrip("/").startswith(node + ":")}
+            self.assertTrue(mine, "no /diagnostics status from %s: %s" % (node, sorted(statuses)))
+            for name, status in mine.items():
+                self.assertGreaterEqual(status["min_values"], 3, (name, status))
+                self.assertLess(status["max_level"], 2, "%s at ERROR during the drive: %s"
+                                % (name, record))
         # Localization is the same as in the other real-drive tests; a loose bound catches a
         # broken frame or origin, not a small regression.
         self.assertTrue(trajectory.get("finite"), record)
