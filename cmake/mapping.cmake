@@ -5,6 +5,8 @@ ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
     src/mapping/semantic_classes.cpp
     src/mapping/semantic_octree.cpp
+    src/mapping/semantic_octree_insertion.cpp
+    src/mapping/semantic_octree_io.cpp
     src/mapping/hashed_voxel_grid.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp

@@ -180,12 +180,11 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
     std::uint64_t morton;
     const SemanticOcTreeNode* evidence;
   };
-  // The last stage of insertLabeledScan (the earlier ones are free functions in the .cpp).
+  // The last stage of insertLabeledScan (the earlier ones, and the batch recursion it shares
+  // with setLeaves, are free functions in semantic_octree_insertion.cpp).
   void applyVoxelUpdates(std::vector<VoxelUpdate>* updates);
-  void updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
-                         const VoxelUpdate* begin, const VoxelUpdate* end);
-  void setLeavesRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
-                       const LeafState* begin, const LeafState* end);
+  // Creates an empty root when the tree has none; true when it did.
+  bool createRootIfEmpty();
   SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
                                                  const SemanticOcTreeNode& evidence);
   SemanticOcTreeNode* updateOccupiedRecurs(SemanticOcTreeNode* node, bool node_just_created,
