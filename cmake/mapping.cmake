@@ -11,6 +11,7 @@ ism_add_core_library(${PROJECT_NAME}_mapping
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
     src/mapping/map_label_images.cpp
+    src/mapping/semantic_mapping_config.cpp
     src/mapping/semantic_mapping_session.cpp
     src/mapping/grid_projection.cpp
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
