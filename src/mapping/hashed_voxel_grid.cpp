@@ -55,10 +55,10 @@ const std::array<std::uint16_t, HashedVoxelGrid::kBlockVoxels>& mortonToIndex() 
 HashedVoxelGrid::HashedVoxelGrid(const HashedVoxelGridOptions& options) : options_(options) {
   if (!(options_.resolution_m > 0)) throw std::invalid_argument("HashedVoxelGrid: resolution <= 0");
   // octomap's float log-odds of the same probabilities: bit-equal arithmetic with the octree.
-  hit_log_ = octomap::logodds(options_.prob_hit);
-  miss_log_ = octomap::logodds(options_.prob_miss);
-  min_log_ = octomap::logodds(options_.clamping_min);
-  max_log_ = octomap::logodds(options_.clamping_max);
+  hit_log_ = octomap::logodds(options_.occupancy.prob_hit);
+  miss_log_ = octomap::logodds(options_.occupancy.prob_miss);
+  min_log_ = octomap::logodds(options_.occupancy.clamping_min);
+  max_log_ = octomap::logodds(options_.occupancy.clamping_max);
   occupied_log_ = octomap::logodds(options_.occupancy_threshold);
   resolution_factor_ = 1.0 / options_.resolution_m;
   rehash(1024);

@@ -18,9 +18,12 @@ void require(bool ok, const std::string& key, const std::string& what) {
 void SemanticMappingConfig::validate() const {
   require(resolution_m > 0 && resolution_m <= 100, "resolution", "must be in (0, 100] m");
   require(max_range_m >= 0, "max_range_m", "must be >= 0 (0: unlimited)");
-  require(prob_hit > 0.5 && prob_hit < 1, "sensor_model.hit", "must be in (0.5, 1)");
-  require(prob_miss > 0 && prob_miss < 0.5, "sensor_model.miss", "must be in (0, 0.5)");
-  require(clamping_min > 0 && clamping_min < clamping_max && clamping_max < 1,
+  require(occupancy.prob_hit > 0.5 && occupancy.prob_hit < 1, "sensor_model.hit",
+          "must be in (0.5, 1)");
+  require(occupancy.prob_miss > 0 && occupancy.prob_miss < 0.5, "sensor_model.miss",
+          "must be in (0, 0.5)");
+  require(occupancy.clamping_min > 0 && occupancy.clamping_min < occupancy.clamping_max &&
+              occupancy.clamping_max < 1,
           "sensor_model.clamping_min/clamping_max", "must satisfy 0 < min < max < 1");
   require(class_set == "cityscapes" || class_set == "semantickitti", "class_set",
           "must be cityscapes or semantickitti, got '" + class_set + "'");
@@ -69,10 +72,10 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   SemanticMappingConfig config;
   reader.read("resolution", &config.resolution_m);
   reader.read("max_range_m", &config.max_range_m);
-  reader.read("sensor_model.hit", &config.prob_hit);
-  reader.read("sensor_model.miss", &config.prob_miss);
-  reader.read("sensor_model.clamping_min", &config.clamping_min);
-  reader.read("sensor_model.clamping_max", &config.clamping_max);
+  reader.read("sensor_model.hit", &config.occupancy.prob_hit);
+  reader.read("sensor_model.miss", &config.occupancy.prob_miss);
+  reader.read("sensor_model.clamping_min", &config.occupancy.clamping_min);
+  reader.read("sensor_model.clamping_max", &config.occupancy.clamping_max);
   reader.read("class_set", &config.class_set);
   std::string rule;
   reader.read("fusion_rule", &rule);

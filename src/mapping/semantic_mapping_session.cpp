@@ -63,10 +63,7 @@ std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
       config_.resolution_m,
       config_.class_set == "cityscapes" ? ClassSet::cityscapes() : ClassSet::semanticKitti(),
       config_.fusion);
-  tree->setProbHit(config_.prob_hit);
-  tree->setProbMiss(config_.prob_miss);
-  tree->setClampingThresMin(config_.clamping_min);
-  tree->setClampingThresMax(config_.clamping_max);
+  tree->setOccupancyModel(config_.occupancy);
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   return tree;
@@ -76,10 +73,7 @@ std::unique_ptr<HashedVoxelGrid> SemanticMappingSession::makeGrid() const {
   if (config_.insertion != "hashed_grid") return nullptr;
   HashedVoxelGridOptions options;
   options.resolution_m = config_.resolution_m;
-  options.prob_hit = config_.prob_hit;
-  options.prob_miss = config_.prob_miss;
-  options.clamping_min = config_.clamping_min;
-  options.clamping_max = config_.clamping_max;
+  options.occupancy = config_.occupancy;
   options.occupancy_threshold = tree_->getOccupancyThres();
   options.grazing_truncation_voxels = config_.grazing_ray_truncation_voxels;
   options.early_termination_voxels = config_.early_ray_termination_voxels;
@@ -471,10 +465,7 @@ void SemanticMappingSession::load(const std::string& path) {
                      " m differs from the configured " + std::to_string(config_.resolution_m) +
                      " m");
   }
-  loaded->setProbHit(config_.prob_hit);
-  loaded->setProbMiss(config_.prob_miss);
-  loaded->setClampingThresMin(config_.clamping_min);
-  loaded->setClampingThresMax(config_.clamping_max);
+  loaded->setOccupancyModel(config_.occupancy);
   loaded->setRayCastingThreads(config_.ray_casting_threads);
   loaded->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   loaded->setFusionModel(config_.fusion);

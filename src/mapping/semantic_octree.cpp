@@ -98,6 +98,13 @@ SemanticOcTree::SemanticOcTree(double resolution, ClassSet classes, FusionModel 
   semantic_octree_member_init_.ensureLinking();
 }
 
+void SemanticOcTree::setOccupancyModel(const OccupancyModel& model) {
+  setProbHit(model.prob_hit);
+  setProbMiss(model.prob_miss);
+  setClampingThresMin(model.clamping_min);
+  setClampingThresMax(model.clamping_max);
+}
+
 bool SemanticOcTree::createRootIfEmpty() {
   if (root != nullptr) return false;
   root = new SemanticOcTreeNode();

@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/occupancy_model.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
 namespace YAML {
@@ -22,10 +23,7 @@ namespace mapping {
 struct SemanticMappingConfig {
   double resolution_m = 0.2;
   double max_range_m = 50.0;
-  double prob_hit = 0.7;
-  double prob_miss = 0.4;
-  double clamping_min = 0.12;
-  double clamping_max = 0.97;
+  OccupancyModel occupancy;              // sensor_model.hit, .miss, .clamping_min, .clamping_max
   std::string class_set = "cityscapes";  // "cityscapes" | "semantickitti"
   FusionModel fusion;
   double grazing_ray_truncation_voxels = 1.0;

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/occupancy_model.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
 namespace inekf_semantic_mapping {
@@ -105,6 +106,9 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   ClassSet& mutableClassSet() { return classes_; }
   const FusionModel& fusionModel() const { return fusion_; }
   void setFusionModel(const FusionModel& fusion) { fusion_ = fusion; }
+  // octomap's setProbHit, setProbMiss and clamping thresholds in one call (a new tree has
+  // octomap's defaults, clamping 0.1192 / 0.971, not OccupancyModel's).
+  void setOccupancyModel(const OccupancyModel& model);
 
   // Batched scan insertion: endpoints are grouped per voxel (each occupied voxel gets one hit
   // per scan, and one class observation per point), free voxels along all rays are collected
