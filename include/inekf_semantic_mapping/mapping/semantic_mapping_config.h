@@ -51,7 +51,7 @@ struct SemanticMappingConfig {
   double label_geometry_min_raised_height_m = 0.2;
   // ... and terrain above label_geometry_max_flat_height_m counts as vegetation instead.
   bool label_geometry_high_terrain_is_vegetation = true;
-  // ... and road beyond a kerb on the scan's laser rings counts as sidewalk
+  // ... and road beyond a curb on the scan's laser rings counts as sidewalk
   // (perception::markPointsBeyondCurbs: scans in ring order, as KITTI's).
   bool label_geometry_curbs = true;
   // Pairing: a label image belongs to the scan whose stamp is within this tolerance (s).
