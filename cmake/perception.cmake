@@ -6,6 +6,7 @@ ism_add_core_library(${PROJECT_NAME}_projection
 
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp
+    src/perception/segmenter_input.cpp src/perception/segmenter_labels.cpp
   LINK ${OpenCV_LIBS} yaml-cpp
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
