@@ -3,7 +3,8 @@
 ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cpp)
 ism_add_core_library(${PROJECT_NAME}_estimation
   SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
-          src/estimation/localizer.cpp src/estimation/lazy_start.cpp
+          src/estimation/localizer.cpp src/estimation/localizer_config.cpp
+          src/estimation/lazy_start.cpp
           src/estimation/smoother.cpp src/estimation/pose_graph.cpp
           src/estimation/selected_inverse.cpp
   LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)

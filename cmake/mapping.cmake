@@ -5,10 +5,13 @@ ism_add_core_library(${PROJECT_NAME}_mapping
   SOURCES
     src/mapping/semantic_classes.cpp
     src/mapping/semantic_octree.cpp
+    src/mapping/semantic_octree_insertion.cpp
+    src/mapping/semantic_octree_io.cpp
     src/mapping/hashed_voxel_grid.cpp
     src/mapping/map_io.cpp
     src/mapping/offline_mapping.cpp
     src/mapping/map_label_images.cpp
+    src/mapping/semantic_mapping_config.cpp
     src/mapping/semantic_mapping_session.cpp
     src/mapping/grid_projection.cpp
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common

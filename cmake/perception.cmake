@@ -1,10 +1,12 @@
 # Component: perception — lidar-to-camera projection and the lidar geometry check on camera labels
 # (Eigen only), Segmenter (OpenCV dnn) and model cards; segmentation_node, segment_image.
 ism_add_core_library(${PROJECT_NAME}_projection
-  SOURCES src/perception/projection.cpp src/perception/label_geometry.cpp)
+  SOURCES src/perception/projection.cpp src/perception/label_geometry.cpp
+    src/perception/curb_detection.cpp)
 
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp
+    src/perception/segmenter_input.cpp src/perception/segmenter_labels.cpp
   LINK ${OpenCV_LIBS} yaml-cpp
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 

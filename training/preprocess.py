@@ -1,4 +1,4 @@
-"""The C++ Segmenter's image preparation (perception/segmenter.cpp), in numpy: the tone curve,
+"""The C++ Segmenter's image preparation (perception/segmenter_input.cpp), in numpy: the tone curve,
 the per-image colour standardisation and the resize to the network's input. A network is trained
 on exactly what it will be given at run time."""
 

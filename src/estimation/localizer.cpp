@@ -9,7 +9,6 @@
 #include <set>
 #include <stdexcept>
 
-#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/estimation/imu_filters.h"
 #include "inekf_semantic_mapping/lie/so3.h"
 
@@ -26,112 +25,6 @@ double wrapRad(double angle) { return std::atan2(std::sin(angle), std::cos(angle
 double headingOf(const Eigen::Matrix3d& rotation) {
   return std::atan2(rotation(1, 0), rotation(0, 0));
 }
-
-}  // namespace
-
-LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
-  common::YamlReader reader = common::YamlReader::fromFile(path);
-  LocalizerConfig config = fromYaml(&reader);
-  reader.allow("node.*");
-  reader.allow("session.*");
-  reader.rejectUnknown();
-  return config;
-}
-
-LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
-  LocalizerConfig config;
-  const auto positive = [reader](const std::string& key, double* out) {
-    reader->read(key, out);
-    if (!(*out > 0.0)) reader->fail(key, "must be a positive number");
-  };
-  const auto non_negative = [reader](const std::string& key, double* out) {
-    reader->read(key, out);
-    if (!(*out >= 0.0)) reader->fail(key, "must be >= 0");
-  };
-  std::string filter;
-  reader->read("filter", &filter);
-  if (!filter.empty()) {
-    try {
-      config.filter_type = filterTypeFromString(filter);
-    } catch (const std::exception& e) {
-      reader->fail("filter", e.what());
-    }
-  }
-  ImuNoise& n = config.imu_noise;
-  positive("imu_noise.gyro_noise_density", &n.gyro_noise_density);
-  positive("imu_noise.accel_noise_density", &n.accel_noise_density);
-  non_negative("imu_noise.gyro_bias_random_walk", &n.gyro_bias_random_walk);
-  non_negative("imu_noise.accel_bias_random_walk", &n.accel_bias_random_walk);
-  positive("imu_noise.gravity_mps2", &n.gravity_mps2);
-  positive("initial_sigma.rotation_deg", &config.initial_rotation_sigma_deg);
-  positive("initial_sigma.yaw_deg", &config.initial_yaw_sigma_deg);
-  positive("initial_sigma.velocity_mps", &config.initial_velocity_sigma_mps);
-  positive("initial_sigma.unknown_velocity_horizontal_mps",
-           &config.unknown_velocity_sigma_horizontal_mps);
-  positive("initial_sigma.unknown_velocity_vertical_mps",
-           &config.unknown_velocity_sigma_vertical_mps);
-  positive("initial_sigma.unknown_yaw_deg", &config.unknown_yaw_sigma_deg);
-  positive("initial_sigma.position_m", &config.initial_position_sigma_m);
-  positive("initial_sigma.gyro_bias_radps", &config.initial_gyro_bias_sigma_radps);
-  positive("initial_sigma.accel_bias_mps2", &config.initial_accel_bias_sigma_mps2);
-  positive("gps.gate_mahalanobis_squared", &config.gps_gate_mahalanobis_squared);
-  non_negative("gps.min_sigma_m", &config.min_gps_sigma_m);
-  non_negative("gps.max_fix_age_s", &config.max_fix_age_s);
-  non_negative("gps.fix_history_s", &config.fix_history_s);
-  reader->read("gps.max_consecutive_rejected_fixes", &config.max_consecutive_rejected_fixes);
-  if (config.max_consecutive_rejected_fixes < 0 ||
-      config.max_consecutive_rejected_fixes > 1000000) {
-    reader->fail("gps.max_consecutive_rejected_fixes", "must be an integer in [0, 1000000]");
-  }
-  positive("gps.max_reacquisition_speed_mps", &config.max_reacquisition_speed_mps);
-  positive("imu.max_angular_rate_radps", &config.max_angular_rate_radps);
-  positive("imu.max_specific_force_mps2", &config.max_specific_force_mps2);
-  positive("imu.max_gap_s", &config.max_imu_gap_s);
-  positive("imu.gap_noise_scale", &config.gap_noise_scale);
-  non_negative("imu.interpolated_gyro_noise_scale_per_s",
-               &config.interpolated_gyro_noise_scale_per_s);
-  positive("imu.interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale);
-  reader->read("nonholonomic.enabled", &config.nonholonomic);
-  positive("nonholonomic.lateral_sigma_mps", &config.nonholonomic_lateral_sigma_mps);
-  positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
-  positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
-  positive("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg);
-  // A mounting error, not another axis convention: an IMU turned further needs its data rotated
-  // (imu_link in tf), not a constraint that bends.
-  const auto mounting_angle = [&](const char* key, double* out) {
-    reader->read(key, out);
-    if (!(std::abs(*out) <= 30.0)) reader->fail(key, "must be in [-30, 30] deg");
-  };
-  mounting_angle("nonholonomic.vehicle_pitch_deg", &config.nonholonomic_vehicle_pitch_deg);
-  mounting_angle("nonholonomic.vehicle_yaw_deg", &config.nonholonomic_vehicle_yaw_deg);
-  reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
-  reader->read("heading.from_track", &config.heading_from_track);
-  positive("heading.track_window_s", &config.heading_track_window_s);
-  positive("heading.track_min_speed_mps", &config.heading_track_min_speed_mps);
-  non_negative("heading.track_min_chord_m", &config.heading_track_min_chord_m);
-  positive("heading.track_max_chord_s", &config.heading_track_max_chord_s);
-  positive("heading.track_max_turn_deg", &config.heading_track_max_turn_deg);
-  non_negative("heading.track_turn_weight", &config.heading_track_turn_weight);
-  non_negative("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg);
-  const auto count = [reader](const std::string& key, int* out, int min) {
-    reader->read(key, out);
-    if (*out < min || *out > 1000000) {
-      reader->fail(key, "must be an integer in [" + std::to_string(min) + ", 1000000]");
-    }
-  };
-  count("heading.track_min_chords", &config.heading_track_min_chords, 1);
-  positive("heading.align_above_sigma_deg", &config.heading_align_above_sigma_deg);
-  positive("heading.align_max_sigma_deg", &config.heading_align_max_sigma_deg);
-  positive("heading.check_sigmas", &config.heading_check_sigmas);
-  non_negative("heading.check_min_deg", &config.heading_check_min_deg);
-  count("heading.reopen_after_rejected_fixes", &config.heading_reopen_after_rejected_fixes, 0);
-  count("heading.nis_window_fixes", &config.heading_nis_window_fixes, 0);
-  positive("heading.nis_window_max", &config.heading_nis_window_max);
-  reader->read("heading.hold_unknown_yaw", &config.heading_hold_unknown_yaw);
-  return config;
-}
-
-namespace {
 
 NonholonomicModel nonholonomicModel(const LocalizerConfig& config) {
   NonholonomicModel model;

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "flat_key_set.h"
+#include "grazing_rays.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
@@ -19,8 +20,6 @@ static_assert(HashedVoxelGrid::kBlockBits == 3, "forEachVoxel and the tables ass
 namespace {
 
 constexpr int kKeyMax = 32768;  // octomap's tree_max_val at depth 16
-// Grazing-ray truncation never withholds more than this fraction of a ray (SemanticOcTree's).
-constexpr double kMaxGrazingCutFraction = 0.25;
 // Label ids below this resolve through a per-scan table instead of the class set's hash map.
 constexpr std::uint32_t kLabelTableSize = 1024;
 
@@ -56,10 +55,10 @@ const std::array<std::uint16_t, HashedVoxelGrid::kBlockVoxels>& mortonToIndex() 
 HashedVoxelGrid::HashedVoxelGrid(const HashedVoxelGridOptions& options) : options_(options) {
   if (!(options_.resolution_m > 0)) throw std::invalid_argument("HashedVoxelGrid: resolution <= 0");
   // octomap's float log-odds of the same probabilities: bit-equal arithmetic with the octree.
-  hit_log_ = octomap::logodds(options_.prob_hit);
-  miss_log_ = octomap::logodds(options_.prob_miss);
-  min_log_ = octomap::logodds(options_.clamping_min);
-  max_log_ = octomap::logodds(options_.clamping_max);
+  hit_log_ = octomap::logodds(options_.occupancy.prob_hit);
+  miss_log_ = octomap::logodds(options_.occupancy.prob_miss);
+  min_log_ = octomap::logodds(options_.occupancy.clamping_min);
+  max_log_ = octomap::logodds(options_.occupancy.clamping_max);
   occupied_log_ = octomap::logodds(options_.occupancy_threshold);
   resolution_factor_ = 1.0 / options_.resolution_m;
   rehash(1024);
@@ -250,7 +249,7 @@ std::size_t HashedVoxelGrid::insertLabeledScan(const LabeledScan& scan, double m
       if (truncation_m > 0.0 && ray[2] < 0.f) {
         // Only rays that go down can graze the road (see SemanticOcTree::setGrazingRayTruncation).
         const double sin_elevation = -ray[2] / range;
-        const double cut = std::min(kMaxGrazingCutFraction * range, truncation_m / sin_elevation);
+        const double cut = grazingRayCut(range, sin_elevation, truncation_m);
         const float keep = static_cast<float>(1.0 - cut / range);
         ray_ends.push_back({origin_f[0] + ray[0] * keep, origin_f[1] + ray[1] * keep,
                             origin_f[2] + ray[2] * keep});

@@ -5,7 +5,6 @@
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/timing.h"
-#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/label_geometry.h"
 #include "inekf_semantic_mapping/perception/projection.h"
@@ -40,120 +39,7 @@ auto nearestInTime(Items& items, double stamp, double tolerance, Eligible eligib
 }
 constexpr auto kAny = [](const auto&) { return true; };
 
-void require(bool ok, const std::string& key, const std::string& what) {
-  if (!ok) throw std::invalid_argument("semantic mapping config: '" + key + "' " + what);
-}
-
 }  // namespace
-
-void SemanticMappingConfig::validate() const {
-  require(resolution_m > 0 && resolution_m <= 100, "resolution", "must be in (0, 100] m");
-  require(max_range_m >= 0, "max_range_m", "must be >= 0 (0: unlimited)");
-  require(prob_hit > 0.5 && prob_hit < 1, "sensor_model.hit", "must be in (0.5, 1)");
-  require(prob_miss > 0 && prob_miss < 0.5, "sensor_model.miss", "must be in (0, 0.5)");
-  require(clamping_min > 0 && clamping_min < clamping_max && clamping_max < 1,
-          "sensor_model.clamping_min/clamping_max", "must satisfy 0 < min < max < 1");
-  require(class_set == "cityscapes" || class_set == "semantickitti", "class_set",
-          "must be cityscapes or semantickitti, got '" + class_set + "'");
-  require(fusion.correct_probability > 0 && fusion.correct_probability < 1, "confusion_probability",
-          "must be in (0, 1)");
-  require(fusion.dirichlet_prior > 0, "dirichlet_prior", "must be > 0");
-  require(grazing_ray_truncation_voxels >= 0, "grazing_ray_truncation_voxels", "must be >= 0");
-  require(ray_casting_threads >= 1 && ray_casting_threads <= 64, "ray_casting_threads",
-          "must be in [1, 64]");
-  require(insertion == "octree" || insertion == "hashed_grid", "insertion",
-          "must be octree or hashed_grid, got '" + insertion + "'");
-  require(early_ray_termination_voxels >= 0, "early_ray_termination_voxels", "must be >= 0");
-  require(label_geometry_max_flat_height_m > 0 && label_geometry_max_flat_height_m <= 10,
-          "label_geometry.max_flat_height", "must be in (0, 10] m");
-  require(label_geometry_min_raised_height_m >= 0 && label_geometry_min_raised_height_m <= 10,
-          "label_geometry.min_raised_height", "must be in [0, 10] m");
-  require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance_s",
-          "must be in [0, 1] s");
-  require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait_s", "must be in [0, 30] s");
-  require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait_s", "must be in [0, 30] s");
-}
-
-const std::vector<std::string>& semanticMappingNodeKeys() {
-  // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does.
-  static const std::vector<std::string> keys = {
-      "map_frame",    "marker_rate",   "max_display_cpu_fraction",
-      "marker_depth", "calib_dir",     "camera_index",
-      "map_file",     "autosave_path", "autosave_period_s",
-      "log_period_s", "grid.*",        "diagnostics.*"};
-  return keys;
-}
-
-const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKeys() {
-  static const std::vector<std::pair<std::string, std::string>> keys = {
-      {"max_range", "max_range_m"},
-      {"label_stamp_tolerance", "label_stamp_tolerance_s"},
-      {"label_wait", "label_wait_s"},
-      {"pose_wait", "pose_wait_s"},
-      {"autosave_period", "autosave_period_s"},
-      {"log_period", "log_period_s"}};
-  return keys;
-}
-
-SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source) {
-  common::YamlReader reader(source, root);
-  SemanticMappingConfig config;
-  reader.read("resolution", &config.resolution_m);
-  reader.read("max_range_m", &config.max_range_m);
-  reader.read("sensor_model.hit", &config.prob_hit);
-  reader.read("sensor_model.miss", &config.prob_miss);
-  reader.read("sensor_model.clamping_min", &config.clamping_min);
-  reader.read("sensor_model.clamping_max", &config.clamping_max);
-  reader.read("class_set", &config.class_set);
-  std::string rule;
-  reader.read("fusion_rule", &rule);
-  if (!rule.empty()) {
-    try {
-      config.fusion.rule = parseFusionRule(rule);
-    } catch (const std::exception& e) {
-      reader.fail("fusion_rule", e.what());
-    }
-  }
-  reader.read("confusion_probability", &config.fusion.correct_probability);
-  reader.read("dirichlet_prior", &config.fusion.dirichlet_prior);
-  reader.read("grazing_ray_truncation_voxels", &config.grazing_ray_truncation_voxels);
-  reader.read("ray_casting_threads", &config.ray_casting_threads);
-  reader.read("insertion", &config.insertion);
-  reader.read("early_ray_termination_voxels", &config.early_ray_termination_voxels);
-  reader.read("insert_points_outside_image", &config.insert_points_outside_image);
-  reader.read("reject_occluded_points", &config.reject_occluded_points);
-  reader.read("label_geometry.enabled", &config.label_geometry_check);
-  reader.read("label_geometry.max_flat_height", &config.label_geometry_max_flat_height_m);
-  reader.read("label_geometry.min_raised_height", &config.label_geometry_min_raised_height_m);
-  reader.read("label_geometry.high_terrain_is_vegetation",
-              &config.label_geometry_high_terrain_is_vegetation);
-  reader.read("label_geometry.curbs", &config.label_geometry_curbs);
-  reader.read("label_stamp_tolerance_s", &config.label_stamp_tolerance_s);
-  reader.read("label_wait_s", &config.label_wait_s);
-  reader.read("pose_wait_s", &config.pose_wait_s);
-  // Times and lengths carry their unit in the name; the old names fail with the new one.
-  for (const auto& [old_key, new_key] : renamedSemanticMappingKeys()) {
-    reader.renamed(old_key, new_key);
-  }
-  for (const std::string& key : semanticMappingNodeKeys()) reader.allow(key);
-  reader.rejectUnknown();
-  try {
-    config.validate();
-  } catch (const std::invalid_argument& e) {
-    throw common::ConfigError(source + ": " + e.what());
-  }
-  return config;
-}
-
-SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::Exception& e) {
-    throw common::ConfigError(yaml_path + ": cannot read config: " + e.what());
-  }
-  return readSemanticMappingConfig(root, yaml_path);
-}
 
 SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& config)
     : config_(config) {
@@ -177,10 +63,7 @@ std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
       config_.resolution_m,
       config_.class_set == "cityscapes" ? ClassSet::cityscapes() : ClassSet::semanticKitti(),
       config_.fusion);
-  tree->setProbHit(config_.prob_hit);
-  tree->setProbMiss(config_.prob_miss);
-  tree->setClampingThresMin(config_.clamping_min);
-  tree->setClampingThresMax(config_.clamping_max);
+  tree->setOccupancyModel(config_.occupancy);
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   return tree;
@@ -190,10 +73,7 @@ std::unique_ptr<HashedVoxelGrid> SemanticMappingSession::makeGrid() const {
   if (config_.insertion != "hashed_grid") return nullptr;
   HashedVoxelGridOptions options;
   options.resolution_m = config_.resolution_m;
-  options.prob_hit = config_.prob_hit;
-  options.prob_miss = config_.prob_miss;
-  options.clamping_min = config_.clamping_min;
-  options.clamping_max = config_.clamping_max;
+  options.occupancy = config_.occupancy;
   options.occupancy_threshold = tree_->getOccupancyThres();
   options.grazing_truncation_voxels = config_.grazing_ray_truncation_voxels;
   options.early_termination_voxels = config_.early_ray_termination_voxels;
@@ -585,10 +465,7 @@ void SemanticMappingSession::load(const std::string& path) {
                      " m differs from the configured " + std::to_string(config_.resolution_m) +
                      " m");
   }
-  loaded->setProbHit(config_.prob_hit);
-  loaded->setProbMiss(config_.prob_miss);
-  loaded->setClampingThresMin(config_.clamping_min);
-  loaded->setClampingThresMax(config_.clamping_max);
+  loaded->setOccupancyModel(config_.occupancy);
   loaded->setRayCastingThreads(config_.ray_casting_threads);
   loaded->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
   loaded->setFusionModel(config_.fusion);

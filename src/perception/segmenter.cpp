@@ -1,3 +1,6 @@
+// Segmenter's network: reading it, the forward pass, the tiled and the single-pass segmentation
+// (softmax, argmax, back to the image). The input preparation is in segmenter_input.cpp, the
+// label-image functions in segmenter_labels.cpp.
 #include "inekf_semantic_mapping/perception/segmenter.h"
 
 #include <algorithm>
@@ -10,10 +13,17 @@
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "segmenter_input.h"
 
 namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
+
+using detail::applyGamma;
+using detail::PreparedInput;
+using detail::prepareInput;
+using detail::standardizeColors;
+using detail::toBgr;
 
 namespace fs = std::filesystem;
 
@@ -28,127 +38,6 @@ cv::dnn::Net readNetwork(const std::string& model_path) {
   }
   throw SegmentationError("unknown model format '" + extension + "' of " + model_path +
                           " (expected .onnx, or Torch7 .net / .t7)");
-}
-
-// The image as 8-bit BGR, whatever of the supported pixel types it came in.
-cv::Mat toBgr(const cv::Mat& image) {
-  if (image.empty()) throw SegmentationError("segment(): empty image");
-  if (image.depth() != CV_8U)
-    throw SegmentationError("segment(): unsupported pixel depth " + std::to_string(image.depth()) +
-                            " (need 8-bit gray, BGR or BGRA)");
-  cv::Mat bgr;
-  switch (image.channels()) {
-    case 1:
-      cv::cvtColor(image, bgr, cv::COLOR_GRAY2BGR);
-      return bgr;
-    case 3:
-      return image;
-    case 4:
-      cv::cvtColor(image, bgr, cv::COLOR_BGRA2BGR);
-      return bgr;
-    default:
-      throw SegmentationError("segment(): unsupported channel count " +
-                              std::to_string(image.channels()) + " (need 1, 3 or 4)");
-  }
-}
-
-int roundUpToMultiple(int value, int multiple) {
-  return (value + multiple - 1) / multiple * multiple;
-}
-
-// The network input made from an image, and where the image lies in it.
-struct PreparedInput {
-  cv::Mat network_image;  // BGR, what blobFromImage receives
-  cv::Rect valid_region;  // the image's pixels inside network_image (output is cropped to it)
-};
-
-PreparedInput prepareInput(const cv::Mat& bgr, const ModelCard& card) {
-  PreparedInput prepared;
-  switch (card.resize_policy) {
-    case ResizePolicy::kResize:
-      cv::resize(bgr, prepared.network_image, cv::Size(card.input_width, card.input_height), 0, 0,
-                 cv::INTER_LINEAR);
-      prepared.valid_region = cv::Rect(0, 0, card.input_width, card.input_height);
-      break;
-    case ResizePolicy::kLetterbox: {
-      const double scale = std::min(static_cast<double>(card.input_width) / bgr.cols,
-                                    static_cast<double>(card.input_height) / bgr.rows);
-      const int width =
-          std::clamp(static_cast<int>(std::lround(bgr.cols * scale)), 1, card.input_width);
-      const int height =
-          std::clamp(static_cast<int>(std::lround(bgr.rows * scale)), 1, card.input_height);
-      const int left = (card.input_width - width) / 2;
-      const int top = (card.input_height - height) / 2;
-      cv::Mat resized;
-      cv::resize(bgr, resized, cv::Size(width, height), 0, 0, cv::INTER_LINEAR);
-      // Pad with the mean color so the padding normalizes to zero.
-      const cv::Scalar mean_bgr = card.swap_rb
-                                      ? cv::Scalar(card.mean[2], card.mean[1], card.mean[0])
-                                      : cv::Scalar(card.mean[0], card.mean[1], card.mean[2]);
-      cv::copyMakeBorder(resized, prepared.network_image, top, card.input_height - height - top,
-                         left, card.input_width - width - left, cv::BORDER_CONSTANT, mean_bgr);
-      prepared.valid_region = cv::Rect(left, top, width, height);
-      break;
-    }
-    case ResizePolicy::kTiles:  // handled by segmentTiles()
-    case ResizePolicy::kPadToMultiple: {
-      cv::Mat resized = bgr;
-      cv::Size target = bgr.size();
-      if (card.input_width > 0 && card.input_height > 0) {
-        target = cv::Size(card.input_width, card.input_height);
-      } else if (card.resize_factor != 1.0) {
-        target =
-            cv::Size(std::max(1, static_cast<int>(std::lround(bgr.cols * card.resize_factor))),
-                     std::max(1, static_cast<int>(std::lround(bgr.rows * card.resize_factor))));
-      }
-      // INTER_AREA: what scripts/train_unet.py uses to make its training images.
-      if (target != bgr.size()) cv::resize(bgr, resized, target, 0, 0, cv::INTER_AREA);
-      const int padded_width = roundUpToMultiple(resized.cols, card.pad_multiple);
-      const int padded_height = roundUpToMultiple(resized.rows, card.pad_multiple);
-      // Reflect (not zero) padding: the network has seen no black borders in training.
-      const int border = std::max(padded_width - resized.cols, padded_height - resized.rows);
-      if (border >= std::min(resized.cols, resized.rows)) {
-        cv::copyMakeBorder(resized, prepared.network_image, 0, padded_height - resized.rows, 0,
-                           padded_width - resized.cols, cv::BORDER_REPLICATE);
-      } else {
-        cv::copyMakeBorder(resized, prepared.network_image, 0, padded_height - resized.rows, 0,
-                           padded_width - resized.cols, cv::BORDER_REFLECT_101);
-      }
-      prepared.valid_region = cv::Rect(0, 0, resized.cols, resized.rows);
-      break;
-    }
-  }
-  return prepared;
-}
-
-// v' = 255 (v / 255)^gamma per channel, by a lookup table.
-cv::Mat applyGamma(const cv::Mat& bgr, double gamma) {
-  cv::Mat table(1, 256, CV_8U);
-  for (int v = 0; v < 256; ++v) {
-    table.at<std::uint8_t>(v) = cv::saturate_cast<std::uint8_t>(255.0 * std::pow(v / 255.0, gamma));
-  }
-  cv::Mat out;
-  cv::LUT(bgr, table, out);
-  return out;
-}
-
-// Maps each channel affinely so its mean and standard deviation over the image become the
-// card's color_mean / color_std (given in the network's channel order).
-cv::Mat standardizeColors(const cv::Mat& bgr, const ModelCard& card) {
-  cv::Scalar image_mean, image_std;
-  cv::meanStdDev(bgr, image_mean, image_std);
-  std::vector<cv::Mat> channels;
-  cv::split(bgr, channels);
-  for (int c = 0; c < 3; ++c) {
-    // BGR channel c is network channel 2 - c when the network takes RGB.
-    const int network_channel = card.swap_rb ? 2 - c : c;
-    const double gain = card.color_std[network_channel] / std::max(image_std[c], 1.0);
-    const double offset = card.color_mean[network_channel] - gain * image_mean[c];
-    channels[c].convertTo(channels[c], CV_8U, gain, offset);  // saturates at 0 and 255
-  }
-  cv::Mat standardized;
-  cv::merge(channels, standardized);
-  return standardized;
 }
 
 // Starts of the fewest windows of `window` pixels that cover [0, extent) with neighbours
@@ -505,61 +394,6 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
     }
   }
   return result;
-}
-
-cv::Mat colorizeLabelIds(const cv::Mat& label_ids) {
-  CV_Assert(label_ids.type() == CV_8UC1);
-  cv::Mat lut(1, 256, CV_8UC3, cv::Scalar(0, 0, 0));
-  for (const cityscapes::LabelInfo& info : cityscapes::kLabels)
-    lut.at<cv::Vec3b>(info.label_id) = cv::Vec3b(info.r, info.g, info.b);
-  cv::Mat three_channel, rgb;
-  cv::cvtColor(label_ids, three_channel, cv::COLOR_GRAY2BGR);
-  cv::LUT(three_channel, lut, rgb);
-  return rgb;
-}
-
-cv::Mat overlayLabelIds(const cv::Mat& bgr_image, const cv::Mat& label_ids, double alpha) {
-  const cv::Mat colors = colorizeLabelIds(label_ids);
-  cv::Mat rgb_image;
-  cv::cvtColor(toBgr(bgr_image), rgb_image, cv::COLOR_BGR2RGB);
-  if (rgb_image.size() != colors.size())
-    throw SegmentationError("overlay: image and label image differ in size");
-  cv::Mat blended;
-  cv::addWeighted(colors, alpha, rgb_image, 1.0 - alpha, 0.0, blended);
-  return blended;
-}
-
-cv::Mat labelIdsToTrainIds(const cv::Mat& label_ids) {
-  CV_Assert(label_ids.type() == CV_8UC1);
-  cv::Mat lut(1, 256, CV_8U);
-  for (int i = 0; i < 256; ++i) lut.at<std::uint8_t>(i) = cityscapes::labelIdToTrainId(i);
-  cv::Mat train_ids;
-  cv::LUT(label_ids, lut, train_ids);
-  return train_ids;
-}
-
-cv::Mat filterLabels(const Segmentation& segmentation, double min_confidence,
-                     int boundary_radius_px) {
-  CV_Assert(segmentation.label_ids.type() == CV_8UC1);
-  cv::Mat filtered = segmentation.label_ids.clone();
-  if (boundary_radius_px > 0) {
-    // A pixel is near a boundary when the labels in its window are not all equal: the
-    // window's maximum (dilation) differs from its minimum (erosion).
-    const cv::Mat window = cv::getStructuringElement(
-        cv::MORPH_RECT, cv::Size(2 * boundary_radius_px + 1, 2 * boundary_radius_px + 1));
-    cv::Mat window_max, window_min;
-    cv::dilate(segmentation.label_ids, window_max, window, cv::Point(-1, -1), 1,
-               cv::BORDER_REPLICATE);
-    cv::erode(segmentation.label_ids, window_min, window, cv::Point(-1, -1), 1,
-              cv::BORDER_REPLICATE);
-    filtered.setTo(cityscapes::kUnlabeled, window_max != window_min);
-  }
-  if (min_confidence > 0.0) {
-    CV_Assert(segmentation.confidence.type() == CV_32FC1 &&
-              segmentation.confidence.size() == segmentation.label_ids.size());
-    filtered.setTo(cityscapes::kUnlabeled, segmentation.confidence < min_confidence);
-  }
-  return filtered;
 }
 
 }  // namespace perception

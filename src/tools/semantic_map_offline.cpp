@@ -91,8 +91,8 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   config.max_range_m = cli.getDouble("--max-range", config.max_range_m);
   config.fusion.correct_probability =
       cli.getDouble("--confusion", config.fusion.correct_probability);
-  config.prob_hit = cli.getDouble("--prob-hit", config.prob_hit);
-  config.prob_miss = cli.getDouble("--prob-miss", config.prob_miss);
+  config.occupancy.prob_hit = cli.getDouble("--prob-hit", config.occupancy.prob_hit);
+  config.occupancy.prob_miss = cli.getDouble("--prob-miss", config.occupancy.prob_miss);
   config.grazing_ray_truncation_voxels =
       cli.getDouble("--grazing-truncation", config.grazing_ray_truncation_voxels);
   if (cli.has("--insertion")) config.insertion = cli.get("--insertion");

@@ -67,10 +67,10 @@ TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
   const SemanticMappingConfig defaults;
   EXPECT_EQ(from_yaml.resolution_m, defaults.resolution_m);
   EXPECT_EQ(from_yaml.max_range_m, defaults.max_range_m);
-  EXPECT_EQ(from_yaml.prob_hit, defaults.prob_hit);
-  EXPECT_EQ(from_yaml.prob_miss, defaults.prob_miss);
-  EXPECT_EQ(from_yaml.clamping_min, defaults.clamping_min);
-  EXPECT_EQ(from_yaml.clamping_max, defaults.clamping_max);
+  EXPECT_EQ(from_yaml.occupancy.prob_hit, defaults.occupancy.prob_hit);
+  EXPECT_EQ(from_yaml.occupancy.prob_miss, defaults.occupancy.prob_miss);
+  EXPECT_EQ(from_yaml.occupancy.clamping_min, defaults.occupancy.clamping_min);
+  EXPECT_EQ(from_yaml.occupancy.clamping_max, defaults.occupancy.clamping_max);
   EXPECT_EQ(from_yaml.class_set, defaults.class_set);
   EXPECT_EQ(from_yaml.fusion.rule, defaults.fusion.rule);
   EXPECT_EQ(from_yaml.fusion.correct_probability, defaults.fusion.correct_probability);
@@ -404,7 +404,7 @@ TEST(SemanticMappingSessionTest, BadLabelImagesAreRejectedAndTheMapIsKept) {
   EXPECT_EQ(session.tree().size(), nodes);
   EXPECT_THROW(SemanticMappingSession([] {
                  SemanticMappingConfig c;
-                 c.prob_hit = 0.4;
+                 c.occupancy.prob_hit = 0.4;
                  return c;
                }()),
                std::invalid_argument);

@@ -25,6 +25,7 @@
 #include <memory>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/occupancy_model.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
 namespace inekf_semantic_mapping {
@@ -35,11 +36,7 @@ class SemanticOcTree;
 
 struct HashedVoxelGridOptions {
   double resolution_m = 0.2;
-  // octomap's sensor model (probabilities; stored as float log-odds like octomap).
-  double prob_hit = 0.7;
-  double prob_miss = 0.4;
-  double clamping_min = 0.12;
-  double clamping_max = 0.97;
+  OccupancyModel occupancy;
   double occupancy_threshold = 0.5;  // octomap's default: occupied above it
   double grazing_truncation_voxels = 0.0;
   int early_termination_voxels = 0;

@@ -23,75 +23,11 @@
 #include "inekf_semantic_mapping/mapping/hashed_voxel_grid.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
+#include "inekf_semantic_mapping/mapping/semantic_mapping_config.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
-
-namespace YAML {
-class Node;
-}
 
 namespace inekf_semantic_mapping {
 namespace mapping {
-
-// Every parameter of a mapping run; the keys of config/semantic_mapping.yaml (the node's ROS
-// parameters and semantic_map_offline --config read the same keys with the same reader).
-struct SemanticMappingConfig {
-  double resolution_m = 0.2;
-  double max_range_m = 50.0;
-  double prob_hit = 0.7;
-  double prob_miss = 0.4;
-  double clamping_min = 0.12;
-  double clamping_max = 0.97;
-  std::string class_set = "cityscapes";  // "cityscapes" | "semantickitti"
-  FusionModel fusion;
-  double grazing_ray_truncation_voxels = 1.0;
-  int ray_casting_threads = 1;
-  // Insertion structure: "hashed_grid" (HashedVoxelGrid, synced into the tree when the tree is
-  // asked for: save, publish) or "octree" (SemanticOcTree::insertLabeledScan). The same map
-  // (test_hashed_voxel_grid); hashed_grid is several times faster.
-  std::string insertion = "hashed_grid";
-  // hashed_grid: a free ray stops after this many consecutive voxels that the same scan already
-  // cleared (0: never; 20: occupancy state of 0.3 % of the voxels differs, 41 % fewer visits).
-  int early_ray_termination_voxels = 20;
-  // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
-  // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
-  bool insert_points_outside_image = false;
-  // Lidar points the camera cannot see (lidar-camera parallax) take no label from the pixel
-  // they fall on (perception::rejectOccludedPoints with its measured defaults).
-  bool reject_occluded_points = true;
-  // Labels the lidar geometry rules out take no class evidence (perception/label_geometry.h):
-  // a flat class (road, sidewalk, terrain...) more than label_geometry_max_flat_height_m above
-  // the scan's local ground (sensor frame, z up), a traffic sign or light less than
-  // label_geometry_min_raised_height_m above it. Cityscapes class set only. Measured on
-  // SemanticKITTI 05 / 08 (README): map mIoU 0.340 -> 0.362 / 0.451 -> 0.460.
-  bool label_geometry_check = true;
-  double label_geometry_max_flat_height_m = 0.2;
-  double label_geometry_min_raised_height_m = 0.2;
-  // ... and terrain above label_geometry_max_flat_height_m counts as vegetation instead.
-  bool label_geometry_high_terrain_is_vegetation = true;
-  // ... and road beyond a kerb on the scan's laser rings counts as sidewalk
-  // (perception::markPointsBeyondCurbs: scans in ring order, as KITTI's).
-  bool label_geometry_curbs = true;
-  // Pairing: a label image belongs to the scan whose stamp is within this tolerance (s).
-  double label_stamp_tolerance_s = 0.05;
-  // How long (data time, s) a scan waits for its label image before it goes in without one.
-  double label_wait_s = 3.0;
-  // How long (data time, s) a scan waits for its pose before it is dropped.
-  double pose_wait_s = 1.0;
-
-  // Throws std::invalid_argument naming the key of the first bad value.
-  void validate() const;
-};
-
-// The keys of the same YAML that semantic_octomap_node reads itself (display, frames, files).
-const std::vector<std::string>& semanticMappingNodeKeys();
-// Retired keys and their names with a unit (old, new): setting an old one is an error naming the
-// new one.
-const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKeys();
-
-// Reads the keys above from a YAML map (the node's keys are allowed and left alone); unknown keys
-// and bad values throw std::invalid_argument (common::ConfigError) naming `source` and the key.
-SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const std::string& source);
-SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path);
 
 // A rectified camera: pixel ~ P [R_rect (T_camera_sensor x); 1] in a width x height image.
 struct CameraModel {

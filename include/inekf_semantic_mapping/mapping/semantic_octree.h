@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/occupancy_model.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
 namespace inekf_semantic_mapping {
@@ -105,6 +106,9 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   ClassSet& mutableClassSet() { return classes_; }
   const FusionModel& fusionModel() const { return fusion_; }
   void setFusionModel(const FusionModel& fusion) { fusion_ = fusion; }
+  // octomap's setProbHit, setProbMiss and clamping thresholds in one call (a new tree has
+  // octomap's defaults, clamping 0.1192 / 0.971, not OccupancyModel's).
+  void setOccupancyModel(const OccupancyModel& model);
 
   // Batched scan insertion: endpoints are grouped per voxel (each occupied voxel gets one hit
   // per scan, and one class observation per point), free voxels along all rays are collected
@@ -180,12 +184,11 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
     std::uint64_t morton;
     const SemanticOcTreeNode* evidence;
   };
-  // The last stage of insertLabeledScan (the earlier ones are free functions in the .cpp).
+  // The last stage of insertLabeledScan (the earlier ones, and the batch recursion it shares
+  // with setLeaves, are free functions in semantic_octree_insertion.cpp).
   void applyVoxelUpdates(std::vector<VoxelUpdate>* updates);
-  void updateBatchRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
-                         const VoxelUpdate* begin, const VoxelUpdate* end);
-  void setLeavesRecurs(SemanticOcTreeNode* node, bool node_just_created, unsigned int depth,
-                       const LeafState* begin, const LeafState* end);
+  // Creates an empty root when the tree has none; true when it did.
+  bool createRootIfEmpty();
   SemanticOcTreeNode* updateOccupiedWithEvidence(const octomap::OcTreeKey& key,
                                                  const SemanticOcTreeNode& evidence);
   SemanticOcTreeNode* updateOccupiedRecurs(SemanticOcTreeNode* node, bool node_just_created,

@@ -1,0 +1,241 @@
+// SemanticOcTree's file format: the class table and fusion model before octomap's node data, an
+// integrity record (node count, length, checksum) and a reader that refuses what it cannot trust.
+#include <cmath>
+#include <cstring>
+#include <istream>
+#include <iterator>
+#include <ostream>
+#include <sstream>
+#include <stdexcept>
+
+#include "inekf_semantic_mapping/mapping/semantic_octree.h"
+
+namespace inekf_semantic_mapping {
+namespace mapping {
+
+std::istream& SemanticOcTreeNode::readData(std::istream& s) {
+  s.read(reinterpret_cast<char*>(&value), sizeof(value));
+  s.read(reinterpret_cast<char*>(classes_.data()), sizeof(ClassIndex) * kSlots);
+  s.read(reinterpret_cast<char*>(counts_.data()), sizeof(std::uint16_t) * kSlots);
+  return s;
+}
+
+std::ostream& SemanticOcTreeNode::writeData(std::ostream& s) const {
+  s.write(reinterpret_cast<const char*>(&value), sizeof(value));
+  s.write(reinterpret_cast<const char*>(classes_.data()), sizeof(ClassIndex) * kSlots);
+  s.write(reinterpret_cast<const char*>(counts_.data()), sizeof(std::uint16_t) * kSlots);
+  return s;
+}
+
+namespace {
+// V1: class table, then octomap's node data. V2 adds an integrity record before the node data:
+// node count, byte length and an FNV-1a checksum, so a corrupt file is refused, never loaded as
+// a silently different map.
+constexpr char kSemanticHeaderMagicV1[] = "ISM_SEMANTIC_OCTREE_V1";
+constexpr char kSemanticHeaderMagicV2[] = "ISM_SEMANTIC_OCTREE_V2";
+static_assert(sizeof(kSemanticHeaderMagicV1) == sizeof(kSemanticHeaderMagicV2));
+// Bytes of one node in octomap's full format: value, class slots, counts, child bits.
+constexpr std::size_t kSerializedNodeBytes =
+    sizeof(float) + SemanticOcTreeNode::kSlots * (sizeof(ClassIndex) + sizeof(std::uint16_t)) + 1;
+
+template <typename T>
+void writePod(std::ostream& s, const T& value) {
+  s.write(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+template <typename T>
+bool readPod(std::istream& s, T* value) {
+  return static_cast<bool>(s.read(reinterpret_cast<char*>(value), sizeof(T)));
+}
+
+// FNV-1a, 64 bit, fed piecewise (the writer streams the node data, the reader has it whole).
+class Fnv1a {
+ public:
+  void add(char c) {
+    hash_ ^= static_cast<std::uint8_t>(c);
+    hash_ *= 1099511628211ull;
+  }
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 1469598103934665603ull;
+};
+
+std::uint64_t fnv1a(const std::string& bytes) {
+  Fnv1a hash;
+  for (const char c : bytes) hash.add(c);
+  return hash.value();
+}
+
+// A stream sink that keeps only the length and the FNV-1a checksum of what is written: the
+// integrity record goes before the node data, and holding the node bytes in memory to learn it
+// cost twice their size at save time (an ostringstream that grows by doubling, then its copy).
+class ChecksumSink : public std::streambuf {
+ public:
+  std::uint64_t length() const { return length_; }
+  std::uint64_t checksum() const { return hash_.value(); }
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (!traits_type::eq_int_type(c, traits_type::eof())) add(traits_type::to_char_type(c));
+    return traits_type::not_eof(c);
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    for (std::streamsize i = 0; i < n; ++i) add(s[i]);
+    return n;
+  }
+
+ private:
+  void add(char c) {
+    hash_.add(c);
+    ++length_;
+  }
+  std::uint64_t length_ = 0;
+  Fnv1a hash_;
+};
+}  // namespace
+
+// The class table and fusion model go before octomap's node data, so a loaded map knows which
+// label id each stored class index stands for.
+std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
+  s.write(kSemanticHeaderMagicV2, sizeof(kSemanticHeaderMagicV2));
+  writePod(s, static_cast<std::uint8_t>(fusion_.rule));
+  writePod(s, fusion_.correct_probability);
+  writePod(s, fusion_.dirichlet_prior);
+  writePod(s, static_cast<std::uint32_t>(classes_.size()));
+  for (const ClassInfo& info : classes_.classes()) {
+    writePod(s, info.label_id);
+    s.write(reinterpret_cast<const char*>(info.rgb.data()), 3);
+    writePod(s, static_cast<std::uint32_t>(info.name.size()));
+    s.write(info.name.data(), static_cast<std::streamsize>(info.name.size()));
+  }
+  // The node data twice: once into the checksum, then to the stream (no copy of it in memory).
+  ChecksumSink sink;
+  std::ostream checksum_stream(&sink);
+  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(checksum_stream);
+  writePod(s, static_cast<std::uint64_t>(size()));
+  writePod(s, sink.length());
+  writePod(s, sink.checksum());
+  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(s);
+  return s;
+}
+
+bool SemanticOcTree::fail(std::istream& s, const std::string& why) {
+  read_error_ = why;
+  s.setstate(std::ios::failbit);
+  return false;
+}
+
+std::istream& SemanticOcTree::refuse(std::istream& s, const std::string& why) {
+  fail(s, why);
+  return s;
+}
+
+std::istream& SemanticOcTree::readData(std::istream& s) {
+  read_error_.clear();
+  char magic[sizeof(kSemanticHeaderMagicV2)] = {};
+  if (!s.read(magic, sizeof(magic))) return refuse(s, "truncated header");
+  const bool v2 = std::memcmp(magic, kSemanticHeaderMagicV2, sizeof(magic)) == 0;
+  if (!v2 && std::memcmp(magic, kSemanticHeaderMagicV1, sizeof(magic)) != 0) {
+    return refuse(s, "not a semantic octree (bad magic)");
+  }
+  std::uint8_t rule = 0;
+  std::uint32_t num_classes = 0;
+  FusionModel fusion;
+  if (!(readPod(s, &rule) && rule <= 1 && readPod(s, &fusion.correct_probability) &&
+        readPod(s, &fusion.dirichlet_prior) && readPod(s, &num_classes) &&
+        num_classes <= static_cast<std::uint32_t>(kMaxClasses))) {
+    return refuse(s, "bad fusion model or class count");
+  }
+  if (!(fusion.correct_probability > 0 && fusion.correct_probability < 1 &&
+        fusion.dirichlet_prior > 0 && std::isfinite(fusion.dirichlet_prior))) {
+    return refuse(s, "fusion model out of range");
+  }
+  std::vector<ClassInfo> classes;
+  for (std::uint32_t i = 0; i < num_classes; ++i) {
+    ClassInfo info;
+    std::uint32_t name_length = 0;
+    if (!(readPod(s, &info.label_id) && s.read(reinterpret_cast<char*>(info.rgb.data()), 3) &&
+          readPod(s, &name_length) && name_length < 4096)) {
+      return refuse(s, "bad class table entry " + std::to_string(i));
+    }
+    info.name.resize(name_length);
+    if (!s.read(info.name.data(), name_length)) return refuse(s, "truncated class table");
+    classes.push_back(std::move(info));
+  }
+  try {
+    classes_ = ClassSet(std::move(classes));
+  } catch (const std::exception& e) {
+    return refuse(s, std::string("bad class table: ") + e.what());
+  }
+  fusion.rule = static_cast<FusionRule>(rule);
+  fusion_ = fusion;
+
+  std::string bytes;
+  std::uint64_t node_count = 0;
+  if (v2) {
+    std::uint64_t length = 0, checksum = 0;
+    if (!(readPod(s, &node_count) && readPod(s, &length) && readPod(s, &checksum))) {
+      return refuse(s, "truncated integrity record");
+    }
+    if (length != node_count * kSerializedNodeBytes || length > (std::uint64_t{1} << 36)) {
+      return refuse(s, "integrity record: " + std::to_string(length) + " bytes for " +
+                           std::to_string(node_count) + " nodes");
+    }
+    bytes.resize(length);
+    if (!s.read(bytes.data(), static_cast<std::streamsize>(length))) {
+      return refuse(s, "truncated node data (" + std::to_string(length) + " bytes announced)");
+    }
+    if (fnv1a(bytes) != checksum) return refuse(s, "checksum mismatch: the node data is corrupt");
+  } else {
+    // V1 files carry no length: the rest of the stream is node data.
+    bytes.assign(std::istreambuf_iterator<char>(s), std::istreambuf_iterator<char>());
+    node_count = bytes.size() / kSerializedNodeBytes;
+  }
+  std::istringstream nodes(bytes);
+  if (root) return refuse(s, "reading into a tree that is not empty");
+  root = new SemanticOcTreeNode();
+  std::uint64_t nodes_read = 0;
+  if (!readNodesChecked(root, nodes, 0, node_count, &nodes_read)) {
+    clear();
+    return refuse(s, read_error_);
+  }
+  if (v2 && nodes_read != node_count) {
+    clear();
+    return refuse(s, "node count " + std::to_string(nodes_read) + " differs from the recorded " +
+                         std::to_string(node_count));
+  }
+  tree_size = nodes_read;
+  size_changed = true;
+  return s;
+}
+
+// octomap's readNodesRecurs without its dangers: the depth is bounded by the tree depth, the
+// node count by the file, and every stored class index and count is checked.
+bool SemanticOcTree::readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
+                                      std::uint64_t max_nodes, std::uint64_t* nodes_read) {
+  if (++*nodes_read > max_nodes) return fail(s, "more nodes than the file records");
+  node->readData(s);
+  std::uint8_t children = 0;
+  if (!readPod(s, &children)) return fail(s, "truncated node data");
+  if (!std::isfinite(node->getValue())) return fail(s, "non-finite occupancy");
+  for (int slot = 0; slot < SemanticOcTreeNode::kSlots; ++slot) {
+    const ClassIndex index = node->slotClass(slot);
+    if (index != kNoClass && index >= classes_.size()) {
+      return fail(s, "class index " + std::to_string(index) + " outside the class table");
+    }
+  }
+  if (children != 0 && depth >= tree_depth) {
+    return fail(s, "children below the finest level (depth " + std::to_string(depth) + ")");
+  }
+  for (unsigned int i = 0; i < 8; ++i) {
+    if (children & (1u << i)) {
+      if (!readNodesChecked(createNodeChild(node, i), s, depth + 1, max_nodes, nodes_read)) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+}  // namespace mapping
+}  // namespace inekf_semantic_mapping
