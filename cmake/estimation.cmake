@@ -39,11 +39,15 @@ ism_add_gtest(test_smoothed_posterior_graph SOURCES test/unit/test_smoothed_post
 # Loop closure end to end on a synthetic drive it generates (lidar, 30 s GPS outage).
 ism_add_gtest(test_loop_closure SOURCES test/unit/test_loop_closure.cpp
   LINK ${PROJECT_NAME}_registration ${PROJECT_NAME}_synthetic)
+ism_add_gtest(test_loop_closure_data SOURCES test/data/test_loop_closure_data.cpp
+  LINK ${PROJECT_NAME}_registration ${PROJECT_NAME}_synthetic)
 ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_localization_session SOURCES test/unit/test_localization_session.cpp
+  LINK ${PROJECT_NAME}_estimation_oxts)
+ism_add_gtest(test_localization_session_data SOURCES test/data/test_localization_session_data.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)
 ism_add_gtest(test_inekf_real_drives SOURCES test/accuracy/test_inekf_real_drives.cpp
   LINK ${PROJECT_NAME}_estimation_oxts)

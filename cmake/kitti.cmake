@@ -12,6 +12,7 @@ ism_add_core_library(${PROJECT_NAME}_kitti
     src/kitti/velodyne.cpp)
 
 ism_add_gtest(test_kitti_io SOURCES test/unit/test_kitti_io.cpp LINK ${PROJECT_NAME}_kitti)
+ism_add_gtest(test_kitti_io_data SOURCES test/data/test_kitti_io_data.cpp LINK ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_kitti_gps_degradation
   SOURCES test/unit/test_kitti_gps_degradation.cpp LINK ${PROJECT_NAME}_kitti)
 
@@ -31,17 +32,19 @@ endif()
 
 ism_add_ros_executable(kitti2bag SOURCES src/tools/kitti2bag.cpp LINK ${PROJECT_NAME}_kitti_ros)
 
-# Conversions + kitti2bag end to end on a synthetic drive the test writes (no ../shared needed).
+# The conversions, and kitti2bag end to end on a synthetic drive the test writes (no ../shared
+# needed).
 ism_add_gtest(test_kitti_conversions SOURCES test/unit/test_kitti_conversions.cpp
   LINK ${PROJECT_NAME}_kitti_ros)
-if(TARGET test_kitti_conversions)
-  target_include_directories(test_kitti_conversions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
-  target_include_directories(test_kitti_conversions SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
-  target_link_libraries(test_kitti_conversions opencv_imgcodecs)
-  target_compile_definitions(test_kitti_conversions PRIVATE
-    KITTI2BAG_PATH="$<TARGET_FILE:kitti2bag>")
-  add_dependencies(test_kitti_conversions kitti2bag)
-endif()
+ism_add_gtest(test_kitti2bag SOURCES test/cli/test_kitti2bag.cpp
+  LINK ${PROJECT_NAME}_kitti_ros TOOL kitti2bag TOOL_MACRO KITTI2BAG_PATH)
+foreach(conversion_test test_kitti_conversions test_kitti2bag)
+  if(TARGET ${conversion_test})
+    target_include_directories(${conversion_test} PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+    target_include_directories(${conversion_test} SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
+    target_link_libraries(${conversion_test} opencv_imgcodecs)
+  endif()
+endforeach()
 
 if(benchmark_FOUND)
   ism_add_tool(bench_kitti SOURCES bench/bench_kitti.cpp

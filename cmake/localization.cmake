@@ -26,9 +26,14 @@ ism_add_ros_executable(kitti_bag_adapter
 ism_add_gtest(test_kitti_bag_conventions
   SOURCES test/unit/test_kitti_bag_conventions.cpp
   LINK ${PROJECT_NAME}_localization_ros ${PROJECT_NAME}_kitti)
-if(TARGET test_kitti_bag_conventions)
-  target_include_directories(test_kitti_bag_conventions PRIVATE ${ISM_ROS_INCLUDE_DIRS})
-endif()
+ism_add_gtest(test_kitti_bag_conventions_data
+  SOURCES test/data/test_kitti_bag_conventions_data.cpp
+  LINK ${PROJECT_NAME}_localization_ros ${PROJECT_NAME}_kitti)
+foreach(conventions_test test_kitti_bag_conventions test_kitti_bag_conventions_data)
+  if(TARGET ${conventions_test})
+    target_include_directories(${conventions_test} PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+  endif()
+endforeach()
 if(CATKIN_ENABLE_TESTING)
   # A real OXTS drive from ../shared played into inekf_node (skips without ../shared).
   add_rostest(test/ros/inekf_node.test

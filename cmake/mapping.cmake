@@ -24,6 +24,9 @@ ism_add_gtest(test_semantic_octree
 # The hashed-grid insertion against the octree's (synthetic and real scans).
 ism_add_gtest(test_hashed_voxel_grid
   SOURCES test/unit/test_hashed_voxel_grid.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_hashed_voxel_grid_data
+  SOURCES test/data/test_hashed_voxel_grid_data.cpp
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_grid_projection
   SOURCES test/unit/test_grid_projection.cpp
@@ -43,15 +46,17 @@ ism_add_tool(semantic_map_offline
   SOURCES src/tools/semantic_map_offline.cpp
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_perception)
 
-# Unit tests (the CLI tests run the tools, so they depend on them).
+# Unit tests; the CLI tests run the tools (TOOL: built first).
 ism_add_gtest(test_projection
   SOURCES test/unit/test_projection.cpp
   LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
-if(TARGET test_projection)
-  target_compile_definitions(test_projection PRIVATE
-    PROJECT_CLOUD_PATH="$<TARGET_FILE:project_cloud>")
-  add_dependencies(test_projection project_cloud)
-endif()
+ism_add_gtest(test_projection_data
+  SOURCES test/data/test_projection_data.cpp
+  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
+ism_add_gtest(test_project_cloud
+  SOURCES test/cli/test_project_cloud.cpp
+  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti
+  TOOL project_cloud TOOL_MACRO PROJECT_CLOUD_PATH)
 # The lidar-geometry check on camera labels (ground estimate, flat / raised classes).
 ism_add_gtest(test_label_geometry
   SOURCES test/unit/test_label_geometry.cpp
@@ -59,11 +64,13 @@ ism_add_gtest(test_label_geometry
 ism_add_gtest(test_semantic_octree_offline
   SOURCES test/unit/test_semantic_octree_offline.cpp
   LINK ${PROJECT_NAME}_mapping)
-if(TARGET test_semantic_octree_offline)
-  target_compile_definitions(test_semantic_octree_offline PRIVATE
-    SEMANTIC_MAP_OFFLINE_PATH="$<TARGET_FILE:semantic_map_offline>")
-  add_dependencies(test_semantic_octree_offline semantic_map_offline)
-endif()
+ism_add_gtest(test_semantic_octree_offline_data
+  SOURCES test/data/test_semantic_octree_offline_data.cpp
+  LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_semantic_map_offline
+  SOURCES test/cli/test_semantic_map_offline.cpp
+  LINK ${PROJECT_NAME}_mapping
+  TOOL semantic_map_offline TOOL_MACRO SEMANTIC_MAP_OFFLINE_PATH)
 
 if(benchmark_FOUND)
   ism_add_tool(bench_semantic_octree
@@ -91,4 +98,7 @@ endif()
 # Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).
 ism_add_gtest(test_input_validation
   SOURCES test/unit/test_input_validation.cpp
+  LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)
+ism_add_gtest(test_input_validation_data
+  SOURCES test/data/test_input_validation_data.cpp
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_kitti)

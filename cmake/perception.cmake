@@ -13,6 +13,9 @@ ism_add_core_library(${PROJECT_NAME}_perception
 ism_add_gtest(test_segmenter
   SOURCES test/unit/test_segmenter.cpp
   LINK ${PROJECT_NAME}_perception)
+ism_add_gtest(test_segmenter_data
+  SOURCES test/data/test_segmenter_data.cpp
+  LINK ${PROJECT_NAME}_perception)
 
 # The default U-Net's mIoU target on held-out synthetic drives it renders itself.
 ism_add_gtest(test_unet_synthetic_accuracy
@@ -60,13 +63,9 @@ ism_add_tool(evaluate_map
   SOURCES src/tools/evaluate_map.cpp
   LINK ${PROJECT_NAME}_semantic_evaluation)
 ism_add_gtest(test_evaluate_map
-  SOURCES test/unit/test_evaluate_map.cpp
-  LINK ${PROJECT_NAME}_semantic_evaluation ${PROJECT_NAME}_synthetic)
-if(TARGET test_evaluate_map)
-  target_compile_definitions(test_evaluate_map PRIVATE
-    EVALUATE_MAP_PATH="$<TARGET_FILE:evaluate_map>")
-  add_dependencies(test_evaluate_map evaluate_map)
-endif()
+  SOURCES test/cli/test_evaluate_map.cpp
+  LINK ${PROJECT_NAME}_semantic_evaluation ${PROJECT_NAME}_synthetic
+  TOOL evaluate_map TOOL_MACRO EVALUATE_MAP_PATH)
 
 # The default ENet labelling path scored on the real SemanticKITTI frames of ../shared.
 ism_add_gtest(test_real_semantics

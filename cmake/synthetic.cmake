@@ -20,6 +20,8 @@ ism_add_gtest(test_synthetic_world SOURCES test/unit/test_synthetic_world.cpp
   LINK ${PROJECT_NAME}_synthetic)
 ism_add_gtest(test_synthetic_drive SOURCES test/unit/test_synthetic_drive.cpp
   LINK ${PROJECT_NAME}_synthetic ${PROJECT_NAME}_kitti opencv_imgcodecs)
+ism_add_gtest(test_synthetic_drive_data SOURCES test/data/test_synthetic_drive_data.cpp
+  LINK ${PROJECT_NAME}_synthetic ${PROJECT_NAME}_kitti)
 
 if(benchmark_FOUND)
   ism_add_tool(bench_synthetic SOURCES bench/bench_synthetic.cpp

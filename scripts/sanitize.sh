@@ -5,9 +5,9 @@
 # them. The data-heavy accuracy tests (real drives, networks) run only in the normal build.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
-TESTS=(test_lie test_imu_filters test_localizer test_lazy_start test_kitti_io
-       test_kitti_gps_degradation test_input_validation test_cli_args test_atomic_file
-       test_projection test_label_geometry test_semantic_octree test_semantic_mapping_session
+TESTS=(test_lie test_imu_filters test_localizer test_lazy_start test_kitti_io test_kitti_io_data
+       test_kitti_gps_degradation test_input_validation test_input_validation_data test_cli_args
+       test_atomic_file test_projection test_projection_data test_label_geometry test_semantic_octree test_semantic_mapping_session
        test_pose_graph)
 flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g"
 asan_ws=$ISM_WS/asan

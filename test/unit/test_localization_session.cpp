@@ -1,7 +1,7 @@
 // LocalizationSession: the start, the map origin, the fix covariance policy, the time-jump reset
 // and the statistics; the fault cases the inekf_node rostests inject (a fix before its IMU
-// message, late fixes, a bag loop, bad samples) on the session directly; and the node's event
-// stream against inekf_offline's run on a real drive (the same trajectory).
+// message, late fixes, a bag loop, bad samples) on the session directly. On real drives:
+// test/data/test_localization_session_data.cpp.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -409,88 +409,6 @@ TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
   }
   std::ofstream(path) << "session:\n  default_fix_sigma_vertical_m: 0\n";
   EXPECT_ANY_THROW(LocalizationSessionConfig::fromYamlFile(path));
-}
-
-// 2011_09_30_drive_0028 has no GPS solution (posmode < 0) before frame 19, so under the protocol
-// the first fix is frame 20's: the offline run starts there, as the node would.
-TEST(LocalizationSession, OfflineRunStartsAtTheFirstFixLikeTheNode) {
-  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0028_sync/oxts";
-  ISM_REQUIRE_SHARED(drive);
-  std::vector<kitti::OxtsFrame> frames = kitti::readOxtsFolder(test::sharedPath(drive));
-  frames.resize(std::min<std::size_t>(frames.size(), 100));
-  OxtsRunOptions options;
-  options.gps.every_n_frames = 10;
-  const OxtsRunResult run = runLocalizerOnOxts(frames, options);
-  ASSERT_EQ(run.first_estimated_frame, 20);
-  EXPECT_NEAR(run.states[20].stamp_s, frames[20].stampSeconds(), 1e-9);
-  EXPECT_EQ(run.states[0].position_map, run.states[20].position_map);  // held at the start
-  EXPECT_EQ(run.states.size(), frames.size());
-}
-
-// inekf_node's path against inekf_offline's on the same data: the events kitti_player /
-// kitti2bag publish for the first 450 frames of 2011_09_30_drive_0027 under the protocol (IMU
-// with the OXTS orientation, GPS velocity in the map frame, the degraded fix with its
-// covariance, the map origin at frame 0 as the rostests set it), delivered with frame 0's fix
-// first (it raced ahead of its IMU message); the session's estimate after each frame's messages
-// against runLocalizerOnOxts.
-TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
-  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0027_sync/oxts";
-  ISM_REQUIRE_SHARED(drive);
-  std::vector<kitti::OxtsFrame> frames = kitti::readOxtsFolder(test::sharedPath(drive));
-  frames.resize(std::min<std::size_t>(frames.size(), 450));
-  OxtsRunOptions options;
-  options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.gps = protocolGps();
-  const OxtsRunResult offline = runLocalizerOnOxts(frames, options);
-  ASSERT_EQ(offline.first_estimated_frame, 0);
-
-  LocalizationSessionConfig config = options.config;
-  const kitti::OxtsRecord& first = frames.front().record;
-  config.origin = GeodeticOrigin{first.lat, first.lon, first.alt};
-  LocalizationSession node(config);
-  kitti::GpsDegrader degrader(options.gps);
-  const double t0 = frames.front().stampSeconds();
-  std::optional<GeodeticFixEvent> frame0_fix;
-  int compared = 0;
-  double worst_m = 0.0;
-  for (std::size_t k = 0; k < frames.size(); ++k) {
-    const kitti::OxtsRecord& r = frames[k].record;
-    const double stamp_s = frames[k].stampSeconds();
-    GeodeticFixEvent fix;
-    const std::optional<kitti::GeodeticFix> geodetic = degrader.degrade(k, stamp_s - t0, r);
-    if (geodetic) {
-      fix = fixEventFromDegraded(*geodetic, stamp_s);
-      if (k == 0) {
-        EXPECT_FALSE(node.addFix(fix).started);  // before its IMU: waits
-      }
-    }
-    ImuEvent imu;
-    imu.sample.stamp_s = stamp_s;
-    imu.sample.angular_velocity = Eigen::Vector3d(r.wx, r.wy, r.wz);
-    imu.sample.specific_force = Eigen::Vector3d(r.ax, r.ay, r.az);
-    imu.sample.interpolated = r.posmode < 0 || (k > 0 && frames[k - 1].record.posmode < 0);
-    // As a sensor_msgs/Imu quaternion carries it.
-    imu.orientation = Eigen::Quaterniond(kitti::rotationFromRollPitchYaw(r.roll, r.pitch, r.yaw))
-                          .normalized()
-                          .toRotationMatrix();
-    const bool estimate = node.addImu(imu).new_estimate;
-    GpsVelocityEvent velocity;
-    velocity.stamp_s = stamp_s;
-    velocity.velocity = Eigen::Vector3d(r.ve, r.vn, r.vu);
-    if (k == 0) {
-      EXPECT_TRUE(node.addGpsVelocity(velocity).started);
-      EXPECT_LT((node.state().position_map - offline.states[0].position_map).norm(), 1e-6);
-    }
-    if (geodetic && k > 0) node.addFix(fix);
-    if (!estimate) continue;
-    const double error_m = (node.state().position_map - offline.states[k].position_map).norm();
-    worst_m = std::max(worst_m, error_m);
-    ++compared;
-  }
-  EXPECT_EQ(compared, static_cast<int>(frames.size()) - 1);  // every sample after the start
-  EXPECT_LT(worst_m, 1e-6);
-  std::printf("[ MEASURED ] node stream vs offline run: %d poses, largest difference %.3g m\n",
-              compared, worst_m);
 }
 
 // The start's yaw sigma about the map z axis (deg).

@@ -1,6 +1,6 @@
 // mapSequence (semantic_map_offline's core, through a SemanticMappingSession) on a small sequence
-// written here: the pose chain T_w_velo_i = inv(Tr) P_i Tr, labels in the input id space, input
-// errors.
+// written here: scans land where the pose chain puts them; bad inputs name the file. The tool:
+// test/cli/test_semantic_map_offline.cpp; a real drive: test/data/.
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
@@ -131,117 +131,6 @@ TEST_F(OfflineMappingTest, BadInputsNameTheFile) {
   } catch (const std::exception& e) {
     EXPECT_NE(std::string(e.what()).find("poses.txt:1"), std::string::npos) << e.what();
   }
-}
-
-// The CLI contract the evaluation uses: exact flags, .ot + PLY outputs, non-zero exit on errors.
-TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
-  const std::string command =
-      std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ + "/velodyne --labels " + dir_ +
-      "/labels --poses " + dir_ + "/poses.txt --calib " + dir_ +
-      "/calib.txt --resolution 0.1 --output " + dir_ + "/map.ot --export-ply " + dir_ +
-      "/map.ply --max-range 30 --confusion 0.7 --max-scans 2 2>/dev/null";
-  ASSERT_EQ(std::system(command.c_str()), 0) << command;
-  std::unique_ptr<SemanticOcTree> loaded = loadSemanticOcTree(dir_ + "/map.ot");
-  EXPECT_DOUBLE_EQ(loaded->fusionModel().correct_probability, 0.7);
-  const SemanticOcTreeNode* node = loaded->search(13.05, -0.95, 0.05);
-  ASSERT_NE(node, nullptr);
-  EXPECT_EQ(loaded->mostLikelyLabel(*node, 0), 50u);
-  std::ifstream ply(dir_ + "/map.ply");
-  std::string first_line;
-  std::getline(ply, first_line);
-  EXPECT_EQ(first_line, "ply");
-
-  const std::string missing_flag = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
-                                   "/velodyne --output " + dir_ + "/x.ot 2>/dev/null";
-  EXPECT_NE(std::system(missing_flag.c_str()), 0);
-  const std::string bad_dir = std::string(SEMANTIC_MAP_OFFLINE_PATH) +
-                              " --scans /nonexistent --labels /nonexistent --poses x --calib x "
-                              "--resolution 0.2 --output " +
-                              dir_ + "/y.ot 2>/dev/null";
-  EXPECT_NE(std::system(bad_dir.c_str()), 0);
-  EXPECT_FALSE(std::filesystem::exists(dir_ + "/y.ot"));
-}
-
-// --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.
-TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
-  std::vector<Eigen::Vector3d> origins;
-  OfflineSequence sequence = options();
-  sequence.on_scan_inserted = [&origins](const Eigen::Isometry3d& T_map_velo) {
-    origins.push_back(T_map_velo.translation());
-  };
-  buildMap(sequence);
-  ASSERT_EQ(origins.size(), 2u);
-  EXPECT_GT((origins[1] - origins[0]).norm(), 1.0);  // the second pose moved 3 m
-
-  const std::string command = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
-                              "/velodyne --labels " + dir_ + "/labels --poses " + dir_ +
-                              "/poses.txt --calib " + dir_ +
-                              "/calib.txt --resolution 0.1 --output " + dir_ + "/map.ot --grid " +
-                              dir_ + "/grid 2>/dev/null";
-  ASSERT_EQ(std::system(command.c_str()), 0) << command;
-  for (const char* name : {"projected", "drivable"}) {
-    const std::string stem = dir_ + "/grid_" + name;
-    const YAML::Node yaml = YAML::LoadFile(stem + ".yaml");
-    EXPECT_EQ(yaml["image"].as<std::string>(), std::string("grid_") + name + ".pgm");
-    EXPECT_DOUBLE_EQ(yaml["resolution"].as<double>(), 0.1);
-    std::ifstream pgm(stem + ".pgm", std::ios::binary);
-    std::string magic;
-    int width = 0, height = 0, maxval = 0;
-    pgm >> magic >> width >> height >> maxval;
-    pgm.get();
-    ASSERT_EQ(magic, "P5");
-    std::vector<unsigned char> pixels(static_cast<std::size_t>(width) * height);
-    pgm.read(reinterpret_cast<char*>(pixels.data()), static_cast<std::streamsize>(pixels.size()));
-    ASSERT_TRUE(pgm) << stem;
-    // The building point of scan 1 (1.78 m above the ground 1.73 m below its lidar) is an
-    // obstacle in both grids; the image's top row is the largest y.
-    const int ix = static_cast<int>(std::floor((13.05 - yaml["origin"][0].as<double>()) / 0.1));
-    const int iy = static_cast<int>(std::floor((-0.95 - yaml["origin"][1].as<double>()) / 0.1));
-    ASSERT_TRUE(ix >= 0 && ix < width && iy >= 0 && iy < height) << ix << " " << iy;
-    EXPECT_EQ(pixels[static_cast<std::size_t>(height - 1 - iy) * width + ix], 0) << name;
-  }
-}
-
-}  // namespace
-}  // namespace mapping
-}  // namespace inekf_semantic_mapping
-
-namespace inekf_semantic_mapping {
-namespace mapping {
-namespace {
-
-// The raw-drive path on the real drive in ../shared: the scans go in at T_map_imu * inv(T_velo_imu)
-// (the IMU sits about 0.93 m above the road, the lidar 0.8 m above the IMU), so the road ahead of
-// the car lies about 0.93 m below the OXTS position.
-TEST(OfflineRawDriveTest, RoadAheadLiesBelowTheImuAtItsMountingHeight) {
-  ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/velodyne_points");
-  SemanticMappingConfig config;
-  config.insert_points_outside_image = true;
-  SemanticMappingSession session(config);
-  OfflineRawDrive drive;
-  drive.drive_dir = test::sharedPath("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync");
-  drive.max_scans = 3;
-  mapRawDrive(drive, &session, nullptr, nullptr);
-  EXPECT_EQ(session.statistics().scans_inserted, 3u);
-  // The first OXTS pose is the map origin with the devkit's roll/pitch/yaw.
-  const Eigen::Isometry3d T_map_imu = [] {
-    const auto oxts = kitti::readOxtsFolder(
-        test::sharedPath("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/oxts"));
-    return kitti::MercatorProjection::atFirstFix(oxts.front().record)
-        .poseInMap(oxts.front().record);
-  }();
-  int road_columns = 0;
-  for (double ahead = 5.0; ahead <= 9.0; ahead += 1.0) {
-    const Eigen::Vector3d column = T_map_imu * Eigen::Vector3d(ahead, 0.0, 0.0);
-    double highest = -1e9;
-    for (double dz = -2.5; dz <= 0.5; dz += 0.1) {
-      const SemanticOcTreeNode* node =
-          session.tree().search(column.x(), column.y(), column.z() + dz);
-      if (node && session.tree().isNodeOccupied(node)) highest = dz;
-    }
-    if (highest > -1.3 && highest < -0.55) ++road_columns;
-  }
-  EXPECT_GE(road_columns, 4) << "the road ahead is not 0.6..1.3 m below the IMU";
 }
 
 }  // namespace
