@@ -2,14 +2,7 @@
 # semantic_map_offline; project_cloud (the projection library is perception's).
 
 ism_add_core_library(${PROJECT_NAME}_mapping
-  SOURCES
-    src/mapping/semantic_classes.cpp
-    src/mapping/semantic_octree.cpp
-    src/mapping/hashed_voxel_grid.cpp
-    src/mapping/map_io.cpp
-    src/mapping/offline_mapping.cpp
-    src/mapping/semantic_mapping_session.cpp
-    src/mapping/grid_projection.cpp
+  SOURCES ${ISM_MAPPING_SOURCES}
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
        ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
@@ -75,8 +68,7 @@ endif()
 
 # Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_mapping_ros
-  SOURCES src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-    src/ros/label_input.cpp
+  SOURCES ${ISM_MAPPING_ROS_SOURCES}
   LINK ${PROJECT_NAME}_mapping yaml-cpp)
 
 ism_add_ros_executable(semantic_octomap_node
