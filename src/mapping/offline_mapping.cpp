@@ -186,7 +186,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
     const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
         velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
     const Eigen::Isometry3d T_map_velo = T_map_imu[frame] * T_imu_velo;
-    char stem[16];
+    char stem[24];  // room for any size_t: a name is never cut short
     std::snprintf(stem, sizeof(stem), "%010zu", frame);
     OwnedLabelImage image;
     std::string evidence = "no labels";
