@@ -1,7 +1,7 @@
 # Component: common — helpers every component shares (the strict YAML config reader; the
 # header-only atomic file writes, command-line parsing and timing live beside it).
 ism_add_core_library(${PROJECT_NAME}_common
-  SOURCES src/common/yaml_reader.cpp
+  SOURCES ${ISM_COMMON_SOURCES}
   LINK yaml-cpp)
 
 # Every node's private parameters through the strict reader (ros/node_parameters.h).

@@ -1,12 +1,8 @@
 # Component: estimation — Lie groups, the InEKF / ESKF filters, the streaming Localizer,
 # inekf_offline, their tests and benchmark.
-ism_add_core_library(${PROJECT_NAME}_lie SOURCES src/lie/so3.cpp src/lie/se23.cpp)
+ism_add_core_library(${PROJECT_NAME}_lie SOURCES ${ISM_LIE_SOURCES})
 ism_add_core_library(${PROJECT_NAME}_estimation
-  SOURCES src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
-          src/estimation/localizer.cpp src/estimation/localizer_config.cpp
-          src/estimation/lazy_start.cpp
-          src/estimation/smoother.cpp src/estimation/pose_graph.cpp
-          src/estimation/selected_inverse.cpp
+  SOURCES ${ISM_ESTIMATION_SOURCES}
   LINK ${PROJECT_NAME}_lie ${PROJECT_NAME}_common)
 
 ism_add_gtest(test_lie SOURCES test/unit/test_lie.cpp LINK ${PROJECT_NAME}_lie)
@@ -16,18 +12,20 @@ ism_add_gtest(test_imu_filters SOURCES test/unit/test_imu_filters.cpp
 # The streaming session both inekf_node and inekf_offline drive (geodetic fixes: needs kitti's
 # Mercator).
 ism_add_core_library(${PROJECT_NAME}_localization_session
-  SOURCES src/estimation/localization_session.cpp
+  SOURCES ${ISM_LOCALIZATION_SESSION_SOURCES}
   LINK ${PROJECT_NAME}_estimation ${PROJECT_NAME}_kitti ${PROJECT_NAME}_common)
 # Runs the session over KITTI OXTS (inekf_offline, real-drive tests, benchmark).
 ism_add_core_library(${PROJECT_NAME}_estimation_oxts
-  SOURCES src/estimation/oxts_run.cpp src/estimation/loop_closure.cpp
-          src/estimation/smoothed_posterior_graph.cpp
+  SOURCES ${ISM_ESTIMATION_OXTS_SOURCES}
   LINK ${PROJECT_NAME}_localization_session)
 # Lidar scan registration for the loop closure (PCL GICP): the one library that sees PCL.
 ism_add_core_library(${PROJECT_NAME}_registration
-  SOURCES src/registration/icp_registration.cpp
+  SOURCES ${ISM_REGISTRATION_SOURCES}
   LINK ${PROJECT_NAME}_estimation_oxts ${PROJECT_NAME}_kitti ${PCL_LIBRARIES}
   SYSTEM_INCLUDES ${PCL_INCLUDE_DIRS})
+# GCC 12's -Warray-bounds fires inside Eigen's SSE loads inlined from PCL's Umeyama (a known false
+# positive on Eigen::Vector3f, reported in xmmintrin.h): kept as a warning, not an error, here only.
+target_compile_options(${PROJECT_NAME}_registration PRIVATE -Wno-error=array-bounds)
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
   LINK ${PROJECT_NAME}_estimation_oxts ${PROJECT_NAME}_registration)
 ism_add_gtest(test_smoother SOURCES test/unit/test_smoother.cpp

@@ -1,15 +1,6 @@
 # Component: kitti — KITTI raw I/O core (Eigen only), ROS conversions, kitti_player, kitti2bag.
 ism_add_core_library(${PROJECT_NAME}_kitti
-  SOURCES
-    src/kitti/calibration.cpp
-    src/kitti/drive_timeline.cpp
-    src/kitti/gps_degradation.cpp
-    src/kitti/mercator.cpp
-    src/kitti/oxts.cpp
-    src/kitti/poses.cpp
-    src/kitti/raw_drive.cpp
-    src/kitti/timestamps.cpp
-    src/kitti/velodyne.cpp)
+  SOURCES ${ISM_KITTI_SOURCES})
 
 ism_add_gtest(test_kitti_io SOURCES test/unit/test_kitti_io.cpp LINK ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_kitti_io_data SOURCES test/data/test_kitti_io_data.cpp LINK ${PROJECT_NAME}_kitti)
@@ -18,7 +9,7 @@ ism_add_gtest(test_kitti_gps_degradation
 
 # KITTI -> ROS message conversions shared by kitti_player and kitti2bag (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_kitti_ros
-  SOURCES src/ros/kitti_conversions.cpp src/ros/drive_publishers.cpp
+  SOURCES ${ISM_KITTI_ROS_SOURCES}
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_node_ros opencv_core opencv_imgcodecs
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 

@@ -4,9 +4,7 @@
 # Message <-> session conversions of inekf_node (ROS-facing, not core): one library for the node
 # and its test; with the bag conventions kitti_bag_adapter turns into the nodes' one.
 ism_add_ros_library(${PROJECT_NAME}_localization_ros
-  SOURCES src/ros/localization_conversions.cpp src/ros/kitti_bag_conventions.cpp
-    src/ros/odometry_output.cpp src/ros/levelled_velocity_pairing.cpp
-    src/ros/localization_diagnostics.cpp
+  SOURCES ${ISM_LOCALIZATION_ROS_SOURCES}
   LINK ${PROJECT_NAME}_localization_session ${PROJECT_NAME}_node_ros)
 
 ism_add_ros_executable(inekf_node

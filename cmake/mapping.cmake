@@ -2,18 +2,7 @@
 # semantic_map_offline; project_cloud (the projection library is perception's).
 
 ism_add_core_library(${PROJECT_NAME}_mapping
-  SOURCES
-    src/mapping/semantic_classes.cpp
-    src/mapping/semantic_octree.cpp
-    src/mapping/semantic_octree_insertion.cpp
-    src/mapping/semantic_octree_io.cpp
-    src/mapping/hashed_voxel_grid.cpp
-    src/mapping/map_io.cpp
-    src/mapping/offline_mapping.cpp
-    src/mapping/map_label_images.cpp
-    src/mapping/semantic_mapping_config.cpp
-    src/mapping/semantic_mapping_session.cpp
-    src/mapping/grid_projection.cpp
+  SOURCES ${ISM_MAPPING_SOURCES}
   LINK ${PROJECT_NAME}_kitti ${PROJECT_NAME}_projection ${PROJECT_NAME}_common
        ${OCTOMAP_LIBRARIES} Threads::Threads
   SYSTEM_INCLUDES ${OCTOMAP_INCLUDE_DIRS})
@@ -82,8 +71,7 @@ endif()
 
 # Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_mapping_ros
-  SOURCES src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-    src/ros/label_input.cpp src/ros/mapping_diagnostics.cpp
+  SOURCES ${ISM_MAPPING_ROS_SOURCES}
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_node_ros yaml-cpp)
 
 ism_add_ros_executable(semantic_octomap_node

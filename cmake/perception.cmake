@@ -1,12 +1,10 @@
 # Component: perception — lidar-to-camera projection and the lidar geometry check on camera labels
 # (Eigen only), Segmenter (OpenCV dnn) and model cards; segmentation_node, segment_image.
 ism_add_core_library(${PROJECT_NAME}_projection
-  SOURCES src/perception/projection.cpp src/perception/label_geometry.cpp
-    src/perception/curb_detection.cpp)
+  SOURCES ${ISM_PROJECTION_SOURCES})
 
 ism_add_core_library(${PROJECT_NAME}_perception
-  SOURCES src/perception/model_card.cpp src/perception/segmenter.cpp
-    src/perception/segmenter_input.cpp src/perception/segmenter_labels.cpp
+  SOURCES ${ISM_PERCEPTION_SOURCES}
   LINK ${OpenCV_LIBS} yaml-cpp
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
@@ -51,7 +49,7 @@ endif()
 
 # Camera labels at lidar points scored against SemanticKITTI's human labels.
 ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
-  SOURCES src/perception/semantic_evaluation.cpp
+  SOURCES ${ISM_SEMANTIC_EVALUATION_SOURCES}
   LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti
        ${PROJECT_NAME}_mapping)
 

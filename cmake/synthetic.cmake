@@ -1,14 +1,7 @@
 # Component: synthetic — KITTI-format drive generator with full ground truth (world, route,
 # sensors), the generate_synthetic_drive tool, unit tests and a benchmark.
 ism_add_core_library(${PROJECT_NAME}_synthetic
-  SOURCES
-    src/synthetic/world.cpp
-    src/synthetic/world_town.cpp
-    src/synthetic/world_io.cpp
-    src/synthetic/route.cpp
-    src/synthetic/sensors.cpp
-    src/synthetic/drive_generator.cpp
-    src/synthetic/label_iou.cpp
+  SOURCES ${ISM_SYNTHETIC_SOURCES}
   LINK ${PROJECT_NAME}_kitti opencv_core opencv_imgcodecs Threads::Threads
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 

@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer harnesses of test/fuzz (clang-14, ASan + UBSan) and runs each for a
-# bounded time from its checked-in seed corpus. Each harness is one test case: its JUnit result
-# goes where catkin_test_results reads (so ./scripts/test.sh counts it), and a crash input is kept
-# in $ISM_WS/fuzz/findings/. Usage: scripts/fuzz.sh [SECONDS_PER_HARNESS (default 20)]
+# Builds the libFuzzer harnesses of test/fuzz (clang-14, ASan + UBSan, in the build
+# scripts/sanitize.sh shares) and runs each for a bounded time from its checked-in seed corpus.
+# Each harness is one test case: its JUnit result goes where catkin_test_results reads (so
+# ./scripts/test.sh counts it), and a crash input is kept in $ISM_WS/fuzz/findings/. Usage: scripts/fuzz.sh [SECONDS_PER_HARNESS (default 20)]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 seconds=${1:-${ISM_FUZZ_SECONDS:-20}}
-build=$ISM_WS/fuzz/build
+# The build scripts/sanitize.sh shares (the core is compiled once for both).
+build=$ISM_WS/sanitizers
 results=$ISM_WS/build/test_results/inekf_semantic_mapping
 findings=$ISM_WS/fuzz/findings
 mkdir -p "$build" "$results" "$findings"
@@ -19,7 +20,8 @@ build_failed() {
 }
 CC=clang-14 CXX=clang++-14 cmake -S "$ISM_ROOT/test/fuzz" -B "$build" -DCMAKE_BUILD_TYPE=Debug \
   >"$build/configure.log" 2>&1 || build_failed "$build/configure.log"
-cmake --build "$build" -j"$ISM_JOBS" >"$build/build.log" 2>&1 || build_failed "$build/build.log"
+cmake --build "$build" --target fuzz_harnesses -j"$ISM_JOBS" >"$build/build.log" 2>&1 ||
+  build_failed "$build/build.log"
 
 failed=0
 for harness in oxts calibration velodyne poses semantic_ot configs command_line; do

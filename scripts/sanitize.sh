@@ -1,37 +1,37 @@
 #!/usr/bin/env bash
-# Builds the unit tests of the ROS-free core with AddressSanitizer + UndefinedBehaviorSanitizer in
-# their own workspace ($ISM_WS/asan) and runs them; any sanitizer report fails the test it occurs
-# in. Results go where catkin_test_results reads (prefixed "asan-"), so ./scripts/test.sh counts
-# them. The data-heavy accuracy tests (real drives, networks) run only in the normal build.
+# Builds the unit tests of the ROS-free core with AddressSanitizer + UndefinedBehaviorSanitizer
+# (clang-14, test/fuzz/CMakeLists.txt: the build the fuzz harnesses share, in
+# $ISM_WS/sanitizers) and runs them; any sanitizer report fails the test it occurs in. Results go
+# where catkin_test_results reads (prefixed "asan-"), so ./scripts/test.sh counts them. The list
+# of tests is SANITIZED_TESTS in test/fuzz/CMakeLists.txt; the data-heavy accuracy tests (real
+# drives, networks) run only in the normal build.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
-TESTS=(test_lie test_imu_filters test_localizer test_lazy_start test_kitti_io test_kitti_io_data
-       test_kitti_gps_degradation test_input_validation test_input_validation_data test_cli_args
-       test_atomic_file test_projection test_projection_data test_label_geometry test_semantic_octree test_semantic_mapping_session
-       test_pose_graph)
-flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer -g"
-asan_ws=$ISM_WS/asan
+build=$ISM_WS/sanitizers
 results=$ISM_WS/build/test_results/inekf_semantic_mapping
-mkdir -p "$results"
+log=$ISM_WS/asan_build.log
+mkdir -p "$build" "$results"
 
-echo "[sanitize] building ${#TESTS[@]} unit tests with ASan + UBSan in $asan_ws"
-if ! ISM_SKIP_DEPS=1 ISM_WS="$asan_ws" "$ISM_ROOT/scripts/build.sh" \
-    -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS="$flags" \
-    -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" \
-    -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=address,undefined" "${TESTS[@]}" \
-    >"$ISM_WS/asan_build.log" 2>&1; then
-  tail -n 40 "$ISM_WS/asan_build.log"
+echo "[sanitize] building the core's unit tests with ASan + UBSan (clang-14) in $build"
+if ! { CC=clang-14 CXX=clang++-14 cmake -S "$ISM_ROOT/test/fuzz" -B "$build" \
+         -DCMAKE_BUILD_TYPE=Debug &&
+       cmake --build "$build" --target sanitized_tests -j"$ISM_JOBS"; } >"$log" 2>&1; then
+  tail -n 40 "$log"
   echo "[sanitize] BUILD FAILED"
-  ism_junit_failure "$results/asan-build.xml" asan_build build "see $ISM_WS/asan_build.log"
+  ism_junit_failure "$results/asan-build.xml" asan_build build "see $log"
   exit 1
 fi
 
+# From the repository root, as catkin runs the gtests (relative paths such as config/ resolve).
+cd "$ISM_ROOT"
 failed=0
-for test in "${TESTS[@]}"; do
+count=0
+while read -r binary; do
+  test=${binary##*/}
+  count=$((count + 1))
   set +e
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
-    "$asan_ws/devel/lib/inekf_semantic_mapping/$test" \
-    --gtest_output="xml:$results/asan-$test.xml" >"$ISM_WS/asan-$test.log" 2>&1
+    "$binary" --gtest_output="xml:$results/asan-$test.xml" >"$ISM_WS/asan-$test.log" 2>&1
   rc=$?
   set -e
   if ((rc != 0)); then
@@ -44,5 +44,6 @@ for test in "${TESTS[@]}"; do
   else
     echo "[sanitize] $test: passed, no sanitizer report"
   fi
-done
+done <"$build/sanitized_tests.txt"
+echo "[sanitize] $count tests, $failed failed"
 ((failed == 0))

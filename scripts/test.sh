@@ -98,4 +98,8 @@ if [[ ${ISM_SKIP_SANITIZERS:-0} != 1 ]]; then
   phase fuzz "$ISM_ROOT/scripts/fuzz.sh" "${ISM_FUZZ_SECONDS:-15}" || true
 fi
 
+# The C++ files as clang-format-14 formats them: one case beside the others.
+phase format "$ISM_ROOT/scripts/check_format.sh" \
+  --junit "$ISM_WS/build/test_results/inekf_semantic_mapping/format-clang_format.xml" || true
+
 judge build/test_results

@@ -66,7 +66,7 @@ class EvaluateMapTest : public ::testing::Test {
             .T_velo_imu.inverse();
     ism::mapping::SemanticMappingSession session{ism::mapping::SemanticMappingConfig{}};
     for (std::size_t frame = 0; frame < poses.size(); frame += 2) {
-      char stem[16];
+      char stem[24];  // room for any size_t
       std::snprintf(stem, sizeof(stem), "%010zu", frame);
       const auto scan =
           ism::kitti::readVelodyneBin(drive_ + "/velodyne_points/data/" + stem + ".bin");

@@ -5,8 +5,8 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {
-    auto tree =
-        inekf_semantic_mapping::mapping::loadSemanticOcTree(ism_fuzz::writeInput(data, size, "m.ot"));
+    auto tree = inekf_semantic_mapping::mapping::loadSemanticOcTree(
+        ism_fuzz::writeInput(data, size, "m.ot"));
     tree->updateInnerOccupancy();
     inekf_semantic_mapping::mapping::countOccupiedFinestVoxels(*tree);
   } catch (const std::exception&) {

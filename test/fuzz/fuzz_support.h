@@ -12,11 +12,10 @@
 
 namespace ism_fuzz {
 
-inline std::string writeInput(const std::uint8_t* data, std::size_t size,
-                              const std::string& name) {
+inline std::string writeInput(const std::uint8_t* data, std::size_t size, const std::string& name) {
   const std::string path = "/dev/shm/ism_fuzz_" + std::to_string(::getpid()) + "_" + name;
-  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(data),
-                                              static_cast<std::streamsize>(size));
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
   return path;
 }
 

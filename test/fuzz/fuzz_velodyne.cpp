@@ -5,7 +5,8 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   namespace kitti = inekf_semantic_mapping::kitti;
   try {
-    const kitti::VelodyneScan scan = kitti::readVelodyneBin(ism_fuzz::writeInput(data, size, "s.bin"));
+    const kitti::VelodyneScan scan =
+        kitti::readVelodyneBin(ism_fuzz::writeInput(data, size, "s.bin"));
     kitti::computeRings(scan);
   } catch (const std::exception&) {
   }

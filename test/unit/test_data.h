@@ -4,12 +4,12 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <string>
-#include <unistd.h>
 
 namespace inekf_semantic_mapping {
 namespace test {
@@ -19,9 +19,7 @@ inline std::string sharedDir() {
   return from_env && *from_env ? std::string(from_env) : std::string(ISM_SHARED_DIR_DEFAULT);
 }
 
-inline std::string sharedPath(const std::string& relative) {
-  return sharedDir() + "/" + relative;
-}
+inline std::string sharedPath(const std::string& relative) { return sharedDir() + "/" + relative; }
 
 inline std::string repoPath(const std::string& relative) {
   return std::string(ISM_REPO_ROOT) + "/" + relative;
@@ -52,12 +50,12 @@ inline std::string makeTempDir(const std::string& tag) {
 }  // namespace inekf_semantic_mapping
 
 // Skips the current test, loudly, when ../shared/<relative> does not exist.
-#define ISM_REQUIRE_SHARED(relative)                                                         \
-  do {                                                                                       \
-    const std::string ism_required_path = ::inekf_semantic_mapping::test::sharedPath(relative); \
-    if (!std::filesystem::exists(ism_required_path)) {                                       \
-      std::cerr << "\n*** SKIPPED: shared data not found: " << ism_required_path            \
+#define ISM_REQUIRE_SHARED(relative)                                                               \
+  do {                                                                                             \
+    const std::string ism_required_path = ::inekf_semantic_mapping::test::sharedPath(relative);    \
+    if (!std::filesystem::exists(ism_required_path)) {                                             \
+      std::cerr << "\n*** SKIPPED: shared data not found: " << ism_required_path                   \
                 << "\n*** (put the shared/ data folder beside the repository to run this test)\n"; \
-      GTEST_SKIP() << "shared data not found: " << ism_required_path;                      \
-    }                                                                                        \
+      GTEST_SKIP() << "shared data not found: " << ism_required_path;                              \
+    }                                                                                              \
   } while (0)

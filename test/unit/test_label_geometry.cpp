@@ -247,7 +247,9 @@ TEST(LabelGeometryTest, AnEmbankmentKeepsItsTerrainLabelsButAHedgeOnItLosesThem)
                                         &cityscapesHighFlatRelabels());
   EXPECT_EQ(changed, scene.points.size() - ground_points);
   for (std::size_t i = ground_points; i < labels.size(); ++i) {
-    ASSERT_EQ(labels[i], (i - ground_points) % 2 == 0 ? kNone : cityscapes::kVegetation) << i;
+    ASSERT_EQ(labels[i],
+              (i - ground_points) % 2 == 0 ? kNone : std::uint32_t{cityscapes::kVegetation})
+        << i;
   }
   for (std::size_t i = 0; i < ground_points; ++i) ASSERT_EQ(labels[i], cityscapes::kTerrain);
 }

@@ -156,7 +156,9 @@ TEST(Localizer, NeverReacquiresAFixFartherThanACarCanMove) {
     for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(k - 1 + 0.1 * i));
     const CorrectionResult result = localizer.addPositionFix(fixAt(k, far));
     EXPECT_FALSE(result.accepted) << "fix " << k;
-    if (k >= 3) EXPECT_NE(result.reason.find("re-acquisition refused"), std::string::npos);
+    if (k >= 3) {
+      EXPECT_NE(result.reason.find("re-acquisition refused"), std::string::npos);
+    }
   }
   EXPECT_EQ(localizer.statistics().gps_reacquisitions, 0);
   EXPECT_LT(localizer.state().position_map.norm(), 1.0);

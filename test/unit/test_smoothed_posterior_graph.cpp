@@ -208,7 +208,9 @@ TEST(SmoothedPosteriorGraph, ALoopGivesTheDenseGaussianPosterior) {
     const Matrix6d expected = e * posterior.block<15, 15>(i, i) * e.transpose();
     worst = std::max(worst, (covariances[k] - expected).norm() / expected.norm());
     // The loop shrinks the covariance of the frames it binds.
-    if (k == keys[1]) EXPECT_LT(covariances[k].trace(), 0.9 * run.pose_covariances[k].trace());
+    if (k == keys[1]) {
+      EXPECT_LT(covariances[k].trace(), 0.9 * run.pose_covariances[k].trace());
+    }
   }
   EXPECT_LT(worst, 1e-5);
 }

@@ -49,12 +49,13 @@ class TimingRegistry {
 
   // One line per stage: name, count, mean / min / max in milliseconds, total in seconds.
   std::string report() const {
-    std::string out = "stage                              count    mean_ms     min_ms     max_ms   total_s\n";
+    std::string out =
+        "stage                              count    mean_ms     min_ms     max_ms   total_s\n";
     char line[256];
     for (const auto& [name, s] : snapshot()) {
       std::snprintf(line, sizeof(line), "%-32s %7zu %10.3f %10.3f %10.3f %9.3f\n", name.c_str(),
-                    s.count, 1e3 * s.meanSeconds(), 1e3 * (s.count ? s.min_s : 0.0),
-                    1e3 * s.max_s, s.total_s);
+                    s.count, 1e3 * s.meanSeconds(), 1e3 * (s.count ? s.min_s : 0.0), 1e3 * s.max_s,
+                    s.total_s);
       out += line;
     }
     return out;

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Checks that the tree's C++ files (tracked, under include/ src/ test/ bench/) are as
+# clang-format-14 formats them with the repository's .clang-format; lists the files that are not.
+# `scripts/check_format.sh --fix` formats them in place. With --junit FILE the result is also
+# written as one JUnit case (./scripts/test.sh's full tier, where catkin_test_results reads).
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
+cd "$ISM_ROOT"
+fix=0
+junit=""
+while (($#)); do
+  case $1 in
+    --fix) fix=1 ;;
+    --junit) junit=$2; shift ;;
+    *) echo "usage: $0 [--fix] [--junit FILE]" >&2; exit 2 ;;
+  esac
+  shift
+done
+mapfile -t files < <(git ls-files -- 'include/*.h' 'include/*.hpp' 'src/*.cpp' 'src/*.h' \
+  'test/*.cpp' 'test/*.h' 'bench/*.cpp' 'bench/*.h')
+if ((fix)); then
+  clang-format-14 -i "${files[@]}"
+  echo "[format] formatted ${#files[@]} files"
+  exit 0
+fi
+start_ns=$(date +%s%N)
+mapfile -t bad < <(clang-format-14 --dry-run -Werror "${files[@]}" 2>&1 |
+  grep -oE '^[^:]+\.(cpp|h|hpp):[0-9]+:[0-9]+: error' | cut -d: -f1 | sort -u)
+elapsed_ms=$((($(date +%s%N) - start_ns) / 1000000))
+elapsed=$((elapsed_ms / 1000)).$(printf %03d $((elapsed_ms % 1000)))
+if ((${#bad[@]})); then
+  echo "[format] ${#bad[@]} of ${#files[@]} files differ from clang-format-14 (scripts/check_format.sh --fix):"
+  printf '  %s\n' "${bad[@]}"
+else
+  echo "[format] ${#files[@]} files as clang-format-14 formats them"
+fi
+if [[ -n $junit ]]; then
+  mkdir -p "$(dirname "$junit")"
+  failure=""
+  ((${#bad[@]})) && failure="<failure message=\"${#bad[@]} files differ from clang-format-14: ${bad[*]}\"/>"
+  cat >"$junit" <<XML
+<?xml version="1.0" encoding="UTF-8"?>
+<testsuite name="format" tests="1" failures="$((${#bad[@]} ? 1 : 0))" errors="0" time="$elapsed">
+  <testcase classname="format" name="clang_format_14 (${#files[@]} files)" time="$elapsed">$failure</testcase>
+</testsuite>
+XML
+fi
+((${#bad[@]} == 0))
