@@ -31,34 +31,6 @@ namespace synthetic {
 namespace {
 namespace fs = std::filesystem;
 
-constexpr int kWidth = 621, kHeight = 188;
-
-class SyntheticDrive : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    output_ = new std::string(test::makeTempDir("synthetic_drive"));
-    DriveOptions options;
-    options.output_dir = *output_;
-    options.seed = 42;
-    options.duration_s = 3.0;
-    options.image_width = kWidth;
-    options.image_height = kHeight;
-    options.lidar.azimuth_step_deg = 0.4;  // fewer rays: the test stays fast
-    options.imu_noise = ImuNoiseModel::none();
-    options.threads = 2;
-    summary_ = new DriveSummary(generateSyntheticDrive(options));
-  }
-  static void TearDownTestSuite() {
-    fs::remove_all(*output_);
-    delete summary_;
-    delete output_;
-  }
-  static std::string* output_;
-  static DriveSummary* summary_;
-};
-std::string* SyntheticDrive::output_ = nullptr;
-DriveSummary* SyntheticDrive::summary_ = nullptr;
-
 TEST(SyntheticRig, MatchesTheRealKittiCalibrationOf2011_09_26) {
   ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_26/calib_cam_to_cam.txt");
   const kitti::RawCalibration real =

@@ -12,6 +12,7 @@
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/levelled_velocity_pairing.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
+#include "python_kitti2bag_imu.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {
@@ -19,36 +20,10 @@ namespace {
 
 namespace conv = ros_conversions;
 
-Eigen::Matrix3d rpy(double roll, double pitch, double yaw) {
-  return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
-          Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-      .toRotationMatrix();
-}
-
-Eigen::Vector3d toEigen(const geometry_msgs::Vector3& v) { return {v.x, v.y, v.z}; }
-
-void setVector(const Eigen::Vector3d& in, geometry_msgs::Vector3* out) {
-  out->x = in.x();
-  out->y = in.y();
-  out->z = in.z();
-}
-
-// An Imu message the way the Python kitti2bag writes it: orientation from roll, pitch, yaw
-// (tf quaternion_from_euler, static xyz = Rz Ry Rx), vectors in the levelled frame.
-sensor_msgs::Imu pythonKitti2bagImu(const Eigen::Matrix3d& R, const Eigen::Vector3d& f_level,
-                                    const Eigen::Vector3d& w_level) {
-  sensor_msgs::Imu imu;
-  imu.header.frame_id = "imu_link";
-  const Eigen::Quaterniond q(R);
-  imu.orientation.w = q.w();
-  imu.orientation.x = q.x();
-  imu.orientation.y = q.y();
-  imu.orientation.z = q.z();
-  setVector(f_level, &imu.linear_acceleration);
-  setVector(w_level, &imu.angular_velocity);
-  return imu;
-}
+using test_imu::pythonKitti2bagImu;
+using test_imu::rpy;
+using test_imu::setVector;
+using test_imu::toEigen;
 
 TEST(KittiBagConventions, LevelledImuVectorsGoBackToTheBodyFrame) {
   std::mt19937 rng(3);
