@@ -72,6 +72,14 @@ def parse_args(argv=None):
     p.add_argument("--distill-zone", default="unlabelled", choices=["outside-lidar", "unlabelled"],
                    help="where the base network teaches in the sparse images: above the lidar's "
                         "top beam only, or at every pixel without a human label")
+    p.add_argument("--distill-labelled-weight", type=float, default=0.0,
+                   help="soft distillation also at the human-labelled pixels, at this weight "
+                        "against 1 in the zone (0: only in the zone); the base network's view "
+                        "of the classes the KITTI labels rarely show keeps pulling there too")
+    p.add_argument("--rare-repeat", type=float, default=0.0,
+                   help="repeat-factor sampling (Gupta et al. 2019): an image is drawn "
+                        "max(1, sqrt(t / f)) times per epoch, f the share of training images "
+                        "holding its rarest class; this is t (0: every image once)")
     p.add_argument("--teacher-confidence", type=float, default=0.7,
                    help="the base network's labels below this softmax confidence teach nothing")
     p.add_argument("--class-weight-power", type=float, default=0.25,
@@ -138,10 +146,47 @@ def distillation_zone(sample, outside_lidar_only):
     return zone
 
 
-def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft, batch=2):
+def distillation_weights(sample, outside_lidar_only, labelled_weight):
+    """Per-pixel weight of the soft distillation: 1 in the zone, labelled_weight at the
+    human-labelled pixels, 0 elsewhere (outside the lidar zone's limit)."""
+    weights = distillation_zone(sample, outside_lidar_only).astype(np.float32)
+    if labelled_weight > 0:
+        weights[sample.target != labels.IGNORE] = labelled_weight
+    return weights
+
+
+def repeat_factors(samples, threshold, min_pixels=50):
+    """Repeat-factor sampling (Gupta et al. 2019, LVIS): each image's class set (classes with at
+    least min_pixels human labels), f_c the share of images holding class c, and the image's
+    factor max(1, max over its classes of sqrt(threshold / f_c)). All ones for threshold 0."""
+    if threshold <= 0 or not samples:
+        return np.ones(len(samples))
+    present = np.zeros((len(samples), labels.NUM_TRAIN_IDS), bool)
+    for i, s in enumerate(samples):
+        counts = np.bincount(s.target[s.target != labels.IGNORE].ravel(),
+                             minlength=labels.NUM_TRAIN_IDS)[:labels.NUM_TRAIN_IDS]
+        present[i] = counts >= min_pixels
+    share = present.mean(axis=0)
+    per_class = np.sqrt(threshold / np.maximum(share, 1e-9))
+    return np.array([max(1.0, per_class[p].max()) if p.any() else 1.0 for p in present])
+
+
+def epoch_order(factors, rng):
+    """One epoch's draw order: image i floor(r_i) times plus once more with probability
+    frac(r_i), shuffled (stochastic rounding keeps the expected count r_i)."""
+    if np.all(factors == 1):
+        return list(rng.permutation(len(factors)))  # the draw of runs without repeats
+    counts = np.floor(factors).astype(int)
+    counts += rng.random(len(factors)) < (factors - counts)
+    return list(rng.permutation(np.repeat(np.arange(len(factors)), counts)))
+
+
+def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft, batch=2,
+                    labelled_weight=0.0):
     """What the base network teaches in its zone. Hard: its labels where its softmax confidence
-    is >= confidence (H x W trainIds, IGNORE elsewhere). Soft: its logits with the zone as a last
-    channel (H x W x (C + 1), float16: the whole distribution, confident or not)."""
+    is >= confidence (H x W trainIds, IGNORE elsewhere). Soft: its logits with the per-pixel
+    weight as a last channel (H x W x (C + 1), float16: the whole distribution, confident or
+    not; distillation_weights)."""
     model.eval()
     with torch.no_grad():
         for i in range(0, len(samples), batch):
@@ -150,9 +195,9 @@ def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft,
             logits = model(x)
             if soft:
                 for s, z in zip(chunk, logits.numpy()):
-                    zone = distillation_zone(s, outside_lidar_only)
+                    weights = distillation_weights(s, outside_lidar_only, labelled_weight)
                     s.teacher = np.concatenate(
-                        [z.transpose(1, 2, 0), zone[..., None]], axis=2).astype(np.float16)
+                        [z.transpose(1, 2, 0), weights[..., None]], axis=2).astype(np.float16)
                 continue
             prob = torch.softmax(logits, dim=1)
             conf, arg = prob.max(dim=1)
@@ -172,8 +217,9 @@ def freeze_batchnorm_statistics(model, torch):
 
 
 def soft_distillation_loss(logits, teacher, temperature, F):
-    """Per-image mean over the zone of KL(teacher || student) at the temperature, times T^2
-    (Hinton et al. 2015); teacher is N x (C + 1) x H x W, the last channel the zone."""
+    """Per-image weighted mean of KL(teacher || student) at the temperature, times T^2 (Hinton
+    et al. 2015); teacher is N x (C + 1) x H x W, the last channel the per-pixel weight (the
+    zone: 1 inside, 0 outside)."""
     zone = teacher[:, -1]
     t = temperature
     kl = F.kl_div(F.log_softmax(logits / t, dim=1), F.softmax(teacher[:, :-1] / t, dim=1),
@@ -405,9 +451,12 @@ def main(argv=None):
     # starting point, measured by the same tools as the adapted one).
     train_at_all = args.max_steps > 0 or args.minutes > 0
     soft = args.distill == "soft"
+    if args.distill_labelled_weight > 0 and not soft:
+        raise SystemExit("--distill-labelled-weight needs --distill soft")
     if train_at_all:
         teacher_targets(train, model, torch, args.teacher_confidence,
-                        args.distill_zone == "outside-lidar", args.distill == "soft")
+                        args.distill_zone == "outside-lidar", soft,
+                        labelled_weight=args.distill_labelled_weight)
         log(f"base network's labels for distillation in {time.time() - teacher_t0:.0f} s")
     if args.init:
         model.load_state_dict(torch.load(args.init, map_location="cpu"))
@@ -421,6 +470,11 @@ def main(argv=None):
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr,
                                   weight_decay=args.weight_decay)
     rng = np.random.default_rng(args.seed)
+    factors = repeat_factors(train, args.rare_repeat)
+    if args.rare_repeat > 0:
+        log(f"repeat-factor sampling at t = {args.rare_repeat}: {len(train)} images drawn "
+            f"{factors.sum():.0f} times per epoch, most repeated x{factors.max():.1f} "
+            f"({int((factors > 1).sum())} images above 1)")
     history = {"train": [], "val": [dict(step=0, **before)]}
     best = dict(step=0, **before)
     best_path = os.path.join(args.output, "best.pt")
@@ -445,7 +499,7 @@ def main(argv=None):
         images, targets, teachers = [], [], []
         for _ in range(args.batch):
             if not order:
-                order = list(rng.permutation(len(train)))
+                order = epoch_order(factors, rng)
             s = train[order.pop()]
             image, target, teacher = augment.random_crop(
                 s, lambda x: x.teacher.astype(np.float32) if soft else x.teacher, rng, crop_h,

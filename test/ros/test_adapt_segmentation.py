@@ -156,6 +156,48 @@ class Distillation(unittest.TestCase):
         self.assertFalse(torch.equal(model[1].running_mean, before))
 
 
+class RareClassSampling(unittest.TestCase):
+    @staticmethod
+    def sample(classes):
+        target = np.full((10, 20), labels.IGNORE, np.uint8)
+        for i, c in enumerate(classes):
+            target[:, i * 5:(i + 1) * 5] = c  # 50 pixels each
+        return datasets.Sample("s", "dense", np.zeros((10, 20, 3), np.uint8), target)
+
+    def test_an_image_with_a_rare_class_is_drawn_more_often_and_common_ones_once(self):
+        import adapt_segmentation as adapt
+
+        road, car, person = 0, 13, 11
+        samples = [self.sample([road, car]) for _ in range(9)] + [self.sample([road, person])]
+        factors = adapt.repeat_factors(samples, 0.4)
+        self.assertTrue(np.all(factors[:9] == 1.0))  # road and car are in every other image
+        self.assertAlmostEqual(factors[9], np.sqrt(0.4 / 0.1), places=6)  # person: 1 in 10
+        self.assertTrue(np.all(adapt.repeat_factors(samples, 0) == 1.0))
+
+        rng = np.random.default_rng(3)
+        draws = [adapt.epoch_order(factors, rng) for _ in range(400)]
+        per_epoch = np.mean([d.count(9) for d in draws])
+        self.assertAlmostEqual(per_epoch, factors[9], delta=0.08)  # stochastic rounding
+        self.assertTrue(all(d.count(0) == 1 for d in draws))
+
+    def test_a_class_below_the_pixel_minimum_does_not_raise_the_factor(self):
+        import adapt_segmentation as adapt
+
+        few = self.sample([0])
+        few.target[0, 10:13] = 11  # 3 person pixels: not counted as present
+        samples = [self.sample([0]) for _ in range(9)] + [few]
+        self.assertTrue(np.all(adapt.repeat_factors(samples, 0.5) == 1.0))
+
+    def test_distillation_weights_are_one_in_the_zone_and_the_given_weight_at_labels(self):
+        import adapt_segmentation as adapt
+
+        s = self.sample([0, 13])  # columns 0-9 labelled, 10-19 not
+        w = adapt.distillation_weights(s, False, 0.3)
+        self.assertTrue(np.allclose(w[:, :10], 0.3))
+        self.assertTrue(np.all(w[:, 10:] == 1.0))
+        self.assertTrue(np.all(adapt.distillation_weights(s, False, 0.0)[:, :10] == 0.0))
+
+
 class Preprocessing(unittest.TestCase):
     def test_standardization_reaches_the_target_statistics(self):
         # Two colours, half the pixels each: every channel maps to exactly mean -+ std, inside
