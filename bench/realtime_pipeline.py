@@ -23,7 +23,10 @@ sys.path.insert(0, os.path.join(REPO_ROOT, "scripts"))
 import compute_demo_metrics as metrics  # noqa: E402
 import pipeline_monitor  # noqa: E402
 
-NODES = ["/inekf_node", "/segmentation_node", "/semantic_octomap_node", "/rosbag_play"]
+# With nodelets:=true the segmentation and map nodes run in /pipeline_manager (their loaders keep
+# the nodes' names and use almost nothing).
+NODES = ["/inekf_node", "/segmentation_node", "/semantic_octomap_node", "/pipeline_manager",
+         "/rosbag_play"]
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 PLAY_DELAY_S = 5.0  # rosbag play waits this long after advertising, so that all subscribe
 PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2 ** 20
@@ -156,6 +159,8 @@ def main():
         row = cpu.get(name)
         if row:
             lines.append("| %s | %.0f | %.0f | %.0f |" % (name.lstrip("/"), row["cpu_mean_pct"], row["cpu_max_pct"], row["rss_max_mb"]))
+    lines.append("| all of them | %.0f | | %.0f |" % (sum(r["cpu_mean_pct"] for r in cpu.values()),
+                                                   sum(r["rss_max_mb"] for r in cpu.values())))
     lines += ["", "| stage | in bag | received | output | dropped | output rate Hz | stage real-time factor |",
               "|---|---:|---:|---:|---:|---:|---:|"]
     for label, source, sink in stages:

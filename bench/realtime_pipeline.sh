@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Real-time benchmark of the whole pipeline at rate 1.0 (see bench/realtime_pipeline.py):
 #   bench/realtime_pipeline.sh [BAG]                  # ISM_BENCH_MODEL=/abs/model (see below)
+#   ISM_BENCH_LAUNCH_ARGS="nodelets:=true" bench/realtime_pipeline.sh   # extra kitti_bag.launch args
 # Without BAG, a 30 s synthetic drive (seed 42) is generated and converted with kitti2bag into
 # output/bench/. ISM_BENCH_MODEL is the segmentation model; it defaults to the synthetic-world
 # U-Net (models/unet_synthetic.onnx), which suits synthetic bags only: give the ENet for a real
 # one. Needs a built workspace (ISM_WS, default .ws). Prints markdown tables
-# (output/bench/realtime.md).
+# (output/bench/realtime.md, or ISM_BENCH_OUTPUT/realtime.md).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../scripts/env.sh"
 ism_source_workspace
@@ -27,4 +28,4 @@ export ROS_MASTER_URI=http://localhost:${ISM_BENCH_PORT:-$((11900 + RANDOM % 90)
 model=${ISM_BENCH_MODEL:-$ISM_ROOT/models/unet_synthetic.onnx}
 echo "[bench] segmentation model: $model (ISM_BENCH_MODEL)"
 exec /usr/bin/python3 "$ISM_ROOT/bench/realtime_pipeline.py" --bag "$bag" --rate "${ISM_BENCH_RATE:-1.0}" \
-  --model "$model" --output-dir "$out"
+  --model "$model" --output-dir "${ISM_BENCH_OUTPUT:-$out}" --launch-args "${ISM_BENCH_LAUNCH_ARGS:-}"

@@ -8,7 +8,7 @@ ism_add_ros_library(${PROJECT_NAME}_localization_ros
   LINK ${PROJECT_NAME}_localization_session ${PROJECT_NAME}_node_ros)
 
 ism_add_ros_executable(inekf_node
-  SOURCES src/nodes/inekf_node.cpp
+  SOURCES src/nodes/inekf_node.cpp src/ros/inekf_node_core.cpp
   LINK ${PROJECT_NAME}_localization_ros roslib)
 ism_add_gtest(test_localization_conversions
   SOURCES test/unit/test_localization_conversions.cpp

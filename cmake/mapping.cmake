@@ -69,7 +69,8 @@ if(benchmark_FOUND)
     ISM_SHARED_DIR_DEFAULT="${ISM_SHARED_DIR}")
 endif()
 
-# Message <-> session conversions of semantic_octomap_node (ROS-facing, not core).
+# Message <-> session conversions of semantic_octomap_node and its work, shared by the node and
+# its nodelet (ROS-facing, not core).
 ism_add_ros_library(${PROJECT_NAME}_mapping_ros
   SOURCES ${ISM_MAPPING_ROS_SOURCES}
   LINK ${PROJECT_NAME}_mapping ${PROJECT_NAME}_node_ros yaml-cpp)
@@ -77,6 +78,12 @@ ism_add_ros_library(${PROJECT_NAME}_mapping_ros
 ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp
   LINK ${PROJECT_NAME}_mapping_ros)
+
+# The segmentation and map nodes as nodelets in one library (nodelet_plugins.xml).
+ism_add_ros_library(${PROJECT_NAME}_nodelets
+  SOURCES ${ISM_NODELET_SOURCES}
+  LINK ${PROJECT_NAME}_segmentation_ros ${PROJECT_NAME}_mapping_ros)
+install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION})
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)

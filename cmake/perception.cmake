@@ -28,9 +28,13 @@ ism_add_gtest(test_segmenter_frame_buffer
   SOURCES test/unit/test_segmenter_frame_buffer.cpp
   LINK ${PROJECT_NAME}_perception)
 
+# segmentation_node's work (ROS-facing), shared by the node and its nodelet.
+ism_add_ros_library(${PROJECT_NAME}_segmentation_ros
+  SOURCES ${ISM_SEGMENTATION_ROS_SOURCES}
+  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_node_ros)
 ism_add_ros_executable(segmentation_node
   SOURCES src/nodes/segmentation_node.cpp
-  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_node_ros)
+  LINK ${PROJECT_NAME}_segmentation_ros)
 
 if(benchmark_FOUND)
   ism_add_tool(bench_segmentation
@@ -46,26 +50,3 @@ if(CATKIN_ENABLE_TESTING)
   # export through segment_image against PyTorch.
   add_rostest(test/ros/adapt_segmentation.test DEPENDENCIES segment_image)
 endif()
-
-# Camera labels at lidar points scored against SemanticKITTI's human labels.
-ism_add_core_library(${PROJECT_NAME}_semantic_evaluation
-  SOURCES ${ISM_SEMANTIC_EVALUATION_SOURCES}
-  LINK ${PROJECT_NAME}_perception ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti
-       ${PROJECT_NAME}_mapping)
-
-ism_add_tool(evaluate_semantics
-  SOURCES src/tools/evaluate_semantics.cpp
-  LINK ${PROJECT_NAME}_semantic_evaluation)
-# The same map metric on any drive with labelled scans (the synthetic drives: demo, e2e tests).
-ism_add_tool(evaluate_map
-  SOURCES src/tools/evaluate_map.cpp
-  LINK ${PROJECT_NAME}_semantic_evaluation)
-ism_add_gtest(test_evaluate_map
-  SOURCES test/cli/test_evaluate_map.cpp
-  LINK ${PROJECT_NAME}_semantic_evaluation ${PROJECT_NAME}_synthetic
-  TOOL evaluate_map TOOL_MACRO EVALUATE_MAP_PATH)
-
-# The default ENet labelling path scored on the real SemanticKITTI frames of ../shared.
-ism_add_gtest(test_real_semantics
-  SOURCES test/accuracy/test_real_semantics.cpp
-  LINK ${PROJECT_NAME}_semantic_evaluation)

@@ -38,7 +38,6 @@ set(ISM_PROJECTION_SOURCES src/perception/projection.cpp src/perception/label_ge
 set(ISM_MODEL_CARD_SOURCES src/perception/model_card.cpp)
 set(ISM_PERCEPTION_SOURCES ${ISM_MODEL_CARD_SOURCES} src/perception/segmenter.cpp
   src/perception/segmenter_input.cpp src/perception/segmenter_labels.cpp)
-set(ISM_SEMANTIC_EVALUATION_SOURCES src/perception/semantic_evaluation.cpp)
 # mapping: SemanticOcTree, the hashed grid, map files, the offline mapping and the session, grids.
 set(ISM_MAPPING_SOURCES
   src/mapping/semantic_classes.cpp
@@ -52,6 +51,8 @@ set(ISM_MAPPING_SOURCES
   src/mapping/semantic_mapping_config.cpp
   src/mapping/semantic_mapping_session.cpp
   src/mapping/grid_projection.cpp)
+# evaluation: scores of camera labels and maps against human labels (above perception and mapping).
+set(ISM_EVALUATION_SOURCES src/evaluation/semantic_evaluation.cpp)
 # synthetic: the KITTI-format drive generator.
 set(ISM_SYNTHETIC_SOURCES
   src/synthetic/world.cpp
@@ -69,4 +70,7 @@ set(ISM_LOCALIZATION_ROS_SOURCES
   src/ros/localization_diagnostics.cpp)
 set(ISM_MAPPING_ROS_SOURCES
   src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-  src/ros/label_input.cpp src/ros/mapping_diagnostics.cpp)
+  src/ros/label_input.cpp src/ros/mapping_diagnostics.cpp src/ros/semantic_octomap_node_core.cpp)
+set(ISM_SEGMENTATION_ROS_SOURCES src/ros/segmentation_node_core.cpp)
+# The segmentation and map nodes as nodelets (nodelet_plugins.xml).
+set(ISM_NODELET_SOURCES src/nodelets/pipeline_nodelets.cpp)

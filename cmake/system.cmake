@@ -9,6 +9,9 @@ if(CATKIN_ENABLE_TESTING)
   # The map is scored with evaluate_map (the package's one map metric).
   add_rostest(test/ros/e2e_synthetic.test
     DEPENDENCIES ${ISM_PIPELINE_TARGETS} evaluate_map)
+  # The same with the segmentation and map nodelets in one manager (pipeline.launch nodelets:=true).
+  add_rostest(test/ros/e2e_synthetic.test ARGS nodelets:=true
+    DEPENDENCIES ${ISM_PIPELINE_TARGETS} ${PROJECT_NAME}_nodelets evaluate_map)
   add_rostest(test/ros/e2e_real_oxts.test DEPENDENCIES kitti2bag inekf_node)
   # Two pipelines in two namespaces on one master, each on its own bag (occupancy only).
   add_rostest(test/ros/two_pipelines.test DEPENDENCIES ${ISM_PIPELINE_TARGETS})

@@ -22,6 +22,8 @@ PACKAGES=(
   libdiagnostic-msgs-dev ros-diagnostic-msgs python3-diagnostic-msgs
   # /diagnostics of every node (diagnostic_updater)
   libdiagnostic-updater-dev
+  # the segmentation and map nodes as nodelets, and the nodelet manager
+  libnodeletlib-dev libnodelet-dev libnodeletlib-tools pluginlib-dev
   # tf, bags, sync, images, clouds
   libtf2-ros-dev python3-tf2-ros tf2-tools libtf2-eigen-dev libtf2-geometry-msgs-dev
   librosbag-dev python3-rosbag libmessage-filters-dev

@@ -108,8 +108,9 @@ void PlaybackMonitor::fill(double wall_s, double requested_rate,
 }
 
 NodeDiagnostics::NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh, double period_s)
-    : updater_(nh, private_nh) {
-  updater_.setHardwareID(ros::this_node::getName());
+    // The private namespace names the node, also for a nodelet (whose process is the manager).
+    : updater_(nh, private_nh, private_nh.getNamespace()) {
+  updater_.setHardwareID(private_nh.getNamespace());
   timer_ = nh.createWallTimer(ros::WallDuration(period_s),
                               [this](const ros::WallTimerEvent&) { updater_.force_update(); });
 }

@@ -1,5 +1,5 @@
 // evaluate_map: scores a saved semantic map against labelled lidar scans with the package's one
-// map metric (perception::mapLabelAt): every labelled point, placed in the map with the pose of
+// map metric (evaluation::mapLabelAt): every labelled point, placed in the map with the pose of
 // its frame, takes the most likely class of its voxel; accuracy and IoU per class over the
 // covered points, mIoU over the scored classes present in the truth, coverage = covered /
 // scored points. The synthetic drives carry such scans (ground_truth/velodyne_labels); the demo
@@ -22,13 +22,13 @@
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
-#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
 namespace fs = std::filesystem;
@@ -132,7 +132,7 @@ int run(const ism::common::CommandLine& cli) {
     return u >= 0 && v >= 0 && u < camera.width && v < camera.height;
   };
 
-  ism::perception::PointLabelScore score;
+  ism::evaluation::PointLabelScore score;
   std::unordered_set<octomap::OcTreeKey, octomap::OcTreeKey::KeyHash> voxels_hit;
   int scans = 0;
   for (std::size_t i = 0; i < poses.size(); ++i) {
@@ -159,7 +159,7 @@ int run(const ism::common::CommandLine& cli) {
       const std::uint8_t truth = scoredTruth(labels[p]);
       if (truth == ism::perception::kIgnoredLabel) continue;
       const Eigen::Vector3f point_map = T_map_velo * point;
-      const std::uint32_t predicted = ism::perception::mapLabelAt(*tree, point_map);
+      const std::uint32_t predicted = ism::evaluation::mapLabelAt(*tree, point_map);
       score.add(truth, predicted);
       if (predicted != ism::cityscapes::kUnlabeled) {
         voxels_hit.insert(tree->coordToKey(point_map.x(), point_map.y(), point_map.z()));

@@ -28,14 +28,15 @@
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
-#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
 namespace ism = inekf_semantic_mapping;
 namespace perception = inekf_semantic_mapping::perception;
+namespace evaluation = inekf_semantic_mapping::evaluation;
 using ism::common::UsageError;
 
 namespace {
@@ -71,11 +72,11 @@ constexpr char kUsage[] =
 
 struct Variant {
   std::string name;
-  perception::PointLabellingOptions options;
+  evaluation::PointLabellingOptions options;
 };
 
 // "default" keeps the library defaults (the session's).
-void parseGeometry(const std::string& text, perception::PointLabellingOptions* options) {
+void parseGeometry(const std::string& text, evaluation::PointLabellingOptions* options) {
   if (text == "default") return;
   options->check_geometry = text != "off";
   if (!options->check_geometry) return;
@@ -119,7 +120,7 @@ std::string occlusionName(bool enabled, const perception::OcclusionOptions& o) {
 }
 
 std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
-  const perception::PointLabellingOptions defaults;
+  const evaluation::PointLabellingOptions defaults;
   std::vector<double> confidences;
   for (const std::string& text : cli.getAll("--min-confidence"))
     confidences.push_back(ism::common::CommandLine::parseDouble("--min-confidence", text));
@@ -238,7 +239,7 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   return card;
 }
 
-void printScore(const std::string& title, const perception::PointLabelScore& score,
+void printScore(const std::string& title, const evaluation::PointLabelScore& score,
                 bool per_class) {
   std::printf("%-58s acc %.4f  coverage %.4f  mIoU %.4f  (%llu of %llu points labelled)\n",
               title.c_str(), score.accuracy(), score.coverage(), score.meanIoU(),
@@ -357,25 +358,25 @@ int main(int argc, char** argv) {
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
-    std::vector<perception::PointLabelScore> totals(variants.size());
-    perception::PointLabelScore map_totals, ceiling_totals;
+    std::vector<evaluation::PointLabelScore> totals(variants.size());
+    evaluation::PointLabelScore map_totals, ceiling_totals;
     std::ostringstream json;
     json << "{\"sequences\":{";
     double total_ms = 0.0;
     int total_frames = 0;
     for (std::size_t s = 0; s < sequences.size(); ++s) {
       const std::string& dir = sequences[s];
-      std::vector<std::string> frames = perception::listSemanticKittiFrames(dir);
+      std::vector<std::string> frames = evaluation::listSemanticKittiFrames(dir);
       if (max_frames > 0 && static_cast<int>(frames.size()) > max_frames) frames.resize(max_frames);
-      std::vector<perception::PointLabelScore> scores(variants.size());
+      std::vector<evaluation::PointLabelScore> scores(variants.size());
       // Per geometry variant: the labels the geometry check took away (truth vs the label).
-      std::vector<perception::PointLabelScore> rejected(variants.size());
+      std::vector<evaluation::PointLabelScore> rejected(variants.size());
       double sequence_ms = 0.0;
       double scale = 1.0;
       for (const std::string& name : frames) {
-        const perception::SemanticKittiFrame frame = perception::readSemanticKittiFrame(dir, name);
+        const evaluation::SemanticKittiFrame frame = evaluation::readSemanticKittiFrame(dir, name);
         const ism::kitti::CameraProjection camera =
-            perception::readSemanticKittiCamera(dir, frame.image.cols, frame.image.rows);
+            evaluation::readSemanticKittiCamera(dir, frame.image.cols, frame.image.rows);
         const double focal = use_focal ? camera.P_rect(0, 0) : 0.0;
         scale = segmenter.tileScaleFor(frame.image.size(), focal);
         const auto start = std::chrono::steady_clock::now();
@@ -387,15 +388,15 @@ int main(int argc, char** argv) {
                                                    frame.image.cols, frame.image.rows);
         perception::ProjectedPoints projected;
         for (std::size_t v = 0; v < variants.size(); ++v) {
-          const std::vector<std::uint32_t> labels = perception::labelScanPoints(
+          const std::vector<std::uint32_t> labels = evaluation::labelScanPoints(
               segmentation, projector, frame.scan, variants[v].options, &projected);
           for (std::size_t i = 0; i < labels.size(); ++i) {
             if (projected.valid[i]) scores[v].add(frame.truth[i], labels[i]);
           }
           if (variants[v].options.check_geometry) {
-            perception::PointLabellingOptions unchecked = variants[v].options;
+            evaluation::PointLabellingOptions unchecked = variants[v].options;
             unchecked.check_geometry = false;
-            const std::vector<std::uint32_t> before = perception::labelScanPoints(
+            const std::vector<std::uint32_t> before = evaluation::labelScanPoints(
                 segmentation, projector, frame.scan, unchecked, &projected);
             for (std::size_t i = 0; i < labels.size(); ++i) {
               if (projected.valid[i] && before[i] != labels[i])
@@ -421,8 +422,8 @@ int main(int argc, char** argv) {
       json << "}";
       if (!cli.has("--no-map")) {
         // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
-        const perception::SequenceMapScores maps =
-            perception::scoreSequenceMaps(dir, &segmenter, max_frames, map_config);
+        const evaluation::SequenceMapScores maps =
+            evaluation::scoreSequenceMaps(dir, &segmenter, max_frames, map_config);
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);
         std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",

@@ -12,17 +12,19 @@
 #include <iostream>
 #include <string>
 
+#include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/label_geometry.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
-#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
+
+using namespace evaluation;  // NOLINT: the scores under test
 
 constexpr char kEnetModel[] = "models/enet-cityscapes/enet-model.net";
 constexpr char kSequences[] = "data/semantickitti/sequences";

@@ -1,4 +1,4 @@
-// The package's one map metric: perception::mapLabelAt and the evaluate_map tool, on a short
+// The package's one map metric: evaluation::mapLabelAt and the evaluate_map tool, on a short
 // synthetic drive mapped from its own true point labels (the score must be near perfect) and
 // from poses shifted by a metre (it must drop), and the tool's errors on bad inputs.
 #include <gtest/gtest.h>
@@ -10,13 +10,13 @@
 #include <sstream>
 #include <string>
 
+#include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
-#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
 
 namespace fs = std::filesystem;
@@ -100,10 +100,10 @@ TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
   session.insertScanWithPointLabels(wall, Eigen::Isometry3d::Identity(),
                                     std::vector<std::uint32_t>(121, cs::kBuilding), cs::kUnlabeled);
   const auto& tree = session.tree();  // synced from the insertion grid when asked for
-  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(5.0f, 0.0f, 0.0f)), cs::kBuilding);
+  EXPECT_EQ(ism::evaluation::mapLabelAt(tree, Eigen::Vector3f(5.0f, 0.0f, 0.0f)), cs::kBuilding);
   // Free space in front of the wall, unknown space behind it: no label.
-  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(2.5f, 0.0f, 0.0f)), cs::kUnlabeled);
-  EXPECT_EQ(ism::perception::mapLabelAt(tree, Eigen::Vector3f(9.0f, 0.0f, 0.0f)), cs::kUnlabeled);
+  EXPECT_EQ(ism::evaluation::mapLabelAt(tree, Eigen::Vector3f(2.5f, 0.0f, 0.0f)), cs::kUnlabeled);
+  EXPECT_EQ(ism::evaluation::mapLabelAt(tree, Eigen::Vector3f(9.0f, 0.0f, 0.0f)), cs::kUnlabeled);
   // An occupied voxel without class evidence covers nothing either.
   Eigen::Matrix3Xf post(3, 1);
   post << 0.0f, 6.0f, 0.0f;
@@ -111,7 +111,7 @@ TEST_F(EvaluateMapTest, MapLabelAtIsTheVoxelsClassOrNone) {
                                     cs::kUnlabeled);
   const auto& updated = session.tree();
   ASSERT_NE(updated.search(0.0, 6.0, 0.0), nullptr);
-  EXPECT_EQ(ism::perception::mapLabelAt(updated, Eigen::Vector3f(0.0f, 6.0f, 0.0f)),
+  EXPECT_EQ(ism::evaluation::mapLabelAt(updated, Eigen::Vector3f(0.0f, 6.0f, 0.0f)),
             cs::kUnlabeled);
 }
 

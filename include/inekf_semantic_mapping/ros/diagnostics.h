@@ -77,8 +77,8 @@ class PlaybackMonitor {
   std::map<std::string, std::size_t> counts_;
 };
 
-// diagnostic_updater::Updater published at 1 Hz on the wall clock. The hardware id is the node's
-// name (what the status is about).
+// diagnostic_updater::Updater published at 1 Hz on the wall clock. The statuses' prefix and the
+// hardware id are the node's name (its private namespace: a nodelet's own name, not its manager's).
 class NodeDiagnostics {
  public:
   using Task = std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)>;

@@ -1,4 +1,4 @@
-#include "inekf_semantic_mapping/perception/semantic_evaluation.h"
+#include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 
 #include <algorithm>
 #include <cmath>
@@ -18,7 +18,10 @@
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
 namespace inekf_semantic_mapping {
-namespace perception {
+namespace evaluation {
+
+using namespace perception;  // NOLINT: the labelling path is perception's, step by step
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -296,5 +299,5 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
   return scores;
 }
 
-}  // namespace perception
+}  // namespace evaluation
 }  // namespace inekf_semantic_mapping

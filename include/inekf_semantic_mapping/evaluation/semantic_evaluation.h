@@ -1,6 +1,7 @@
 // Scoring camera labels at lidar points against human point labels (SemanticKITTI), and the
 // labelling path from a segmentation to per-point labels that the scores are taken on. ROS-free;
-// used by the evaluate_semantics tool and the real-data tests.
+// used by the evaluate_semantics and evaluate_map tools and the real-data tests. A layer above
+// perception and mapping (it builds maps to score them), so that neither depends on the other.
 #pragma once
 
 #include <cstdint>
@@ -16,7 +17,7 @@
 #include "inekf_semantic_mapping/perception/segmenter.h"
 
 namespace inekf_semantic_mapping {
-namespace perception {
+namespace evaluation {
 
 // Confusion counts of camera labels (Cityscapes labelIds, 0 = no label) against true labels
 // (Cityscapes labelIds of scored classes, kIgnoredLabel = not scored). A camera label of a class
@@ -80,28 +81,28 @@ kitti::CameraProjection readSemanticKittiCamera(const std::string& sequence_dir,
 
 // The labelling path from a segmentation to point labels, as the mapping uses it.
 struct PointLabellingOptions {
-  LabelFilterOptions filter;
+  perception::LabelFilterOptions filter;
   bool reject_occluded = true;
-  OcclusionOptions occlusion;
+  perception::OcclusionOptions occlusion;
   // rejectGeometricallyInconsistentLabels with the Cityscapes kinds (and, with
   // high_terrain_is_vegetation, cityscapesHighFlatRelabels): the session's defaults.
   bool check_geometry = true;
-  LabelGeometryOptions geometry;
+  perception::LabelGeometryOptions geometry;
   bool high_terrain_is_vegetation = true;
   // ... and then road beyond a kerb is sidewalk (applyCityscapesLidarChecks; with
   // check_geometry only): the session's default.
   bool check_curbs = true;
-  CurbOptions curbs;
+  perception::CurbOptions curbs;
 };
 
 // Per point of the scan: the camera's labelId at its pixel after filterLabels, 0 for points
 // outside the image, hidden from the camera (when reject_occluded), filtered or ruled out by the
 // lidar geometry (when check_geometry). projected: filled with the scan's projection.
-std::vector<std::uint32_t> labelScanPoints(const Segmentation& segmentation,
-                                           const PointProjector& projector,
+std::vector<std::uint32_t> labelScanPoints(const perception::Segmentation& segmentation,
+                                           const perception::PointProjector& projector,
                                            const kitti::VelodyneScan& scan,
                                            const PointLabellingOptions& options,
-                                           ProjectedPoints* projected);
+                                           perception::ProjectedPoints* projected);
 
 // The package's one map metric, "the map at the lidar points": each labelled lidar point (map
 // frame) takes the most likely class of its voxel; cityscapes::kUnlabeled (the point is not
@@ -123,9 +124,9 @@ struct SequenceMapScores {
   PointLabelScore ceiling;  // map built from the human labels
   std::size_t map_voxels = 0;
 };
-SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
-                                    int max_frames = -1,
+SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
+                                    perception::Segmenter* segmenter, int max_frames = -1,
                                     const mapping::SemanticMappingConfig& config = {});
 
-}  // namespace perception
+}  // namespace evaluation
 }  // namespace inekf_semantic_mapping

@@ -1,0 +1,206 @@
+// inekf_node's work (see ros/inekf_node_core.h).
+#include "inekf_semantic_mapping/ros/inekf_node_core.h"
+
+#include <geometry_msgs/TwistStamped.h>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <sensor_msgs/Imu.h>
+#include <sensor_msgs/NavSatFix.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <deque>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "inekf_semantic_mapping/FilterStatus.h"
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/estimation/localization_session.h"
+#include "inekf_semantic_mapping/ros/diagnostics.h"
+#include "inekf_semantic_mapping/ros/localization_conversions.h"
+#include "inekf_semantic_mapping/ros/localization_diagnostics.h"
+#include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
+#include "inekf_semantic_mapping/ros/odometry_output.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+namespace {
+
+using estimation::LocalizationSession;
+
+// Every private parameter, read (and checked) before anything is advertised.
+struct InekfNodeParameters {
+  std::string config_file;
+  estimation::LocalizationSessionConfig session;
+  OdometryOutputOptions output;
+  LocalizationDiagnosticsOptions diagnostics;
+};
+
+InekfNodeParameters readParameters(const ros::NodeHandle& private_nh) {
+  common::YamlReader reader = privateParameterReader(private_nh);
+  InekfNodeParameters parameters;
+  parameters.session = sessionConfigFromParameters(
+      &reader, ros::package::getPath("inekf_semantic_mapping") + "/config/inekf.yaml",
+      &parameters.config_file);
+  parameters.output = readOdometryOutputOptions(&reader);
+  if (std::filesystem::is_regular_file(parameters.config_file)) {
+    // The config file's node-only section (LocalizationSessionConfig leaves it alone).
+    common::YamlReader file(parameters.config_file + " (section node)",
+                            YAML::LoadFile(parameters.config_file)["node"]);
+    readLocalizationDiagnosticsOptions(&file, "diagnostics.", &parameters.diagnostics);
+    file.rejectUnknown();
+  }
+  readLocalizationDiagnosticsOptions(&reader, "diagnostics.", &parameters.diagnostics);
+  reader.rejectUnknown();
+  return parameters;
+}
+
+}  // namespace
+
+class InekfNodeCore::Impl {
+ public:
+  Impl(ros::NodeHandle& nh, ros::NodeHandle& private_nh, const InekfNodeParameters& parameters)
+      : config_file_(parameters.config_file),
+        session_(parameters.session),
+        output_(nh, parameters.output),
+        monitor_(parameters.diagnostics),
+        diagnostics_(nh, private_nh) {
+    diagnostics_.add("localization",
+                     [this](auto& status) { monitor_.fill(session_, wallNow(), &status); });
+    status_publisher_ = nh.advertise<FilterStatus>(topics::kFilterStatus, 10);
+    imu_subscriber_ =
+        nh.subscribe(topics::kImu, 400, &Impl::onImu, this, ros::TransportHints().tcpNoDelay());
+    fix_subscriber_ = nh.subscribe(topics::kGpsFix, 50, &Impl::onFix, this);
+    velocity_subscriber_ = nh.subscribe(topics::kGpsVelocity, 10, &Impl::onVelocity, this);
+    ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " filter, config "
+                                   << config_file_ << ", waiting for IMU on "
+                                   << imu_subscriber_.getTopic() << " and GPS on "
+                                   << fix_subscriber_.getTopic());
+  }
+
+  ~Impl() { ROS_INFO_STREAM("inekf_node timing:\n" << TimingRegistry::instance().report()); }
+
+ private:
+  // Runs one event through the session (`stage` in the timing report); a callback never lets an
+  // exception out.
+  void handle(const char* stage, const ros::Time& stamp,
+              const std::function<LocalizationSession::Update()>& event) {
+    try {
+      ScopedTimer timer(stage);
+      session_.setGpsVelocityExpected(velocity_subscriber_.getNumPublishers() > 0);
+      const ros::Time now = ros::Time::now();
+      if (!now.isZero()) report(session_.addClock(now.toSec()));
+      const LocalizationSession::Update update = event();
+      report(update);
+      // The start's pose at the first fix's stamp, whichever message completed the start: a scan
+      // between it and the next IMU sample has a pose (otherwise the first pose would come with
+      // the next IMU sample, 0.1 s later on KITTI, and such scans would stay out of the map).
+      if (const auto& start = update.start_estimate) {
+        output_.publish(startStamp(start->state.stamp_s), start->state, start->pose_covariance,
+                        session_.latestAngularVelocity());
+      }
+      if (update.new_estimate) publishState(stamp);
+      if (update.new_estimate || update.correction || update.started) publishStatus(stamp);
+    } catch (const std::exception& error) {
+      ROS_ERROR_STREAM_THROTTLE(
+          5.0, "inekf_node: " << stage << " message at " << stamp << " failed: " << error.what());
+    }
+  }
+
+  void report(const LocalizationSession::Update& update) {
+    if (update.reset) {
+      ROS_WARN_STREAM("inekf_node: " << update.note << ": filter and path reset (bag loop?)");
+      output_.clearPath();
+    } else if (update.started) {
+      ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " " << update.note);
+    } else if (update.heading_event) {
+      // Each alignment, recovery or re-open of the heading: once, never throttled away.
+      ROS_WARN_STREAM("inekf_node: " << update.note);
+    } else if (!update.note.empty()) {
+      ROS_WARN_STREAM_THROTTLE(5.0, "inekf_node: " << update.note);
+    }
+  }
+
+  void onImu(const sensor_msgs::Imu::ConstPtr& message) {
+    output_.noteImuFrame(message->header.frame_id);
+    handle("inekf_node/imu", message->header.stamp,
+           [&] { return session_.addImu(imuEvent(*message)); });
+    monitor_.noteImu(message->header.stamp.toSec(), wallNow(), session_);
+  }
+
+  void onFix(const sensor_msgs::NavSatFix::ConstPtr& message) {
+    if (!logged_unknown_fix_covariance_ && isUsableFix(*message) && !fixCovarianceEnu(*message)) {
+      // E.g. the Python kitti2bag writes position_covariance_type 0 on every fix.
+      logged_unknown_fix_covariance_ = true;
+      ROS_INFO_STREAM("inekf_node: fixes on "
+                      << fix_subscriber_.getTopic() << " without a usable covariance (type "
+                      << int(message->position_covariance_type)
+                      << "): using the configured sigmas, horizontal "
+                      << session_.config().default_fix_sigma_horizontal_m << " m, vertical "
+                      << session_.config().default_fix_sigma_vertical_m
+                      << " m (session.default_fix_sigma_*)");
+    }
+    recent_fix_stamps_.push_back(message->header.stamp);
+    while (recent_fix_stamps_.size() > kRecentFixStamps) recent_fix_stamps_.pop_front();
+    handle("inekf_node/gps", message->header.stamp,
+           [&] { return session_.addFix(fixEvent(*message)); });
+    monitor_.noteFix(message->header.stamp.toSec(), wallNow(), session_);
+  }
+
+  void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
+    const auto velocity = gpsVelocity(*message);
+    if (!velocity) return;
+    handle("inekf_node/gps_velocity", message->header.stamp,
+           [&] { return session_.addGpsVelocity(*velocity); });
+  }
+
+  // The start fix's own message stamp (the start is at a fix's stamp): exact, as every other
+  // estimate's. ros::Time(stamp_s) only if that fix is not among the recent ones.
+  ros::Time startStamp(double stamp_s) const {
+    for (const ros::Time& fix_stamp : recent_fix_stamps_) {
+      if (std::abs(fix_stamp.toSec() - stamp_s) < estimation::Localizer::kDuplicateStampS) {
+        return fix_stamp;
+      }
+    }
+    return ros::Time(stamp_s);
+  }
+
+  // Stamped with the message's own stamp, not ros::Time(state.stamp_s): a double loses the
+  // nanoseconds, and consumers match our poses to their data by exact stamp.
+  void publishState(const ros::Time& stamp) {
+    output_.publish(stamp, session_.state(), session_.poseCovariance(),
+                    session_.latestAngularVelocity());
+    ROS_INFO_STREAM_THROTTLE(10.0, "inekf_node: " << session_.summary());
+  }
+
+  FilterStatus filterStatus() const { return ros_conversions::filterStatus(session_); }
+
+  void publishStatus(const ros::Time& stamp) {
+    FilterStatus status = filterStatus();
+    status.header.stamp = stamp;
+    status.header.frame_id = output_.baseFrame();
+    status_publisher_.publish(status);
+  }
+
+  std::string config_file_;
+  LocalizationSession session_;
+  OdometryOutput output_;
+  bool logged_unknown_fix_covariance_ = false;
+  static constexpr std::size_t kRecentFixStamps = 20;
+  std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received (startStamp)
+  ros::Publisher status_publisher_;
+  ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
+  LocalizationMonitor monitor_;
+  NodeDiagnostics diagnostics_;
+};
+
+InekfNodeCore::InekfNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh)
+    : impl_(std::make_unique<Impl>(nh, private_nh, readParameters(private_nh))) {}
+
+InekfNodeCore::~InekfNodeCore() = default;
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping

@@ -1,0 +1,208 @@
+// The map node's work, shared by semantic_octomap_node and the map nodelet
+// (see ros/semantic_octomap_node_core.h).
+#include "inekf_semantic_mapping/ros/semantic_octomap_node_core.h"
+
+#include <ros/ros.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <memory>
+#include <optional>
+
+#include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/ros/label_input.h"
+#include "inekf_semantic_mapping/ros/map_display.h"
+#include "inekf_semantic_mapping/ros/map_services.h"
+#include "inekf_semantic_mapping/ros/mapping_conversions.h"
+#include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
+#include "inekf_semantic_mapping/ros/names.h"
+#include "inekf_semantic_mapping/ros/node_parameters.h"
+
+namespace inekf_semantic_mapping {
+namespace ros_conversions {
+namespace {
+
+namespace conv = ros_conversions;
+
+// The node's own keys (display, frames, calibration); the rest belong to the session.
+struct NodeOptions {
+  conv::MapDisplayOptions display{frames::kMap};
+  double marker_rate_hz = 1.0;
+  std::string calib_dir;
+  int camera_index = 2;
+  std::string map_file;       // loaded at start when set
+  std::string autosave_path;  // saved every autosave_period and at shutdown when set
+  double autosave_period_s = 30.0;
+  double log_period_s = 10.0;
+  conv::MappingDiagnosticsOptions diagnostics;
+};
+
+}  // namespace
+
+class SemanticOctomapNodeCore::Impl {
+ public:
+  Impl(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
+    const YAML::Node parameters = conv::privateParametersAsYaml(pnh_);
+    const std::string source = conv::parameterSource(pnh_);
+    common::YamlReader reader(source, parameters);
+    reader.read("map_frame", &options_.display.map_frame);
+    reader.read("marker_rate", &options_.marker_rate_hz);
+    reader.read("max_display_cpu_fraction", &options_.display.max_display_cpu_fraction);
+    reader.read("marker_depth", &options_.display.marker_depth);
+    reader.read("calib_dir", &options_.calib_dir);
+    reader.read("camera_index", &options_.camera_index);
+    reader.read("map_file", &options_.map_file);
+    reader.read("autosave_path", &options_.autosave_path);
+    reader.read("autosave_period_s", &options_.autosave_period_s);
+    reader.read("log_period_s", &options_.log_period_s);
+    const YAML::Node& all = parameters;  // const: operator[] must not add the key
+    common::YamlReader diagnostics_reader(source + ", diagnostics", all["diagnostics"]);
+    conv::readMappingDiagnosticsOptions(&diagnostics_reader, &options_.diagnostics);
+    diagnostics_reader.rejectUnknown();
+    monitor_ = std::make_unique<conv::MappingMonitor>(options_.diagnostics);
+    session_ = std::make_unique<mapping::SemanticMappingSession>(
+        mapping::readSemanticMappingConfig(parameters, source));
+    display_ = std::make_unique<conv::MapDisplay>(
+        nh_, *session_, options_.display, mapping::readGridProjectionConfig(parameters, source));
+    session_->setPoseLookup([this](double stamp, const std::string& frame) {
+      const std::string& map = options_.display.map_frame;
+      std::optional<Eigen::Isometry3d> pose;
+      if (tf_buffer_.canTransform(map, frame, ros::Time(stamp))) {
+        pose = tf2::transformToEigen(tf_buffer_.lookupTransform(map, frame, ros::Time(stamp)));
+      }
+      return pose;
+    });
+    session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
+      monitor_->noteInserted(stamp, conv::wallNow());
+      display_->scanInserted(scan);
+      if (cloud_pub_.getNumSubscribers() == 0) return;
+      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->classSet(),
+                                                   options_.display.map_frame, ros::Time(stamp)));
+    });
+    if (!options_.map_file.empty()) {
+      session_->load(options_.map_file);
+      ROS_INFO_STREAM("semantic_octomap_node: resumed from "
+                      << options_.map_file << " (" << session_->tree().size() << " nodes)");
+    }
+    std::optional<mapping::CameraModel> file_camera;
+    if (!options_.calib_dir.empty()) {
+      const kitti::CameraProjection c =
+          kitti::readRawCalibration(options_.calib_dir).projection(options_.camera_index);
+      file_camera = mapping::CameraModel{c.P_rect, c.R_rect, c.T_cam0_velo, c.width, c.height};
+    }
+    labels_ = std::make_unique<conv::LabelInput>(tf_buffer_, file_camera);
+    cloud_pub_ = nh_.advertise<sensor_msgs::PointCloud2>(topics::kLabeledCloud, 2);
+    camera_info_sub_ = nh_.subscribe(topics::kCameraColorLeftInfo, 1,
+                                     &conv::LabelInput::setCameraInfo, labels_.get());
+    // Room for what arrives while a batch of waiting scans goes in: on a loaded machine a dropped
+    // label image leaves its scan without classes (with 5 here most scans of e2e_synthetic were).
+    constexpr int kInputQueue = 30;
+    cloud_sub_ = nh_.subscribe(topics::kVelodyne, kInputQueue, &Impl::onCloud, this);
+    labels_sub_ = nh_.subscribe(topics::kSegmentationLabels, kInputQueue, &Impl::onLabels, this);
+    services_ = std::make_unique<conv::MapServices>(
+        nh_, pnh_, *session_, *display_, options_.autosave_path, options_.autosave_period_s);
+    // Pending scans go in when their wait is over, also after the last message of a bag.
+    clock_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &Impl::onTick, this);
+    if (options_.marker_rate_hz > 0) {
+      display_timer_ =
+          nh_.createWallTimer(ros::WallDuration(1.0 / options_.marker_rate_hz),
+                              [this](const ros::WallTimerEvent&) { display_->update(); });
+    }
+    log_timer_ = nh_.createWallTimer(ros::WallDuration(options_.log_period_s), [this](auto&) {
+      ROS_INFO_STREAM("semantic_octomap_node: " << conv::mappingStatusLine(*session_));
+    });
+    diagnostics_ = std::make_unique<conv::NodeDiagnostics>(nh_, pnh_);
+    diagnostics_->add("map", [this](auto& status) {
+      monitor_->fillMap(*session_, services_->lastSave(), services_->lastAutosave(),
+                        conv::wallNow(), &status);
+    });
+    diagnostics_->add("labels", [this](auto& status) {
+      const bool expected =
+          labels_sub_.getNumPublishers() > 0 || session_->statistics().label_images_received > 0;
+      monitor_->fillLabels(*session_, expected, conv::wallNow(), &status);
+    });
+    const mapping::SemanticMappingConfig& c = session_->config();
+    ROS_INFO_STREAM("semantic_octomap_node: resolution "
+                    << c.resolution_m << " m, max range " << c.max_range_m << " m, classes "
+                    << c.class_set << ", label wait " << c.label_wait_s << " s");
+  }
+
+ private:
+  void onCloud(const sensor_msgs::PointCloud2ConstPtr& cloud) {
+    try {
+      ScopedTimer timer("semantic_map/scan");
+      detectClockJump();
+      monitor_->noteScan(cloud->header.stamp.toSec(), conv::wallNow());
+      labels_->setLidarFrame(cloud->header.frame_id);
+      if (!session_->hasCameraView()) labels_->setCameraViewOf(*session_);
+      session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
+                        conv::pointsFromCloud(*cloud));
+      labels_->passTo(*session_);
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
+                                                             << cloud->header.stamp
+                                                             << " ignored: " << e.what());
+    }
+  }
+
+  void onLabels(const sensor_msgs::ImageConstPtr& labels) {
+    monitor_->noteLabelImage(conv::wallNow());
+    try {
+      labels_->push(labels);
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kSegmentationLabels
+                                                             << " at " << labels->header.stamp
+                                                             << " ignored: " << e.what());
+    }
+    labels_->passTo(*session_);
+  }
+
+  void onTick(const ros::WallTimerEvent&) {
+    try {
+      detectClockJump();
+      labels_->passTo(*session_);
+      session_->advanceTo(ros::Time::now().toSec());
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: inserting pending scans: " << e.what());
+    }
+  }
+
+  // A bag loop shows as the clock jumping back: the pending scans go in with the poses tf still
+  // has, then tf forgets the old timeline.
+  void detectClockJump() {
+    const ros::Time now = ros::Time::now();
+    if (!last_clock_.isZero() && now + ros::Duration(1.0) < last_clock_) {
+      ROS_WARN_STREAM("semantic_octomap_node: clock jumped back (" << last_clock_ << " -> " << now
+                                                                   << "): clearing the tf buffer");
+      session_->flush();
+      tf_buffer_.clear();
+    }
+    last_clock_ = now;
+  }
+
+  ros::NodeHandle nh_, pnh_;
+  NodeOptions options_;
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_{tf_buffer_, nh_};  // nh_: the node's tf remapping
+  std::unique_ptr<conv::MappingMonitor> monitor_;  // before the session: its callback notes
+  std::unique_ptr<mapping::SemanticMappingSession> session_;
+  std::unique_ptr<conv::MapDisplay> display_;
+  std::unique_ptr<conv::LabelInput> labels_;
+  ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
+  ros::Publisher cloud_pub_;
+  std::unique_ptr<conv::MapServices> services_;  // after the session: autosaves at shutdown
+  std::unique_ptr<conv::NodeDiagnostics> diagnostics_;
+  ros::WallTimer clock_timer_, display_timer_, log_timer_;
+  ros::Time last_clock_;
+};
+
+SemanticOctomapNodeCore::SemanticOctomapNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh)
+    : impl_(std::make_unique<Impl>(nh, private_nh)) {}
+
+SemanticOctomapNodeCore::~SemanticOctomapNodeCore() = default;
+
+}  // namespace ros_conversions
+}  // namespace inekf_semantic_mapping
