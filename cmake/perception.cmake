@@ -5,7 +5,7 @@ ism_add_core_library(${PROJECT_NAME}_projection
 
 ism_add_core_library(${PROJECT_NAME}_perception
   SOURCES ${ISM_PERCEPTION_SOURCES}
-  LINK ${OpenCV_LIBS} yaml-cpp
+  LINK ${PROJECT_NAME}_common ${OpenCV_LIBS} yaml-cpp
   SYSTEM_INCLUDES ${OpenCV_INCLUDE_DIRS})
 
 ism_add_gtest(test_segmenter

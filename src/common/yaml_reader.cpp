@@ -7,7 +7,8 @@
 namespace inekf_semantic_mapping {
 namespace common {
 
-YamlReader::YamlReader(std::string source, YAML::Node root) : source_(std::move(source)) {
+YamlReader::YamlReader(std::string source, YAML::Node root, bool cite_lines)
+    : source_(std::move(source)), cite_lines_(cite_lines) {
   // IsDefined first and reset(), not operator=: a missing section of a const map is an invalid
   // node, which throws on IsNull and on assignment (and assigning would write into `root`).
   if (!root.IsDefined() || root.IsNull()) {
@@ -24,18 +25,28 @@ YamlReader YamlReader::fromFile(const std::string& path) {
     throw ConfigError(path + ": config file not found (or not a regular file)");
   }
   try {
-    return YamlReader(path, YAML::LoadFile(path));
+    return YamlReader(path, YAML::LoadFile(path), /*cite_lines=*/true);
   } catch (const YAML::Exception& e) {
     throw ConfigError(path + ": not valid YAML: " + e.what());
   }
 }
 
 void YamlReader::fail(const std::string& key, const std::string& what) const {
-  throw ConfigError(source_ + ": key '" + key + "' " + what);
+  std::string where = source_;
+  if (cite_lines_) {
+    const YAML::Node node = find(key);
+    if (node.IsDefined() && node.Mark().line >= 0)
+      where += ":" + std::to_string(node.Mark().line + 1);
+  }
+  throw ConfigError(where + ": key '" + key + "' " + what);
 }
 
 YAML::Node YamlReader::lookup(const std::string& key) {
   used_.insert(key);
+  return find(key);
+}
+
+YAML::Node YamlReader::find(const std::string& key) const {
   // Walk through const nodes: operator[] on a non-const node would insert the key.
   YAML::Node node;
   node.reset(root_);
@@ -108,6 +119,40 @@ void YamlReader::read(const std::string& key, std::vector<std::string>* out) {
     values.push_back(item.Scalar());
   }
   *out = std::move(values);
+}
+
+void YamlReader::read(const std::string& key, std::vector<double>* out) {
+  const YAML::Node node = lookup(key);
+  if (!node.IsDefined()) return;
+  if (!node.IsSequence()) fail(key, "is not a list of numbers");
+  std::vector<double> values;
+  for (const YAML::Node& item : node) {
+    double value = 0.0;
+    try {
+      if (!item.IsScalar()) fail(key, "is not a list of numbers");
+      value = item.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(key, "is not a list of numbers: '" + item.Scalar() + "'");
+    }
+    if (!std::isfinite(value)) fail(key, "must hold finite numbers");
+    values.push_back(value);
+  }
+  *out = std::move(values);
+}
+
+void YamlReader::read(const std::string& key, std::vector<int>* out) {
+  std::vector<double> values;
+  read(key, &values);
+  if (!find(key).IsDefined()) return;
+  std::vector<int> integers;
+  for (double value : values) {
+    if (value != std::floor(value) || value < std::numeric_limits<int>::min() ||
+        value > std::numeric_limits<int>::max()) {
+      fail(key, "must hold integers in the range of int");
+    }
+    integers.push_back(static_cast<int>(value));
+  }
+  *out = std::move(integers);
 }
 
 void YamlReader::allow(const std::string& key) { used_.insert(key); }

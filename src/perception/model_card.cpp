@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 
 namespace inekf_semantic_mapping {
@@ -18,125 +19,80 @@ namespace {
 
 namespace fs = std::filesystem;
 
-[[noreturn]] void fail(const std::string& path, const YAML::Node& node, const std::string& what) {
-  std::ostringstream msg;
-  msg << "model card " << path;
-  if (node.IsDefined() && node.Mark().line >= 0) msg << ":" << node.Mark().line + 1;
-  msg << ": " << what;
-  throw ModelCardError(msg.str());
-}
+using common::YamlReader;
 
-template <typename T>
-T read(const std::string& path, const YAML::Node& parent, const std::string& field) {
-  const YAML::Node node = parent[field];
-  if (!node) fail(path, parent, "missing field '" + field + "'");
-  try {
-    return node.as<T>();
-  } catch (const YAML::Exception& e) {
-    fail(path, node, "field '" + field + "' has the wrong type (" + e.msg + ")");
-  }
-}
-
-template <typename T>
-T readOr(const std::string& path, const YAML::Node& parent, const std::string& field,
-         const T& fallback) {
-  return parent[field] ? read<T>(path, parent, field) : fallback;
-}
-
-ResizePolicy parsePolicy(const std::string& path, const YAML::Node& node) {
-  const std::string name = node.as<std::string>();
+ResizePolicy parsePolicy(YamlReader* card) {
+  std::string name = "resize";
+  card->read("resize_policy", &name);
   if (name == "resize") return ResizePolicy::kResize;
   if (name == "letterbox") return ResizePolicy::kLetterbox;
   if (name == "pad_to_multiple") return ResizePolicy::kPadToMultiple;
   if (name == "tiles") return ResizePolicy::kTiles;
-  fail(path, node,
-       "resize_policy '" + name + "' is not one of resize | letterbox | pad_to_multiple | tiles");
+  card->fail("resize_policy",
+             "'" + name + "' is not one of resize | letterbox | pad_to_multiple | tiles");
 }
 
-ColorNormalization parseColorNormalization(const std::string& path, const YAML::Node& node) {
-  const std::string name = node.as<std::string>();
+ColorNormalization parseColorNormalization(YamlReader* card) {
+  std::string name = "none";
+  card->read("color_normalization", &name);
   if (name == "none") return ColorNormalization::kNone;
   if (name == "standardize") return ColorNormalization::kStandardize;
-  fail(path, node, "color_normalization '" + name + "' is not one of none | standardize");
+  card->fail("color_normalization", "'" + name + "' is not one of none | standardize");
 }
 
-std::array<double, 3> readTriple(const std::string& path, const YAML::Node& root,
-                                 const std::string& field, const std::array<double, 3>& fallback) {
-  if (!root[field]) return fallback;
-  const auto values = read<std::vector<double>>(path, root, field);
-  if (values.size() != 3) fail(path, root[field], field + " must have 3 values");
-  return {values[0], values[1], values[2]};
+void readTriple(YamlReader* card, const std::string& key, std::array<double, 3>* out) {
+  std::vector<double> values(out->begin(), out->end());
+  card->read(key, &values);
+  if (values.size() != 3) card->fail(key, "must have 3 values");
+  *out = {values[0], values[1], values[2]};
 }
 
-// A misspelt key would silently leave its default in place (the same rule as the configs).
-void rejectUnknownKeys(const std::string& path, const YAML::Node& map,
-                       const std::vector<std::string>& known, const std::string& prefix) {
-  for (const auto& entry : map) {
-    const std::string key = entry.first.Scalar();
-    if (std::find(known.begin(), known.end(), key) == known.end()) {
-      fail(path, entry.first, "unknown key '" + prefix + key + "'");
-    }
-  }
+// A section that is there must be a map: the reader would read nothing from a scalar.
+void requireMap(YamlReader* card, const YAML::Node& root, const std::string& key,
+                const std::string& shape) {
+  const YAML::Node& const_root = root;  // operator[] must not add the key
+  const YAML::Node node = const_root[key];
+  if (node.IsDefined() && !node.IsMap()) card->fail(key, "must be a map " + shape);
 }
 
-void validate(const ModelCard& card, const std::string& path, const YAML::Node& root) {
-  rejectUnknownKeys(
-      path, root,
-      {"name", "input", "resize_policy", "pad_multiple", "resize_factor", "mean", "scale",
-       "swap_rb", "tile_scale", "network_focal_px", "tile_overlap", "tile_bottom_margin",
-       "tile_max_width", "flip_average", "suppress_unlabeled", "label_filter", "gamma",
-       "color_normalization", "color_mean", "color_std", "output_label_ids", "num_output_channels",
-       // Informational (scripts/train_unet.py records the network's validation score).
-       "validation_miou"},
-      "");
-  if (root["input"]) {
-    if (!root["input"].IsMap()) fail(path, root["input"], "input must be a map {width, height}");
-    rejectUnknownKeys(path, root["input"], {"width", "height"}, "input.");
-  }
-  if (root["label_filter"]) {
-    rejectUnknownKeys(path, root["label_filter"], {"min_confidence", "boundary_radius_px"},
-                      "label_filter.");
-  }
-  for (const auto* triple : {&card.mean, &card.color_mean}) {
-    for (double value : *triple) {
-      if (!std::isfinite(value)) fail(path, root, "mean / color_mean values must be finite");
-    }
-  }
+// The value checks, each naming its key (and line): a typo in a card fails here, not later
+// inside OpenCV.
+void validate(const ModelCard& card, YamlReader* r) {
   // A network input beyond 16384 pixels a side is a typo, and would fail later inside OpenCV.
   constexpr int kMaxInputSide = 16384;
   if (card.input_width < 0 || card.input_height < 0 || card.input_width > kMaxInputSide ||
       card.input_height > kMaxInputSide)
-    fail(path, root["input"], "input width/height must be in [0, 16384]");
+    r->fail("input", "width/height must be in [0, 16384]");
   if (card.resize_policy != ResizePolicy::kPadToMultiple &&
       (card.input_width == 0 || card.input_height == 0))
-    fail(path, root["input"], "resize, letterbox and tiles need input width and height > 0");
-  if (card.pad_multiple < 1) fail(path, root["pad_multiple"], "pad_multiple must be >= 1");
+    r->fail("input", "needs width and height > 0 for resize, letterbox and tiles");
+  if (card.pad_multiple < 1) r->fail("pad_multiple", "must be >= 1");
   if (!(card.resize_factor > 0.0 && card.resize_factor <= 8.0))
-    fail(path, root["resize_factor"], "resize_factor must be in (0, 8]");
-  if (!(card.scale > 0.0)) fail(path, root["scale"], "scale must be > 0");
+    r->fail("resize_factor", "must be in (0, 8]");
+  if (!(card.scale > 0.0)) r->fail("scale", "must be > 0");
   if (!(card.tile_scale >= 0.0 && card.tile_scale <= 8.0))
-    fail(path, root["tile_scale"], "tile_scale must be in [0, 8] (0: fit one tile)");
-  if (!(card.network_focal_px >= 0.0))
-    fail(path, root["network_focal_px"], "network_focal_px must be >= 0 (0: unknown)");
+    r->fail("tile_scale", "must be in [0, 8] (0: fit one tile)");
+  if (!(card.network_focal_px >= 0.0)) r->fail("network_focal_px", "must be >= 0 (0: unknown)");
   if (card.tile_overlap < 0 ||
       (card.resize_policy == ResizePolicy::kTiles &&
        (2 * card.tile_overlap >= card.input_width || 2 * card.tile_overlap >= card.input_height)))
-    fail(path, root["tile_overlap"],
-         "tile_overlap must be >= 0 and less than half the input width and height");
+    r->fail("tile_overlap", "must be >= 0 and less than half the input width and height");
   if (card.tile_max_width != 0 &&
       (card.tile_max_width < card.input_width || card.tile_max_width > kMaxInputSide))
-    fail(path, root["tile_max_width"], "tile_max_width must be 0 or in [input width, 16384]");
+    r->fail("tile_max_width", "must be 0 or in [input width, 16384]");
   if (card.tile_bottom_margin < 0 || (card.resize_policy == ResizePolicy::kTiles &&
                                       2 * card.tile_bottom_margin >= card.input_height))
-    fail(path, root["tile_bottom_margin"],
-         "tile_bottom_margin must be >= 0 and less than half the input height");
+    r->fail("tile_bottom_margin", "must be >= 0 and less than half the input height");
   if (!(card.gamma >= ModelCard::kMinGamma && card.gamma <= ModelCard::kMaxGamma))
-    fail(path, root["gamma"], "gamma must be in [0.2, 5] (1: no tone curve)");
+    r->fail("gamma", "must be in [0.2, 5] (1: no tone curve)");
   for (double value : card.color_std) {
-    if (!(value > 0.0)) fail(path, root["color_std"], "color_std values must be > 0");
+    if (!(value > 0.0)) r->fail("color_std", "values must be > 0");
   }
-  if (card.output_label_ids.empty())
-    fail(path, root["output_label_ids"], "output_label_ids must list one labelId per channel");
+  const LabelFilterOptions& filter = card.label_filter;
+  if (!(filter.min_confidence >= 0 && filter.min_confidence < 1))
+    r->fail("label_filter.min_confidence", "must be in [0, 1)");
+  if (filter.boundary_radius_px < 0 || filter.boundary_radius_px > 50)
+    r->fail("label_filter.boundary_radius_px", "must be in [0, 50]");
 }
 
 }  // namespace
@@ -182,6 +138,8 @@ ModelCard loadModelCard(const std::string& yaml_path) {
   if (!root.IsMap()) throw ModelCardError("model card " + yaml_path + ": top level is not a map");
   try {
     return parseModelCard(yaml_path, root);
+  } catch (const common::ConfigError& e) {
+    throw ModelCardError(e.what());
   } catch (const YAML::Exception& e) {
     // A field of the wrong shape (a list where a map belongs...) that the checks did not name.
     throw ModelCardError("model card " + yaml_path + ":" + std::to_string(e.mark.line + 1) + ": " +
@@ -191,66 +149,58 @@ ModelCard loadModelCard(const std::string& yaml_path) {
 
 namespace {
 ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
+  YamlReader r("model card " + yaml_path, root, /*cite_lines=*/true);
   ModelCard card;
   card.source = yaml_path;
-  card.name = readOr<std::string>(yaml_path, root, "name", fs::path(yaml_path).stem().string());
-  if (root["input"]) {
-    card.input_width = readOr<int>(yaml_path, root["input"], "width", 0);
-    card.input_height = readOr<int>(yaml_path, root["input"], "height", 0);
-  }
-  card.resize_policy =
-      parsePolicy(yaml_path, root["resize_policy"] ? root["resize_policy"] : YAML::Node("resize"));
-  card.pad_multiple = readOr<int>(yaml_path, root, "pad_multiple", 1);
-  card.resize_factor = readOr<double>(yaml_path, root, "resize_factor", 1.0);
-  if (root["mean"]) {
-    const auto mean = read<std::vector<double>>(yaml_path, root, "mean");
-    if (mean.size() != 3) fail(yaml_path, root["mean"], "mean must have 3 values");
-    card.mean = {mean[0], mean[1], mean[2]};
-  }
-  card.scale = readOr<double>(yaml_path, root, "scale", 1.0 / 255.0);
-  card.swap_rb = readOr<bool>(yaml_path, root, "swap_rb", true);
-  card.tile_scale = readOr<double>(yaml_path, root, "tile_scale", 0.0);
-  card.network_focal_px = readOr<double>(yaml_path, root, "network_focal_px", 0.0);
-  card.tile_overlap = readOr<int>(yaml_path, root, "tile_overlap", 0);
-  card.tile_bottom_margin = readOr<int>(yaml_path, root, "tile_bottom_margin", 0);
-  card.tile_max_width = readOr<int>(yaml_path, root, "tile_max_width", 0);
-  card.flip_average = readOr<bool>(yaml_path, root, "flip_average", false);
-  card.suppress_unlabeled = readOr<bool>(yaml_path, root, "suppress_unlabeled", false);
-  if (root["label_filter"]) {
-    const YAML::Node filter = root["label_filter"];
-    if (!filter.IsMap()) fail(yaml_path, filter, "label_filter must be a map");
-    card.label_filter.min_confidence = readOr<double>(yaml_path, filter, "min_confidence", 0.0);
-    card.label_filter.boundary_radius_px = readOr<int>(yaml_path, filter, "boundary_radius_px", 0);
-    if (!(card.label_filter.min_confidence >= 0 && card.label_filter.min_confidence < 1) ||
-        card.label_filter.boundary_radius_px < 0 || card.label_filter.boundary_radius_px > 50)
-      fail(yaml_path, filter,
-           "label_filter: min_confidence must be in [0, 1), boundary_radius_px in [0, 50]");
-  }
-  card.gamma = readOr<double>(yaml_path, root, "gamma", 1.0);
-  if (root["color_normalization"]) {
-    card.color_normalization = parseColorNormalization(yaml_path, root["color_normalization"]);
-  }
-  card.color_mean = readTriple(yaml_path, root, "color_mean", card.color_mean);
-  card.color_std = readTriple(yaml_path, root, "color_std", card.color_std);
-  if (card.color_normalization == ColorNormalization::kStandardize &&
-      (!root["color_mean"] || !root["color_std"]))
-    fail(yaml_path, root["color_normalization"],
-         "color_normalization standardize needs color_mean and color_std");
-  const auto ids = read<std::vector<int>>(yaml_path, root, "output_label_ids");
+  card.name = fs::path(yaml_path).stem().string();
+  r.read("name", &card.name);
+  requireMap(&r, root, "input", "{width, height}");
+  r.read("input.width", &card.input_width);
+  r.read("input.height", &card.input_height);
+  card.resize_policy = parsePolicy(&r);
+  r.read("pad_multiple", &card.pad_multiple);
+  r.read("resize_factor", &card.resize_factor);
+  readTriple(&r, "mean", &card.mean);
+  r.read("scale", &card.scale);
+  r.read("swap_rb", &card.swap_rb);
+  r.read("tile_scale", &card.tile_scale);
+  r.read("network_focal_px", &card.network_focal_px);
+  r.read("tile_overlap", &card.tile_overlap);
+  r.read("tile_bottom_margin", &card.tile_bottom_margin);
+  r.read("tile_max_width", &card.tile_max_width);
+  r.read("flip_average", &card.flip_average);
+  r.read("suppress_unlabeled", &card.suppress_unlabeled);
+  requireMap(&r, root, "label_filter", "{min_confidence, boundary_radius_px}");
+  card.label_filter = LabelFilterOptions{0.0, 0};  // a card without a filter filters nothing
+  r.read("label_filter.min_confidence", &card.label_filter.min_confidence);
+  r.read("label_filter.boundary_radius_px", &card.label_filter.boundary_radius_px);
+  r.read("gamma", &card.gamma);
+  card.color_normalization = parseColorNormalization(&r);
+  const bool has_color_statistics = r.has("color_mean") && r.has("color_std");
+  readTriple(&r, "color_mean", &card.color_mean);
+  readTriple(&r, "color_std", &card.color_std);
+  if (card.color_normalization == ColorNormalization::kStandardize && !has_color_statistics)
+    r.fail("color_normalization", "standardize needs color_mean and color_std");
+  if (!r.has("output_label_ids"))
+    r.fail("output_label_ids", "is missing: one Cityscapes labelId per network channel");
+  std::vector<int> ids;
+  r.read("output_label_ids", &ids);
   for (int id : ids) {
     if (id < 0 || id >= cityscapes::kNumLabelIds)
-      fail(yaml_path, root["output_label_ids"],
-           "labelId " + std::to_string(id) + " is outside the Cityscapes range 0..33");
+      r.fail("output_label_ids",
+             "holds labelId " + std::to_string(id) + ", outside the Cityscapes range 0..33");
     card.output_label_ids.push_back(static_cast<std::uint8_t>(id));
   }
-  if (root["num_output_channels"]) {
-    const int declared = read<int>(yaml_path, root, "num_output_channels");
-    if (declared != card.numOutputChannels())
-      fail(yaml_path, root["num_output_channels"],
-           "num_output_channels " + std::to_string(declared) + " but output_label_ids has " +
-               std::to_string(card.numOutputChannels()) + " entries");
-  }
-  validate(card, yaml_path, root);
+  if (card.output_label_ids.empty())
+    r.fail("output_label_ids", "must list one labelId per channel");
+  int declared = card.numOutputChannels();
+  r.read("num_output_channels", &declared);
+  if (declared != card.numOutputChannels())
+    r.fail("num_output_channels", "is " + std::to_string(declared) + " but output_label_ids has " +
+                                      std::to_string(card.numOutputChannels()) + " entries");
+  r.allow("validation_miou");  // informational (the training scripts record their score)
+  r.rejectUnknown();           // a misspelt key would leave its default silently in place
+  validate(card, &r);
   return card;
 }
 }  // namespace

@@ -133,7 +133,7 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
   // A misspelt key would leave its default silently in place: named with its line.
   const std::string typo =
       cardError("input: {width: 10, height: 10}\ntile_scal: 1.2\noutput_label_ids: [7]\n");
-  EXPECT_NE(typo.find(":2: unknown key 'tile_scal'"), std::string::npos) << typo;
+  EXPECT_NE(typo.find(":2: key 'tile_scal' is not a known key"), std::string::npos) << typo;
   EXPECT_NE(cardError("input: {width: 10, height: 10, depth: 3}\noutput_label_ids: [7]\n")
                 .find("input.depth"),
             std::string::npos);

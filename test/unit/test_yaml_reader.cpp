@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
 
@@ -38,6 +39,45 @@ TEST(YamlReader, UnknownAndMistypedKeysNameTheKey) {
             "ROS parameters of /node: key 'label_wiat_s' is not a known key");
   EXPECT_NE(errorOf("label_wait_s: soon", readWait).find("'label_wait_s' is not a number"),
             std::string::npos);
+}
+
+TEST(YamlReader, ListsOfNumbersAreCheckedItemByItem) {
+  YamlReader reader("test", YAML::Load("mean: [1, 2.5, 3]\nids: [7, 8]\nbad: [1, x]\nhalf: [1.5]"));
+  std::vector<double> mean;
+  reader.read("mean", &mean);
+  EXPECT_EQ(mean, (std::vector<double>{1.0, 2.5, 3.0}));
+  std::vector<int> ids;
+  reader.read("ids", &ids);
+  EXPECT_EQ(ids, (std::vector<int>{7, 8}));
+  std::vector<int> unset{4};
+  reader.read("absent", &unset);  // left as it was
+  EXPECT_EQ(unset, std::vector<int>{4});
+  EXPECT_THROW(reader.read("bad", &mean), ConfigError);
+  EXPECT_THROW(reader.read("half", &ids), ConfigError);
+}
+
+TEST(YamlReader, AParsedFileNamesTheLineOfTheKey) {
+  const std::string text = "a: 1\nsection:\n  b: 2\n  typo: 3\n";
+  YamlReader cited("card.yaml", YAML::Load(text), /*cite_lines=*/true);
+  int a = 0, b = 0;
+  cited.read("a", &a);
+  cited.read("section.b", &b);
+  try {
+    cited.rejectUnknown();
+    ADD_FAILURE() << "the unknown key was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), "card.yaml:4: key 'section.typo' is not a known key");
+  }
+  YamlReader plain("ROS parameters of /node", YAML::Load(text));  // no lines: not a file's
+  plain.read("a", &a);
+  plain.read("section.b", &b);
+  EXPECT_THROW(plain.rejectUnknown(), ConfigError);
+  try {
+    plain.rejectUnknown();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "ROS parameters of /node: key 'section.typo' is not a known key");
+  }
 }
 
 TEST(YamlReader, AMissingSectionIsAnEmptyMap) {

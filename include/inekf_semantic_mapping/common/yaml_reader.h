@@ -1,6 +1,8 @@
 // A strict reader of YAML configuration maps: every value is checked for its type, and keys that
 // nobody reads are errors. Messages name the source (a file, or "ROS parameters of /node") and
-// the key, e.g. "config/x.yaml: key 'sensor_model.hit' is not a number".
+// the key, e.g. "config/x.yaml: key 'sensor_model.hit' is not a number"; a reader of a parsed
+// file (fromFile, or cite_lines) also names the key's line: "config/x.yaml:12: key ...".
+// The configs, the nodes' private parameters and the model cards all go through it.
 #pragma once
 
 #include <yaml-cpp/yaml.h>
@@ -21,7 +23,8 @@ class ConfigError : public std::invalid_argument {
 class YamlReader {
  public:
   // `root` must be a map (or null: an empty file; or missing: a section that is not there).
-  YamlReader(std::string source, YAML::Node root);
+  // cite_lines: messages name the line of the key (for a root parsed from text).
+  YamlReader(std::string source, YAML::Node root, bool cite_lines = false);
   // Parses a file; throws ConfigError naming it when it cannot be read or is not a YAML map.
   static YamlReader fromFile(const std::string& path);
 
@@ -31,6 +34,8 @@ class YamlReader {
   void read(const std::string& key, bool* out);
   void read(const std::string& key, std::string* out);
   void read(const std::string& key, std::vector<std::string>* out);  // a list of strings
+  void read(const std::string& key, std::vector<double>* out);       // finite numbers
+  void read(const std::string& key, std::vector<int>* out);          // integers that fit an int
   // Keys (or whole sections: "name.*") that are valid but read elsewhere.
   void allow(const std::string& key);
   // Throws ConfigError naming `new_key` when the retired `old_key` is set (a key that gained its
@@ -45,13 +50,15 @@ class YamlReader {
   const std::string& source() const { return source_; }
 
  private:
-  YAML::Node lookup(const std::string& key);
+  YAML::Node lookup(const std::string& key);  // marks the key read
+  YAML::Node find(const std::string& key) const;
   void collectKeys(const YAML::Node& node, const std::string& prefix,
                    std::vector<std::string>* keys) const;
 
   std::string source_;
   YAML::Node root_;
   std::set<std::string> used_;
+  bool cite_lines_ = false;
 };
 
 }  // namespace common
