@@ -72,11 +72,11 @@ def parse_args(argv=None):
     p.add_argument("--distill-zone", default="unlabelled", choices=["outside-lidar", "unlabelled"],
                    help="where the base network teaches in the sparse images: above the lidar's "
                         "top beam only, or at every pixel without a human label")
-    p.add_argument("--distill-labelled-weight", type=float, default=0.0,
+    p.add_argument("--distill-labelled-weight", type=float, default=0.3,
                    help="soft distillation also at the human-labelled pixels, at this weight "
                         "against 1 in the zone (0: only in the zone); the base network's view "
                         "of the classes the KITTI labels rarely show keeps pulling there too")
-    p.add_argument("--rare-repeat", type=float, default=0.0,
+    p.add_argument("--rare-repeat", type=float, default=0.3,
                    help="repeat-factor sampling (Gupta et al. 2019): an image is drawn "
                         "max(1, sqrt(t / f)) times per epoch, f the share of training images "
                         "holding its rarest class; this is t (0: every image once)")

@@ -186,11 +186,13 @@ TEST(RealSemantics, KittiAdaptedNetworkOnSemanticKitti) {
     double min_raw_accuracy, min_map_miou;
   };
   // Measured (docs/segmentation_adaptation.md, CPU runs of the command, seed 1): the default
-  // (soft distillation, frozen batch norm, 66 steps) raw accuracy 0.865 / 0.734, map mIoU
-  // 0.463 / 0.512; the first version (hard distillation, 132 steps) 0.865 / 0.791 and
-  // 0.459 / 0.477; the built-in ENet card 0.841 / 0.712. Margins: 0.025 on accuracy below the
-  // lower of the two, 0.04 on mIoU.
-  const AdaptedExpectation expectations[] = {{"05", 0.84, 0.42}, {"08", 0.71, 0.435}};
+  // (rare-class repeats, distillation at the labelled pixels too; 855 steps in 45 min on an idle
+  // machine) raw accuracy 0.890 / 0.727, map mIoU 0.495 / 0.610; the untrained ESPNetv2 0.765 /
+  // 0.788 and 0.425 / 0.593; the built-in ENet card 0.841 / 0.712 and 0.384 / 0.532. Margins:
+  // 0.025 on accuracy, 0.035 on 05's mIoU; 08's 0.610 holds a bicycle IoU of 1.0 on its 5 points
+  // in the map, without which it is 0.51: its floor is 0.50, which the runs that lost the
+  // cyclist and the pedestrian (0.477) fail.
+  const AdaptedExpectation expectations[] = {{"05", 0.865, 0.46}, {"08", 0.70, 0.50}};
   for (const AdaptedExpectation& expected : expectations) {
     const std::string dir = test::sharedPath(kSequences) + "/" + expected.sequence;
     const PointLabelScore score = scoreSequence(&segmenter, dir, raw);
