@@ -2,12 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include <algorithm>
-#include <cmath>
-#include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"

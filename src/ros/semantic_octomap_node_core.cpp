@@ -25,11 +25,9 @@ namespace inekf_semantic_mapping {
 namespace ros_conversions {
 namespace {
 
-namespace conv = ros_conversions;
-
 // The node's own keys (display, frames, calibration); the rest belong to the session.
 struct NodeOptions {
-  conv::MapDisplayOptions display{frames::kMap};
+  MapDisplayOptions display{frames::kMap};
   double marker_rate_hz = 1.0;
   std::string calib_dir;
   int camera_index = 2;
@@ -37,7 +35,7 @@ struct NodeOptions {
   std::string autosave_path;  // saved every autosave_period and at shutdown when set
   double autosave_period_s = 30.0;
   double log_period_s = 10.0;
-  conv::MappingDiagnosticsOptions diagnostics;
+  MappingDiagnosticsOptions diagnostics;
 };
 
 }  // namespace
@@ -45,8 +43,8 @@ struct NodeOptions {
 class SemanticOctomapNodeCore::Impl {
  public:
   Impl(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {
-    const YAML::Node parameters = conv::privateParametersAsYaml(pnh_);
-    const std::string source = conv::parameterSource(pnh_);
+    const YAML::Node parameters = privateParametersAsYaml(pnh_);
+    const std::string source = parameterSource(pnh_);
     common::YamlReader reader(source, parameters);
     reader.read("map_frame", &options_.display.map_frame);
     reader.read("marker_rate", &options_.marker_rate_hz);
@@ -60,13 +58,13 @@ class SemanticOctomapNodeCore::Impl {
     reader.read("log_period_s", &options_.log_period_s);
     const YAML::Node& all = parameters;  // const: operator[] must not add the key
     common::YamlReader diagnostics_reader(source + ", diagnostics", all["diagnostics"]);
-    conv::readMappingDiagnosticsOptions(&diagnostics_reader, &options_.diagnostics);
+    readMappingDiagnosticsOptions(&diagnostics_reader, &options_.diagnostics);
     diagnostics_reader.rejectUnknown();
-    monitor_ = std::make_unique<conv::MappingMonitor>(options_.diagnostics);
+    monitor_ = std::make_unique<MappingMonitor>(options_.diagnostics);
     session_ = std::make_unique<mapping::SemanticMappingSession>(
         mapping::readSemanticMappingConfig(parameters, source));
-    display_ = std::make_unique<conv::MapDisplay>(
-        nh_, *session_, options_.display, mapping::readGridProjectionConfig(parameters, source));
+    display_ = std::make_unique<MapDisplay>(nh_, *session_, options_.display,
+                                            mapping::readGridProjectionConfig(parameters, source));
     session_->setPoseLookup([this](double stamp, const std::string& frame) {
       const std::string& map = options_.display.map_frame;
       std::optional<Eigen::Isometry3d> pose;
@@ -76,11 +74,11 @@ class SemanticOctomapNodeCore::Impl {
       return pose;
     });
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
-      monitor_->noteInserted(stamp, conv::wallNow());
+      monitor_->noteInserted(stamp, wallNow());
       display_->scanInserted(scan);
       if (cloud_pub_.getNumSubscribers() == 0) return;
-      cloud_pub_.publish(conv::labeledCloudMessage(scan, session_->classSet(),
-                                                   options_.display.map_frame, ros::Time(stamp)));
+      cloud_pub_.publish(labeledCloudMessage(scan, session_->classSet(), options_.display.map_frame,
+                                             ros::Time(stamp)));
     });
     if (!options_.map_file.empty()) {
       session_->load(options_.map_file);
@@ -93,17 +91,17 @@ class SemanticOctomapNodeCore::Impl {
           kitti::readRawCalibration(options_.calib_dir).projection(options_.camera_index);
       file_camera = mapping::CameraModel{c.P_rect, c.R_rect, c.T_cam0_velo, c.width, c.height};
     }
-    labels_ = std::make_unique<conv::LabelInput>(tf_buffer_, file_camera);
+    labels_ = std::make_unique<LabelInput>(tf_buffer_, file_camera);
     cloud_pub_ = nh_.advertise<sensor_msgs::PointCloud2>(topics::kLabeledCloud, 2);
-    camera_info_sub_ = nh_.subscribe(topics::kCameraColorLeftInfo, 1,
-                                     &conv::LabelInput::setCameraInfo, labels_.get());
+    camera_info_sub_ =
+        nh_.subscribe(topics::kCameraColorLeftInfo, 1, &LabelInput::setCameraInfo, labels_.get());
     // Room for what arrives while a batch of waiting scans goes in: on a loaded machine a dropped
     // label image leaves its scan without classes (with 5 here most scans of e2e_synthetic were).
     constexpr int kInputQueue = 30;
     cloud_sub_ = nh_.subscribe(topics::kVelodyne, kInputQueue, &Impl::onCloud, this);
     labels_sub_ = nh_.subscribe(topics::kSegmentationLabels, kInputQueue, &Impl::onLabels, this);
-    services_ = std::make_unique<conv::MapServices>(
-        nh_, pnh_, *session_, *display_, options_.autosave_path, options_.autosave_period_s);
+    services_ = std::make_unique<MapServices>(nh_, pnh_, *session_, *display_,
+                                              options_.autosave_path, options_.autosave_period_s);
     // Pending scans go in when their wait is over, also after the last message of a bag.
     clock_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &Impl::onTick, this);
     if (options_.marker_rate_hz > 0) {
@@ -112,17 +110,17 @@ class SemanticOctomapNodeCore::Impl {
                               [this](const ros::WallTimerEvent&) { display_->update(); });
     }
     log_timer_ = nh_.createWallTimer(ros::WallDuration(options_.log_period_s), [this](auto&) {
-      ROS_INFO_STREAM("semantic_octomap_node: " << conv::mappingStatusLine(*session_));
+      ROS_INFO_STREAM("semantic_octomap_node: " << mappingStatusLine(*session_));
     });
-    diagnostics_ = std::make_unique<conv::NodeDiagnostics>(nh_, pnh_);
+    diagnostics_ = std::make_unique<NodeDiagnostics>(nh_, pnh_);
     diagnostics_->add("map", [this](auto& status) {
-      monitor_->fillMap(*session_, services_->lastSave(), services_->lastAutosave(),
-                        conv::wallNow(), &status);
+      monitor_->fillMap(*session_, services_->lastSave(), services_->lastAutosave(), wallNow(),
+                        &status);
     });
     diagnostics_->add("labels", [this](auto& status) {
       const bool expected =
           labels_sub_.getNumPublishers() > 0 || session_->statistics().label_images_received > 0;
-      monitor_->fillLabels(*session_, expected, conv::wallNow(), &status);
+      monitor_->fillLabels(*session_, expected, wallNow(), &status);
     });
     const mapping::SemanticMappingConfig& c = session_->config();
     ROS_INFO_STREAM("semantic_octomap_node: resolution "
@@ -135,11 +133,11 @@ class SemanticOctomapNodeCore::Impl {
     try {
       ScopedTimer timer("semantic_map/scan");
       detectClockJump();
-      monitor_->noteScan(cloud->header.stamp.toSec(), conv::wallNow());
+      monitor_->noteScan(cloud->header.stamp.toSec(), wallNow());
       labels_->setLidarFrame(cloud->header.frame_id);
       if (!session_->hasCameraView()) labels_->setCameraViewOf(*session_);
       session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
-                        conv::pointsFromCloud(*cloud));
+                        pointsFromCloud(*cloud));
       labels_->passTo(*session_);
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
@@ -149,7 +147,7 @@ class SemanticOctomapNodeCore::Impl {
   }
 
   void onLabels(const sensor_msgs::ImageConstPtr& labels) {
-    monitor_->noteLabelImage(conv::wallNow());
+    monitor_->noteLabelImage(wallNow());
     try {
       labels_->push(labels);
     } catch (const std::exception& e) {
@@ -187,14 +185,14 @@ class SemanticOctomapNodeCore::Impl {
   NodeOptions options_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_{tf_buffer_, nh_};  // nh_: the node's tf remapping
-  std::unique_ptr<conv::MappingMonitor> monitor_;  // before the session: its callback notes
+  std::unique_ptr<MappingMonitor> monitor_;  // before the session: its callback notes
   std::unique_ptr<mapping::SemanticMappingSession> session_;
-  std::unique_ptr<conv::MapDisplay> display_;
-  std::unique_ptr<conv::LabelInput> labels_;
+  std::unique_ptr<MapDisplay> display_;
+  std::unique_ptr<LabelInput> labels_;
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher cloud_pub_;
-  std::unique_ptr<conv::MapServices> services_;  // after the session: autosaves at shutdown
-  std::unique_ptr<conv::NodeDiagnostics> diagnostics_;
+  std::unique_ptr<MapServices> services_;  // after the session: autosaves at shutdown
+  std::unique_ptr<NodeDiagnostics> diagnostics_;
   ros::WallTimer clock_timer_, display_timer_, log_timer_;
   ros::Time last_clock_;
 };
