@@ -151,11 +151,24 @@ def load_pseudo(labels_dir, images_dir, width, height, gamma, standardize, limit
     return samples
 
 
+def evenly_spaced(items, limit):
+    """`limit` items spread evenly over the list (all of them without a limit), so that a few
+    frames of a video dataset come from all of its sequences rather than the first one."""
+    if not limit or limit >= len(items):
+        return list(items)
+    picks = np.linspace(0, len(items) - 1, limit).round().astype(int)
+    return [items[i] for i in picks]
+
+
 def load_camvid(root, width, height, gamma, standardize, limit=None):
-    """CamVid (SegNet layout): train/*.png|jpg with trainannot/*.png (11 classes)."""
+    """CamVid (SegNet layout): train/*.png|jpg with trainannot/*.png (11 classes); with a limit,
+    frames spread over all of its drives."""
     lut = labels.camvid_to_train_id_lut()
     samples = []
-    for label_path in sorted(glob.glob(os.path.join(root, "trainannot", "*.png")))[:limit]:
+    label_paths = sorted(glob.glob(os.path.join(root, "trainannot", "*.png")))
+    if not label_paths:
+        raise DatasetError(f"{root}/trainannot: no CamVid label images")
+    for label_path in evenly_spaced(label_paths, limit):
         stem = os.path.splitext(os.path.basename(label_path))[0]
         candidates = [os.path.join(root, "train", stem + e) for e in (".jpg", ".png")]
         image_path = next((p for p in candidates if os.path.exists(p)), None)
@@ -164,9 +177,10 @@ def load_camvid(root, width, height, gamma, standardize, limit=None):
         image = _read_image(image_path)
         label = _read_label(label_path, cv2.IMREAD_GRAYSCALE)
         _check_same_size(image, label, image_path, label_path)
-        # CamVid's 4:3 frames at the KITTI input's height; crops take KITTI-wide windows.
+        # CamVid's 4:3 frames at the KITTI input's height; crops take KITTI-wide windows (padded).
+        # The teacher labels the whole frame, and the network needs sides in multiples of 32.
         h = height
-        w = int(round(image.shape[1] * h / image.shape[0]))
+        w = max(32, int(round(image.shape[1] * h / image.shape[0] / 32.0)) * 32)
         prepared = preprocess.resize_to_input(preprocess.card_colors(image, gamma, standardize),
                                               w, h)
         target = cv2.resize(lut[label], (w, h), interpolation=cv2.INTER_NEAREST)

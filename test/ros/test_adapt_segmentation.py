@@ -117,6 +117,42 @@ class PseudoLabels(unittest.TestCase):
                                      32, 32, 0.7, True)
 
 
+class CamVidSubset(unittest.TestCase):
+    def test_a_limited_subset_spans_the_list_without_repeats(self):
+        frames = [f"{seq}_{i:03d}" for seq in ("0001TP", "0006R0", "0016E5", "Seq05VD")
+                  for i in range(90)]
+        picked = datasets.evenly_spaced(frames, 8)
+        self.assertEqual(len(picked), 8)
+        self.assertEqual(len(set(picked)), 8)
+        self.assertEqual(picked[0], frames[0])
+        self.assertEqual(picked[-1], frames[-1])
+        self.assertEqual({p.split("_")[0] for p in picked},
+                         {"0001TP", "0006R0", "0016E5", "Seq05VD"})
+
+    def test_frames_come_at_the_input_height_and_a_width_the_network_takes(self):
+        import cv2
+        with tempfile.TemporaryDirectory() as root:
+            os.makedirs(os.path.join(root, "train"))
+            os.makedirs(os.path.join(root, "trainannot"))
+            image = np.full((720, 960, 3), 90, np.uint8)
+            label = np.full((720, 960), 3, np.uint8)  # CamVid 3: road
+            cv2.imwrite(os.path.join(root, "train", "0001TP_006690.png"), image)
+            cv2.imwrite(os.path.join(root, "trainannot", "0001TP_006690.png"), label)
+            samples = datasets.load_camvid(root, 1024, 320, 0.7, True, 1)
+        self.assertEqual(len(samples), 1)
+        h, w = samples[0].image.shape[:2]
+        self.assertEqual(h, 320)
+        self.assertEqual(w % 32, 0)  # 427 would not pass the network's downsampling
+        self.assertLess(abs(w - 960 * 320 / 720), 32)
+        self.assertEqual(samples[0].target.shape, (h, w))
+        self.assertTrue((samples[0].target == labels.camvid_to_train_id_lut()[3]).all())
+
+    def test_no_limit_or_a_large_one_keeps_every_frame_in_order(self):
+        frames = list(range(5))
+        self.assertEqual(datasets.evenly_spaced(frames, 0), frames)
+        self.assertEqual(datasets.evenly_spaced(frames, 9), frames)
+
+
 class Distillation(unittest.TestCase):
     def test_soft_loss_is_zero_for_the_teacher_and_ignores_pixels_outside_the_zone(self):
         if not HAVE_TORCH:
