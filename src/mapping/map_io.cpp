@@ -9,8 +9,10 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
+#include "inekf_semantic_mapping/common/decimal_text.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
@@ -124,7 +126,14 @@ std::size_t saveMapInto(SemanticOcTree& tree, const std::string& path, MapFormat
                 << tree.getResolution() << " m\nelement vertex " << vertex_count
                 << "\nproperty float x\nproperty float y\nproperty float z\nproperty uint label\n"
                    "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
-            char line[128];
+            // Lines gather in a buffer written in large pieces; each line is at most 3 numbers of
+            // appendFixed4 (320 chars in its slowest case) and 4 of appendUnsigned.
+            std::vector<char> text(std::size_t{1} << 16);
+            std::size_t used = 0;
+            const auto flush = [&] {
+              out.write(text.data(), static_cast<std::streamsize>(used));
+              used = 0;
+            };
             for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
               if (!tree.isNodeOccupied(*it)) continue;
               const ClassIndex index = it->mostLikelyClass();
@@ -142,13 +151,25 @@ std::size_t saveMapInto(SemanticOcTree& tree, const std::string& path, MapFormat
                     const octomap::OcTreeKey key(base_key[0] + dx, base_key[1] + dy,
                                                  base_key[2] + dz);
                     const octomap::point3d center = tree.keyToCoord(key);
-                    std::snprintf(line, sizeof(line), "%.4f %.4f %.4f %u %u %u %u\n", center.x(),
-                                  center.y(), center.z(), label, rgb[0], rgb[1], rgb[2]);
-                    out << line;
+                    if (used + 1200 > text.size()) flush();
+                    char* line = text.data() + used;
+                    char* cursor = line;
+                    for (const float coordinate : {center.x(), center.y(), center.z()}) {
+                      cursor = common::appendFixed4(cursor, coordinate);
+                      *cursor++ = ' ';
+                    }
+                    cursor = common::appendUnsigned(cursor, label);
+                    for (const std::uint8_t channel : rgb) {
+                      *cursor++ = ' ';
+                      cursor = common::appendUnsigned(cursor, channel);
+                    }
+                    *cursor++ = '\n';
+                    used += static_cast<std::size_t>(cursor - line);
                   }
                 }
               }
             }
+            flush();
           },
           set);
       return vertex_count;

@@ -2,6 +2,7 @@
 // integrity record (node count, length, checksum) and a reader that refuses what it cannot trust.
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <istream>
 #include <iterator>
 #include <ostream>
@@ -54,6 +55,14 @@ class Fnv1a {
     hash_ ^= static_cast<std::uint8_t>(c);
     hash_ *= 1099511628211ull;
   }
+  void add(const char* bytes, std::size_t n) {
+    std::uint64_t hash = hash_;
+    for (std::size_t i = 0; i < n; ++i) {
+      hash ^= static_cast<std::uint8_t>(bytes[i]);
+      hash *= 1099511628211ull;
+    }
+    hash_ = hash;
+  }
   std::uint64_t value() const { return hash_; }
 
  private:
@@ -62,36 +71,60 @@ class Fnv1a {
 
 std::uint64_t fnv1a(const std::string& bytes) {
   Fnv1a hash;
-  for (const char c : bytes) hash.add(c);
+  hash.add(bytes.data(), bytes.size());
   return hash.value();
 }
 
-// A stream sink that keeps only the length and the FNV-1a checksum of what is written: the
-// integrity record goes before the node data, and holding the node bytes in memory to learn it
-// cost twice their size at save time (an ostringstream that grows by doubling, then its copy).
-class ChecksumSink : public std::streambuf {
+// The node data in octomap's full format, byte for byte what OcTreeBaseImpl::writeNodesRecurs
+// writes (each node's value, class slots and counts, then a byte of child bits; depth first),
+// but serialised into one fixed buffer handed to `sink` as it fills: octomap's writer makes
+// four stream calls per node, which cost more than the rest of a save.
+class NodeDataWriter {
  public:
-  std::uint64_t length() const { return length_; }
-  std::uint64_t checksum() const { return hash_.value(); }
-
- protected:
-  int_type overflow(int_type c) override {
-    if (!traits_type::eq_int_type(c, traits_type::eof())) add(traits_type::to_char_type(c));
-    return traits_type::not_eof(c);
+  using Sink = std::function<void(const char* bytes, std::size_t n)>;
+  NodeDataWriter(const SemanticOcTree& tree, Sink sink) : tree_(tree), sink_(std::move(sink)) {
+    buffer_.resize(std::size_t{1} << 20);
   }
-  std::streamsize xsputn(const char* s, std::streamsize n) override {
-    for (std::streamsize i = 0; i < n; ++i) add(s[i]);
-    return n;
+  void write(const SemanticOcTreeNode* root) {
+    if (root != nullptr) writeNode(root);
+    flush();
   }
 
  private:
-  void add(char c) {
-    hash_.add(c);
-    ++length_;
+  void writeNode(const SemanticOcTreeNode* node) {
+    if (used_ + kSerializedNodeBytes > buffer_.size()) flush();
+    char* out = buffer_.data() + used_;
+    const float value = node->getValue();
+    std::memcpy(out, &value, sizeof(value));
+    out += sizeof(value);
+    std::memcpy(out, node->slotClasses().data(), sizeof(ClassIndex) * SemanticOcTreeNode::kSlots);
+    out += sizeof(ClassIndex) * SemanticOcTreeNode::kSlots;
+    std::memcpy(out, node->slotCounts().data(), sizeof(std::uint16_t) * SemanticOcTreeNode::kSlots);
+    out += sizeof(std::uint16_t) * SemanticOcTreeNode::kSlots;
+    unsigned int children = 0;
+    for (unsigned int i = 0; i < 8; ++i) {
+      if (tree_.nodeChildExists(node, i)) children |= 1u << i;
+    }
+    *out = static_cast<char>(children);
+    used_ += kSerializedNodeBytes;
+    for (unsigned int i = 0; i < 8; ++i) {
+      if (children & (1u << i)) writeNode(tree_.getNodeChild(node, i));
+    }
   }
-  std::uint64_t length_ = 0;
-  Fnv1a hash_;
+  void flush() {
+    if (used_ > 0) sink_(buffer_.data(), used_);
+    used_ = 0;
+  }
+
+  const SemanticOcTree& tree_;
+  Sink sink_;
+  std::vector<char> buffer_;
+  std::size_t used_ = 0;
 };
+
+static_assert(sizeof(ClassSlotIndices) == sizeof(ClassIndex) * SemanticOcTreeNode::kSlots &&
+                  sizeof(ClassSlotCounts) == sizeof(std::uint16_t) * SemanticOcTreeNode::kSlots,
+              "the node format is the slot arrays' bytes");
 }  // namespace
 
 // The class table and fusion model go before octomap's node data, so a loaded map knows which
@@ -108,14 +141,33 @@ std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
     writePod(s, static_cast<std::uint32_t>(info.name.size()));
     s.write(info.name.data(), static_cast<std::streamsize>(info.name.size()));
   }
-  // The node data twice: once into the checksum, then to the stream (no copy of it in memory).
-  ChecksumSink sink;
-  std::ostream checksum_stream(&sink);
-  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(checksum_stream);
-  writePod(s, static_cast<std::uint64_t>(size()));
-  writePod(s, sink.length());
-  writePod(s, sink.checksum());
-  OccupancyOcTreeBase<SemanticOcTreeNode>::writeData(s);
+  // The integrity record goes before the node data. Its length follows from the node count;
+  // the checksum is patched in after one pass over the tree where the stream can seek (files),
+  // else learnt in a first pass (no copy of the node data in memory either way).
+  const std::uint64_t node_count = root ? size() : 0;
+  writePod(s, node_count);
+  writePod(s, node_count * kSerializedNodeBytes);
+  const std::streampos checksum_at = s.tellp();
+  Fnv1a hash;
+  if (checksum_at != std::streampos(-1)) {
+    writePod(s, std::uint64_t{0});
+    NodeDataWriter(*this, [&](const char* bytes, std::size_t n) {
+      hash.add(bytes, n);
+      s.write(bytes, static_cast<std::streamsize>(n));
+    }).write(root);
+    const std::streampos end = s.tellp();
+    s.seekp(checksum_at);
+    writePod(s, hash.value());
+    s.seekp(end);
+  } else {
+    NodeDataWriter(*this, [&](const char* bytes, std::size_t n) {
+      hash.add(bytes, n);
+    }).write(root);
+    writePod(s, hash.value());
+    NodeDataWriter(*this, [&](const char* bytes, std::size_t n) {
+      s.write(bytes, static_cast<std::streamsize>(n));
+    }).write(root);
+  }
   return s;
 }
 

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -299,6 +300,56 @@ TEST(SemanticOcTreeIo, OtRoundTripIsBitIdenticalAndGoesThroughTheFactory) {
   EXPECT_EQ(compared, tree.size());
   EXPECT_EQ(serialize(*loaded), serialize(tree));
   std::filesystem::remove_all(dir);
+}
+
+// A sink that cannot seek (a pipe, a socket): tellp() answers -1.
+class UnseekableBuffer : public std::stringbuf {
+ protected:
+  pos_type seekoff(off_type, std::ios_base::seekdir, std::ios_base::openmode) override {
+    return pos_type(off_type(-1));
+  }
+  pos_type seekpos(pos_type, std::ios_base::openmode) override { return pos_type(off_type(-1)); }
+};
+
+TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
+  const SemanticOcTree tree = makeRandomMap(11);
+  ASSERT_GT(tree.size(), 1000u);
+  // octomap's own serialisation of the same nodes (non-virtual call of the base writer).
+  std::ostringstream octomap_nodes;
+  tree.octomap::OcTreeBaseImpl<SemanticOcTreeNode, octomap::AbstractOccupancyOcTree>::writeData(
+      octomap_nodes);
+  const std::string expected_nodes = octomap_nodes.str();
+  ASSERT_FALSE(expected_nodes.empty());
+
+  const std::string seekable = serialize(tree);
+  UnseekableBuffer buffer;
+  std::ostream unseekable(&buffer);
+  ASSERT_EQ(unseekable.tellp(), std::streampos(-1));
+  tree.write(unseekable);
+  EXPECT_EQ(buffer.str(), seekable);  // the checksum patched in, or learnt in a first pass
+  ASSERT_GE(seekable.size(), expected_nodes.size());
+  EXPECT_EQ(seekable.substr(seekable.size() - expected_nodes.size()), expected_nodes);
+  // The integrity record before the nodes: count, length, FNV-1a of exactly those bytes.
+  const std::size_t record = seekable.size() - expected_nodes.size() - 24;
+  std::uint64_t count = 0, length = 0, checksum = 0;
+  std::memcpy(&count, seekable.data() + record, 8);
+  std::memcpy(&length, seekable.data() + record + 8, 8);
+  std::memcpy(&checksum, seekable.data() + record + 16, 8);
+  EXPECT_EQ(count, tree.size());
+  EXPECT_EQ(length, expected_nodes.size());
+  std::uint64_t fnv = 1469598103934665603ull;
+  for (const char c : expected_nodes) {
+    fnv ^= static_cast<std::uint8_t>(c);
+    fnv *= 1099511628211ull;
+  }
+  EXPECT_EQ(checksum, fnv);
+  // An empty tree: an empty record, and it loads back empty.
+  SemanticOcTree empty(0.2);
+  std::stringstream empty_file;
+  empty.write(empty_file);
+  std::unique_ptr<octomap::AbstractOcTree> loaded(octomap::AbstractOcTree::read(empty_file));
+  ASSERT_NE(loaded, nullptr);
+  EXPECT_EQ(loaded->size(), 0u);
 }
 
 TEST(SemanticOcTree, ParallelRayCastingGivesTheSameMap) {
