@@ -2,10 +2,30 @@
 
 #include <cmath>
 #include <filesystem>
+#include <iostream>
 #include <limits>
+#include <utility>
 
 namespace inekf_semantic_mapping {
 namespace common {
+namespace {
+
+ConfigWarningHandler& warningHandler() {
+  static ConfigWarningHandler handler = [](const std::string& message) {
+    std::cerr << "warning: " << message << std::endl;
+  };
+  return handler;
+}
+
+}  // namespace
+
+void setConfigWarningHandler(ConfigWarningHandler handler) {
+  warningHandler() = std::move(handler);
+}
+
+void configWarning(const std::string& message) {
+  if (warningHandler()) warningHandler()(message);
+}
 
 YamlReader::YamlReader(std::string source, YAML::Node root, bool cite_lines)
     : source_(std::move(source)), cite_lines_(cite_lines) {
@@ -38,7 +58,12 @@ void YamlReader::fail(const std::string& key, const std::string& what) const {
     if (node.IsDefined() && node.Mark().line >= 0)
       where += ":" + std::to_string(node.Mark().line + 1);
   }
-  throw ConfigError(where + ": key '" + key + "' " + what);
+  // A value read through a renamed key is cited by the name the file has.
+  const auto old_name = old_names_.find(key);
+  const std::string name = old_name == old_names_.end()
+                               ? "'" + key + "'"
+                               : "'" + old_name->second + "' (now '" + key + "')";
+  throw ConfigError(where + ": key " + name + " " + what);
 }
 
 YAML::Node YamlReader::lookup(const std::string& key) {
@@ -47,6 +72,11 @@ YAML::Node YamlReader::lookup(const std::string& key) {
 }
 
 YAML::Node YamlReader::find(const std::string& key) const {
+  const auto old_name = old_names_.find(key);
+  return findPath(old_name == old_names_.end() ? key : old_name->second);
+}
+
+YAML::Node YamlReader::findPath(const std::string& key) const {
   // Walk through const nodes: operator[] on a non-const node would insert the key.
   YAML::Node node;
   node.reset(root_);
@@ -158,7 +188,18 @@ void YamlReader::read(const std::string& key, std::vector<int>* out) {
 void YamlReader::allow(const std::string& key) { used_.insert(key); }
 
 void YamlReader::renamed(const std::string& old_key, const std::string& new_key) {
-  if (lookup(old_key).IsDefined()) fail(old_key, "was renamed to '" + new_key + "'");
+  const YAML::Node old_node = findPath(old_key);
+  if (!old_node.IsDefined()) return;
+  used_.insert(old_key);
+  if (findPath(new_key).IsDefined()) {
+    fail(old_key, "was renamed to '" + new_key + "', which is set too: remove '" + old_key + "'");
+  }
+  old_names_[new_key] = old_key;
+  std::string where = source_;
+  if (cite_lines_ && old_node.Mark().line >= 0)
+    where += ":" + std::to_string(old_node.Mark().line + 1);
+  configWarning(where + ": key '" + old_key + "' is deprecated, renamed to '" + new_key +
+                "' (the old name is still accepted in this release)");
 }
 
 bool YamlReader::has(const std::string& key) { return lookup(key).IsDefined(); }

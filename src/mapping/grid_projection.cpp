@@ -84,21 +84,25 @@ std::vector<float> groundRaster(const std::vector<float>& drivable_min_z,
 }  // namespace
 
 void GridProjectionConfig::validate() const {
-  require(max_z > min_z, "max_z", "must be > grid.min_z");
-  require(ground_min_z < min_z, "ground_min_z", "must be < grid.min_z");
-  require(sensor_height >= 0 && sensor_height <= 10, "sensor_height", "must be in [0, 10] m");
+  require(max_z > min_z, "max_z_m", "must be > grid.min_z_m");
+  require(ground_min_z < min_z, "ground_min_z_m", "must be < grid.min_z_m");
+  require(sensor_height >= 0 && sensor_height <= 10, "sensor_height_m", "must be in [0, 10] m");
   require(!drivable_classes.empty(), "drivable_classes", "must name at least one class");
 }
 
 GridProjectionConfig readGridProjectionConfig(const YAML::Node& root, const std::string& source) {
   common::YamlReader reader(source, root);
   GridProjectionConfig config;
-  reader.read("grid.min_z", &config.min_z);
-  reader.read("grid.max_z", &config.max_z);
-  reader.read("grid.ground_min_z", &config.ground_min_z);
+  // Lengths carry their unit in the name; an old name still works, with a warning.
+  for (const char* key : {"min_z", "max_z", "ground_min_z", "sensor_height", "ground_z"}) {
+    reader.renamed(std::string("grid.") + key, std::string("grid.") + key + "_m");
+  }
+  reader.read("grid.min_z_m", &config.min_z);
+  reader.read("grid.max_z_m", &config.max_z);
+  reader.read("grid.ground_min_z_m", &config.ground_min_z);
   reader.read("grid.drivable_classes", &config.drivable_classes);
-  reader.read("grid.sensor_height", &config.sensor_height);
-  reader.read("grid.ground_z", &config.ground_z);
+  reader.read("grid.sensor_height_m", &config.sensor_height);
+  reader.read("grid.ground_z_m", &config.ground_z);
   // Only the grid section is this reader's: a misspelt key inside it is an error, the rest of
   // the file belongs to readSemanticMappingConfig.
   if (root.IsMap()) {

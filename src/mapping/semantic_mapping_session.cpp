@@ -50,7 +50,7 @@ SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& conf
   // it has nothing to say: they carry no class evidence. So does SemanticKITTI's unlabeled (0).
   ignored_label_.assign(256, 0);
   for (int id = 0; id < 256; ++id) {
-    if (config_.class_set == "cityscapes") {
+    if (config_.class_set == MapClassSet::kCityscapes) {
       ignored_label_[id] = cityscapes::labelIdToTrainId(static_cast<std::uint8_t>(id)) == 255;
     } else {
       ignored_label_[id] = id == 0;
@@ -59,10 +59,11 @@ SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& conf
 }
 
 std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
-  auto tree = std::make_unique<SemanticOcTree>(
-      config_.resolution_m,
-      config_.class_set == "cityscapes" ? ClassSet::cityscapes() : ClassSet::semanticKitti(),
-      config_.fusion);
+  auto tree = std::make_unique<SemanticOcTree>(config_.resolution_m,
+                                               config_.class_set == MapClassSet::kCityscapes
+                                                   ? ClassSet::cityscapes()
+                                                   : ClassSet::semanticKitti(),
+                                               config_.fusion);
   tree->setOccupancyModel(config_.occupancy);
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
@@ -70,7 +71,7 @@ std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
 }
 
 std::unique_ptr<HashedVoxelGrid> SemanticMappingSession::makeGrid() const {
-  if (config_.insertion != "hashed_grid") return nullptr;
+  if (config_.insertion != InsertionStructure::kHashedGrid) return nullptr;
   HashedVoxelGridOptions options;
   options.resolution_m = config_.resolution_m;
   options.occupancy = config_.occupancy;
@@ -137,7 +138,7 @@ std::vector<std::uint32_t> SemanticMappingSession::labelPointsFromCamera(
     perception::rejectOccludedPoints(projected, labels.width, labels.height,
                                      perception::OcclusionOptions(), kNoLabel, &label_ids);
   }
-  if (config_.label_geometry_check && config_.class_set == "cityscapes") {
+  if (config_.label_geometry_check && config_.class_set == MapClassSet::kCityscapes) {
     ScopedTimer geometry_timer("semantic_map/label_geometry");
     perception::CityscapesLidarChecks checks;
     checks.geometry.max_flat_height_m =

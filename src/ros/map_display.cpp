@@ -22,7 +22,7 @@ MapDisplay::MapDisplay(ros::NodeHandle& nh, mapping::SemanticMappingSession& ses
     mapping::projectGrids(session_.tree(), grid_config_, {});
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(std::string(e.what()) + " (class_set " +
-                                session_.config().class_set + ")");
+                                mapping::mapClassSetName(session_.config().class_set) + ")");
   }
   markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(topics::kMapMarkers, 1, true);
   info_pub_ = nh.advertise<SemanticMapInfo>(topics::kMapInfo, 1, true);

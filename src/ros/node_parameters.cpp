@@ -1,6 +1,9 @@
 #include "inekf_semantic_mapping/ros/node_parameters.h"
 
+#include <ros/console.h>
 #include <xmlrpcpp/XmlRpcValue.h>
+
+#include <mutex>
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -36,6 +39,12 @@ YAML::Node toYaml(const XmlRpc::XmlRpcValue& value) {
 }  // namespace
 
 YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh) {
+  // The readers' warnings (a deprecated parameter name) go to rosconsole, where a node's other
+  // messages are. Once per process: nodelets share one manager.
+  static std::once_flag route_warnings;
+  std::call_once(route_warnings, [] {
+    common::setConfigWarningHandler([](const std::string& message) { ROS_WARN_STREAM(message); });
+  });
   XmlRpc::XmlRpcValue all;
   if (!private_nh.getParam(private_nh.getNamespace(), all)) return YAML::Node(YAML::NodeType::Map);
   return toYaml(all);

@@ -47,7 +47,8 @@ class SemanticOctomapNodeCore::Impl {
     const std::string source = parameterSource(pnh_);
     common::YamlReader reader(source, parameters);
     reader.read("map_frame", &options_.display.map_frame);
-    reader.read("marker_rate", &options_.marker_rate_hz);
+    reader.renamed("marker_rate", "marker_rate_hz");
+    reader.read("marker_rate_hz", &options_.marker_rate_hz);
     reader.read("max_display_cpu_fraction", &options_.display.max_display_cpu_fraction);
     reader.read("marker_depth", &options_.display.marker_depth);
     reader.read("calib_dir", &options_.calib_dir);
@@ -125,7 +126,8 @@ class SemanticOctomapNodeCore::Impl {
     const mapping::SemanticMappingConfig& c = session_->config();
     ROS_INFO_STREAM("semantic_octomap_node: resolution "
                     << c.resolution_m << " m, max range " << c.max_range_m << " m, classes "
-                    << c.class_set << ", label wait " << c.label_wait_s << " s");
+                    << mapping::mapClassSetName(c.class_set) << ", label wait " << c.label_wait_s
+                    << " s");
   }
 
  private:

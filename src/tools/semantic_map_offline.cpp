@@ -85,8 +85,8 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   if (cli.has("--config")) {
     config = mapping::loadSemanticMappingConfig(cli.get("--config"));
   }
-  config.class_set = cli.has("--labels") ? "semantickitti" : "cityscapes";
-  if (cli.has("--classes")) config.class_set = cli.get("--classes");
+  config.class_set = cli.has("--labels") ? mapping::MapClassSet::kSemanticKitti
+                                         : mapping::MapClassSet::kCityscapes;
   config.resolution_m = cli.getDouble("--resolution", config.resolution_m);
   config.max_range_m = cli.getDouble("--max-range", config.max_range_m);
   config.fusion.correct_probability =
@@ -95,11 +95,20 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   config.occupancy.prob_miss = cli.getDouble("--prob-miss", config.occupancy.prob_miss);
   config.grazing_ray_truncation_voxels =
       cli.getDouble("--grazing-truncation", config.grazing_ray_truncation_voxels);
-  if (cli.has("--insertion")) config.insertion = cli.get("--insertion");
   config.early_ray_termination_voxels =
       cli.getInt("--early-termination", config.early_ray_termination_voxels);
+  const auto choice = [&cli](const std::string& flag, auto parse, auto* out) {
+    if (!cli.has(flag)) return;
+    try {
+      *out = parse(cli.get(flag));
+    } catch (const std::invalid_argument& error) {
+      throw UsageError(flag + ": " + error.what());
+    }
+  };
+  choice("--classes", mapping::parseMapClassSet, &config.class_set);
+  choice("--insertion", mapping::parseInsertionStructure, &config.insertion);
+  choice("--fusion", mapping::parseFusionRule, &config.fusion.rule);
   try {
-    if (cli.has("--fusion")) config.fusion.rule = mapping::parseFusionRule(cli.get("--fusion"));
     config.validate();
   } catch (const std::invalid_argument& error) {
     throw UsageError(error.what());
@@ -365,7 +374,8 @@ int main(int argc, char** argv) {
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       const double reference_cpu_s = thread_cpu_s() - cpu_start;
       const double scans = static_cast<double>(std::max<std::size_t>(1, stats.scans_inserted));
-      std::cerr << "[semantic_map_offline] whole run (" << session.config().insertion
+      std::cerr << "[semantic_map_offline] whole run ("
+                << mapping::insertionStructureName(session.config().insertion)
                 << " insertion, reading, mapping, save) per scan: wall " << 1e3 * wall_s / scans
                 << " ms, CPU " << 1e3 * cpu_s / scans
                 << " ms; octomap insertPointCloud of the same scans per scan: wall "

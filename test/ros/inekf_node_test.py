@@ -252,11 +252,12 @@ class InekfNodeTest(unittest.TestCase):
         self.assertNotEqual(code, 0, output)
         self.assertIn("filtr", output)
         self.assertIn("misspelt_parameter_inekf_node", output)
-        # The filter's name is `filter`: the other spelling once accepted names it.
+        # The filter's name is `filter`; the old spelling is still read, but not beside the new
+        # one (which of the two would win?).
         code, output = run_with_parameters("inekf_node", "filter_type_inekf_node",
-                                           {"filter_type": "left"})
+                                           {"filter_type": "left", "filter": "right"})
         self.assertNotEqual(code, 0, output)
-        self.assertIn("renamed to 'filter'", output)
+        self.assertIn("renamed to 'filter', which is set too", output)
 
     def test_localizes_a_real_drive(self):
         if rospy.get_param("~source", "self") == "kitti_player":

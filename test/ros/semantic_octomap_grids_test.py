@@ -20,7 +20,7 @@ from visualization_msgs.msg import MarkerArray
 PKG = "inekf_semantic_mapping"
 WIDTH, HEIGHT = 200, 100
 ROAD, BUILDING = 7, 11  # Cityscapes labelIds
-SENSOR_HEIGHT = 1.73  # grid.sensor_height of config/semantic_mapping.yaml
+SENSOR_HEIGHT = 1.73  # grid.sensor_height_m of config/semantic_mapping.yaml
 MAP_Y_OFFSET = 2.0  # map -> velo_link translation along y
 WALL_X = 14.0
 # Image rows: v = 50 + 100 * (-z / x); the road (z = -1.73, x <= 12) is at v >= 64.4, the wall's

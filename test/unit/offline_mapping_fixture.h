@@ -68,7 +68,7 @@ class OfflineMappingTest : public ::testing::Test {
     SemanticMappingConfig config;
     config.resolution_m = 0.1;
     config.max_range_m = 30;
-    config.class_set = "semantickitti";
+    config.class_set = mapping::MapClassSet::kSemanticKitti;
     auto session = std::make_unique<SemanticMappingSession>(config);
     mapSequence(sequence, session.get(), nullptr, nullptr);
     return session;

@@ -262,8 +262,8 @@ TEST(GridProjectionConfig, TheShippedYamlHoldsTheDefaults) {
   // Every key of the section is in the file (a default that only the struct knows is hidden).
   const YAML::Node grid = YAML::LoadFile(path)["grid"];
   ASSERT_TRUE(grid.IsMap());
-  for (const char* key :
-       {"min_z", "max_z", "ground_min_z", "drivable_classes", "sensor_height", "ground_z"}) {
+  for (const char* key : {"min_z_m", "max_z_m", "ground_min_z_m", "drivable_classes",
+                          "sensor_height_m", "ground_z_m"}) {
     EXPECT_TRUE(grid[key].IsDefined()) << key;
   }
 }
@@ -279,15 +279,25 @@ TEST(GridProjectionConfig, ErrorsNameTheSourceAndTheKey) {
   };
   EXPECT_NE(message("grid: {mn_z: 0.2}").find("test.yaml: key 'grid.mn_z' is not a known key"),
             std::string::npos);
-  EXPECT_NE(message("grid: {min_z: 2.0, max_z: 1.0}").find("test.yaml: grid.max_z"),
+  EXPECT_NE(message("grid: {min_z_m: 2.0, max_z_m: 1.0}").find("test.yaml: grid.max_z_m"),
             std::string::npos);
   EXPECT_NE(message("grid: {drivable_classes: road}").find("'grid.drivable_classes'"),
             std::string::npos);
   EXPECT_NE(message("grid: {drivable_classes: []}").find("grid.drivable_classes"),
             std::string::npos);
-  EXPECT_NE(message("grid: {min_z: high}").find("'grid.min_z' is not a number"), std::string::npos);
+  EXPECT_NE(message("grid: {min_z_m: high}").find("'grid.min_z_m' is not a number"),
+            std::string::npos);
   // The rest of the file is another reader's.
-  EXPECT_EQ(message("resolution: 0.1\nsensor_model: {hit: 0.7}\ngrid: {max_z: 3.0}"), "no error");
+  EXPECT_EQ(message("resolution_m: 0.1\nsensor_model: {hit: 0.7}\ngrid: {max_z_m: 3.0}"),
+            "no error");
+  // The names before the unit suffix: still read, with a warning; both names: an error.
+  const GridProjectionConfig old_names = readGridProjectionConfig(
+      YAML::Load("grid: {min_z: 0.4, sensor_height: 2.0, ground_z: -3.0}"), "old.yaml");
+  EXPECT_DOUBLE_EQ(old_names.min_z, 0.4);
+  EXPECT_DOUBLE_EQ(old_names.sensor_height, 2.0);
+  EXPECT_DOUBLE_EQ(old_names.ground_z, -3.0);
+  EXPECT_NE(message("grid: {max_z: 3.0, max_z_m: 2.5}").find("which is set too"),
+            std::string::npos);
 }
 
 TEST(MapServerGrid, WritesPgmTopRowFirstAndItsYaml) {

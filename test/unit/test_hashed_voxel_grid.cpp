@@ -238,7 +238,7 @@ TEST(HashedVoxelGrid, LoadFromATreeExpandsPrunedLeaves) {
   EXPECT_EQ(agreement.log_odds_equal, agreement.union_voxels);
 }
 
-SemanticMappingConfig sessionConfig(const std::string& insertion) {
+SemanticMappingConfig sessionConfig(InsertionStructure insertion) {
   SemanticMappingConfig config;
   config.insertion = insertion;
   config.early_ray_termination_voxels = 0;  // the octree's exact meaning
@@ -248,8 +248,8 @@ SemanticMappingConfig sessionConfig(const std::string& insertion) {
 }
 
 TEST(HashedVoxelGridSession, SameMapAsTheOctreeSessionThroughSaveAndLoad) {
-  SemanticMappingSession octree(sessionConfig("octree"));
-  SemanticMappingSession grid(sessionConfig("hashed_grid"));
+  SemanticMappingSession octree(sessionConfig(InsertionStructure::kOctree));
+  SemanticMappingSession grid(sessionConfig(InsertionStructure::kHashedGrid));
   ASSERT_NE(grid.grid(), nullptr);
   EXPECT_EQ(octree.grid(), nullptr);
   for (int s = 0; s < 3; ++s) {
@@ -273,7 +273,7 @@ TEST(HashedVoxelGridSession, SameMapAsTheOctreeSessionThroughSaveAndLoad) {
   std::unique_ptr<octomap::AbstractOcTree> raw(octomap::AbstractOcTree::read(path));
   ASSERT_NE(raw, nullptr);
   EXPECT_EQ(raw->getTreeType(), "SemanticOcTree");
-  SemanticMappingSession loaded(sessionConfig("hashed_grid"));
+  SemanticMappingSession loaded(sessionConfig(InsertionStructure::kHashedGrid));
   loaded.load(path);
   // The loaded map is held once (the tree) until something is inserted.
   EXPECT_TRUE(loaded.gridReleased());
@@ -307,7 +307,7 @@ TEST(HashedVoxelGridSession, ConfigKeys) {
             SemanticMappingConfig().early_ray_termination_voxels);
   YAML::Node root = YAML::Load("insertion: hashed_grid\nearly_ray_termination_voxels: 10\n");
   const SemanticMappingConfig config = readSemanticMappingConfig(root, "test");
-  EXPECT_EQ(config.insertion, "hashed_grid");
+  EXPECT_EQ(config.insertion, InsertionStructure::kHashedGrid);
   EXPECT_EQ(config.early_ray_termination_voxels, 10);
   EXPECT_THROW(readSemanticMappingConfig(YAML::Load("insertion: voxblox\n"), "test"),
                std::exception);

@@ -139,7 +139,7 @@ TEST_F(CalibrationFiles, MappingErrorsNameThePosesOrTheLabelFile) {
   sequence.calib_path =
       write("calib.txt", std::string(kOdometryCalib) + "Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n");
   mapping::SemanticMappingConfig config;
-  config.class_set = "semantickitti";
+  config.class_set = mapping::MapClassSet::kSemanticKitti;
   // A pose 10,000 km away (a wrong poses file): outside the octree's +-6.5 km at 0.2 m.
   sequence.poses_path = write("far.txt", "1 0 0 1e7 0 1 0 0 0 0 1 0\n");
   {

@@ -109,12 +109,30 @@ TEST(SemanticMappingConfigTest, ErrorsNameTheSourceAndTheKey) {
   EXPECT_NE(message("ray_casting_threads: 1.5").find("'ray_casting_threads'"), std::string::npos);
   EXPECT_NE(message("class_set: coco").find("class_set"), std::string::npos);
   EXPECT_NE(message("fusion_rule: vote").find("fusion_rule"), std::string::npos);
-  EXPECT_EQ(message("resolution: 0.1\nlabel_wait_s: 0.5"), "no error");
-  // Keys that gained their unit: the old name is refused with the new one.
-  EXPECT_NE(message("label_wait: 0.5").find("'label_wait' was renamed to 'label_wait_s'"),
+  // Choices are parsed once, into enums; a bad name lists the good ones.
+  EXPECT_NE(message("insertion: voxblox")
+                .find("key 'insertion' must be hashed_grid or octree, got 'voxblox'"),
             std::string::npos);
-  EXPECT_NE(message("max_range: 50").find("'max_range_m'"), std::string::npos);
-  EXPECT_NE(message("autosave_period: 5").find("'autosave_period_s'"), std::string::npos);
+  EXPECT_EQ(readSemanticMappingConfig(YAML::Load("class_set: semantickitti\ninsertion: octree"),
+                                      "test.yaml")
+                .insertion,
+            InsertionStructure::kOctree);
+  EXPECT_EQ(message("resolution_m: 0.1\nlabel_wait_s: 0.5"), "no error");
+  // Keys that gained their unit: the old name is still read (with a warning), both is an error.
+  const SemanticMappingConfig old_names = readSemanticMappingConfig(
+      YAML::Load("resolution: 0.1\nlabel_wait: 0.5\nmax_range: 40\n"
+                 "label_geometry: {max_flat_height: 0.3}\nmarker_rate: 2"),
+      "old.yaml");
+  EXPECT_DOUBLE_EQ(old_names.resolution_m, 0.1);
+  EXPECT_DOUBLE_EQ(old_names.label_wait_s, 0.5);
+  EXPECT_DOUBLE_EQ(old_names.max_range_m, 40.0);
+  EXPECT_DOUBLE_EQ(old_names.label_geometry_max_flat_height_m, 0.3);
+  EXPECT_NE(message("label_wait: 0.5\nlabel_wait_s: 1")
+                .find("'label_wait' was renamed to "
+                      "'label_wait_s', which is set too"),
+            std::string::npos);
+  EXPECT_NE(message("resolution: 0.1\nresolution_m: 0.2").find("'resolution_m'"),
+            std::string::npos);
   EXPECT_THROW(loadSemanticMappingConfig("/nonexistent/semantic_mapping.yaml"),
                common::ConfigError);
 }
@@ -436,7 +454,7 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
 // once; an insertion afterwards rebuilds the grid and the map goes on as if it had stayed.
 TEST(SemanticMappingSessionTest, ReleasingTheGridKeepsTheMapAndHoldsItOnce) {
   SemanticMappingConfig config = testConfig();
-  ASSERT_EQ(config.insertion, "hashed_grid");
+  ASSERT_EQ(config.insertion, InsertionStructure::kHashedGrid);
   SemanticMappingSession kept(config);
   SemanticMappingSession released(config);
   const std::vector<std::uint8_t> pixels = testLabels();

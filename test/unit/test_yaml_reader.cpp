@@ -1,6 +1,7 @@
 // The strict config reader that every config file and every node's private parameters go through.
 #include <gtest/gtest.h>
 
+#include <iostream>
 #include <string>
 #include <vector>
 
@@ -24,14 +25,57 @@ std::string errorOf(const std::string& yaml, void (*reads)(YamlReader*)) {
 
 void readWait(YamlReader* reader) {
   double wait_s = 0.0;
-  reader->read("label_wait_s", &wait_s);
   reader->renamed("label_wait", "label_wait_s");
+  reader->read("label_wait_s", &wait_s);
 }
 
-TEST(YamlReader, RenamedKeyNamesTheNewKeyAndTheSource) {
+// Collects the readers' warnings while it lives, then restores the default handler.
+class WarningCapture {
+ public:
+  WarningCapture() {
+    inekf_semantic_mapping::common::setConfigWarningHandler(
+        [this](const std::string& message) { warnings.push_back(message); });
+  }
+  ~WarningCapture() {
+    inekf_semantic_mapping::common::setConfigWarningHandler(
+        [](const std::string& message) { std::cerr << "warning: " << message << std::endl; });
+  }
+  std::vector<std::string> warnings;
+};
+
+TEST(YamlReader, AnOldKeyNameIsReadAsTheNewOneWithOneWarningNamingBoth) {
+  WarningCapture capture;
+  YamlReader reader("config/x.yaml", YAML::Load("a: 1\nlabel_wait: 0.5\n"), /*cite_lines=*/true);
+  reader.renamed("label_wait", "label_wait_s");
+  double wait_s = 3.0;
+  reader.read("label_wait_s", &wait_s);
+  int a = 0;
+  reader.read("a", &a);
+  EXPECT_NO_THROW(reader.rejectUnknown());  // the old name counts as read
+  EXPECT_DOUBLE_EQ(wait_s, 0.5);
+  ASSERT_EQ(capture.warnings.size(), 1u);
+  EXPECT_EQ(capture.warnings[0],
+            "config/x.yaml:2: key 'label_wait' is deprecated, renamed to 'label_wait_s' (the old "
+            "name is still accepted in this release)");
+  // A bad value under the old name is cited by the name the file has.
+  YamlReader bad("p", YAML::Load("label_wait: soon"));
+  bad.renamed("label_wait", "label_wait_s");
+  try {
+    bad.read("label_wait_s", &wait_s);
+    FAIL() << "a non-number was read";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "p: key 'label_wait' (now 'label_wait_s') is not a number: 'soon'");
+  }
+}
+
+TEST(YamlReader, TheNewNameAloneWarnsOfNothingAndBothNamesAreAnError) {
+  WarningCapture capture;
   EXPECT_EQ(errorOf("label_wait_s: 1.0", readWait), "no error");
-  EXPECT_EQ(errorOf("label_wait: 1.0", readWait),
-            "ROS parameters of /node: key 'label_wait' was renamed to 'label_wait_s'");
+  EXPECT_TRUE(capture.warnings.empty());
+  EXPECT_EQ(errorOf("label_wait: 1.0\nlabel_wait_s: 2.0", readWait),
+            "ROS parameters of /node: key 'label_wait' was renamed to 'label_wait_s', which is set "
+            "too: remove 'label_wait'");
 }
 
 TEST(YamlReader, UnknownAndMistypedKeysNameTheKey) {

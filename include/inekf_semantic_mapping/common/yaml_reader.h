@@ -7,6 +7,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <functional>
+#include <map>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -19,6 +21,13 @@ class ConfigError : public std::invalid_argument {
  public:
   using std::invalid_argument::invalid_argument;
 };
+
+// Where the readers' warnings (a deprecated key name) go: by default "warning: ..." on stderr;
+// the ROS nodes route them to rosconsole; an empty handler drops them. Set it before any reader
+// runs (not thread-safe).
+using ConfigWarningHandler = std::function<void(const std::string& message)>;
+void setConfigWarningHandler(ConfigWarningHandler handler);
+void configWarning(const std::string& message);
 
 class YamlReader {
  public:
@@ -38,8 +47,9 @@ class YamlReader {
   void read(const std::string& key, std::vector<int>* out);          // integers that fit an int
   // Keys (or whole sections: "name.*") that are valid but read elsewhere.
   void allow(const std::string& key);
-  // Throws ConfigError naming `new_key` when the retired `old_key` is set (a key that gained its
-  // unit, e.g. label_wait -> label_wait_s): an old file fails loudly instead of being ignored.
+  // A key that gained its unit (resolution -> resolution_m), accepted under its old name for one
+  // release: call it before reading `new_key`. Where only `old_key` is set, reads of `new_key`
+  // take its value and one warning names both; where both are set, throws ConfigError.
   void renamed(const std::string& old_key, const std::string& new_key);
   // Whether `key` is set (marks it read).
   bool has(const std::string& key);
@@ -50,14 +60,16 @@ class YamlReader {
   const std::string& source() const { return source_; }
 
  private:
-  YAML::Node lookup(const std::string& key);  // marks the key read
-  YAML::Node find(const std::string& key) const;
+  YAML::Node lookup(const std::string& key);      // marks the key read
+  YAML::Node find(const std::string& key) const;  // through a renamed key's old name
+  YAML::Node findPath(const std::string& path) const;
   void collectKeys(const YAML::Node& node, const std::string& prefix,
                    std::vector<std::string>* keys) const;
 
   std::string source_;
   YAML::Node root_;
   std::set<std::string> used_;
+  std::map<std::string, std::string> old_names_;  // new key -> the old name set in the file
   bool cite_lines_ = false;
 };
 

@@ -18,22 +18,35 @@ class Node;
 namespace inekf_semantic_mapping {
 namespace mapping {
 
+// The class set of the map's labels: the camera networks' (Cityscapes labelIds) or SemanticKITTI's
+// lidar labels.
+enum class MapClassSet { kCityscapes, kSemanticKitti };
+// "cityscapes" | "semantickitti"; throws std::invalid_argument naming the choices otherwise.
+MapClassSet parseMapClassSet(const std::string& name);
+const char* mapClassSetName(MapClassSet set);
+
+// Where scans are inserted: a HashedVoxelGrid, synced into the tree when the tree is asked for
+// (save, publish), or the SemanticOcTree itself (insertLabeledScan). The same map
+// (test_hashed_voxel_grid); the grid is several times faster.
+enum class InsertionStructure { kHashedGrid, kOctree };
+// "hashed_grid" | "octree"; throws std::invalid_argument naming the choices otherwise.
+InsertionStructure parseInsertionStructure(const std::string& name);
+const char* insertionStructureName(InsertionStructure structure);
+
 // Every parameter of a mapping run; the keys of config/semantic_mapping.yaml (the node's ROS
-// parameters and semantic_map_offline --config read the same keys with the same reader).
+// parameters and semantic_map_offline --config read the same keys with the same reader). Names
+// of choices are parsed once, by the reader: the fields hold enums.
 struct SemanticMappingConfig {
   double resolution_m = 0.2;
   double max_range_m = 50.0;
-  OccupancyModel occupancy;              // sensor_model.hit, .miss, .clamping_min, .clamping_max
-  std::string class_set = "cityscapes";  // "cityscapes" | "semantickitti"
+  OccupancyModel occupancy;  // sensor_model.hit, .miss, .clamping_min, .clamping_max
+  MapClassSet class_set = MapClassSet::kCityscapes;
   FusionModel fusion;
   double grazing_ray_truncation_voxels = 1.0;
   int ray_casting_threads = 1;
-  // Insertion structure: "hashed_grid" (HashedVoxelGrid, synced into the tree when the tree is
-  // asked for: save, publish) or "octree" (SemanticOcTree::insertLabeledScan). The same map
-  // (test_hashed_voxel_grid); hashed_grid is several times faster.
-  std::string insertion = "hashed_grid";
+  InsertionStructure insertion = InsertionStructure::kHashedGrid;
   // hashed_grid: a free ray stops after this many consecutive voxels that the same scan already
-  // cleared (0: never; 20: occupancy state of 0.3 % of the voxels differs, 41 % fewer visits).
+  // cleared (0: never, every ray to the sensor; docs/results.md has what it costs in accuracy).
   int early_ray_termination_voxels = 20;
   // Points outside the camera image: inserted for occupancy (true) or left out (false: the map
   // holds what the camera sees). Without any camera (lidar-only runs) scans go in whole.
@@ -44,8 +57,7 @@ struct SemanticMappingConfig {
   // Labels the lidar geometry rules out take no class evidence (perception/label_geometry.h):
   // a flat class (road, sidewalk, terrain...) more than label_geometry_max_flat_height_m above
   // the scan's local ground (sensor frame, z up), a traffic sign or light less than
-  // label_geometry_min_raised_height_m above it. Cityscapes class set only. Measured on
-  // SemanticKITTI 05 / 08 (README): map mIoU 0.340 -> 0.362 / 0.451 -> 0.460.
+  // label_geometry_min_raised_height_m above it. Cityscapes class set only.
   bool label_geometry_check = true;
   double label_geometry_max_flat_height_m = 0.2;
   double label_geometry_min_raised_height_m = 0.2;
@@ -67,8 +79,8 @@ struct SemanticMappingConfig {
 
 // The keys of the same YAML that semantic_octomap_node reads itself (display, frames, files).
 const std::vector<std::string>& semanticMappingNodeKeys();
-// Retired keys and their names with a unit (old, new): setting an old one is an error naming the
-// new one.
+// Keys that gained their unit (old, new): the old name is still read in this release, with a
+// warning naming the new one (common::YamlReader::renamed).
 const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKeys();
 
 // Reads the keys above from a YAML map (the node's keys are allowed and left alone); unknown keys

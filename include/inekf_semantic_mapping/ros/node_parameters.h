@@ -16,7 +16,8 @@ namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
 // All parameters in a node's private namespace as a YAML map (ints, doubles, bools, strings,
-// lists and nested maps as they are on the parameter server).
+// lists and nested maps as they are on the parameter server). The first call routes the readers'
+// warnings (common::setConfigWarningHandler) to ROS_WARN.
 YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh);
 
 // "ROS parameters of /node_name": the source every message names.
