@@ -64,12 +64,15 @@ class TwoPipelines(unittest.TestCase):
         self.assertTrue(e2e.wait_for_subscribers(needed, timeout=60),
                         "the pipelines did not subscribe to %s" % needed)
         # car_b's bag without /clock (one clock per master: car_a's), started at the same instant:
-        # both bags begin at the drive's first stamp.
-        player_b = subprocess.Popen(["rosbag", "play", "--quiet", "--prefix", "/car_b",
+        # both bags begin at the drive's first stamp. Both players wait 2 s after advertising
+        # (rosbag's default 0.2 s): on a loaded machine the six subscriptions were not all
+        # connected by then, and the first scans were lost before any node saw them.
+        connect_s = "--delay=%g" % p("connect_delay_s", 2.0)
+        player_b = subprocess.Popen(["rosbag", "play", "--quiet", connect_s, "--prefix", "/car_b",
                                      bags["car_b"]], stdout=subprocess.DEVNULL,
                                     stderr=subprocess.STDOUT)
         started = time.time()
-        e2e.play_bag(bags["car_a"], extra_args=["--prefix", "/car_a"], timeout=120)
+        e2e.play_bag(bags["car_a"], extra_args=[connect_s, "--prefix", "/car_a"], timeout=120)
         player_b.wait(timeout=60)
         with e2e.ClockAfterBag(bags["car_a"]):
             # Lidar-only scans go in once label_wait_s (3 s) shows no label image will come.
