@@ -51,13 +51,13 @@ YamlReader YamlReader::fromFile(const std::string& path) {
   }
 }
 
+std::string YamlReader::citation(const YAML::Node& node) const {
+  if (!cite_lines_ || !node.IsDefined() || node.Mark().line < 0) return source_;
+  return source_ + ":" + std::to_string(node.Mark().line + 1);
+}
+
 void YamlReader::fail(const std::string& key, const std::string& what) const {
-  std::string where = source_;
-  if (cite_lines_) {
-    const YAML::Node node = find(key);
-    if (node.IsDefined() && node.Mark().line >= 0)
-      where += ":" + std::to_string(node.Mark().line + 1);
-  }
+  const std::string where = citation(find(key));
   // A value read through a renamed key is cited by the name the file has.
   const auto old_name = old_names_.find(key);
   const std::string name = old_name == old_names_.end()
@@ -195,11 +195,8 @@ void YamlReader::renamed(const std::string& old_key, const std::string& new_key)
     fail(old_key, "was renamed to '" + new_key + "', which is set too: remove '" + old_key + "'");
   }
   old_names_[new_key] = old_key;
-  std::string where = source_;
-  if (cite_lines_ && old_node.Mark().line >= 0)
-    where += ":" + std::to_string(old_node.Mark().line + 1);
-  configWarning(where + ": key '" + old_key + "' is deprecated, renamed to '" + new_key +
-                "' (the old name is still accepted in this release)");
+  configWarning(citation(old_node) + ": key '" + old_key + "' is deprecated, renamed to '" +
+                new_key + "' (the old name is still accepted in this release)");
 }
 
 bool YamlReader::has(const std::string& key) { return lookup(key).IsDefined(); }

@@ -51,10 +51,6 @@ bool readPod(std::istream& s, T* value) {
 // FNV-1a, 64 bit, fed piecewise (the writer streams the node data, the reader has it whole).
 class Fnv1a {
  public:
-  void add(char c) {
-    hash_ ^= static_cast<std::uint8_t>(c);
-    hash_ *= 1099511628211ull;
-  }
   void add(const char* bytes, std::size_t n) {
     std::uint64_t hash = hash_;
     for (std::size_t i = 0; i < n; ++i) {

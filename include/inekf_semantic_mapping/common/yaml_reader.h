@@ -63,6 +63,8 @@ class YamlReader {
   YAML::Node lookup(const std::string& key);      // marks the key read
   YAML::Node find(const std::string& key) const;  // through a renamed key's old name
   YAML::Node findPath(const std::string& path) const;
+  // "source" or, for a parsed file, "source:LINE" of `node`.
+  std::string citation(const YAML::Node& node) const;
   void collectKeys(const YAML::Node& node, const std::string& prefix,
                    std::vector<std::string>* keys) const;
 
