@@ -29,15 +29,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
     reader->read(key, out);
     if (!(*out >= 0.0)) reader->fail(key, "must be >= 0");
   };
-  std::string filter;
-  reader->read("filter", &filter);
-  if (!filter.empty()) {
-    try {
-      config.filter_type = filterTypeFromString(filter);
-    } catch (const std::exception& e) {
-      reader->fail("filter", e.what());
-    }
-  }
+  reader->readChoice("filter", filterTypeFromString, &config.filter_type);
   ImuNoise& n = config.imu_noise;
   positive("imu_noise.gyro_noise_density", &n.gyro_noise_density);
   positive("imu_noise.accel_noise_density", &n.accel_noise_density);

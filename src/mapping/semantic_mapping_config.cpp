@@ -101,23 +101,13 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("sensor_model.clamping_min", &config.occupancy.clamping_min);
   reader.read("sensor_model.clamping_max", &config.occupancy.clamping_max);
   // Names of choices become enums here, once; a bad one names its key.
-  const auto read_choice = [&reader](const std::string& key, auto parse, auto* out) {
-    std::string name;
-    reader.read(key, &name);
-    if (name.empty()) return;
-    try {
-      *out = parse(name);
-    } catch (const std::invalid_argument& e) {
-      reader.fail(key, e.what());
-    }
-  };
-  read_choice("class_set", parseMapClassSet, &config.class_set);
-  read_choice("fusion_rule", parseFusionRule, &config.fusion.rule);
+  reader.readChoice("class_set", parseMapClassSet, &config.class_set);
+  reader.readChoice("fusion_rule", parseFusionRule, &config.fusion.rule);
   reader.read("confusion_probability", &config.fusion.correct_probability);
   reader.read("dirichlet_prior", &config.fusion.dirichlet_prior);
   reader.read("grazing_ray_truncation_voxels", &config.grazing_ray_truncation_voxels);
   reader.read("ray_casting_threads", &config.ray_casting_threads);
-  read_choice("insertion", parseInsertionStructure, &config.insertion);
+  reader.readChoice("insertion", parseInsertionStructure, &config.insertion);
   reader.read("early_ray_termination_voxels", &config.early_ray_termination_voxels);
   reader.read("insert_points_outside_image", &config.insert_points_outside_image);
   reader.read("reject_occluded_points", &config.reject_occluded_points);

@@ -35,17 +35,9 @@ estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlRe
   } else {
     *config_file = "built-in defaults (" + default_file + " not found)";
   }
-  // One name for the filter, the config file's own key; the other one used to be accepted too.
+  // One name for the filter, the config file's own key; filter_type is its old name.
   reader->renamed("filter_type", "filter");
-  std::string filter;
-  reader->read("filter", &filter);
-  if (!filter.empty()) {
-    try {
-      config.localizer.filter_type = estimation::filterTypeFromString(filter);
-    } catch (const std::exception& error) {
-      reader->fail("filter", error.what());
-    }
-  }
+  reader->readChoice("filter", estimation::filterTypeFromString, &config.localizer.filter_type);
   estimation::LocalizerConfig& localizer = config.localizer;
   reader->read("init_orientation_from_imu", &localizer.init_orientation_from_reference);
   reader->read("min_fix_sigma_m", &localizer.min_gps_sigma_m);

@@ -45,6 +45,20 @@ class YamlReader {
   void read(const std::string& key, std::vector<std::string>* out);  // a list of strings
   void read(const std::string& key, std::vector<double>* out);       // finite numbers
   void read(const std::string& key, std::vector<int>* out);          // integers that fit an int
+  // A name from a set of choices, converted once by `parse` (which throws std::invalid_argument
+  // for a name it does not know, saying which it knows): the error names the key. Leaves *out
+  // where the key is absent or empty.
+  template <typename T, typename Parse>
+  void readChoice(const std::string& key, Parse parse, T* out) {
+    std::string name;
+    read(key, &name);
+    if (name.empty()) return;
+    try {
+      *out = parse(name);
+    } catch (const std::invalid_argument& error) {
+      fail(key, error.what());
+    }
+  }
   // Keys (or whole sections: "name.*") that are valid but read elsewhere.
   void allow(const std::string& key);
   // A key that gained its unit (resolution -> resolution_m), accepted under its old name for one
