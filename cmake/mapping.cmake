@@ -23,6 +23,9 @@ ism_add_gtest(test_grid_projection
 ism_add_gtest(test_semantic_mapping_session
   SOURCES test/unit/test_semantic_mapping_session.cpp
   LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_scan_label_pairing
+  SOURCES test/unit/test_scan_label_pairing.cpp
+  LINK ${PROJECT_NAME}_mapping)
 ism_add_gtest(test_map_label_images
   SOURCES test/unit/test_map_label_images.cpp
   LINK ${PROJECT_NAME}_mapping)

@@ -49,6 +49,7 @@ set(ISM_MAPPING_SOURCES
   src/mapping/offline_mapping.cpp
   src/mapping/map_label_images.cpp
   src/mapping/semantic_mapping_config.cpp
+  src/mapping/scan_label_pairing.cpp
   src/mapping/semantic_mapping_session.cpp
   src/mapping/grid_projection.cpp)
 # evaluation: scores of camera labels and maps against human labels (above perception and mapping).
@@ -70,7 +71,7 @@ set(ISM_LOCALIZATION_ROS_SOURCES
   src/ros/localization_diagnostics.cpp)
 set(ISM_MAPPING_ROS_SOURCES
   src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-  src/ros/label_input.cpp src/ros/mapping_diagnostics.cpp src/ros/semantic_octomap_node_core.cpp)
+  src/ros/label_camera.cpp src/ros/mapping_diagnostics.cpp src/ros/semantic_octomap_node_core.cpp)
 set(ISM_SEGMENTATION_ROS_SOURCES src/ros/segmentation_node_core.cpp)
 # The segmentation and map nodes as nodelets (nodelet_plugins.xml).
 set(ISM_NODELET_SOURCES src/nodelets/pipeline_nodelets.cpp)

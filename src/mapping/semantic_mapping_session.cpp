@@ -11,38 +11,11 @@
 
 namespace inekf_semantic_mapping {
 namespace mapping {
-namespace {
-
-// Label images are kept this long past the newest scan for a scan that may still come (s).
-constexpr double kLabelKeepMargin_s = 1.0;
-// ... and at most this long past the clock (data time, s) when no newer scan comes at all (lidar
-// stopped): it bounds the memory of the label images waiting, not the lag of the scan queue.
-constexpr double kLabelKeepMax_s = 30.0;
-// Scans that went in without labels are kept this long (data time) for a late label image.
-constexpr double kLateLabelWindow_s = 10.0;
-// A stamp this much older than the newest one means the clock went back (a bag loop).
-constexpr double kTimeJump_s = 1.0;
-
-// The item of `items` (scans or label images) whose stamp is nearest to `stamp`, within
-// `tolerance`, among those `eligible` accepts; items.end() if none.
-template <typename Items, typename Eligible>
-auto nearestInTime(Items& items, double stamp, double tolerance, Eligible eligible) {
-  auto best = items.end();
-  for (auto it = items.begin(); it != items.end(); ++it) {
-    const double gap = std::abs(it->stamp - stamp);
-    if (eligible(*it) && gap <= tolerance &&
-        (best == items.end() || gap < std::abs(best->stamp - stamp))) {
-      best = it;
-    }
-  }
-  return best;
-}
-constexpr auto kAny = [](const auto&) { return true; };
-
-}  // namespace
-
 SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& config)
-    : config_(config) {
+    : config_(config),
+      pairing_(PairingOptions{config_.label_stamp_tolerance_s, config_.label_wait_s,
+                              config_.pose_wait_s},
+               &statistics_) {
   config_.validate();
   tree_ = makeTree();
   grid_ = makeGrid();
@@ -262,192 +235,158 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
                                             Eigen::Matrix3Xf points_sensor) {
   if (!std::isfinite(stamp)) throw std::invalid_argument("addScan: stamp is not finite");
   ++statistics_.scans_received;
-  // Against the newest scan, not the clock: a scan that sat in a busy subscriber queue is older
-  // than the clock by the queue's lag, and that is no bag loop.
-  if (stamp + kTimeJump_s < newest_scan_stamp_) restartClock();
-  PendingScan scan{stamp, frame, std::move(points_sensor), nullptr};
-  // A label image that came first (segmentation can beat the pose or the cloud's transport).
-  const auto best = nearestInTime(pending_labels_, stamp, config_.label_stamp_tolerance_s, kAny);
-  if (best != pending_labels_.end()) {
-    scan.labels = std::make_shared<const PendingLabels>(std::move(*best));
-    pending_labels_.erase(best);
+  if (pairing_.wentBack(stamp)) {  // a bag loop: what is pending goes in, the clock restarts
+    flush();
+    pairing_.restartClock();
   }
-  pending_scans_.push_back(std::move(scan));
-  newest_stamp_ = std::max(newest_stamp_, stamp);
-  newest_scan_stamp_ = std::max(newest_scan_stamp_, stamp);
-  first_stamp_ = std::min(first_stamp_, stamp);
-  return insertReadyScans(newest_stamp_);
+  pairing_.addScan(PendingScan{stamp, frame, std::move(points_sensor), nullptr});
+  return insertReadyScans(pairing_.now());
 }
 
-std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
-                                                  const CameraModel& camera) {
-  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
+namespace {
+
+void checkLabelView(const LabelImageView& labels) {
   if (!labels.data || labels.width <= 0 || labels.height <= 0 ||
       labels.step < static_cast<std::size_t>(labels.width)) {
     throw std::invalid_argument("label image: malformed (null data, size or row step)");
   }
+}
+
+void checkCameraFits(const CameraModel& camera, const LabelImageView& labels) {
   if (camera.width != labels.width || camera.height != labels.height) {
     throw std::invalid_argument("label image is " + std::to_string(labels.width) + "x" +
                                 std::to_string(labels.height) + " but the camera is " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
   }
-  ++statistics_.label_images_received;
-  // Its scan, in this order: still pending (waiting for labels or its pose), already in the map
-  // without labels (the labels add class evidence), or not here yet. The scans' own stamps decide
-  // the last case, not the clock: under load the scan queue can lag the clock by more than
-  // label_wait, and the scan still comes.
-  auto pending = nearestInTime(pending_scans_, stamp, config_.label_stamp_tolerance_s,
-                               [](const PendingScan& scan) { return !scan.labels; });
-  const bool scan_may_come = stamp + config_.label_stamp_tolerance_s >= newest_scan_stamp_;
-  if (pending == pending_scans_.end() && !scan_may_come) {
-    if (!applyLateLabels(stamp, labels, camera)) ++statistics_.label_images_unmatched;
-    return insertReadyScans(newest_stamp_);
-  }
-  auto copy = std::make_shared<PendingLabels>();
-  copy->stamp = stamp;
+}
+
+}  // namespace
+
+std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
+                                                  const CameraModel& camera) {
+  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
+  checkLabelView(labels);
+  checkCameraFits(camera, labels);
+  std::shared_ptr<PendingLabels> copy = PendingLabels::copyOf(stamp, labels);
   copy->camera = camera;
-  const std::size_t row = static_cast<std::size_t>(labels.width);
-  copy->pixels.resize(row * static_cast<std::size_t>(labels.height));
-  for (int r = 0; r < labels.height; ++r) {
-    std::copy_n(labels.data + static_cast<std::size_t>(r) * labels.step, row,
-                copy->pixels.data() + static_cast<std::size_t>(r) * row);
-  }
-  copy->view = LabelImageView{copy->pixels.data(), labels.width, labels.height, row};
-  last_camera_ = camera;
-  newest_label_stamp_ = std::max(newest_label_stamp_, stamp);
-  newest_stamp_ = std::max(newest_stamp_, stamp);
-  first_stamp_ = std::min(first_stamp_, stamp);
-  last_label_arrival_ = newest_stamp_;
-
-  if (pending != pending_scans_.end()) {
-    pending->labels = std::move(copy);
-  } else if (!applyLateLabels(stamp, copy->view, copy->camera)) {
-    pending_labels_.push_back(std::move(*copy));
-  }
-  return insertReadyScans(newest_stamp_);
+  return addLabels(std::move(copy));
 }
 
-std::size_t SemanticMappingSession::advanceTo(double now) {
-  if (std::isfinite(now)) newest_stamp_ = std::max(newest_stamp_, now);
-  return insertReadyScans(newest_stamp_);
+std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
+                                                  const std::string& camera_frame) {
+  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
+  checkLabelView(labels);
+  // Known now: checked now, so that a label image that does not fit its camera is reported as it
+  // comes.
+  std::optional<CameraModel> camera;
+  if (camera_lookup_) camera = camera_lookup_(camera_frame, labels.width, labels.height);
+  if (camera) checkCameraFits(*camera, labels);
+  std::shared_ptr<PendingLabels> copy = PendingLabels::copyOf(stamp, labels);
+  copy->camera_frame = camera_frame;
+  copy->camera = std::move(camera);
+  return addLabels(std::move(copy));
 }
 
-bool SemanticMappingSession::labelsMayStillCome(const PendingScan& scan, double now) const {
-  if (scan.labels) return false;
-  // Segmentation publishes in stamp order: once a newer label image is here, none will come
-  // for this scan.
-  if (newest_label_stamp_ > scan.stamp + config_.label_stamp_tolerance_s) return false;
-  // No label image has arrived for a whole wait (data time of its arrival, not its stamp: a
-  // label image comes one segmentation latency after its stamp), and the run is older than that:
-  // segmentation is not running (lidar-only runs). At the start, scans wait for the first one.
-  if (last_label_arrival_ < now - config_.label_wait_s &&
-      first_stamp_ < now - config_.label_wait_s) {
-    return false;
+std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> labels) {
+  ++statistics_.label_images_received;
+  const std::optional<CameraModel> camera = labels->camera;
+  const ScanLabelPairing::LabelsPlace place = pairing_.addLabels(
+      std::move(labels),
+      [this](PendingLabels& l, InsertedScan& scan) { return applyLateLabels(l, scan); });
+  // The camera view of the scans without labels follows the label images of the present.
+  if (camera && place != ScanLabelPairing::LabelsPlace::kUnmatched) last_camera_ = camera;
+  return insertReadyScans(pairing_.now());
+}
+
+std::size_t SemanticMappingSession::advanceTo(double now) { return insertReadyScans(now); }
+
+std::size_t SemanticMappingSession::insertReadyScans(double now) {
+  return pairing_.insertReady(
+      now, [this](PendingScan& scan) { return insertWhenReady(scan, /*may_wait=*/true); });
+}
+
+std::size_t SemanticMappingSession::flush() {
+  return pairing_.flush(
+      [this](PendingScan& scan) { return insertWhenReady(scan, /*may_wait=*/false); });
+}
+
+bool SemanticMappingSession::resolveCamera(PendingLabels& labels, bool* unusable) {
+  *unusable = false;
+  if (labels.camera) return true;
+  if (!camera_lookup_) return false;
+  try {
+    labels.camera = camera_lookup_(labels.camera_frame, labels.view.width, labels.view.height);
+    if (labels.camera) checkCameraFits(*labels.camera, labels.view);
+  } catch (const std::exception& e) {
+    labels.camera.reset();
+    *unusable = true;
+    if (label_warning_) label_warning_(labels.stamp, e.what());
   }
-  return now - scan.stamp <= config_.label_wait_s;
+  return labels.camera.has_value();
+}
+
+bool SemanticMappingSession::insertWhenReady(PendingScan& scan, bool may_wait) {
+  std::optional<Eigen::Isometry3d> pose;
+  if (pose_lookup_) pose = pose_lookup_(scan.stamp, scan.frame);
+  if (!pose) return false;
+  if (scan.labels) {
+    bool unusable = false;
+    if (!resolveCamera(*scan.labels, &unusable)) {
+      // Waits for its camera as for its pose, then goes in without its classes.
+      const double waited = pairing_.now() - scan.stamp;
+      if (may_wait && !unusable && waited <= config_.label_wait_s + config_.pose_wait_s) {
+        return false;
+      }
+      if (!unusable && label_warning_) {
+        label_warning_(scan.labels->stamp,
+                       "its camera is still unknown (camera_info and the "
+                       "lidar -> camera transform): the scan goes in "
+                       "without its classes");
+      }
+      ++statistics_.label_images_without_camera;
+      scan.labels.reset();
+    }
+  }
+  insertPending(scan, *pose);
+  return true;
 }
 
 void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose) {
   if (scan.labels) {
-    insertScan(scan.points_sensor, pose, &scan.labels->view, &scan.labels->camera);
+    insertScan(scan.points_sensor, pose, &scan.labels->view, &*scan.labels->camera);
     ++statistics_.label_images_used;
   } else {
     insertScan(scan.points_sensor, pose);
-    unlabelled_scans_.push_back({scan.stamp, last_scan_.points_map, pose});
-    while (!unlabelled_scans_.empty() &&
-           unlabelled_scans_.front().stamp < scan.stamp - kLateLabelWindow_s) {
-      unlabelled_scans_.pop_front();
-    }
+    pairing_.keepForLateLabels(InsertedScan{scan.stamp, last_scan_.points_map, pose});
   }
   if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_);
 }
 
-bool SemanticMappingSession::applyLateLabels(double stamp, const LabelImageView& labels,
-                                             const CameraModel& camera) {
-  const auto best = nearestInTime(unlabelled_scans_, stamp, config_.label_stamp_tolerance_s, kAny);
-  if (best == unlabelled_scans_.end()) return false;
-  const Eigen::Isometry3d T_sensor_map = best->T_map_sensor.inverse();
+bool SemanticMappingSession::applyLateLabels(PendingLabels& labels, InsertedScan& scan) {
+  bool unusable = false;
+  if (!resolveCamera(labels, &unusable)) return false;  // it waits, or ends unmatched
+  const CameraModel& camera = *labels.camera;
+  const Eigen::Isometry3d T_sensor_map = scan.T_map_sensor.inverse();
   const Eigen::Matrix3Xf points_sensor =
-      (T_sensor_map.linear().cast<float>() * best->points_map).colwise() +
+      (T_sensor_map.linear().cast<float>() * scan.points_map).colwise() +
       T_sensor_map.translation().cast<float>();
   std::vector<std::uint8_t> in_image;
-  LabeledScan scan;
-  scan.label_ids = labelPointsFromCamera(points_sensor, labels, camera, &in_image);
-  scan.points_map = std::move(best->points_map);
-  scan.unknown_label_id = kNoLabel;
-  unlabelled_scans_.erase(best);
+  LabeledScan labeled;
+  labeled.label_ids = labelPointsFromCamera(points_sensor, labels.view, camera, &in_image);
+  labeled.points_map = std::move(scan.points_map);
+  labeled.unknown_label_id = kNoLabel;
   {
     ScopedTimer timer("semantic_map/late_labels");
     statistics_.points_with_class +=
-        grid_ ? gridForInsertion().addClassEvidence(scan, tree_->classSet())
-              : tree_->addClassEvidence(scan);
+        grid_ ? gridForInsertion().addClassEvidence(labeled, tree_->classSet())
+              : tree_->addClassEvidence(labeled);
   }
   ++statistics_.label_images_used;
   ++statistics_.label_images_late;
   ++statistics_.scans_with_labels;
-  last_scan_ = std::move(scan);
-  if (inserted_callback_) inserted_callback_(stamp, last_scan_);
+  last_scan_ = std::move(labeled);
+  if (inserted_callback_) inserted_callback_(labels.stamp, last_scan_);
   return true;
-}
-
-std::size_t SemanticMappingSession::insertReadyScans(double now) {
-  std::size_t inserted = 0;
-  for (auto it = pending_scans_.begin(); it != pending_scans_.end();) {
-    if (labelsMayStillCome(*it, now)) {
-      ++it;
-      continue;
-    }
-    std::optional<Eigen::Isometry3d> pose;
-    if (pose_lookup_) pose = pose_lookup_(it->stamp, it->frame);
-    if (!pose) {
-      if (now - it->stamp > config_.label_wait_s + config_.pose_wait_s) {
-        ++statistics_.scans_without_pose;
-        it = pending_scans_.erase(it);
-      } else {
-        ++it;
-      }
-      continue;
-    }
-    insertPending(*it, *pose);
-    ++inserted;
-    it = pending_scans_.erase(it);
-  }
-  // Label images no scan will claim any more: newer scans have come (scans arrive in stamp
-  // order), or none has for a long time.
-  for (auto it = pending_labels_.begin(); it != pending_labels_.end();) {
-    if (it->stamp + kLabelKeepMargin_s < newest_scan_stamp_ || it->stamp + kLabelKeepMax_s < now) {
-      ++statistics_.label_images_unmatched;
-      it = pending_labels_.erase(it);
-    } else {
-      ++it;
-    }
-  }
-  return inserted;
-}
-
-void SemanticMappingSession::restartClock() {
-  flush();
-  unlabelled_scans_.clear();
-  newest_stamp_ = newest_scan_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
-  first_stamp_ = 1e300;
-}
-
-std::size_t SemanticMappingSession::flush() {
-  std::size_t inserted = 0;
-  for (auto it = pending_scans_.begin(); it != pending_scans_.end();) {
-    std::optional<Eigen::Isometry3d> pose;
-    if (pose_lookup_) pose = pose_lookup_(it->stamp, it->frame);
-    if (pose) {
-      insertPending(*it, *pose);
-      ++inserted;
-    } else {
-      ++statistics_.scans_without_pose;
-    }
-    it = pending_scans_.erase(it);
-  }
-  statistics_.label_images_unmatched += pending_labels_.size();
-  pending_labels_.clear();
-  return inserted;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -484,13 +423,9 @@ void SemanticMappingSession::reset() {
   tree_ = makeTree();
   grid_ = makeGrid();
   grid_released_ = false;
-  pending_scans_.clear();
-  pending_labels_.clear();
-  unlabelled_scans_.clear();
+  pairing_.clear();
   statistics_ = MappingStatistics();
   last_scan_ = LabeledScan();
-  newest_stamp_ = newest_scan_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
-  first_stamp_ = 1e300;
 }
 
 }  // namespace mapping

@@ -106,6 +106,7 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
   status->add("label images used", stats.label_images_used);
   status->add("label images late", stats.label_images_late);
   status->add("label images unmatched", stats.label_images_unmatched);
+  status->add("label images without camera", stats.label_images_without_camera);
   status->add("scans with labels", stats.scans_with_labels);
   status->addf("since last label image (s)", "%.1f", since_label_s);
 }

@@ -13,7 +13,7 @@
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
-#include "inekf_semantic_mapping/ros/label_input.h"
+#include "inekf_semantic_mapping/ros/label_camera.h"
 #include "inekf_semantic_mapping/ros/map_display.h"
 #include "inekf_semantic_mapping/ros/map_services.h"
 #include "inekf_semantic_mapping/ros/mapping_conversions.h"
@@ -92,10 +92,11 @@ class SemanticOctomapNodeCore::Impl {
           kitti::readRawCalibration(options_.calib_dir).projection(options_.camera_index);
       file_camera = mapping::CameraModel{c.P_rect, c.R_rect, c.T_cam0_velo, c.width, c.height};
     }
-    labels_ = std::make_unique<LabelInput>(tf_buffer_, file_camera);
+    label_camera_ = std::make_unique<LabelCamera>(tf_buffer_, file_camera);
+    label_camera_->serve(session_.get());
     cloud_pub_ = nh_.advertise<sensor_msgs::PointCloud2>(topics::kLabeledCloud, 2);
-    camera_info_sub_ =
-        nh_.subscribe(topics::kCameraColorLeftInfo, 1, &LabelInput::setCameraInfo, labels_.get());
+    camera_info_sub_ = nh_.subscribe(topics::kCameraColorLeftInfo, 1, &LabelCamera::setCameraInfo,
+                                     label_camera_.get());
     // Room for what arrives while a batch of waiting scans goes in: on a loaded machine a dropped
     // label image leaves its scan without classes (with 5 here most scans of e2e_synthetic were).
     constexpr int kInputQueue = 30;
@@ -136,11 +137,10 @@ class SemanticOctomapNodeCore::Impl {
       ScopedTimer timer("semantic_map/scan");
       detectClockJump();
       monitor_->noteScan(cloud->header.stamp.toSec(), wallNow());
-      labels_->setLidarFrame(cloud->header.frame_id);
-      if (!session_->hasCameraView()) labels_->setCameraViewOf(*session_);
+      label_camera_->setLidarFrame(cloud->header.frame_id);
+      if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);
       session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
                         pointsFromCloud(*cloud));
-      labels_->passTo(*session_);
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
                                                              << cloud->header.stamp
@@ -151,19 +151,21 @@ class SemanticOctomapNodeCore::Impl {
   void onLabels(const sensor_msgs::ImageConstPtr& labels) {
     monitor_->noteLabelImage(wallNow());
     try {
-      labels_->push(labels);
+      ScopedTimer timer("semantic_map/labels");
+      // Checked as it comes (a malformed image is reported now, naming the field); the session
+      // keeps it until its scan and its camera are there.
+      session_->addLabelImage(labels->header.stamp.toSec(), labelImageView(*labels),
+                              labels->header.frame_id);
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kSegmentationLabels
                                                              << " at " << labels->header.stamp
                                                              << " ignored: " << e.what());
     }
-    labels_->passTo(*session_);
   }
 
   void onTick(const ros::WallTimerEvent&) {
     try {
       detectClockJump();
-      labels_->passTo(*session_);
       session_->advanceTo(ros::Time::now().toSec());
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: inserting pending scans: " << e.what());
@@ -190,7 +192,7 @@ class SemanticOctomapNodeCore::Impl {
   std::unique_ptr<MappingMonitor> monitor_;  // before the session: its callback notes
   std::unique_ptr<mapping::SemanticMappingSession> session_;
   std::unique_ptr<MapDisplay> display_;
-  std::unique_ptr<LabelInput> labels_;
+  std::unique_ptr<LabelCamera> label_camera_;
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher cloud_pub_;
   std::unique_ptr<MapServices> services_;  // after the session: autosaves at shutdown

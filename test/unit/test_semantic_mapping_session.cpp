@@ -239,6 +239,79 @@ TEST(SemanticMappingSessionTest, StreamingEqualsDirectInsertion) {
   EXPECT_EQ(serialized(streaming), serialized(direct));
 }
 
+// The node hands over label images before camera_info and tf have come: they wait in the
+// session, and their scans wait for the camera as for a pose.
+TEST(SemanticMappingSessionTest, ALabelImageWaitsForItsCameraAndItsScanWaitsWithIt) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig(1.0);
+  config.pose_wait_s = 1.0;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  bool camera_known = false;
+  std::vector<std::string> frames_asked;
+  session.setCameraLookup([&](const std::string& frame, int width, int height) {
+    frames_asked.push_back(frame);
+    EXPECT_EQ(width, 100);
+    EXPECT_EQ(height, 100);
+    return camera_known ? std::optional<CameraModel>(testCamera()) : std::nullopt;
+  });
+  int warnings = 0;
+  session.setLabelWarningCallback([&](double, const std::string&) { ++warnings; });
+
+  EXPECT_EQ(session.addLabelImage(0.0, view, std::string("camera_color_left")), 0u);
+  EXPECT_EQ(session.statistics().label_images_received, 1u);  // counted as it comes
+  EXPECT_EQ(session.addScan(0.0, "velo", testScan()), 0u);    // paired; its camera is unknown
+  EXPECT_EQ(session.advanceTo(1.5), 0u);                      // within label + pose wait
+  EXPECT_EQ(session.pendingScans(), 1u);
+  camera_known = true;
+  EXPECT_EQ(session.advanceTo(1.6), 1u);
+  EXPECT_EQ(session.statistics().scans_with_labels, 1u);
+  EXPECT_EQ(session.statistics().label_images_without_camera, 0u);
+  EXPECT_EQ(labelAt(session, -1.05, 0.55, 10.05), 7u);  // the test labels' road on the wall
+  EXPECT_EQ(frames_asked.front(), "camera_color_left");
+  EXPECT_EQ(warnings, 0);
+
+  // A camera that never comes: the scan goes in without classes after label + pose wait.
+  camera_known = false;
+  EXPECT_EQ(session.addLabelImage(5.0, view, std::string()), 0u);
+  EXPECT_EQ(session.addScan(5.0, "velo", testScan()), 0u);
+  EXPECT_EQ(session.advanceTo(6.9), 0u);
+  EXPECT_EQ(session.advanceTo(7.1), 1u);
+  EXPECT_EQ(session.statistics().scans_inserted, 2u);
+  EXPECT_EQ(session.statistics().scans_with_labels, 1u);
+  EXPECT_EQ(session.statistics().label_images_without_camera, 1u);
+  EXPECT_EQ(warnings, 1);
+}
+
+TEST(SemanticMappingSessionTest, ALabelImageThatDoesNotFitItsKnownCameraIsRefusedAsItComes) {
+  const std::vector<std::uint8_t> pixels(100 * 50, 21);
+  SemanticMappingSession session(testConfig());
+  session.setCameraLookup([](const std::string&, int, int) {
+    return std::optional<CameraModel>(testCamera());  // 100 x 100, whatever the image
+  });
+  EXPECT_THROW(session.addLabelImage(0.0, LabelImageView{pixels.data(), 100, 50, 100},
+                                     std::string("camera")),
+               std::invalid_argument);
+  EXPECT_EQ(session.statistics().label_images_received, 0u);
+  // An unusable camera found later: the scan goes in without classes, the reason told.
+  SemanticMappingSession later(testConfig());
+  later.setPoseLookup([](double stamp, const std::string&) { return poseAt(stamp); });
+  bool known = false;
+  later.setCameraLookup([&](const std::string&, int, int) -> std::optional<CameraModel> {
+    if (!known) return std::nullopt;
+    throw std::invalid_argument("camera_info P is not finite");
+  });
+  std::string why;
+  later.setLabelWarningCallback([&](double, const std::string& w) { why = w; });
+  later.addLabelImage(0.0, LabelImageView{pixels.data(), 100, 50, 100}, std::string("camera"));
+  known = true;
+  EXPECT_EQ(later.addScan(0.0, "velo", testScan()), 1u);
+  EXPECT_EQ(later.statistics().scans_with_labels, 0u);
+  EXPECT_EQ(later.statistics().label_images_without_camera, 1u);
+  EXPECT_NE(why.find("not finite"), std::string::npos);
+}
+
 TEST(SemanticMappingSessionTest, EveryScanGoesInWhenSegmentationIsSlowOrAbsent) {
   const std::vector<std::uint8_t> pixels = testLabels();
   const LabelImageView view{pixels.data(), 100, 100, 100};

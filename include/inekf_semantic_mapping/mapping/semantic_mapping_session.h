@@ -6,7 +6,8 @@
 //
 // Occupancy comes from every scan; class evidence from a label image when one exists for the
 // scan's stamp. A scan waits (in data time) at most label_wait_s for its label image, so a
-// segmentation slower than the lidar delays class evidence but never drops a scan.
+// segmentation slower than the lidar delays class evidence but never drops a scan; the pairing
+// rules are ScanLabelPairing's (scan_label_pairing.h).
 #pragma once
 
 #include <Eigen/Core>
@@ -20,31 +21,16 @@
 #include <utility>
 #include <vector>
 
+#include "inekf_semantic_mapping/mapping/camera_model.h"
 #include "inekf_semantic_mapping/mapping/hashed_voxel_grid.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/mapping/scan_label_pairing.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_config.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 
 namespace inekf_semantic_mapping {
 namespace mapping {
-
-// A rectified camera: pixel ~ P [R_rect (T_camera_sensor x); 1] in a width x height image.
-struct CameraModel {
-  Eigen::Matrix<double, 3, 4> P = Eigen::Matrix<double, 3, 4>::Zero();
-  Eigen::Matrix3d R_rect = Eigen::Matrix3d::Identity();
-  Eigen::Isometry3d T_camera_sensor = Eigen::Isometry3d::Identity();
-  int width = 0;
-  int height = 0;
-};
-
-// A row-major 8-bit label image (label ids of the config's class set), not owned.
-struct LabelImageView {
-  const std::uint8_t* data = nullptr;
-  int width = 0;
-  int height = 0;
-  std::size_t step = 0;  // bytes per row
-};
 
 struct MappingStatistics {
   std::size_t scans_received = 0;
@@ -53,9 +39,11 @@ struct MappingStatistics {
   std::size_t scans_without_pose = 0;  // dropped after pose_wait_s
   std::size_t label_images_received = 0;
   std::size_t label_images_used = 0;
-  std::size_t label_images_late = 0;       // of the used ones: came after their scan went in
-                                           // (class evidence only)
-  std::size_t label_images_unmatched = 0;  // no scan within the tolerance while it was kept
+  std::size_t label_images_late = 0;            // of the used ones: came after their scan went in
+                                                // (class evidence only)
+  std::size_t label_images_unmatched = 0;       // no scan within the tolerance while it was kept
+  std::size_t label_images_without_camera = 0;  // their camera never became known or was
+                                                // unusable: their scans went in without classes
   std::size_t points_inserted = 0;
   std::size_t points_with_class = 0;  // points that added class evidence
 };
@@ -79,13 +67,28 @@ class SemanticMappingSession {
   std::size_t addScan(double stamp, const std::string& frame, Eigen::Matrix3Xf points_sensor);
   // The image is copied. Throws std::invalid_argument for a view that does not fit `camera`.
   std::size_t addLabelImage(double stamp, const LabelImageView& labels, const CameraModel& camera);
+  // The camera of a label image (camera_frame may be empty: the lookup's default camera), sized
+  // to width x height; nullopt while it is unknown (the node: camera_info or the lidar -> camera
+  // transform has not come yet). May throw std::exception for a camera that is unusable.
+  using CameraLookup = std::function<std::optional<CameraModel>(const std::string& camera_frame,
+                                                                int width, int height)>;
+  void setCameraLookup(CameraLookup lookup) { camera_lookup_ = std::move(lookup); }
+  // A label image whose camera is looked up (setCameraLookup) when it is needed: now if it is
+  // known, else when its scan goes in; its scan waits for it as for its pose, then goes in without
+  // labels. Throws std::invalid_argument for a malformed view or a known camera it does not fit.
+  std::size_t addLabelImage(double stamp, const LabelImageView& labels,
+                            const std::string& camera_frame);
+  // Told why a label image gave no class evidence after it was accepted (its camera), with its
+  // stamp; the node logs it.
+  using LabelWarning = std::function<void(double stamp, const std::string& why)>;
+  void setLabelWarningCallback(LabelWarning callback) { label_warning_ = std::move(callback); }
   // Data time has reached `now` (the clock, when no scan arrives): inserts scans whose wait is
   // over.
   std::size_t advanceTo(double now);
   // Inserts every pending scan (with the labels that have arrived) whose pose is known, e.g. at
   // the end of a run or before the node clears its tf buffer; the others are dropped.
   std::size_t flush();
-  std::size_t pendingScans() const { return pending_scans_.size(); }
+  std::size_t pendingScans() const { return pairing_.pendingScans(); }
   // The camera whose view scans without a label image are cut to (with
   // insert_points_outside_image false) before the first label image brings its own; without it
   // such scans go in whole (lidar-only runs).
@@ -143,25 +146,6 @@ class SemanticMappingSession {
   void reset();
 
  private:
-  struct PendingLabels {
-    double stamp;
-    std::vector<std::uint8_t> pixels;
-    LabelImageView view;  // into pixels
-    CameraModel camera;
-  };
-  // A scan that went in without labels, kept a while for a label image that comes late.
-  struct InsertedScan {
-    double stamp;
-    Eigen::Matrix3Xf points_map;  // the points as inserted (cut to the camera's view)
-    Eigen::Isometry3d T_map_sensor;
-  };
-  struct PendingScan {
-    double stamp;
-    std::string frame;
-    Eigen::Matrix3Xf points_sensor;
-    std::shared_ptr<const PendingLabels> labels;  // its label image, once paired
-  };
-
   std::unique_ptr<SemanticOcTree> makeTree() const;
   std::unique_ptr<HashedVoxelGrid> makeGrid() const;
   void syncTree() const;
@@ -182,15 +166,18 @@ class SemanticMappingSession {
   void insertIntoTree(const Eigen::Matrix3Xf& points_sensor, const Eigen::Isometry3d& T_map_sensor,
                       std::vector<std::uint32_t> labels);
 
-  // Streaming: inserts the pending scans that are ready at data time `now` (paired, or their
-  // wait is over) and whose pose is known; drops those whose pose never came.
+  // Streaming: the pairing's scans go in through these.
+  std::size_t addLabels(std::shared_ptr<PendingLabels> labels);
   std::size_t insertReadyScans(double now);
-  bool labelsMayStillCome(const PendingScan& scan, double now) const;
+  // Inserts a ready scan if its pose is known: false if not, or if its labels' camera is not
+  // known yet and `may_wait` (else it goes in without them).
+  bool insertWhenReady(PendingScan& scan, bool may_wait);
   void insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose);
-  // Class evidence from a label image whose scan already went in; false if none matches.
-  bool applyLateLabels(double stamp, const LabelImageView& labels, const CameraModel& camera);
-  // Stamps went back (a bag loop): what is pending goes in, the data clock starts again.
-  void restartClock();
+  // Class evidence from a label image whose scan already went in; false if its camera is unknown.
+  bool applyLateLabels(PendingLabels& labels, InsertedScan& scan);
+  // Looks up the camera of `labels` if it is not known: false while it is not (or never will be:
+  // `*unusable` set, the warning sent).
+  bool resolveCamera(PendingLabels& labels, bool* unusable);
 
   SemanticMappingConfig config_;
   std::unique_ptr<SemanticOcTree> tree_;
@@ -201,18 +188,11 @@ class SemanticMappingSession {
   MappingStatistics statistics_;
   LabeledScan last_scan_;
   PoseLookup pose_lookup_;
+  CameraLookup camera_lookup_;
+  LabelWarning label_warning_;
   InsertedCallback inserted_callback_;
-  std::deque<PendingScan> pending_scans_;
-  std::deque<PendingLabels> pending_labels_;
-  std::deque<InsertedScan> unlabelled_scans_;
+  ScanLabelPairing pairing_;
   std::optional<CameraModel> last_camera_;
-  double newest_stamp_ = -1e300;  // newest scan or label stamp, or clock (data time)
-  // Newest scan stamp: scans arrive in stamp order, so once it has passed a label image's stamp
-  // no scan of that stamp will come, however far the clock is ahead (a lagging scan queue).
-  double newest_scan_stamp_ = -1e300;
-  double newest_label_stamp_ = -1e300;  // newest label image
-  double first_stamp_ = 1e300;          // first scan or label image of this timeline
-  double last_label_arrival_ = -1e300;  // data time when the newest label image arrived
 };
 
 }  // namespace mapping
