@@ -95,6 +95,13 @@ def parse_args(argv=None):
                         "--label-images DIR), trained on as sparse labels")
     p.add_argument("--pseudo-images", default="",
                    help="the images of --pseudo-labels (the drive's image_02/data)")
+    p.add_argument("--teacher", default="",
+                   help="the network that teaches by distillation, when not the base network: a "
+                        "base network's name (a larger one teaching a smaller student, e.g. "
+                        "--base espnetv2_s1 --teacher espnetv2_s2)")
+    p.add_argument("--teacher-init", default="",
+                   help="the teacher's weights (a best.pt of an adapted run of --teacher) instead "
+                        "of its Cityscapes ones")
     p.add_argument("--init", default="",
                    help="start from these weights (a best.pt of an earlier round) instead of "
                         "the base network's; the base network still teaches")
@@ -206,6 +213,26 @@ def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft,
                 t = t.astype(np.uint8)
                 t[~distillation_zone(s, outside_lidar_only)] = labels.IGNORE
                 s.teacher = t
+
+
+def build_teacher(args, base, model, shared, torch):
+    """The network whose outputs are distilled, and its name for the log: the base network itself
+    (model, before any training) unless --teacher / --teacher-init name another."""
+    if not args.teacher and not args.teacher_init:
+        return model, f"the base network ({base.name})"
+    spec = base_networks.get(args.teacher or base.name)
+    teacher = spec.build(os.path.join(shared, spec.weights))
+    name = spec.name
+    if args.teacher_init:
+        if not os.path.isfile(args.teacher_init):
+            raise SystemExit(f"--teacher-init {args.teacher_init}: no such file")
+        try:
+            teacher.load_state_dict(torch.load(args.teacher_init, map_location="cpu"))
+        except RuntimeError as e:
+            raise SystemExit(f"--teacher-init {args.teacher_init}: not weights of {spec.name} "
+                             f"({str(e).splitlines()[0]})")
+        name += f" from {args.teacher_init}"
+    return teacher.eval(), f"the teacher ({name})"
 
 
 def freeze_batchnorm_statistics(model, torch):
@@ -341,6 +368,8 @@ def write_card(path, base, width, height, gamma, standardize, summary):
         f"# fine-tuned from {base.description} on the KITTI camera, at this input size:",
         "# the Segmenter gives it each image resized to input width x height after the same",
         "# tone curve and colour standardisation as in training.",
+        f"# Distillation teacher: {summary['teacher']}"
+        + (f" ({summary['teacher_init']})" if summary["teacher_init"] else "") + ".",
         f"name: kitti_adapted_{base.name}",
         f"input: {{width: {width}, height: {height}}}",
         "resize_policy: pad_to_multiple  # INTER_AREA to the input size (the training resize)",
@@ -454,10 +483,12 @@ def main(argv=None):
     if args.distill_labelled_weight > 0 and not soft:
         raise SystemExit("--distill-labelled-weight needs --distill soft")
     if train_at_all:
-        teacher_targets(train, model, torch, args.teacher_confidence,
+        teacher, teacher_name = build_teacher(args, base, model, shared, torch)
+        teacher_targets(train, teacher, torch, args.teacher_confidence,
                         args.distill_zone == "outside-lidar", soft,
                         labelled_weight=args.distill_labelled_weight)
-        log(f"base network's labels for distillation in {time.time() - teacher_t0:.0f} s")
+        log(f"{teacher_name}'s labels for distillation in {time.time() - teacher_t0:.0f} s")
+        del teacher
     if args.init:
         model.load_state_dict(torch.load(args.init, map_location="cpu"))
         log(f"starting from {args.init}")
@@ -571,6 +602,8 @@ def main(argv=None):
     summary = {
         "cityscapes_sample_pixel_accuracy": cityscapes,
         "base": base.name,
+        "teacher": args.teacher or base.name,
+        "teacher_init": args.teacher_init,
         "input": [width, height],
         "seed": args.seed,
         "steps": step,

@@ -234,6 +234,56 @@ class RareClassSampling(unittest.TestCase):
         self.assertTrue(np.all(adapt.distillation_weights(s, False, 0.0)[:, :10] == 0.0))
 
 
+class Teacher(unittest.TestCase):
+    """Who teaches by distillation: the base network unless another is named."""
+
+    @staticmethod
+    def args(teacher="", teacher_init=""):
+        import argparse
+
+        return argparse.Namespace(teacher=teacher, teacher_init=teacher_init)
+
+    def test_without_a_teacher_the_base_network_itself_teaches(self):
+        import adapt_segmentation as adapt
+        import base_networks
+
+        base = base_networks.get("espnetv2_s1")
+        model = object()
+        teacher, name = adapt.build_teacher(self.args(), base, model, shared_dir(), None)
+        self.assertIs(teacher, model)
+        self.assertIn("espnetv2_s1", name)
+
+    def test_a_named_teacher_is_its_own_network_and_wrong_weights_name_the_file(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        shared = shared_dir()
+        import adapt_segmentation as adapt
+        import base_networks
+
+        for name in ("espnetv2_s1", "espnetv2_s2"):
+            if not os.path.exists(os.path.join(shared, base_networks.get(name).weights)):
+                skip_loudly(self, f"shared weights of {name} not found")
+        base = base_networks.get("espnetv2_s1")
+        student = base.build(os.path.join(shared, base.weights))
+        teacher, name = adapt.build_teacher(self.args("espnetv2_s2"), base, student, shared, torch)
+        self.assertIsNot(teacher, student)
+        self.assertFalse(teacher.training)
+        count = lambda m: sum(p.numel() for p in m.parameters())  # noqa: E731
+        self.assertGreater(count(teacher), 1.5 * count(student))  # s=2.0 against s=1.0
+        self.assertIn("espnetv2_s2", name)
+        # The student's weights are not the teacher's: refused, naming the file.
+        path = os.path.join(tempfile.mkdtemp(prefix="ism_teacher_"), "student.pt")
+        torch.save(student.state_dict(), path)
+        with self.assertRaises(SystemExit) as caught:
+            adapt.build_teacher(self.args("espnetv2_s2", path), base, student, shared, torch)
+        self.assertIn(path, str(caught.exception))
+        self.assertIn("espnetv2_s2", str(caught.exception))
+        with self.assertRaises(SystemExit) as caught:
+            adapt.build_teacher(self.args("espnetv2_s2", path + ".missing"), base, student, shared,
+                                torch)
+        self.assertIn("no such file", str(caught.exception))
+
+
 class Preprocessing(unittest.TestCase):
     def test_standardization_reaches_the_target_statistics(self):
         # Two colours, half the pixels each: every channel maps to exactly mean -+ std, inside
