@@ -84,8 +84,8 @@ ScanLabelPairing::LabelsPlace ScanLabelPairing::addLabels(std::shared_ptr<Pendin
   // without labels (the labels add class evidence), or not here yet. The scans' own stamps decide
   // the last case, not the clock: under load the scan queue can lag the clock by more than
   // label_wait, and the scan still comes.
-  const auto pending = nearestInTime(scans_, stamp, tolerance,
-                                     [](const PendingScan& scan) { return !scan.labels; });
+  const auto pending =
+      nearestInTime(scans_, stamp, tolerance, [](const PendingScan& scan) { return !scan.labels; });
   const bool scan_may_come = stamp + tolerance >= newest_scan_stamp_;
   if (pending != scans_.end() || scan_may_come) {
     // A label image of the present: it moves the clocks (one for a scan long gone does not).

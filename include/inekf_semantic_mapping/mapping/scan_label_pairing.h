@@ -37,9 +37,9 @@ struct MappingStatistics;
 struct PendingLabels {
   double stamp = 0.0;
   std::vector<std::uint8_t> pixels;
-  LabelImageView view;               // into pixels
-  std::string camera_frame;          // for the camera lookup; may be empty
-  std::optional<CameraModel> camera; // unset while camera_info / tf have not come
+  LabelImageView view;                // into pixels
+  std::string camera_frame;           // for the camera lookup; may be empty
+  std::optional<CameraModel> camera;  // unset while camera_info / tf have not come
 
   // Copies the view's rows (the caller's buffer may go away).
   static std::shared_ptr<PendingLabels> copyOf(double stamp, const LabelImageView& view);
