@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
+#include <limits>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -65,9 +68,138 @@ GeodeticFixEvent fixEventFromDegraded(const kitti::GeodeticFix& fix, double stam
   return event;
 }
 
+namespace {
+
+// A start orientation for the frames up to the start (the second pass): per frame, with the
+// covariance it is stated with (rad^2 about the map axes; a zero axis keeps the configured sigma).
+struct GivenStart {
+  std::vector<Eigen::Matrix3d> rotations;  // frames 0 .. the start frame
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+};
+
+// One pass and what the second-pass decision needs of it: per frame, the causal (filtered) state
+// and yaw sigma, the gyro-bias z sigma; the frames of the heading events; how the start was made.
+struct Pass {
+  OxtsRunResult run;
+  std::vector<NavState> filtered;
+  std::vector<double> filtered_yaw_sigma_rad, gyro_bias_z_sigma_radps;
+  std::vector<int> heading_event_frames;
+  bool started_without_attitude = false;
+};
+
+double yawSigmaOf(const NavState& state, const PoseCovariance& pose_covariance) {
+  const Eigen::Matrix3d world =
+      state.rotation * pose_covariance.bottomRightCorner<3, 3>() * state.rotation.transpose();
+  return std::sqrt(std::max(0.0, world(2, 2)));
+}
+
+Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& options,
+             const GivenStart* given);
+
+}  // namespace
+
 OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
                                  const OxtsRunOptions& options) {
   if (frames.empty()) throw std::invalid_argument("runLocalizerOnOxts: no OXTS frames");
+  Pass first = runPass(frames, options, nullptr);
+  if (!options.smooth || !options.second_pass || first.filtered.empty()) {
+    return std::move(first.run);
+  }
+  // Only a start whose heading was not known: none stated, or a stated one the monitor replaced.
+  const int start = first.run.first_estimated_frame;
+  int earliest = -1;
+  if (first.started_without_attitude) {
+    earliest = start;
+  } else if (first.run.statistics.filter.heading_recoveries +
+                 first.run.statistics.filter.heading_alignments >
+             0) {
+    // A stated heading the monitor re-initialised, or re-opened and then aligned.
+    earliest = first.heading_event_frames.empty() ? start : first.heading_event_frames.front();
+  } else {
+    return std::move(first.run);
+  }
+  // The first frame from which the causal yaw sigma stays settled for 30 s (or to the end of a
+  // shorter drive) without a heading event: its heading is the one to carry back.
+  const int n = static_cast<int>(frames.size());
+  const double settled = options.settled_yaw_sigma_deg * kDegToRad;
+  int reference = -1;
+  for (int k = std::max(earliest, start); k < n && reference < 0; ++k) {
+    if (!(first.filtered_yaw_sigma_rad[k] <= settled)) continue;
+    const double t0 = frames[k].stampSeconds();
+    bool holds = true;
+    int j = k;
+    for (; j < n && frames[j].stampSeconds() - t0 <= 30.0; ++j) {
+      if (!(first.filtered_yaw_sigma_rad[j] <= settled)) {
+        holds = false;
+        break;
+      }
+    }
+    if (!holds) {
+      k = j;  // no frame before j can hold either
+      continue;
+    }
+    for (int e : first.heading_event_frames) holds = holds && !(e > k && e < j);
+    if (holds) reference = k;
+  }
+  std::ostringstream note;
+  note << std::fixed << std::setprecision(1);
+  if (reference < 0) {
+    note << "no second pass: the heading never settled (causal yaw sigma <= "
+         << options.settled_yaw_sigma_deg << " deg for 30 s or to the end)";
+    first.run.heading_notes.insert(first.run.heading_notes.begin(), note.str());
+    return std::move(first.run);
+  }
+  // Back from the reference through the gyro: the step k-1 -> k is the sample at k's.
+  GivenStart given;
+  given.rotations.assign(static_cast<std::size_t>(start) + 1, Eigen::Matrix3d::Identity());
+  const Eigen::Vector3d bias = first.filtered[reference].gyro_bias;
+  Eigen::Matrix3d rotation = first.filtered[reference].rotation;
+  for (int k = reference; k > 0; --k) {
+    if (k <= start) given.rotations[k] = rotation;
+    const double dt = frames[k].stampSeconds() - frames[k - 1].stampSeconds();
+    const kitti::OxtsRecord& r = frames[k].record;
+    rotation = rotation * lie::expSO3(-(Eigen::Vector3d(r.wx, r.wy, r.wz) - bias) * dt);
+  }
+  given.rotations[0] = rotation;
+  const double span_s = frames[reference].stampSeconds() - frames[start].stampSeconds();
+  const double drift = first.gyro_bias_z_sigma_radps[reference] * span_s;
+  const double sigma = std::max(options.config.localizer.initial_yaw_sigma_deg * kDegToRad,
+                                std::hypot(first.filtered_yaw_sigma_rad[reference], drift));
+  given.covariance(2, 2) = sigma * sigma;
+  if (!first.started_without_attitude) {
+    // A stated start the carried-back heading agrees with was right: the monitor's events came
+    // later (e.g. a re-open over bad fixes); the first pass stands.
+    const double off_deg =
+        wrapDeg(headingDeg(given.rotations[start]) - headingDeg(first.filtered[start].rotation));
+    const double combined_deg = std::hypot(sigma, first.filtered_yaw_sigma_rad[start]) / kDegToRad;
+    if (std::abs(off_deg) <= 3.0 * combined_deg) {
+      note << "no second pass: the start's stated heading agrees with the settled one carried "
+              "back to it ("
+           << std::setprecision(2) << off_deg << " deg, sigma " << combined_deg << " deg)";
+      first.run.heading_notes.insert(first.run.heading_notes.begin(), note.str());
+      return std::move(first.run);
+    }
+  }
+  Pass second = runPass(frames, options, &given);
+  note << "second pass: the heading settled at t=" << frames[reference].stampSeconds() << " s "
+       << "(frame " << reference << ", yaw sigma " << std::setprecision(2)
+       << first.filtered_yaw_sigma_rad[reference] / kDegToRad << " deg), carried back "
+       << std::setprecision(1) << span_s << " s through the gyro to the start: yaw "
+       << headingDeg(given.rotations[start]) << " deg, sigma " << std::setprecision(2)
+       << sigma / kDegToRad << " deg (the first pass started at " << std::setprecision(1)
+       << headingDeg(first.filtered[start].rotation) << " deg)";
+  second.run.heading_notes.insert(second.run.heading_notes.begin(), note.str());
+  second.run.second_pass = true;
+  second.run.second_pass_reference_frame = reference;
+  second.run.second_pass_yaw_sigma_deg = sigma / kDegToRad;
+  return std::move(second.run);
+}
+
+namespace {
+
+Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& options,
+             const GivenStart* given) {
+  Pass pass;
   const kitti::OxtsRecord& origin = frames.front().record;
   LocalizationSessionConfig config = options.config;
   // The truth's map frame, so that the estimate compares with it directly.
@@ -81,7 +213,8 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
   const kitti::MercatorProjection& projection = *session.projection();
   std::vector<ForwardEpoch> epochs;  // one per reported frame from the start on (smoothing)
   kitti::GpsDegrader degrader(options.gps);
-  OxtsRunResult run;
+  OxtsRunResult& run = pass.run;
+  pass.filtered.reserve(frames.size());
   run.states.reserve(frames.size());
   run.pose_covariances.reserve(frames.size());
   run.truth.reserve(frames.size());
@@ -106,6 +239,10 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
       imu.orientation = kitti::rotationFromRollPitchYaw(
           record.roll, record.pitch, record.yaw + options.init_yaw_error_deg * kDegToRad);
     }
+    if (given && k < given->rotations.size() && !session.started()) {
+      imu.orientation = given->rotations[k];  // the second pass's start, stated with its sigma
+      imu.orientation_covariance = given->covariance;
+    }
     // Without a velocity in the frame there is none to wait for (the start does not wait).
     session.setGpsVelocityExpected(has_attitude);
     const bool started_before = session.started();
@@ -114,6 +251,8 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
       ScopedTimer timer("oxts_run.propagate");
       const LocalizationSession::Update update = session.addImu(imu);
       if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
+      if (update.heading_event) pass.heading_event_frames.push_back(static_cast<int>(k));
+      if (update.started) pass.started_without_attitude = !imu.orientation;
     }
     ForwardEpoch epoch;
     if (options.smooth && started_before && session.started() && !epochs.empty() &&
@@ -136,6 +275,8 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
       const bool was_started = session.started();
       const LocalizationSession::Update update = session.addFix(event);
       if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
+      if (update.heading_event) pass.heading_event_frames.push_back(static_cast<int>(k));
+      if (update.started) pass.started_without_attitude = !imu.orientation;
       if (was_started && (!update.correction || update.correction->accepted)) {
         OxtsRunResult::Fix fix;  // the session's conversion, for the loop closure's GPS factors
         fix.frame = static_cast<int>(k);
@@ -151,9 +292,16 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
       run.first_estimated_frame = static_cast<int>(k);
       run.states.assign(k, session.state());
       run.pose_covariances.assign(k, session.poseCovariance());
+      pass.filtered.assign(k, session.state());
+      pass.filtered_yaw_sigma_rad.assign(k, std::numeric_limits<double>::infinity());
+      pass.gyro_bias_z_sigma_radps.assign(k, std::numeric_limits<double>::infinity());
     }
     run.states.push_back(session.state());
     run.pose_covariances.push_back(session.poseCovariance());
+    pass.filtered.push_back(session.state());
+    pass.filtered_yaw_sigma_rad.push_back(yawSigmaOf(session.state(), session.poseCovariance()));
+    pass.gyro_bias_z_sigma_radps.push_back(
+        std::sqrt(std::max(0.0, session.errorCovariance()(11, 11))));
     if (options.smooth) {
       epoch.filtered = session.state();
       epoch.filtered_covariance = session.errorCovariance();
@@ -187,8 +335,10 @@ OxtsRunResult runLocalizerOnOxts(const std::vector<kitti::OxtsFrame>& frames,
     run.pose_covariances.assign(frames.size(), session.poseCovariance());
   }
   run.statistics = session.statistics();
-  return run;
+  return pass;
 }
+
+}  // namespace
 
 TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first, int last) {
   const int end = last < 0 ? static_cast<int>(run.states.size()) : last;

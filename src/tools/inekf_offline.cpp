@@ -38,8 +38,9 @@ constexpr char kUsage[] =
     "                     [--gps-every N] [--filter left|right|ekf] [--config FILE]\n"
     "                     [--init-yaw-sigma-deg DEG] [--init-yaw-error-deg DEG]\n"
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
-    "                     [--seed S] [--imu-gps-only] [--smooth] [--loop-closure [--scans DIR]\n"
-    "                     [--loop-config FILE] [--output-loops LOOPS.csv]]\n"
+    "                     [--seed S] [--imu-gps-only] [--smooth [--single-pass]]\n"
+    "                     [--loop-closure [--scans DIR] [--loop-config FILE]\n"
+    "                     [--output-loops LOOPS.csv]]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
     "  --output-kitti    one IMU pose per OXTS frame in the map frame, 12 numbers (row-major "
     "3x4);\n"
@@ -58,7 +59,12 @@ constexpr char kUsage[] =
     "                    attitude and velocity columns are all zero) and the heading monitor\n"
     "                    aligns it from the GPS track\n"
     "  --smooth          after the causal run, a Rauch-Tung-Striebel pass on the left-invariant\n"
-    "                    error (filter left): every --output-* holds the smoothed estimate\n"
+    "                    error (filter left): every --output-* holds the smoothed estimate.\n"
+    "                    A start without a known heading (--imu-gps-only, or a wrong one the\n"
+    "                    monitor replaced) is run twice: the heading where it settled is carried\n"
+    "                    back through the gyro to the start, and the second run starts there\n"
+    "  --single-pass     with --smooth: one run only (the frames before the alignment keep the\n"
+    "                    causal run's unknown heading)\n"
     "  --loop-closure    after --smooth: lidar loop closures (revisits by the smoothed estimate\n"
     "                    and its covariance, GICP of the two scans, robust loop factors on\n"
     "                    the smoothed run's own posterior over keyframes); every --output-*\n"
@@ -120,7 +126,8 @@ int main(int argc, char** argv) {
                                        "--output-states", "--filter", "--config",
                                        "--init-yaw-sigma-deg", "--init-yaw-error-deg", "--scans",
                                        "--loop-config", "--output-loops"}),
-        {"--smooth", "--loop-closure", "--imu-gps-only"}, ism::tools::kGpsRepeatableFlags);
+        {"--smooth", "--single-pass", "--loop-closure", "--imu-gps-only"},
+        ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
@@ -162,6 +169,10 @@ int main(int argc, char** argv) {
       ism::tools::readGpsDegradationFlags(cli, &options.gps);
       options.smooth = cli.has("--smooth");
       options.imu_gps_only = cli.has("--imu-gps-only");
+      options.second_pass = !cli.has("--single-pass");
+      if (cli.has("--single-pass") && !options.smooth) {
+        throw UsageError("--single-pass applies to --smooth");
+      }
       if (options.smooth &&
           options.config.localizer.filter_type != estimation::FilterType::kLeftInvariant) {
         throw UsageError("--smooth needs the left-invariant filter (--filter left)");

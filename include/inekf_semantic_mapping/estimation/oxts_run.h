@@ -36,6 +36,15 @@ struct OxtsRunOptions {
   // After the causal run, a Rauch-Tung-Striebel pass over it (estimation/smoother.h): states and
   // pose covariances become the smoothed ones. Needs the left-invariant filter.
   bool smooth = false;
+  // With smooth, when the run started without a usable heading (no attitude in the start frame,
+  // or a reference heading the monitor had to re-initialise): once the forward run's heading has
+  // settled (yaw sigma <= settled_yaw_sigma_deg for 30 s or to the end, no heading event), its
+  // orientation there is carried back to the start frame through the gyro (the bias estimated
+  // there) and the run is repeated from that start (yaw sigma: the settled sigma plus the bias's
+  // drift). The smoothed frames before the alignment then have the heading as well: an offline
+  // smoother knows the future. inekf_offline --single-pass turns it off.
+  bool second_pass = true;
+  double settled_yaw_sigma_deg = 2.0;
 };
 
 struct OxtsRunResult {
@@ -64,6 +73,12 @@ struct OxtsRunResult {
   // The session's notes of its heading alignments, recoveries and re-opens and of its resets,
   // once each, in order (inekf_offline prints them; inekf_node logs them).
   std::vector<std::string> heading_notes;
+  // The second pass (OxtsRunOptions::second_pass): whether it ran, the frame whose heading it
+  // carried back and the start's yaw sigma it used; the notes above are then the second pass's,
+  // after one line saying so (or why there was none).
+  bool second_pass = false;
+  int second_pass_reference_frame = -1;
+  double second_pass_yaw_sigma_deg = 0.0;
 };
 
 // The evaluation protocol's GPS (scripts/run_inekf_protocol.sh): the OXTS fix plus N(0, 1.5 m)
