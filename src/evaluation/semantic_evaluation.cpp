@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <stdexcept>
@@ -229,12 +230,23 @@ std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vecto
 }
 
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
-                                    int max_frames, const mapping::SemanticMappingConfig& config) {
+                                    int max_frames, const mapping::SemanticMappingConfig& config,
+                                    int label_every) {
+  if (label_every < 1) throw std::invalid_argument("scoreSequenceMaps: label_every must be >= 1");
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
   if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
   const std::vector<Eigen::Isometry3d> poses = kitti::readKittiPoses(sequence_dir + "/poses.txt");
   mapping::SemanticMappingSession camera_map(config);
   mapping::SemanticMappingSession human_map(config);
+  constexpr double kFramePeriod_s = 0.1;
+  std::map<std::size_t, Eigen::Isometry3d> streamed_poses;  // by frame index (label_every > 1)
+  camera_map.setPoseLookup(
+      [&](double stamp, const std::string&) -> std::optional<Eigen::Isometry3d> {
+        const auto it =
+            streamed_poses.find(static_cast<std::size_t>(std::lround(stamp / kFramePeriod_s)));
+        if (it == streamed_poses.end()) return std::nullopt;
+        return it->second;
+      });
   struct Kept {
     Eigen::Matrix3Xf points_in_view;
     std::vector<std::uint8_t> truth_in_view;
@@ -255,16 +267,32 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
         frame.scan.xyzi.data(), 4, static_cast<Eigen::Index>(frame.scan.size()));
     const Eigen::Matrix3Xf points = xyzi.topRows<3>();
 
-    const cv::Mat labels =
-        filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
-    const mapping::LabelImageView view{labels.ptr<std::uint8_t>(), labels.cols, labels.rows,
-                                       labels.step};
+    const int width = frame.image.cols, height = frame.image.rows;
     const mapping::CameraModel camera{projection.P_rect, projection.R_rect, projection.T_cam0_velo,
-                                      labels.cols, labels.rows};
-    camera_map.insertScan(points, T_w_velo, &view, &camera);
+                                      width, height};
+    if (label_every == 1) {
+      const cv::Mat labels =
+          filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
+      const mapping::LabelImageView view{labels.ptr<std::uint8_t>(), labels.cols, labels.rows,
+                                         labels.step};
+      camera_map.insertScan(points, T_w_velo, &view, &camera);
+    } else {
+      const double stamp = kFramePeriod_s * static_cast<double>(index);
+      streamed_poses[index] = T_w_velo;
+      camera_map.setCameraView(camera);
+      if (kept.size() % static_cast<std::size_t>(label_every) == 0) {
+        const cv::Mat labels =
+            filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
+        camera_map.addLabelImage(stamp,
+                                 mapping::LabelImageView{labels.ptr<std::uint8_t>(), labels.cols,
+                                                         labels.rows, labels.step},
+                                 camera);
+      }
+      camera_map.addScan(stamp, "velo", points);
+    }
 
     const PointProjector projector(projection.P_rect, projection.R_rect, projection.T_cam0_velo,
-                                   labels.cols, labels.rows);
+                                   width, height);
     ProjectedPoints projected;
     projector.project(points, &projected);
     Kept k;
@@ -281,6 +309,7 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
     human_map.insertScanWithPointLabels(k.points_in_view, T_w_velo, human, kIgnoredLabel);
     kept.push_back(std::move(k));
   }
+  if (label_every > 1) camera_map.flush();
   SequenceMapScores scores;
   // Lookups only from here on: each map held once (the tree), not beside its insertion grid.
   camera_map.treeReleasingGrid().updateInnerOccupancy();

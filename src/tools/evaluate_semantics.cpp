@@ -51,7 +51,7 @@ constexpr char kUsage[] =
     "         [--suppress-unlabeled 0|1] [--no-focal] [--min-confidence C]...\n"
     "         [--boundary-radius PX]...\n"
     "         [--occlusion off|CWxCH:RX:UP:DOWN:REL:ABS]... [--geometry off|F:R:S[:K[:V]]]...\n"
-    "         [--map-config YAML] [--no-map] [--curbs 0|1]\n"
+    "         [--map-config YAML] [--map-label-every N] [--no-map] [--curbs 0|1]\n"
     "  --sequence         SemanticKITTI sequence folder (velodyne/, labels/, image_2/, calib.txt)\n"
     "  --no-focal         do not give the segmenter the camera's focal length (P2)\n"
     "  --min-confidence, --boundary-radius, --occlusion: labelling variants (default: the\n"
@@ -66,6 +66,10 @@ constexpr char kUsage[] =
     "                     0 or 1); e.g. off, 0.3:0.2:0 or 0.2:0.2:0:5:1.\n"
     "                     Each such variant also prints the labels it rejected\n"
     "  --map-config       semantic mapping YAML (config/semantic_mapping.yaml keys) for the maps\n"
+    "  --map-label-every  segment only every N-th frame for the camera map, as a segmentation\n"
+    "                     slower than the lidar does (default 1: every frame); the scans then\n"
+    "                     stream through the node's pairing, and those without a label image\n"
+    "                     borrow a neighbour's (label_neighbour_s of --map-config)\n"
     "  --no-map           skip the maps: by default each sequence is also mapped (ground-truth\n"
     "                     poses, 0.2 m, the node's labelling path) from the camera labels and\n"
     "                     from the human labels (the ceiling), scored at the lidar points\n";
@@ -316,6 +320,7 @@ int main(int argc, char** argv) {
          "--suppress-unlabeled",
          "--bottom-margin",
          "--map-config",
+         "--map-label-every",
          "--curbs"},
         {"--no-focal", "--no-map"},
         {"--sequence", "--min-confidence", "--boundary-radius", "--occlusion", "--geometry"});
@@ -324,6 +329,8 @@ int main(int argc, char** argv) {
     if (sequences.empty()) throw UsageError("--sequence is required");
     const std::string model = cli.require("--model");
     const int max_frames = cli.getInt("--max-frames", 0);
+    const int map_label_every = cli.getInt("--map-label-every", 1);
+    if (map_label_every < 1) throw UsageError("--map-label-every must be >= 1");
     const bool use_focal = !cli.has("--no-focal");
     const perception::ModelCard card =
         applyOverrides(cli.has("--model-card") ? perception::loadModelCard(cli.get("--model-card"))
@@ -423,7 +430,7 @@ int main(int argc, char** argv) {
       if (!cli.has("--no-map")) {
         // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
         const evaluation::SequenceMapScores maps =
-            evaluation::scoreSequenceMaps(dir, &segmenter, max_frames, map_config);
+            evaluation::scoreSequenceMaps(dir, &segmenter, max_frames, map_config, map_label_every);
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);
         std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",

@@ -119,6 +119,10 @@ std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vecto
 // ceiling of the same map). Then every scored point in the camera's view takes the most likely
 // class of its voxel (none: a free or classless voxel, counted as not covered). `config` is the
 // mapping config of both maps (its defaults: the node's).
+// label_every > 1: only every label_every-th frame is segmented, as by a segmentation slower than
+// the lidar; the camera map's scans and label images then stream through the session's pairing
+// as the node's do (stamps 0.1 s per frame), so that a scan without its own label image borrows
+// a neighbour's (config.label_neighbour_s).
 struct SequenceMapScores {
   PointLabelScore camera;   // map built from the camera labels
   PointLabelScore ceiling;  // map built from the human labels
@@ -126,7 +130,8 @@ struct SequenceMapScores {
 };
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
                                     perception::Segmenter* segmenter, int max_frames = -1,
-                                    const mapping::SemanticMappingConfig& config = {});
+                                    const mapping::SemanticMappingConfig& config = {},
+                                    int label_every = 1);
 
 }  // namespace evaluation
 }  // namespace inekf_semantic_mapping
