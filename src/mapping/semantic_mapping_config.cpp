@@ -59,6 +59,8 @@ void SemanticMappingConfig::validate() const {
   require(label_stamp_tolerance_s >= 0 && label_stamp_tolerance_s <= 1.0, "label_stamp_tolerance_s",
           "must be in [0, 1] s");
   require(label_wait_s >= 0 && label_wait_s <= 30, "label_wait_s", "must be in [0, 30] s");
+  require(label_neighbour_s >= 0 && label_neighbour_s <= 1.0, "label_neighbour_s",
+          "must be in [0, 1] s");
   require(pose_wait_s >= 0 && pose_wait_s <= 30, "pose_wait_s", "must be in [0, 30] s");
 }
 
@@ -119,6 +121,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
   reader.read("label_geometry.curbs", &config.label_geometry_curbs);
   reader.read("label_stamp_tolerance_s", &config.label_stamp_tolerance_s);
   reader.read("label_wait_s", &config.label_wait_s);
+  reader.read("label_neighbour_s", &config.label_neighbour_s);
   reader.read("pose_wait_s", &config.pose_wait_s);
   for (const std::string& key : semanticMappingNodeKeys()) reader.allow(key);
   reader.rejectUnknown();

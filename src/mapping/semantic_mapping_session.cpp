@@ -238,6 +238,7 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
   if (pairing_.wentBack(stamp)) {  // a bag loop: what is pending goes in, the clock restarts
     flush();
     pairing_.restartClock();
+    recent_labels_.clear();
   }
   pairing_.addScan(PendingScan{stamp, frame, std::move(points_sensor), nullptr});
   return insertReadyScans(pairing_.now());
@@ -290,11 +291,14 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
 std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> labels) {
   ++statistics_.label_images_received;
   const std::optional<CameraModel> camera = labels->camera;
+  const std::shared_ptr<PendingLabels> shared = labels;  // the same pixels, for the neighbours
   const ScanLabelPairing::LabelsPlace place = pairing_.addLabels(
       std::move(labels),
       [this](PendingLabels& l, InsertedScan& scan) { return applyLateLabels(l, scan); });
   // The camera view of the scans without labels follows the label images of the present.
   if (camera && place != ScanLabelPairing::LabelsPlace::kUnmatched) last_camera_ = camera;
+  // Also one whose own scan is gone (or never came): its neighbours may still be in the window.
+  if (config_.label_neighbour_s > 0.0) lendToNeighbours(shared);
   return insertReadyScans(pairing_.now());
 }
 
@@ -357,7 +361,9 @@ void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen:
     ++statistics_.label_images_used;
   } else {
     insertScan(scan.points_sensor, pose);
-    pairing_.keepForLateLabels(InsertedScan{scan.stamp, last_scan_.points_map, pose});
+    InsertedScan inserted{scan.stamp, last_scan_.points_map, pose, scan.frame};
+    if (config_.label_neighbour_s > 0.0) borrowFromNeighbours(&inserted);
+    pairing_.keepForLateLabels(std::move(inserted));
   }
   if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_);
 }
@@ -386,6 +392,62 @@ bool SemanticMappingSession::applyLateLabels(PendingLabels& labels, InsertedScan
   ++statistics_.scans_with_labels;
   last_scan_ = std::move(labeled);
   if (inserted_callback_) inserted_callback_(labels.stamp, last_scan_);
+  return true;
+}
+
+void SemanticMappingSession::lendToNeighbours(const std::shared_ptr<PendingLabels>& labels) {
+  bool unusable = false;
+  if (!resolveCamera(*labels, &unusable)) return;
+  const double stamp = labels->stamp;
+  for (InsertedScan& scan : pairing_.scansWithoutLabels()) {
+    const double gap = std::abs(scan.stamp - stamp);
+    if (scan.has_neighbour_labels || gap <= config_.label_stamp_tolerance_s ||
+        gap > config_.label_neighbour_s) {
+      continue;
+    }
+    scan.has_neighbour_labels = applyNeighbourLabels(*labels, &scan);
+  }
+  recent_labels_.push_back(labels);
+  // Scans come in stamp order: older label images than one window behind this one, or more
+  // than a few, will lend to no scan still to come.
+  while (recent_labels_.size() > 4 ||
+         (!recent_labels_.empty() &&
+          recent_labels_.front()->stamp < stamp - 2.0 * config_.label_neighbour_s - 1.0)) {
+    recent_labels_.pop_front();
+  }
+}
+
+void SemanticMappingSession::borrowFromNeighbours(InsertedScan* scan) {
+  const PendingLabels* nearest = nullptr;
+  double nearest_gap = config_.label_neighbour_s;
+  for (const std::shared_ptr<PendingLabels>& labels : recent_labels_) {
+    const double gap = std::abs(labels->stamp - scan->stamp);
+    if (gap > config_.label_stamp_tolerance_s && gap <= nearest_gap) {
+      nearest = labels.get();
+      nearest_gap = gap;
+    }
+  }
+  if (nearest) scan->has_neighbour_labels = applyNeighbourLabels(*nearest, scan);
+}
+
+bool SemanticMappingSession::applyNeighbourLabels(const PendingLabels& labels, InsertedScan* scan) {
+  if (!labels.camera || !pose_lookup_ || scan->points_map.cols() == 0) return false;
+  const std::optional<Eigen::Isometry3d> pose = pose_lookup_(labels.stamp, scan->frame);
+  if (!pose) return false;
+  ScopedTimer timer("semantic_map/neighbour_labels");
+  const Eigen::Isometry3d T_sensor_map = pose->inverse();
+  const Eigen::Matrix3Xf points_sensor =
+      (T_sensor_map.linear().cast<float>() * scan->points_map).colwise() +
+      T_sensor_map.translation().cast<float>();
+  std::vector<std::uint8_t> in_image;
+  LabeledScan labeled;
+  labeled.label_ids = labelPointsFromCamera(points_sensor, labels.view, *labels.camera, &in_image);
+  labeled.points_map = scan->points_map;
+  labeled.unknown_label_id = kNoLabel;
+  statistics_.points_with_class +=
+      grid_ ? gridForInsertion().addClassEvidence(labeled, tree_->classSet())
+            : tree_->addClassEvidence(labeled);
+  ++statistics_.scans_with_neighbour_labels;
   return true;
 }
 
@@ -424,6 +486,7 @@ void SemanticMappingSession::reset() {
   grid_ = makeGrid();
   grid_released_ = false;
   pairing_.clear();
+  recent_labels_.clear();
   statistics_ = MappingStatistics();
   last_scan_ = LabeledScan();
 }

@@ -105,6 +105,7 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
   status->add("label images received", stats.label_images_received);
   status->add("label images used", stats.label_images_used);
   status->add("label images late", stats.label_images_late);
+  status->add("scans with a neighbour's labels", stats.scans_with_neighbour_labels);
   status->add("label images unmatched", stats.label_images_unmatched);
   status->add("label images without camera", stats.label_images_without_camera);
   status->add("scans with labels", stats.scans_with_labels);

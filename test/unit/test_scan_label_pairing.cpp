@@ -72,7 +72,7 @@ TEST(ScanLabelPairingTest, ALabelImageForAScanThatWentInAddsLateEvidenceOrWaitsI
   ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
   pairing.addScan(scanAt(0.0));
   pairing.insertReady(2.0, [](PendingScan&) { return true; });  // no segmentation yet: in at once
-  pairing.keepForLateLabels(InsertedScan{0.0, Eigen::Matrix3Xf(3, 0), {}});
+  pairing.keepForLateLabels(InsertedScan{0.0, Eigen::Matrix3Xf(3, 0), {}, "velo", false});
   bool camera_known = false;
   const auto late = [&](PendingLabels&, InsertedScan& scan) {
     EXPECT_DOUBLE_EQ(scan.stamp, 0.0);

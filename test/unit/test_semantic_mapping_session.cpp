@@ -46,6 +46,7 @@ SemanticMappingConfig testConfig(double label_wait_s = SemanticMappingConfig().l
   SemanticMappingConfig config;
   config.resolution_m = 0.1;
   config.label_wait_s = label_wait_s;
+  config.label_neighbour_s = 0.0;  // the pairing rules alone (NeighbouringScans... turns it on)
   return config;
 }
 
@@ -88,6 +89,7 @@ TEST(SemanticMappingConfigTest, TheShippedYamlHoldsTheDefaults) {
             defaults.label_geometry_high_terrain_is_vegetation);
   EXPECT_EQ(from_yaml.label_stamp_tolerance_s, defaults.label_stamp_tolerance_s);
   EXPECT_EQ(from_yaml.label_wait_s, defaults.label_wait_s);
+  EXPECT_EQ(from_yaml.label_neighbour_s, defaults.label_neighbour_s);
   EXPECT_EQ(from_yaml.pose_wait_s, defaults.pose_wait_s);
 }
 
@@ -365,6 +367,63 @@ TEST(SemanticMappingSessionTest, SlowSegmentationStillPairsEveryLabelImage) {
   EXPECT_EQ(session.statistics().label_images_used, next_label);
   EXPECT_EQ(session.statistics().scans_with_labels, next_label);
   EXPECT_EQ(session.statistics().label_images_unmatched, 0u);
+}
+
+// Segmentation slower than the lidar: a scan without a label image of its own borrows the one
+// within label_neighbour_s, its map points projected from the sensor's pose at the image's stamp.
+// The sensor moves sideways at 5 m/s, so the scan's own pose would put the road / building split
+// 0.4 m off: the voxels between show which pose was used. Both orders: the label image before
+// the scan goes in (borrowed), and after (lent).
+TEST(SemanticMappingSessionTest, NeighbouringScansBorrowALabelImageFromItsPose) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const auto sideways = [](double stamp, const std::string&) {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() << 5.0 * stamp, 0.0, 0.0;
+    return std::optional<Eigen::Isometry3d>(pose);
+  };
+  for (const bool label_first : {true, false}) {
+    for (const double window_s : {0.1, 0.0}) {
+      SemanticMappingConfig config = testConfig(/*label_wait_s=*/0.3);
+      config.label_neighbour_s = window_s;
+      SemanticMappingSession session(config);
+      session.setPoseLookup(sideways);
+      session.setCameraView(testCamera());
+      if (label_first) {
+        session.addLabelImage(0.0, view, testCamera());  // its own scan never comes
+        session.addScan(0.08, "velo", testScan());       // 0.08 s later: not its own
+        session.advanceTo(1.0);
+      } else {
+        session.addScan(0.08, "velo", testScan());
+        session.advanceTo(1.0);  // in without labels: no label image is coming
+        session.addLabelImage(0.0, view, testCamera());
+      }
+      SCOPED_TRACE(std::string(label_first ? "label image first" : "scan first") + ", window " +
+                   std::to_string(window_s));
+      EXPECT_EQ(session.statistics().scans_inserted, 1u);
+      EXPECT_EQ(session.statistics().scans_with_labels, 0u);
+      // The wall's points at map x = sensor x + 0.4; seen from x = 0 at the image's stamp.
+      if (window_s > 0.0) {
+        EXPECT_EQ(session.statistics().scans_with_neighbour_labels, 1u);
+        EXPECT_EQ(labelAt(session, -0.25, 0.55, 10.05), 7u);
+        EXPECT_EQ(labelAt(session, 0.25, 0.55, 10.05), 11u);  // road from the scan's own pose
+        EXPECT_EQ(labelAt(session, 0.35, 0.55, 10.05), 11u);
+      } else {
+        EXPECT_EQ(session.statistics().scans_with_neighbour_labels, 0u);
+        EXPECT_EQ(labelAt(session, 0.25, 0.55, 10.05), 999u);  // occupied, no class
+      }
+    }
+  }
+  // Farther than the window: nothing borrowed.
+  SemanticMappingConfig config = testConfig(0.3);
+  config.label_neighbour_s = 0.1;
+  SemanticMappingSession session(config);
+  session.setPoseLookup(sideways);
+  session.setCameraView(testCamera());
+  session.addLabelImage(0.0, view, testCamera());
+  session.addScan(0.15, "velo", testScan());
+  session.advanceTo(1.0);
+  EXPECT_EQ(session.statistics().scans_with_neighbour_labels, 0u);
 }
 
 // Label images later than label_wait: their scans went in without labels, and the labels still

@@ -57,6 +57,8 @@ struct InsertedScan {
   double stamp = 0.0;
   Eigen::Matrix3Xf points_map;  // the points as inserted (cut to the camera's view)
   Eigen::Isometry3d T_map_sensor = Eigen::Isometry3d::Identity();
+  std::string frame;                  // the scan's sensor frame (pose lookups)
+  bool has_neighbour_labels = false;  // a neighbouring label image's evidence was added
 };
 
 struct PairingOptions {
@@ -95,6 +97,8 @@ class ScanLabelPairing {
   std::size_t flush(const Insert& insert);
   // A scan that went in without labels (its label image may still come).
   void keepForLateLabels(InsertedScan scan);
+  // Those scans, oldest first, for the class evidence of a neighbouring label image.
+  std::deque<InsertedScan>& scansWithoutLabels() { return unlabelled_scans_; }
 
   // After a flush: the clocks start again and the late window empties (a new timeline).
   void restartClock();

@@ -70,6 +70,10 @@ struct SemanticMappingConfig {
   double label_stamp_tolerance_s = 0.05;
   // How long (data time, s) a scan waits for its label image before it goes in without one.
   double label_wait_s = 3.0;
+  // A scan that goes in without a label image of its own borrows the class evidence of one
+  // within this time (s) of it: its map points projected into that image from the sensor's pose
+  // at the image's stamp (exact for what does not move). 0: only a scan's own label image.
+  double label_neighbour_s = 0.1;
   // How long (data time, s) a scan waits for its pose before it is dropped.
   double pose_wait_s = 1.0;
 

@@ -44,6 +44,8 @@ struct MappingStatistics {
   std::size_t label_images_unmatched = 0;       // no scan within the tolerance while it was kept
   std::size_t label_images_without_camera = 0;  // their camera never became known or was
                                                 // unusable: their scans went in without classes
+  std::size_t scans_with_neighbour_labels = 0;  // without a label image of their own, the
+                                                // evidence of one within label_neighbour_s
   std::size_t points_inserted = 0;
   std::size_t points_with_class = 0;  // points that added class evidence
 };
@@ -175,6 +177,14 @@ class SemanticMappingSession {
   void insertPending(const PendingScan& scan, const Eigen::Isometry3d& pose);
   // Class evidence from a label image whose scan already went in; false if its camera is unknown.
   bool applyLateLabels(PendingLabels& labels, InsertedScan& scan);
+  // A label image with its camera lends its class evidence to the scans without one of their own
+  // within label_neighbour_s, and is kept a while for those still to come.
+  void lendToNeighbours(const std::shared_ptr<PendingLabels>& labels);
+  // A scan that just went in without labels borrows from the nearest kept label image.
+  void borrowFromNeighbours(InsertedScan* scan);
+  // Class evidence of `labels` for `scan`'s map points seen from the sensor's pose at the label
+  // image's stamp; false when that pose is unknown.
+  bool applyNeighbourLabels(const PendingLabels& labels, InsertedScan* scan);
   // Looks up the camera of `labels` if it is not known: false while it is not (or never will be:
   // `*unusable` set, the warning sent).
   bool resolveCamera(PendingLabels& labels, bool* unusable);
@@ -193,6 +203,8 @@ class SemanticMappingSession {
   InsertedCallback inserted_callback_;
   ScanLabelPairing pairing_;
   std::optional<CameraModel> last_camera_;
+  // The latest label images with a known camera, newest last (label_neighbour_s).
+  std::deque<std::shared_ptr<PendingLabels>> recent_labels_;
 };
 
 }  // namespace mapping
