@@ -371,21 +371,10 @@ void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen:
 bool SemanticMappingSession::applyLateLabels(PendingLabels& labels, InsertedScan& scan) {
   bool unusable = false;
   if (!resolveCamera(labels, &unusable)) return false;  // it waits, or ends unmatched
-  const CameraModel& camera = *labels.camera;
-  const Eigen::Isometry3d T_sensor_map = scan.T_map_sensor.inverse();
-  const Eigen::Matrix3Xf points_sensor =
-      (T_sensor_map.linear().cast<float>() * scan.points_map).colwise() +
-      T_sensor_map.translation().cast<float>();
-  std::vector<std::uint8_t> in_image;
   LabeledScan labeled;
-  labeled.label_ids = labelPointsFromCamera(points_sensor, labels.view, camera, &in_image);
-  labeled.points_map = std::move(scan.points_map);
-  labeled.unknown_label_id = kNoLabel;
   {
     ScopedTimer timer("semantic_map/late_labels");
-    statistics_.points_with_class +=
-        grid_ ? gridForInsertion().addClassEvidence(labeled, tree_->classSet())
-              : tree_->addClassEvidence(labeled);
+    labeled = addImageEvidence(labels, scan.T_map_sensor, std::move(scan.points_map));
   }
   ++statistics_.label_images_used;
   ++statistics_.label_images_late;
@@ -435,20 +424,27 @@ bool SemanticMappingSession::applyNeighbourLabels(const PendingLabels& labels, I
   const std::optional<Eigen::Isometry3d> pose = pose_lookup_(labels.stamp, scan->frame);
   if (!pose) return false;
   ScopedTimer timer("semantic_map/neighbour_labels");
-  const Eigen::Isometry3d T_sensor_map = pose->inverse();
+  addImageEvidence(labels, *pose, scan->points_map);
+  ++statistics_.scans_with_neighbour_labels;
+  return true;
+}
+
+LabeledScan SemanticMappingSession::addImageEvidence(const PendingLabels& labels,
+                                                     const Eigen::Isometry3d& T_map_sensor,
+                                                     Eigen::Matrix3Xf points_map) {
+  const Eigen::Isometry3d T_sensor_map = T_map_sensor.inverse();
   const Eigen::Matrix3Xf points_sensor =
-      (T_sensor_map.linear().cast<float>() * scan->points_map).colwise() +
+      (T_sensor_map.linear().cast<float>() * points_map).colwise() +
       T_sensor_map.translation().cast<float>();
   std::vector<std::uint8_t> in_image;
   LabeledScan labeled;
   labeled.label_ids = labelPointsFromCamera(points_sensor, labels.view, *labels.camera, &in_image);
-  labeled.points_map = scan->points_map;
+  labeled.points_map = std::move(points_map);
   labeled.unknown_label_id = kNoLabel;
   statistics_.points_with_class +=
       grid_ ? gridForInsertion().addClassEvidence(labeled, tree_->classSet())
             : tree_->addClassEvidence(labeled);
-  ++statistics_.scans_with_neighbour_labels;
-  return true;
+  return labeled;
 }
 
 // ---------------------------------------------------------------------------------------------

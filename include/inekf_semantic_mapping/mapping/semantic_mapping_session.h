@@ -185,6 +185,10 @@ class SemanticMappingSession {
   // Class evidence of `labels` for `scan`'s map points seen from the sensor's pose at the label
   // image's stamp; false when that pose is unknown.
   bool applyNeighbourLabels(const PendingLabels& labels, InsertedScan* scan);
+  // Class evidence (no occupancy update) of a label image with its camera at `points_map`, seen
+  // from the sensor at T_map_sensor (its pose at the image's stamp); returns the labelled points.
+  LabeledScan addImageEvidence(const PendingLabels& labels, const Eigen::Isometry3d& T_map_sensor,
+                               Eigen::Matrix3Xf points_map);
   // Looks up the camera of `labels` if it is not known: false while it is not (or never will be:
   // `*unusable` set, the warning sent).
   bool resolveCamera(PendingLabels& labels, bool* unusable);
