@@ -327,7 +327,8 @@ class TinyPipeline(unittest.TestCase):
         out = tempfile.mkdtemp(prefix="ism_adapt_")
         command = ["/usr/bin/python3", os.path.join(REPO_ROOT, "training", "adapt_segmentation.py"),
                    "--shared", shared, "--output", out, "--max-steps", "3", "--max-images", "2",
-                   "--input", "512x160", "--crop", "128x256", "--batch", "2",
+                   "--input", "512x160", "--export-input", "416x128", "--crop", "128x256",
+                   "--batch", "2",
                    "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2"]
         result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, timeout=600)
@@ -338,10 +339,18 @@ class TinyPipeline(unittest.TestCase):
         with open(os.path.join(out, "summary.json")) as f:
             summary = json.load(f)
         self.assertEqual(summary["steps"], 3)
+        # Trained at one size, exported at another: the card and the graph say the exported one.
+        self.assertEqual(summary["training_input"], [512, 160])
+        self.assertEqual(summary["input"], [416, 128])
+        import onnx_export
+        self.assertEqual(tuple(onnx_export.onnx_input_size(os.path.join(out, "kitti_adapted.onnx"))),
+                         (416, 128))
+        with open(os.path.join(out, "kitti_adapted.yaml")) as f:
+            self.assertIn("input: {width: 416, height: 128}", f.read())
         self.assertGreaterEqual(summary["onnx_parity"]["argmax_agreement"], 0.995)
 
         # The C++ Segmenter, with the card the script wrote, against PyTorch on a held-out image
-        # (labels at the image's own size, trainIds).
+        # at the exported size (labels at the image's own size, trainIds).
         import cv2
 
         import adapt_segmentation as adapt
@@ -358,7 +367,7 @@ class TinyPipeline(unittest.TestCase):
         model = base_networks.get("espnetv2_s2").build(None)
         state = torch.load(os.path.join(out, "best.pt"), map_location="cpu")
         model.load_state_dict(state)
-        prepared = preprocess.resize_to_input(preprocess.card_colors(image, 0.7, True), 512, 160)
+        prepared = preprocess.resize_to_input(preprocess.card_colors(image, 0.7, True), 416, 128)
         torch_labels = adapt.predict(model, torch, [prepared])[0]
         torch_labels = cv2.resize(torch_labels, (image.shape[1], image.shape[0]),
                                   interpolation=cv2.INTER_NEAREST)
