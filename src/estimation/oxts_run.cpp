@@ -87,12 +87,6 @@ struct Pass {
   bool started_without_attitude = false;
 };
 
-double yawSigmaOf(const NavState& state, const PoseCovariance& pose_covariance) {
-  const Eigen::Matrix3d world =
-      state.rotation * pose_covariance.bottomRightCorner<3, 3>() * state.rotation.transpose();
-  return std::sqrt(std::max(0.0, world(2, 2)));
-}
-
 Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& options,
              const GivenStart* given);
 
@@ -299,7 +293,7 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
     run.states.push_back(session.state());
     run.pose_covariances.push_back(session.poseCovariance());
     pass.filtered.push_back(session.state());
-    pass.filtered_yaw_sigma_rad.push_back(yawSigmaOf(session.state(), session.poseCovariance()));
+    pass.filtered_yaw_sigma_rad.push_back(session.yawSigma());
     pass.gyro_bias_z_sigma_radps.push_back(
         std::sqrt(std::max(0.0, session.errorCovariance()(11, 11))));
     if (options.smooth) {

@@ -143,6 +143,8 @@ class LocalizationSession {
   bool started() const { return localizer_.initialized(); }
   const NavState& state() const { return localizer_.state(); }
   PoseCovariance poseCovariance() const { return localizer_.filter().poseCovariance(); }
+  // 1-sigma yaw uncertainty about the map z axis (rad); infinite before the start.
+  double yawSigma() const { return localizer_.yawSigma(); }
   // The filter's full 15x15 covariance in its own error coordinates (smoothing records it).
   ErrorCovariance errorCovariance() const { return localizer_.filter().covariance(); }
   // The last IMU step's prediction, before that epoch's constraint update (for the smoother).
