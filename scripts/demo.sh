@@ -3,8 +3,9 @@
 #   scripts/demo.sh                                   # synthetic 30 s drive (fixed seed), generated here
 #   scripts/demo.sh KITTI_DRIVE_DIR --model MODEL     # a KITTI raw <date>_drive_<nnnn>_sync folder
 # MODEL is the segmentation network for the drive's camera images (ONNX, Torch7 .net, ...): for a
-# real drive the Cityscapes ENet (.../enet-cityscapes/enet-model.net), or `none` for a lidar-only
-# map. A real drive without --model is an error: the default U-Net (models/unet_synthetic.onnx)
+# real drive the network adapted to the KITTI camera (output/models/kitti/kitti_adapted.onnx from
+# scripts/adapt_segmentation.sh), the Cityscapes ENet (.../enet-cityscapes/enet-model.net), or
+# `none` for a lidar-only map. A real drive without --model is an error: the default U-Net (models/unet_synthetic.onnx)
 # was trained on the project's synthetic world only and labels real images wrongly, and a demo
 # that quietly maps with it would look like a broken pipeline.
 # Installs what is missing and builds (scripts/build.sh), converts the drive into a bag with
@@ -42,8 +43,11 @@ elif [[ -z $model ]]; then
   cat >&2 <<EOM
 [demo] ERROR: $drive is a real drive and no segmentation model was given.
 [demo] The default U-Net (models/unet_synthetic.onnx) knows only the synthetic world; on real
-[demo] images its labels are wrong. Pass the Cityscapes ENet (the e-lab ENet, Torch7
-[demo] enet-model.net, CC BY-NC 4.0: not part of this repository), e.g.
+[demo] images its labels are wrong. Pass the network adapted to the KITTI camera (made by
+[demo] scripts/adapt_segmentation.sh from the Cityscapes weights and KITTI labels you have), e.g.
+[demo]   scripts/demo.sh $drive --model output/models/kitti/kitti_adapted.onnx
+[demo] or the Cityscapes ENet (the e-lab ENet, Torch7 enet-model.net, CC BY-NC 4.0: not part
+[demo] of this repository), e.g.
 [demo]   scripts/demo.sh $drive --model /path/to/shared/models/enet-cityscapes/enet-model.net
 [demo] or map without labels (occupancy only):
 [demo]   scripts/demo.sh $drive --model none
