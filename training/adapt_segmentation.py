@@ -90,6 +90,9 @@ def parse_args(argv=None):
                    help="class weights (median frequency / frequency)^power, 0: none")
     p.add_argument("--sparse-sequences", default="01,02,03,09",
                    help="semantickitti_train sequences to train on")
+    p.add_argument("--sparse-parking", default="road", choices=["road", "ignore"],
+                   help="SemanticKITTI's parking points in the sparse training labels: road (as "
+                        "the evaluation scores them) or unlabelled (left to the distillation)")
     p.add_argument("--val-sequence", default="06", help="semantickitti_train sequence held out")
     p.add_argument("--dense-val-every", type=int, default=7,
                    help="every N-th dense frame is held out for validation")
@@ -439,7 +442,7 @@ def load_samples(args, shared, width, height, standardize, limit):
     dense = datasets.load_dense(os.path.join(shared, "data", "kitti_semantics", "training"),
                                 width, height, args.gamma, standardize, limit)
     sparse = datasets.load_sparse(sparse_root, sparse_train, width, height, args.gamma,
-                                  standardize, limit)
+                                  standardize, limit, args.sparse_parking == "road")
     sparse_val = datasets.load_sparse(sparse_root, val_sequence, width, height, args.gamma,
                                       standardize, limit) if val_sequence else []
     camvid = datasets.load_camvid(os.path.join(shared, "data", "camvid"), width, height,

@@ -105,10 +105,20 @@ def load_dense(root, width, height, gamma, standardize, limit=None):
     return samples
 
 
-def load_sparse(root, sequences, width, height, gamma, standardize, limit=None):
+# SemanticKITTI's "parking" (the evaluation scores it as road, as a Cityscapes network labels it).
+SEMANTICKITTI_PARKING = 44
+
+
+def load_sparse(root, sequences, width, height, gamma, standardize, limit=None,
+                parking_as_road=True):
     """semantickitti_train/sequences/NN: image_{2,3}/*.jpg with labels_{2,3}/*.png (16-bit
-    SemanticKITTI classes of the lidar points seen at that pixel, 0 where none)."""
+    SemanticKITTI classes of the lidar points seen at that pixel, 0 where none).
+    parking_as_road=False leaves the parking points unlabelled (Cityscapes' own labels never
+    trained its networks on parking: there they are void)."""
     lut = labels.semantickitti_to_train_id_lut()
+    if not parking_as_road:
+        lut = lut.copy()
+        lut[SEMANTICKITTI_PARKING] = labels.IGNORE
     samples = []
     for seq in sequences:
         if seq in EVALUATION_SEQUENCES:

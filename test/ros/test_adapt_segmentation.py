@@ -117,6 +117,33 @@ class PseudoLabels(unittest.TestCase):
                                      32, 32, 0.7, True)
 
 
+class SparseLidarLabels(unittest.TestCase):
+    """The projected SemanticKITTI lidar labels (semantickitti_train) as sparse training labels."""
+
+    def test_parking_is_road_or_left_unlabelled_as_asked(self):
+        import cv2
+
+        with tempfile.TemporaryDirectory() as tmp:
+            seq = os.path.join(tmp, "sequences", "01")
+            for sub in ("image_2", "labels_2"):
+                os.makedirs(os.path.join(seq, sub))
+            label = np.zeros((40, 80), np.uint16)  # 0: no lidar point
+            label[30, 10], label[35, 60], label[20, 40] = 44, 40, 48  # parking, road, sidewalk
+            cv2.imwrite(os.path.join(seq, "labels_2", "000000.png"), label)
+            cv2.imwrite(os.path.join(seq, "image_2", "000000.jpg"),
+                        np.full((40, 80, 3), 120, np.uint8))
+            road, sidewalk = labels.semantickitti_to_train_id_lut()[[40, 48]]
+            [as_road] = datasets.load_sparse(tmp, ["01"], 80, 40, 0.7, True)
+            [left_out] = datasets.load_sparse(tmp, ["01"], 80, 40, 0.7, True,
+                                              parking_as_road=False)
+            self.assertEqual(as_road.target[30, 10], road)
+            self.assertEqual(left_out.target[30, 10], labels.IGNORE)
+            for sample in (as_road, left_out):
+                self.assertEqual(sample.target[35, 60], road)
+                self.assertEqual(sample.target[20, 40], sidewalk)
+            self.assertEqual(int((left_out.target != labels.IGNORE).sum()), 2)
+
+
 class CamVidSubset(unittest.TestCase):
     def test_a_limited_subset_spans_the_list_without_repeats(self):
         frames = [f"{seq}_{i:03d}" for seq in ("0001TP", "0006R0", "0016E5", "Seq05VD")
