@@ -614,17 +614,19 @@ def main(argv=None):
     import onnx_export
 
     stem = os.path.join(args.output, "kitti_adapted")
+    resized_export = (export_width, export_height) != (width, height)
+    # The held-out frames prepared at the exported size, as the Segmenter will give them.
+    val_export = (load_samples(args, shared, export_width, export_height, standardize, limit)[1]
+                  if resized_export else val)
     onnx_export.export_onnx(model, stem + ".onnx", export_width, export_height)
-    parity = onnx_export.check_onnx_against_torch(model, stem + ".onnx", [s.image for s in val],
-                                                  export_width, export_height, args.threads)
+    parity = onnx_export.check_onnx_against_torch(model, stem + ".onnx",
+                                                  [s.image for s in val_export], export_width,
+                                                  export_height, args.threads)
     log(f"ONNX through OpenCV dnn against PyTorch on {len(val)} validation images: argmax "
         f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
     at_export_size = best
-    if (export_width, export_height) != (width, height):
-        # The held-out frames prepared at the exported size, as the Segmenter will give them.
-        _, val_export, _ = load_samples(args, shared, export_width, export_height, standardize,
-                                        limit)
+    if resized_export:
         at_export_size = dict(step=best["step"], **validate(model, torch, val_export))
         log(f"exported at {export_width}x{export_height} (trained at {width}x{height}): "
             "validation " + ", ".join(f"{k} {at_export_size[k]:.4f}" for k in
