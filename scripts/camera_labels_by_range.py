@@ -77,9 +77,9 @@ def main():
     if not frames:
         sys.exit(f"{seq}/image_2: no frames")
     n_bins = len(bins) - 1
-    right = np.zeros((len(args.model), n_bins))
     total = np.zeros(n_bins)
-    taken = [[{} for _ in range(n_bins)] for _ in args.model]
+    # Per model and range bin: how many of the class's points got each trainId (256: uint8).
+    counts = np.zeros((len(args.model), n_bins, 256), np.int64)
     with tempfile.TemporaryDirectory() as tmp:
         for frame in frames:
             image_path = os.path.join(seq, "image_2", frame + ".png")
@@ -107,11 +107,7 @@ def main():
                 segment(args.segment_image, model, image_path, out)
                 predicted = cv2.imread(out, cv2.IMREAD_GRAYSCALE)
                 at = predicted[v[keep].astype(int), u[keep].astype(int)]
-                for b in range(n_bins):
-                    here = at[inside & (which == b)]
-                    right[m, b] += np.sum(here == class_id)
-                    for label in here[here != class_id]:
-                        taken[m][b][label] = taken[m][b].get(label, 0) + 1
+                np.add.at(counts[m], (which[inside], at[inside]), 1)
     header = " | ".join(f"{bins[b]:g}-{bins[b + 1]:g} m ({int(total[b])} points)"
                         for b in range(n_bins))
     print(f"{args.class_name} in {seq}, share labelled {args.class_name} (most of the rest):\n")
@@ -120,10 +116,12 @@ def main():
     for m, model in enumerate(args.model):
         cells = []
         for b in range(n_bins):
-            share = right[m, b] / total[b] if total[b] else float("nan")
-            rest = max(taken[m][b].items(), key=lambda kv: kv[1], default=None)
-            cells.append(f"{share:.2f}" + (f" ({names[rest[0]] if rest[0] < len(names) else 'void'})"
-                                               if rest else ""))
+            share = counts[m, b, class_id] / total[b] if total[b] else float("nan")
+            others = counts[m, b].copy()
+            others[class_id] = 0
+            rest = int(others.argmax())
+            cells.append(f"{share:.2f}" + (f" ({names[rest] if rest < len(names) else 'void'})"
+                                           if others[rest] else ""))
         print(f"| {model} | " + " | ".join(cells) + " |")
 
 
