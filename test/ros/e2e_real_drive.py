@@ -111,7 +111,7 @@ class EndToEndRealDrive(unittest.TestCase):
         started = time.time()
         # --delay: the subscribers' connections are made after the bag advertises its topics; the
         # first fix (the filter's start) and the first scans would otherwise be lost.
-        e2e.play_bag(bag, rate=p("rate", 1.0), extra_args=["--delay=%g" % p("play_delay_s", 2.0)],
+        e2e.play_bag(bag, rate=p("rate", 1.0), extra_args=["--delay=%g" % p("play_delay_s", e2e.CONNECT_DELAY_S)],
                      timeout=10 * bag_duration + 60)
         play_wall_s = time.time() - started
 

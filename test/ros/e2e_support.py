@@ -156,10 +156,23 @@ def stop_process(process, log_file=None, timeout=20):
         log_file.close()
 
 
+# rosbag play waits 0.2 s after advertising its topics; the subscribers connect after that (one
+# XML-RPC round and one TCP connection each), and on a loaded machine the first message of every
+# topic was lost before the test's own monitor had connected. Two seconds covers that.
+CONNECT_DELAY_S = 2.0
+
+
+def _play_command(bag, rate, extra_args):
+    extra_args = list(extra_args)
+    if not any(a.startswith("--delay") or a == "-d" for a in extra_args):
+        extra_args.append("--delay=%g" % CONNECT_DELAY_S)
+    return ["rosbag", "play", "--clock", "--quiet", "--rate=%g" % rate] + extra_args + [bag]
+
+
 def play_bag(bag, rate=1.0, extra_args=(), timeout=300):
-    """Plays a bag with /clock and waits for the end."""
-    command = ["rosbag", "play", "--clock", "--quiet", "--rate=%g" % rate] + list(extra_args) + [bag]
-    subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, timeout=timeout, check=True)
+    """Plays a bag with /clock (after the connection delay) and waits for the end."""
+    subprocess.run(_play_command(bag, rate, extra_args), stdout=subprocess.DEVNULL,
+                   stderr=subprocess.STDOUT, timeout=timeout, check=True)
 
 
 class ClockAfterBag:
@@ -198,8 +211,9 @@ class ClockAfterBag:
 
 
 def start_bag(bag, rate=1.0, extra_args=()):
-    command = ["rosbag", "play", "--clock", "--quiet", "--rate=%g" % rate] + list(extra_args) + [bag]
-    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    """Starts playing a bag with /clock (after the connection delay); returns the process."""
+    return subprocess.Popen(_play_command(bag, rate, extra_args), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.STDOUT)
 
 
 def wait_for_subscribers(topics, timeout=30.0):

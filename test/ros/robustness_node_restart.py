@@ -66,7 +66,7 @@ class NodeRestart(unittest.TestCase):
             thread.start()
         player = e2e.start_bag(bag, rate=p("rate", 1.0))
         try:
-            time.sleep(p("kill_after_s", 5.0))
+            time.sleep(e2e.CONNECT_DELAY_S + p("kill_after_s", 5.0))  # seconds into the bag
             clouds_before = monitor.summary()["topics"]["/semantic_map/labeled_cloud"]["messages"]
             odometry_before = monitor.summary()["topics"]["/inekf/odometry"]["messages"]
             e2e.kill_node("/semantic_octomap_node")
