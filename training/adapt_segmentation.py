@@ -112,6 +112,11 @@ def parse_args(argv=None):
     p.add_argument("--init", default="",
                    help="start from these weights (a best.pt of an earlier round) instead of "
                         "the base network's; the base network still teaches")
+    p.add_argument("--interpolate", default="1",
+                   help="weight-space ensembling with the base network (WiSE-FT, Wortsman et al. "
+                        "2022): for each a of this comma list, the weights base + a * (adapted - "
+                        "base) are validated on the held-out frames at the export size and the "
+                        "best is exported (1: the adapted weights; 0: the base network's)")
     p.add_argument("--max-images", type=int, default=0,
                    help="use at most this many images of each source (0: all; CI uses a few)")
     p.add_argument("--val-interval", type=float, default=5.0, help="minutes between validations")
@@ -119,6 +124,48 @@ def parse_args(argv=None):
     p.add_argument("--no-standardize", action="store_true",
                    help="no per-image colour standardisation in the card")
     return p.parse_args(argv)
+
+
+def interpolation_factors(text):
+    """The --interpolate list as floats in [0, 1], in the order given."""
+    try:
+        factors = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise SystemExit(f"--interpolate {text}: not a comma-separated list of numbers")
+    if not factors or any(not 0.0 <= a <= 1.0 for a in factors):
+        raise SystemExit(f"--interpolate {text}: each factor must be in [0, 1]")
+    return factors
+
+
+def interpolate_weights(base_state, adapted_state, alpha):
+    """base + alpha (adapted - base) for every floating-point tensor (weights, biases, batch
+    normalisation statistics); integer buffers (the batch counters) are the adapted ones."""
+    out = {}
+    for key, adapted in adapted_state.items():
+        if key not in base_state or base_state[key].shape != adapted.shape:
+            raise ValueError(f"the base network has no tensor {key} of shape "
+                             f"{tuple(adapted.shape)}")
+        base = base_state[key]
+        out[key] = base + alpha * (adapted - base) if adapted.is_floating_point() else adapted
+    return out
+
+
+def choose_interpolation(model, torch, base_state, val, factors):
+    """Loads each interpolation of the model's (adapted) weights with the base network's, scores
+    it on the validation samples, logs it; leaves the model at the best (validation mIoU, the
+    first given on a tie) and returns (its factor, every factor's scores)."""
+    adapted = {k: v.clone() for k, v in model.state_dict().items()}
+    scored = []
+    for alpha in factors:
+        model.load_state_dict(interpolate_weights(base_state, adapted, alpha))
+        scores = dict(alpha=alpha, **validate(model, torch, val))
+        scored.append(scores)
+        log(f"interpolated at {alpha:g} towards the adapted weights: validation " + ", ".join(
+            f"{k} {scores[k]:.4f}" for k in ("dense_pixel_accuracy", "sparse_point_accuracy",
+                                             "miou")))
+    best = max(scored, key=lambda s: s["miou"])  # max keeps the first of equals
+    model.load_state_dict(interpolate_weights(base_state, adapted, best["alpha"]))
+    return best["alpha"], scored
 
 
 def seed_everything(seed, threads, torch):
@@ -378,6 +425,11 @@ def write_card(path, base, width, height, gamma, standardize, summary):
         "# tone curve and colour standardisation as in training.",
         f"# Distillation teacher: {summary['teacher']}"
         + (f" ({summary['teacher_init']})" if summary["teacher_init"] else "") + ".",
+    ]
+    if summary.get("interpolation"):
+        lines.append(f"# Weights: the base network's + {summary['interpolation']['chosen']:g} x "
+                     "(adapted - base), chosen on the held-out frames (--interpolate).")
+    lines += [
         f"name: kitti_adapted_{base.name}",
         f"input: {{width: {width}, height: {height}}}",
         "resize_policy: pad_to_multiple  # INTER_AREA to the input size (the training resize)",
@@ -477,6 +529,7 @@ def main(argv=None):
     if export_width % 32 or export_height % 32:
         raise SystemExit(f"--export-input {args.export_input}: width and height must be "
                          "multiples of 32")
+    interpolate_at = interpolation_factors(args.interpolate)
     os.makedirs(args.output, exist_ok=True)
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
@@ -618,6 +671,15 @@ def main(argv=None):
     # The held-out frames prepared at the exported size, as the Segmenter will give them.
     val_export = (load_samples(args, shared, export_width, export_height, standardize, limit)[1]
                   if resized_export else val)
+    interpolation = None
+    if interpolate_at != [1.0]:
+        base_state = base.build(os.path.join(shared, base.weights)).state_dict()
+        alpha, scored = choose_interpolation(model, torch, base_state, val_export,
+                                             interpolate_at)
+        interpolation = {"factors": scored, "chosen": alpha}
+        log(f"exporting base + {alpha:g} (adapted - base)")
+    # The weights in the ONNX graph (best.pt stays the adapted ones, to re-export from).
+    torch.save(model.state_dict(), os.path.join(args.output, "exported.pt"))
     onnx_export.export_onnx(model, stem + ".onnx", export_width, export_height)
     parity = onnx_export.check_onnx_against_torch(model, stem + ".onnx",
                                                   [s.image for s in val_export], export_width,
@@ -626,7 +688,7 @@ def main(argv=None):
         f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
     at_export_size = best
-    if resized_export:
+    if resized_export or interpolation is not None:
         at_export_size = dict(step=best["step"], **validate(model, torch, val_export))
         log(f"exported at {export_width}x{export_height} (trained at {width}x{height}): "
             "validation " + ", ".join(f"{k} {at_export_size[k]:.4f}" for k in
@@ -650,6 +712,7 @@ def main(argv=None):
         "best_validation": best,
         "validation_at_export_size": at_export_size,
         "onnx_parity": parity,
+        "interpolation": interpolation,
         "args": vars(args),
     }
     write_card(stem + ".yaml", base, export_width, export_height, args.gamma, standardize,

@@ -311,6 +311,71 @@ class Teacher(unittest.TestCase):
         self.assertIn("no such file", str(caught.exception))
 
 
+class WeightInterpolation(unittest.TestCase):
+    """Weight-space ensembling of the adapted network with its base (--interpolate)."""
+
+    def setUp(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+
+    def test_floats_move_by_the_factor_and_the_batch_counter_is_the_adapted_one(self):
+        import torch
+        import adapt_segmentation as adapt
+
+        base = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1), torch.nn.BatchNorm2d(4)).state_dict()
+        adapted = {k: (v + 4.0 if v.is_floating_point() else v + 7) for k, v in base.items()}
+        half = adapt.interpolate_weights(base, adapted, 0.25)
+        for key, value in base.items():
+            if value.is_floating_point():
+                self.assertTrue(torch.allclose(half[key], value + 1.0), key)
+            else:
+                self.assertTrue(torch.equal(half[key], adapted[key]), key)
+        for alpha, expect in ((0.0, base), (1.0, adapted)):
+            out = adapt.interpolate_weights(base, adapted, alpha)
+            for key in base:
+                if base[key].is_floating_point():
+                    self.assertTrue(torch.allclose(out[key], expect[key]), (alpha, key))
+        with self.assertRaisesRegex(ValueError, "1.weight"):
+            adapt.interpolate_weights({k: v for k, v in base.items() if k != "1.weight"},
+                                      adapted, 0.5)
+
+    def test_the_factors_are_checked_and_named_in_the_error(self):
+        import adapt_segmentation as adapt
+
+        self.assertEqual(adapt.interpolation_factors("0.5, 1"), [0.5, 1.0])
+        for bad in ("0.5,x", "1.5", "-0.1", ""):
+            with self.assertRaises(SystemExit) as caught:
+                adapt.interpolation_factors(bad)
+            self.assertIn("--interpolate", str(caught.exception))
+
+    def test_the_best_validated_factor_is_chosen_and_left_in_the_model(self):
+        import torch
+        import adapt_segmentation as adapt
+
+        model = torch.nn.Linear(1, 1, bias=False)
+        with torch.no_grad():
+            model.weight.fill_(1.0)  # adapted: 1, base: 0, so the weight is the factor
+        base = {"weight": torch.zeros(1, 1)}
+        real_validate = adapt.validate
+        # A validation that peaks at weight 0.3: of 0, 0.5 and 1 the best is 0.5.
+        adapt.validate = lambda m, t, v: {"dense_pixel_accuracy": 0.0, "sparse_point_accuracy": 0.0,
+                                          "miou": -(m.weight.item() - 0.3) ** 2}
+        try:
+            alpha, scored = adapt.choose_interpolation(model, torch, base, [], [0.0, 0.5, 1.0])
+            self.assertEqual(alpha, 0.5)
+            self.assertAlmostEqual(model.weight.item(), 0.5)
+            self.assertEqual([s["alpha"] for s in scored], [0.0, 0.5, 1.0])
+            # Equal scores: the first given wins (the list's order is the user's preference).
+            adapt.validate = lambda m, t, v: {"dense_pixel_accuracy": 0.0,
+                                              "sparse_point_accuracy": 0.0, "miou": 0.4}
+            model.weight.data.fill_(1.0)
+            alpha, _ = adapt.choose_interpolation(model, torch, base, [], [1.0, 0.5])
+            self.assertEqual(alpha, 1.0)
+            self.assertAlmostEqual(model.weight.item(), 1.0)
+        finally:
+            adapt.validate = real_validate
+
+
 class Preprocessing(unittest.TestCase):
     def test_standardization_reaches_the_target_statistics(self):
         # Two colours, half the pixels each: every channel maps to exactly mean -+ std, inside
@@ -355,7 +420,7 @@ class TinyPipeline(unittest.TestCase):
         command = ["/usr/bin/python3", os.path.join(REPO_ROOT, "training", "adapt_segmentation.py"),
                    "--shared", shared, "--output", out, "--max-steps", "3", "--max-images", "2",
                    "--input", "512x160", "--export-input", "416x128", "--crop", "128x256",
-                   "--batch", "2",
+                   "--batch", "2", "--interpolate", "0.5,1",
                    "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2"]
         result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, timeout=600)
@@ -375,6 +440,8 @@ class TinyPipeline(unittest.TestCase):
         with open(os.path.join(out, "kitti_adapted.yaml")) as f:
             self.assertIn("input: {width: 416, height: 128}", f.read())
         self.assertGreaterEqual(summary["onnx_parity"]["argmax_agreement"], 0.995)
+        self.assertEqual([f["alpha"] for f in summary["interpolation"]["factors"]], [0.5, 1.0])
+        self.assertIn(summary["interpolation"]["chosen"], (0.5, 1.0))
 
         # The C++ Segmenter, with the card the script wrote, against PyTorch on a held-out image
         # at the exported size (labels at the image's own size, trainIds).
@@ -392,7 +459,7 @@ class TinyPipeline(unittest.TestCase):
         cpp = cv2.imread(labels_path, cv2.IMREAD_GRAYSCALE)
         image = cv2.imread(image_path)
         model = base_networks.get("espnetv2_s2").build(None)
-        state = torch.load(os.path.join(out, "best.pt"), map_location="cpu")
+        state = torch.load(os.path.join(out, "exported.pt"), map_location="cpu")
         model.load_state_dict(state)
         prepared = preprocess.resize_to_input(preprocess.card_colors(image, 0.7, True), 416, 128)
         torch_labels = adapt.predict(model, torch, [prepared])[0]
