@@ -153,7 +153,7 @@ def interpolate_weights(base_state, adapted_state, alpha):
 def choose_interpolation(model, torch, base_state, val, factors):
     """Loads each interpolation of the model's (adapted) weights with the base network's, scores
     it on the validation samples, logs it; leaves the model at the best (validation mIoU, the
-    first given on a tie) and returns (its factor, every factor's scores)."""
+    first given on a tie) and returns (its scores with its factor, every factor's scores)."""
     adapted = {k: v.clone() for k, v in model.state_dict().items()}
     scored = []
     for alpha in factors:
@@ -165,7 +165,7 @@ def choose_interpolation(model, torch, base_state, val, factors):
                                              "miou")))
     best = max(scored, key=lambda s: s["miou"])  # max keeps the first of equals
     model.load_state_dict(interpolate_weights(base_state, adapted, best["alpha"]))
-    return best["alpha"], scored
+    return best, scored
 
 
 def seed_everything(seed, threads, torch):
@@ -671,13 +671,13 @@ def main(argv=None):
     # The held-out frames prepared at the exported size, as the Segmenter will give them.
     val_export = (load_samples(args, shared, export_width, export_height, standardize, limit)[1]
                   if resized_export else val)
-    interpolation = None
+    interpolation, chosen = None, None
     if interpolate_at != [1.0]:
         base_state = base.build(os.path.join(shared, base.weights)).state_dict()
-        alpha, scored = choose_interpolation(model, torch, base_state, val_export,
-                                             interpolate_at)
-        interpolation = {"factors": scored, "chosen": alpha}
-        log(f"exporting base + {alpha:g} (adapted - base)")
+        chosen, scored = choose_interpolation(model, torch, base_state, val_export,
+                                              interpolate_at)
+        interpolation = {"factors": scored, "chosen": chosen["alpha"]}
+        log(f"exporting base + {chosen['alpha']:g} (adapted - base)")
     # The weights in the ONNX graph (best.pt stays the adapted ones, to re-export from).
     torch.save(model.state_dict(), os.path.join(args.output, "exported.pt"))
     onnx_export.export_onnx(model, stem + ".onnx", export_width, export_height)
@@ -688,8 +688,12 @@ def main(argv=None):
         f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
     at_export_size = best
-    if resized_export or interpolation is not None:
+    if chosen is not None:  # scored on these frames already
+        at_export_size = dict(step=best["step"], **{k: v for k, v in chosen.items()
+                                                    if k != "alpha"})
+    elif resized_export:
         at_export_size = dict(step=best["step"], **validate(model, torch, val_export))
+    if resized_export or interpolation is not None:
         log(f"exported at {export_width}x{export_height} (trained at {width}x{height}): "
             "validation " + ", ".join(f"{k} {at_export_size[k]:.4f}" for k in
                                       ("dense_pixel_accuracy", "sparse_point_accuracy", "miou")))

@@ -109,10 +109,9 @@ class EndToEndRealDrive(unittest.TestCase):
         self.assertTrue(e2e.wait_for_subscribers(needed, timeout=p("start_timeout_s", 40)),
                         "the nodes did not subscribe to %s; launch log:\n%s" % (needed, launch_tail()))
         started = time.time()
-        # --delay: the subscribers' connections are made after the bag advertises its topics; the
-        # first fix (the filter's start) and the first scans would otherwise be lost.
-        e2e.play_bag(bag, rate=p("rate", 1.0), extra_args=["--delay=%g" % p("play_delay_s", e2e.CONNECT_DELAY_S)],
-                     timeout=10 * bag_duration + 60)
+        # play_bag waits for the subscribers' connections after advertising: the first fix (the
+        # filter's start) and the first scans would otherwise be lost.
+        e2e.play_bag(bag, rate=p("rate", 1.0), timeout=10 * bag_duration + 60)
         play_wall_s = time.time() - started
 
         def labels_published():

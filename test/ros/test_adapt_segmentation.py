@@ -361,16 +361,17 @@ class WeightInterpolation(unittest.TestCase):
         adapt.validate = lambda m, t, v: {"dense_pixel_accuracy": 0.0, "sparse_point_accuracy": 0.0,
                                           "miou": -(m.weight.item() - 0.3) ** 2}
         try:
-            alpha, scored = adapt.choose_interpolation(model, torch, base, [], [0.0, 0.5, 1.0])
-            self.assertEqual(alpha, 0.5)
+            chosen, scored = adapt.choose_interpolation(model, torch, base, [], [0.0, 0.5, 1.0])
+            self.assertEqual(chosen["alpha"], 0.5)
+            self.assertAlmostEqual(chosen["miou"], -0.04)
             self.assertAlmostEqual(model.weight.item(), 0.5)
             self.assertEqual([s["alpha"] for s in scored], [0.0, 0.5, 1.0])
             # Equal scores: the first given wins (the list's order is the user's preference).
             adapt.validate = lambda m, t, v: {"dense_pixel_accuracy": 0.0,
                                               "sparse_point_accuracy": 0.0, "miou": 0.4}
             model.weight.data.fill_(1.0)
-            alpha, _ = adapt.choose_interpolation(model, torch, base, [], [1.0, 0.5])
-            self.assertEqual(alpha, 1.0)
+            chosen, _ = adapt.choose_interpolation(model, torch, base, [], [1.0, 0.5])
+            self.assertEqual(chosen["alpha"], 1.0)
             self.assertAlmostEqual(model.weight.item(), 1.0)
         finally:
             adapt.validate = real_validate
