@@ -90,6 +90,9 @@ def parse_args(argv=None):
                    help="class weights (median frequency / frequency)^power, 0: none")
     p.add_argument("--sparse-sequences", default="01,02,03,09",
                    help="semantickitti_train sequences to train on")
+    p.add_argument("--sparse-weight", type=float, default=1.0,
+                   help="weight of the projected lidar labels' loss against the dense frames' "
+                        "(each image's mean; 0: those images teach by distillation only)")
     p.add_argument("--sparse-parking", default="road", choices=["road", "ignore"],
                    help="SemanticKITTI's parking points in the sparse training labels: road (as "
                         "the evaluation scores them) or unlabelled (left to the distillation)")
@@ -308,6 +311,15 @@ def soft_distillation_loss(logits, teacher, temperature, F):
     return ((kl * zone).flatten(1).sum(1) / zone.flatten(1).sum(1).clamp(min=1)).mean()
 
 
+def per_image_label_loss(ce, target, image_weights):
+    """The human-label loss: each image's mean cross-entropy over its labelled pixels (a sparse
+    image's few thousand labels weigh as much as a dense frame's), scaled by the image's weight,
+    averaged over the batch. ce and target are N x H x W, image_weights N."""
+    labelled = (target != labels.IGNORE).flatten(1)
+    ce_sum = (ce.flatten(1) * labelled).sum(1)
+    return (image_weights * ce_sum / labelled.sum(1).clamp(min=1)).mean()
+
+
 def class_weights(samples, power):
     freq = np.zeros(labels.NUM_CLASSES)
     for s in samples:
@@ -495,6 +507,8 @@ def load_samples(args, shared, width, height, standardize, limit):
                                 width, height, args.gamma, standardize, limit)
     sparse = datasets.load_sparse(sparse_root, sparse_train, width, height, args.gamma,
                                   standardize, limit, args.sparse_parking == "road")
+    for s in sparse:
+        s.label_weight = args.sparse_weight
     sparse_val = datasets.load_sparse(sparse_root, val_sequence, width, height, args.gamma,
                                       standardize, limit) if val_sequence else []
     camvid = datasets.load_camvid(os.path.join(shared, "data", "camvid"), width, height,
@@ -530,6 +544,8 @@ def main(argv=None):
         raise SystemExit(f"--export-input {args.export_input}: width and height must be "
                          "multiples of 32")
     interpolate_at = interpolation_factors(args.interpolate)
+    if not args.sparse_weight >= 0:
+        raise SystemExit(f"--sparse-weight {args.sparse_weight}: must be 0 or more")
     os.makedirs(args.output, exist_ok=True)
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
@@ -604,11 +620,12 @@ def main(argv=None):
             math.pi * min(progress, 1.0))))
         for group in optimizer.param_groups:
             group["lr"] = lr
-        images, targets, teachers = [], [], []
+        images, targets, teachers, label_weights = [], [], [], []
         for _ in range(args.batch):
             if not order:
                 order = epoch_order(factors, rng)
             s = train[order.pop()]
+            label_weights.append(s.label_weight)
             image, target, teacher = augment.random_crop(
                 s, lambda x: x.teacher.astype(np.float32) if soft else x.teacher, rng, crop_h,
                 crop_w)
@@ -616,6 +633,7 @@ def main(argv=None):
             targets.append(target)
             teachers.append(teacher)
         x = preprocess.to_tensor_rgb01(np.stack(images)).to(device)
+        image_weights = torch.tensor(label_weights, dtype=torch.float32)
         target = torch.from_numpy(np.stack(targets).astype(np.int64)).to(device)
         if soft:
             teacher = torch.from_numpy(np.stack(teachers).transpose(0, 3, 1, 2).copy()).to(device)
@@ -625,11 +643,9 @@ def main(argv=None):
         if args.bn_stats == "frozen":
             freeze_batchnorm_statistics(model, torch)
         logits = model(x)
-        # Per-image means: a sparse image's few thousand labels weigh as much as a dense one.
         ce = F.cross_entropy(logits, target, weight=weights, ignore_index=labels.IGNORE,
                              reduction="none")
-        n_label = (target != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
-        label_loss = (ce.flatten(1).sum(1) / n_label).mean()
+        label_loss = per_image_label_loss(ce, target, image_weights.to(device))
         if soft:
             distill_loss = soft_distillation_loss(logits, teacher, args.temperature, F)
         else:

@@ -28,6 +28,7 @@ class Sample:
     image: np.ndarray  # H x W x 3 uint8 BGR, the card's colours, at the network's input size
     target: np.ndarray  # H x W uint8 trainIds, 255 where no human label
     teacher: np.ndarray = field(default=None)  # H x W uint8 trainIds of the base network, 255 unsure
+    label_weight: float = 1.0  # this image's human-label loss is scaled by it (its source's weight)
 
 
 def _read_image(path):

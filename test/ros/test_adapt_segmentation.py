@@ -219,6 +219,38 @@ class Distillation(unittest.TestCase):
         self.assertFalse(torch.equal(model[1].running_mean, before))
 
 
+class LabelLoss(unittest.TestCase):
+    def test_each_image_weighs_its_weight_however_many_labels_it_has(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        import torch
+        import adapt_segmentation as adapt
+
+        ce = torch.zeros(2, 4, 5)
+        target = torch.full((2, 4, 5), labels.IGNORE, dtype=torch.int64)
+        target[0] = 0  # dense: 20 labels, loss 1 each
+        ce[0] = 1.0
+        target[1, 0, :2] = 0  # sparse: 2 labels, loss 3 each
+        ce[1, 0, :2] = 3.0
+        ce[1, 2:] = 50.0  # unlabelled pixels count for nothing
+        one = torch.ones(2)
+        self.assertAlmostEqual(adapt.per_image_label_loss(ce, target, one).item(), 2.0, places=6)
+        half = torch.tensor([1.0, 0.5])
+        self.assertAlmostEqual(adapt.per_image_label_loss(ce, target, half).item(), 1.25,
+                               places=6)
+        none = torch.tensor([1.0, 0.0])
+        self.assertAlmostEqual(adapt.per_image_label_loss(ce, target, none).item(), 0.5, places=6)
+        target[:] = labels.IGNORE  # no label at all: zero, not NaN
+        self.assertEqual(adapt.per_image_label_loss(ce, target, one).item(), 0.0)
+
+    def test_a_negative_sparse_weight_is_refused_naming_the_option(self):
+        import adapt_segmentation as adapt
+
+        with self.assertRaises(SystemExit) as e:
+            adapt.main(["--shared", "/nonexistent", "--sparse-weight", "-1"])
+        self.assertIn("--sparse-weight", str(e.exception))
+
+
 class RareClassSampling(unittest.TestCase):
     @staticmethod
     def sample(classes):
