@@ -314,7 +314,8 @@ def soft_distillation_loss(logits, teacher, temperature, F):
 def per_image_label_loss(ce, target, image_weights):
     """The human-label loss: each image's mean cross-entropy over its labelled pixels (a sparse
     image's few thousand labels weigh as much as a dense frame's), scaled by the image's weight,
-    averaged over the batch. ce and target are N x H x W, image_weights N."""
+    averaged over the batch. ce and target are N x H x W, image_weights N. The hard
+    distillation takes the same mean over the teacher's confident pixels."""
     labelled = (target != labels.IGNORE).flatten(1)
     ce_sum = (ce.flatten(1) * labelled).sum(1)
     return (image_weights * ce_sum / labelled.sum(1).clamp(min=1)).mean()
@@ -633,7 +634,7 @@ def main(argv=None):
             targets.append(target)
             teachers.append(teacher)
         x = preprocess.to_tensor_rgb01(np.stack(images)).to(device)
-        image_weights = torch.tensor(label_weights, dtype=torch.float32)
+        image_weights = torch.tensor(label_weights, dtype=torch.float32, device=device)
         target = torch.from_numpy(np.stack(targets).astype(np.int64)).to(device)
         if soft:
             teacher = torch.from_numpy(np.stack(teachers).transpose(0, 3, 1, 2).copy()).to(device)
@@ -645,13 +646,12 @@ def main(argv=None):
         logits = model(x)
         ce = F.cross_entropy(logits, target, weight=weights, ignore_index=labels.IGNORE,
                              reduction="none")
-        label_loss = per_image_label_loss(ce, target, image_weights.to(device))
+        label_loss = per_image_label_loss(ce, target, image_weights)
         if soft:
             distill_loss = soft_distillation_loss(logits, teacher, args.temperature, F)
         else:
             kd = F.cross_entropy(logits, teacher, ignore_index=labels.IGNORE, reduction="none")
-            n_teach = (teacher != labels.IGNORE).flatten(1).sum(1).clamp(min=1)
-            distill_loss = (kd.flatten(1).sum(1) / n_teach).mean()
+            distill_loss = per_image_label_loss(kd, teacher, torch.ones_like(image_weights))
         loss = label_loss + args.distill_weight * distill_loss
         if not torch.isfinite(loss):
             raise SystemExit(f"[adapt_segmentation] step {step}: loss is {loss.item()}")
