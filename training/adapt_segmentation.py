@@ -64,6 +64,9 @@ def parse_args(argv=None):
     p.add_argument("--crop", default="320x640", help="training crop HxW")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-4)
+    p.add_argument("--encoder-lr-scale", type=float, default=1.0,
+                   help="the base network's encoder learns at this times --lr (its decoder at "
+                        "--lr); 0 freezes the encoder: only the decoder adapts to the camera")
     p.add_argument("--bn-stats", default="frozen", choices=["frozen", "update"],
                    help="frozen: batch normalisation keeps the base network's statistics (the "
                         "affine terms still train); update: they follow the KITTI batches")
@@ -321,6 +324,27 @@ def per_image_label_loss(ce, target, image_weights):
     return (image_weights * ce_sum / labelled.sum(1).clamp(min=1)).mean()
 
 
+def parameter_groups(model, is_encoder, encoder_lr_scale):
+    """The optimizer's parameter groups: the decoder's parameters at the full learning rate and
+    the encoder's (is_encoder of the parameter's name) at encoder_lr_scale times it, each group
+    with its "lr_scale". At 0 the encoder is frozen instead (requires_grad off: the backward pass
+    then stops at the decoder, and AdamW's weight decay cannot move it either). encoder_lr_scale
+    is >= 0 (main checks the option)."""
+    encoder, decoder = [], []
+    for name, parameter in model.named_parameters():
+        (encoder if is_encoder(name) else decoder).append(parameter)
+    if not encoder or not decoder:
+        raise SystemExit(f"--encoder-lr-scale: the network's parameters do not split into an "
+                         f"encoder and a decoder ({len(encoder)} / {len(decoder)} tensors)")
+    groups = [{"params": decoder, "lr_scale": 1.0}]
+    if encoder_lr_scale > 0:
+        groups.append({"params": encoder, "lr_scale": encoder_lr_scale})
+    else:
+        for parameter in encoder:
+            parameter.requires_grad_(False)
+    return groups
+
+
 def class_weights(samples, power):
     freq = np.zeros(labels.NUM_CLASSES)
     for s in samples:
@@ -545,8 +569,10 @@ def main(argv=None):
         raise SystemExit(f"--export-input {args.export_input}: width and height must be "
                          "multiples of 32")
     interpolate_at = interpolation_factors(args.interpolate)
-    if not args.sparse_weight >= 0:
-        raise SystemExit(f"--sparse-weight {args.sparse_weight}: must be 0 or more")
+    for option, value in (("--sparse-weight", args.sparse_weight),
+                          ("--encoder-lr-scale", args.encoder_lr_scale)):
+        if not value >= 0:
+            raise SystemExit(f"{option} {value}: must be 0 or more")
     os.makedirs(args.output, exist_ok=True)
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
@@ -592,8 +618,11 @@ def main(argv=None):
     weights = torch.tensor(class_weights(train, args.class_weight_power), dtype=torch.float32,
                            device=device)
     model.to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr,
-                                  weight_decay=args.weight_decay)
+    groups = parameter_groups(model, base.is_encoder, args.encoder_lr_scale)
+    if args.encoder_lr_scale != 1.0:
+        log(f"the encoder learns at {args.encoder_lr_scale:g} x the learning rate"
+            + (" (frozen: only the decoder adapts)" if args.encoder_lr_scale == 0 else ""))
+    optimizer = torch.optim.AdamW(groups, lr=args.lr, weight_decay=args.weight_decay)
     rng = np.random.default_rng(args.seed)
     factors = repeat_factors(train, args.rare_repeat)
     if args.rare_repeat > 0:
@@ -620,7 +649,7 @@ def main(argv=None):
         lr = args.lr * min(1.0, (step + 1) / 20) * (0.05 + 0.95 * 0.5 * (1 + math.cos(
             math.pi * min(progress, 1.0))))
         for group in optimizer.param_groups:
-            group["lr"] = lr
+            group["lr"] = lr * group["lr_scale"]
         images, targets, teachers, label_weights = [], [], [], []
         for _ in range(args.batch):
             if not order:

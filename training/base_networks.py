@@ -11,6 +11,9 @@ class BaseNetwork:
     description: str
     weights: str  # relative to the shared folder
     build: Callable  # weights path -> torch.nn.Module
+    # Whether a parameter name of the built module is the encoder's (the feature extractor that
+    # runs at 1/2 to 1/8 or 1/16 scale), not the decoder's: --encoder-lr-scale acts on these.
+    is_encoder: Callable  # parameter name -> bool
 
 
 def _espnetv2(scale):
@@ -41,15 +44,25 @@ def _enet(path):
     return TrainIdOrder(enet.build_enet_from_torch7(path))
 
 
+def _espnetv2_encoder(name):
+    return name.startswith("net.base_net.")  # NormalizedSegmenter.net.base_net: the EESPNet
+
+
+def _enet_encoder(name):
+    # ENet's encoder: the initial block and stages 1-3 (4 and 5 upsample: the decoder).
+    return name.startswith(("net.initial.", "net.bottleneck1_", "net.bottleneck2_",
+                            "net.bottleneck3_"))
+
+
 _NETWORKS = {
     "espnetv2_s2": BaseNetwork("espnetv2_s2", "ESPNetv2 s=2.0 (Cityscapes, Mehta et al. 2019)",
                                "models/espnetv2-cityscapes/espnetv2_s_2.0_city_1024x512.pth",
-                               _espnetv2(2.0)),
+                               _espnetv2(2.0), _espnetv2_encoder),
     "espnetv2_s1": BaseNetwork("espnetv2_s1", "ESPNetv2 s=1.0 (Cityscapes, Mehta et al. 2019)",
                                "models/espnetv2-cityscapes/espnetv2_s_1.0_city_1024x512.pth",
-                               _espnetv2(1.0)),
+                               _espnetv2(1.0), _espnetv2_encoder),
     "enet": BaseNetwork("enet", "the e-lab ENet (Cityscapes, Paszke et al. 2016)",
-                        "models/enet-cityscapes/enet-model.net", _enet),
+                        "models/enet-cityscapes/enet-model.net", _enet, _enet_encoder),
 }
 
 

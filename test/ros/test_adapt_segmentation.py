@@ -18,6 +18,7 @@ import numpy as np
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
 sys.path.insert(0, os.path.join(REPO_ROOT, "training"))
 sys.path.insert(0, os.path.join(REPO_ROOT, "test", "ros"))
+import base_networks  # noqa: E402
 import datasets  # noqa: E402
 import labels  # noqa: E402
 import preprocess  # noqa: E402
@@ -407,6 +408,86 @@ class WeightInterpolation(unittest.TestCase):
             self.assertAlmostEqual(model.weight.item(), 1.0)
         finally:
             adapt.validate = real_validate
+
+
+class EncoderLearningRate(unittest.TestCase):
+    """--encoder-lr-scale: the encoder learns slower than the decoder, or not at all."""
+
+    def setUp(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+
+    def test_each_base_network_splits_into_its_encoder_and_decoder(self):
+        import enet
+        import espnetv2
+
+        espnet = espnetv2.build_normalized_espnetv2(1.0)
+        names = [n for n, _ in espnet.named_parameters()]
+        encoder = [n for n in names if base_networks.get("espnetv2_s1").is_encoder(n)]
+        # The whole EESPNet and nothing of the bottom-up decoder or its merges.
+        self.assertEqual(encoder, [n for n in names if ".base_net." in n])
+        self.assertTrue(any(n.startswith("net.bu_dec_l4.") for n in set(names) - set(encoder)))
+        self.assertEqual(base_networks.get("espnetv2_s2").is_encoder,
+                         base_networks.get("espnetv2_s1").is_encoder)
+
+        class Wrapped(torch.nn.Module):  # base_networks' TrainIdOrder wraps ENet as .net
+            def __init__(self):
+                super().__init__()
+                self.net = enet.build_enet()
+
+        names = [n for n, _ in Wrapped().named_parameters()]
+        encoder = [n for n in names if base_networks.get("enet").is_encoder(n)]
+        stages = ("net.initial.", "net.bottleneck1_", "net.bottleneck2_", "net.bottleneck3_")
+        self.assertEqual(encoder, [n for n in names if n.startswith(stages)])
+        self.assertIn("net.fullconv.weight", set(names) - set(encoder))
+        self.assertTrue(any(n.startswith("net.bottleneck4_0.") for n in names))
+        self.assertFalse(any(n.startswith("net.bottleneck4_") for n in encoder))
+
+    def toy(self):
+        torch.manual_seed(0)
+        model = torch.nn.Sequential()
+        model.add_module("enc", torch.nn.Linear(3, 3))
+        model.add_module("dec", torch.nn.Linear(3, 2))
+        return model
+
+    def step(self, model, scale):
+        import adapt_segmentation as adapt
+
+        groups = adapt.parameter_groups(model, lambda n: n.startswith("enc."), scale)
+        optimizer = torch.optim.AdamW(groups, lr=0.01, weight_decay=0.0)
+        for group in optimizer.param_groups:  # as the training loop sets it
+            group["lr"] = 0.01 * group["lr_scale"]
+        before = {n: p.detach().clone() for n, p in model.named_parameters()}
+        model(torch.randn(5, 3)).pow(2).sum().backward()
+        optimizer.step()
+        return {n: (p.detach() - before[n]).abs() for n, p in model.named_parameters()}
+
+    def test_the_encoder_moves_by_the_scale_and_not_at_all_when_frozen(self):
+        model = self.toy()
+        moved = self.step(model, 0.1)
+        # Adam's first step moves every parameter with a gradient by its learning rate.
+        self.assertTrue(torch.allclose(moved["dec.weight"], torch.full((2, 3), 0.01), atol=1e-6))
+        self.assertTrue(torch.allclose(moved["enc.weight"], torch.full((3, 3), 0.001), atol=1e-6))
+
+        model = self.toy()
+        moved = self.step(model, 0.0)
+        self.assertEqual(float(moved["enc.weight"].max()), 0.0)
+        self.assertEqual(float(moved["enc.bias"].max()), 0.0)
+        self.assertFalse(model.enc.weight.requires_grad)  # no backward through it at all
+        self.assertTrue(torch.allclose(moved["dec.bias"], torch.full((2,), 0.01), atol=1e-6))
+
+    def test_a_network_without_an_encoder_is_refused(self):
+        import adapt_segmentation as adapt
+
+        with self.assertRaisesRegex(SystemExit, "encoder-lr-scale.*0 / 4"):
+            adapt.parameter_groups(self.toy(), lambda n: False, 0.5)
+
+    def test_a_negative_scale_is_refused_naming_the_option(self):
+        import adapt_segmentation as adapt
+
+        with self.assertRaises(SystemExit) as e:
+            adapt.main(["--shared", "/nonexistent", "--encoder-lr-scale", "-0.5"])
+        self.assertIn("--encoder-lr-scale -0.5", str(e.exception))
 
 
 class Preprocessing(unittest.TestCase):
