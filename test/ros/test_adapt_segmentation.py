@@ -490,6 +490,36 @@ class EncoderLearningRate(unittest.TestCase):
         self.assertIn("--encoder-lr-scale -0.5", str(e.exception))
 
 
+class AdaptationTradePlot(unittest.TestCase):
+    """scripts/plot_adaptation_trade.py: the runs table read strictly, the figure written."""
+
+    def run_plot(self, text):
+        sys.path.insert(0, os.path.join(REPO_ROOT, "scripts"))
+        import plot_adaptation_trade as trade
+
+        tmp = tempfile.mkdtemp()
+        runs = os.path.join(tmp, "runs.csv")
+        with open(runs, "w") as f:
+            f.write(text)
+        output = os.path.join(tmp, "trade.png")
+        trade.main(["--runs", runs, "--output", output])
+        return runs, output
+
+    def test_the_table_becomes_a_figure(self):
+        _, output = self.run_plot("# a comment\nlabel,kind,raw_05,raw_08,section\n"
+                                  "base,base,0.74,0.78,x\nrun,adapted,0.88,0.73,y\n")
+        with open(output, "rb") as f:
+            self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
+
+    def test_a_bad_row_is_named_by_its_file_line(self):
+        header = "# comment\nlabel,kind,raw_05,raw_08,section\nok,base,0.7,0.7,x\n"
+        for row, what in (("bad,adapted,0.8x,0.7,y\n", r"runs\.csv:4: raw_05 and raw_08 must"),
+                          ("bad,teacher,0.8,0.7,y\n", r"runs\.csv:4: kind 'teacher'")):
+            with self.assertRaises(SystemExit) as caught:
+                self.run_plot(header + row)
+            self.assertRegex(str(caught.exception), what)
+
+
 class Preprocessing(unittest.TestCase):
     def test_standardization_reaches_the_target_statistics(self):
         # Two colours, half the pixels each: every channel maps to exactly mean -+ std, inside
