@@ -73,7 +73,7 @@ def plot(rows, output, target):
     ax.set_ylabel("raw camera accuracy at all points, SemanticKITTI 08")
     ax.set_title("Every network measured: what 05 gains, 08 loses")
     ax.grid(alpha=0.3)
-    ax.legend(loc="center left", fontsize=8)
+    ax.legend(loc="upper center", fontsize=8)
     fig.tight_layout()
     tmp = output + ".tmp.png"
     fig.savefig(tmp, dpi=110)
