@@ -10,8 +10,8 @@ Losses: cross-entropy on the human labels (each image weighs the same, sparse or
 distillation from the base network where no human label is (by default its whole class
 distribution, KL at a temperature, at every unlabelled pixel: between the lidar's beams and above
 them in the sparse images, the unlabelled pixels of the dense ones), so that the sky, building
-tops and the rare classes it knew are not forgotten. Batch normalisation learns the KITTI
-batches' statistics by default (--bn-stats frozen keeps the base network's).
+tops and the rare classes it knew are not forgotten. Batch normalisation keeps the base
+network's statistics by default (small KITTI batches would replace them).
 
 Training runs at the network's input scale (the images resized to input width x height, as the
 Segmenter does at run time), so inference needs no upscaling. Deterministic for a given seed and
@@ -67,10 +67,9 @@ def parse_args(argv=None):
     p.add_argument("--encoder-lr-scale", type=float, default=1.0,
                    help="the base network's encoder learns at this times --lr (its decoder at "
                         "--lr); 0 freezes the encoder: only the decoder adapts to the camera")
-    p.add_argument("--bn-stats", default="update", choices=["frozen", "update"],
-                   help="update: batch normalisation's statistics follow the KITTI batches "
-                        "during training (08's sidewalks kept: docs/segmentation_adaptation.md); "
-                        "frozen: they stay the base network's (the affine terms still train)")
+    p.add_argument("--bn-stats", default="frozen", choices=["frozen", "update"],
+                   help="frozen: batch normalisation keeps the base network's statistics (the "
+                        "affine terms still train); update: they follow the KITTI batches")
     p.add_argument("--weight-decay", type=float, default=1e-4)
     p.add_argument("--distill", default="soft", choices=["soft", "hard"],
                    help="soft: the base network's whole class distribution (KL at --temperature) "
