@@ -6,7 +6,8 @@
 // committed default U-Net; the network adapted to the KITTI camera (scripts/adapt_segmentation.sh:
 // $ISM_ADAPTED_MODEL, else output/models/kitti/kitti_adapted.onnx, else
 // ../shared/models/kitti-adapted/kitti_adapted.onnx; skipped when there is none) with its card.
-// Compare BM_KittiAdaptedKittiFrame with BM_EnetCityscapesKittiFrame: the ratio of their times.
+// Compare BM_KittiAdaptedKittiFrame with BM_EnetCityscapesKittiFrame: the ratio of their times
+// (BM_KittiAdaptedKittiFrameFlipAveraged: the same network averaged with its mirror image).
 // filterLabels: the confidence / boundary filter at its defaults.
 // Threads: 2 (the machine).
 //
@@ -119,6 +120,18 @@ void BM_KittiAdaptedKittiFrame(benchmark::State& state) {
   runSegmenter(state, model, perception::defaultModelCardFor(model));
 }
 
+// The same with its mirror image averaged (flip_average): the price of the option.
+void BM_KittiAdaptedKittiFrameFlipAveraged(benchmark::State& state) {
+  const std::string model = adaptedModelPath();
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError(("no adapted model (scripts/adapt_segmentation.sh): " + model).c_str());
+    return;
+  }
+  perception::ModelCard card = perception::defaultModelCardFor(model);
+  card.flip_average = true;
+  runSegmenter(state, model, card);
+}
+
 void BM_FilterLabelsKittiFrame(benchmark::State& state) {
   perception::Segmentation segmentation;
   segmentation.label_ids.create(375, 1242, CV_8UC1);
@@ -154,6 +167,10 @@ BENCHMARK(BM_EnetCityscapesKittiFrameStretched)
     ->UseRealTime();
 BENCHMARK(BM_UnetSyntheticKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_KittiAdaptedKittiFrame)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_KittiAdaptedKittiFrameFlipAveraged)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_FilterLabelsKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OverlayKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

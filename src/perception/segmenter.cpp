@@ -68,6 +68,43 @@ std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
   return weights;
 }
 
+// Softmax over the channels of a 1 x C x h x w score blob, as a C x (h w) matrix.
+cv::Mat channelSoftmax(const cv::Mat& scores) {
+  const int channels = scores.size[1];
+  const int pixels = scores.size[2] * scores.size[3];
+  const cv::Mat flat(channels, pixels, CV_32F, const_cast<float*>(scores.ptr<float>()));
+  cv::Mat column_max, column_sum, probabilities(channels, pixels, CV_32F);
+  cv::reduce(flat, column_max, 0, cv::REDUCE_MAX);
+  for (int c = 0; c < channels; ++c) cv::subtract(flat.row(c), column_max, probabilities.row(c));
+  cv::exp(probabilities, probabilities);
+  cv::reduce(probabilities, column_sum, 0, cv::REDUCE_SUM);
+  for (int c = 0; c < channels; ++c)
+    cv::divide(probabilities.row(c), column_sum, probabilities.row(c));
+  return probabilities;
+}
+
+// The mean of the probabilities of an image (`scores`) and of its mirror image
+// (`mirrored_scores`, mirrored back here), as log-probabilities in the 1 x C x h x w layout:
+// their argmax is the mean's, and the softmax of their winner is the winner's mean probability,
+// so the single-pass argmax and confidence read them like the network's own scores.
+cv::Mat meanWithMirrorAsScores(const cv::Mat& scores, const cv::Mat& mirrored_scores) {
+  const int channels = scores.size[1];
+  const int height = scores.size[2];
+  const int width = scores.size[3];
+  cv::Mat mean = channelSoftmax(scores);
+  const cv::Mat mirrored = channelSoftmax(mirrored_scores);
+  cv::Mat unmirrored;
+  for (int c = 0; c < channels; ++c) {
+    cv::flip(mirrored.row(c).reshape(1, height), unmirrored, 1);
+    cv::Mat plane = mean.row(c).reshape(1, height);
+    cv::addWeighted(plane, 0.5, unmirrored, 0.5, 0.0, plane);
+  }
+  cv::max(mean, 1e-30, mean);  // an underflowed probability: a finite log
+  cv::log(mean, mean);
+  const int sizes[] = {1, channels, height, width};
+  return mean.reshape(1, 4, sizes);
+}
+
 // Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
 // over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
 // channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
@@ -342,6 +379,17 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
   {
     ScopedTimer timer("segmentation/forward");
     output = forward(prepared.network_image);
+  }
+  if (card_.flip_average) {
+    output = output.clone();  // the next forward pass reuses the network's output buffer
+    cv::Mat mirrored_input, mirrored_output;
+    cv::flip(prepared.network_image, mirrored_input, 1);
+    {
+      ScopedTimer timer("segmentation/forward");
+      mirrored_output = forward(mirrored_input);
+    }
+    ScopedTimer timer("segmentation/softmax");
+    output = meanWithMirrorAsScores(output, mirrored_output);
   }
   const int channels = output.size[1];
   const int height = output.size[2];

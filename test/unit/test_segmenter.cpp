@@ -7,6 +7,7 @@
 #include <fstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
@@ -46,6 +47,39 @@ TEST(SegmenterUnet, CommittedModelSegmentsWideKittiSizedImagesAtInputResolution)
       EXPECT_EQ(cv::countNonZero(result.label_ids == id), 0) << "labelId " << id;
     }
   }
+}
+
+// A mirrored image's labels with flip_average are the mirror of the image's: both average the
+// same two passes. The network alone is not mirror-symmetric, so a card whose flip_average did
+// nothing on the single-pass path fails here.
+TEST(SegmenterUnet, FlipAverageMakesTheSinglePassMirrorSymmetric) {
+  const std::string model = repoPath("models/unet_synthetic.onnx");
+  if (!fs::exists(model)) GTEST_SKIP() << "models/unet_synthetic.onnx not committed yet";
+  ModelCard card = defaultModelCardFor(model);
+  ASSERT_EQ(card.resize_policy, ResizePolicy::kPadToMultiple);
+  card.resize_factor = 1.0;  // a 320 x 96 image is the network's input as it is: no padding
+  cv::Mat image(96, 320, CV_8UC3);
+  cv::randu(image, cv::Scalar::all(0), cv::Scalar::all(255));
+  cv::GaussianBlur(image, image, cv::Size(9, 9), 3.0);  // regions the network labels apart
+  cv::Mat mirrored_image;
+  cv::flip(image, mirrored_image, 1);
+  const auto asymmetric_pixels = [&](Segmenter& segmenter) {
+    const Segmentation direct = segmenter.segment(image);
+    const Segmentation mirrored = segmenter.segment(mirrored_image);
+    cv::Mat mirrored_back;
+    cv::flip(mirrored.label_ids, mirrored_back, 1);
+    return cv::countNonZero(direct.label_ids != mirrored_back);
+  };
+  Segmenter single(model, card);
+  ASSERT_GT(asymmetric_pixels(single), 0) << "the network is mirror-symmetric on this image";
+  card.flip_average = true;
+  Segmenter averaged(model, card);
+  EXPECT_EQ(asymmetric_pixels(averaged), 0);
+  const Segmentation result = averaged.segment(image);
+  double min_confidence = 0.0, max_confidence = 0.0;
+  cv::minMaxLoc(result.confidence, &min_confidence, &max_confidence);
+  EXPECT_GT(min_confidence, 0.0);  // the winner's mean probability: in (0, 1]
+  EXPECT_LE(max_confidence, 1.0 + 1e-6);
 }
 
 TEST(ModelCard, ParsesEveryField) {

@@ -80,7 +80,8 @@ struct ModelCard {
   // convolutional network takes such widths, and one wide pass costs less than overlapping
   // tiles.
   int tile_max_width = 0;
-  // Average the probabilities with those of the horizontally mirrored image (kTiles only).
+  // Average the probabilities with those of the horizontally mirrored image (every policy):
+  // twice the network's time.
   bool flip_average = false;
   // true: channels mapped to labelId 0 ("unlabeled") never win the argmax; their probability
   // still counts in the softmax, so where the network saw void the chosen class has a low
