@@ -68,43 +68,6 @@ std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
   return weights;
 }
 
-// Softmax over the channels of a 1 x C x h x w score blob, as a C x (h w) matrix.
-cv::Mat channelSoftmax(const cv::Mat& scores) {
-  const int channels = scores.size[1];
-  const int pixels = scores.size[2] * scores.size[3];
-  const cv::Mat flat(channels, pixels, CV_32F, const_cast<float*>(scores.ptr<float>()));
-  cv::Mat column_max, column_sum, probabilities(channels, pixels, CV_32F);
-  cv::reduce(flat, column_max, 0, cv::REDUCE_MAX);
-  for (int c = 0; c < channels; ++c) cv::subtract(flat.row(c), column_max, probabilities.row(c));
-  cv::exp(probabilities, probabilities);
-  cv::reduce(probabilities, column_sum, 0, cv::REDUCE_SUM);
-  for (int c = 0; c < channels; ++c)
-    cv::divide(probabilities.row(c), column_sum, probabilities.row(c));
-  return probabilities;
-}
-
-// The mean of the probabilities of an image (`scores`) and of its mirror image
-// (`mirrored_scores`, mirrored back here), as log-probabilities in the 1 x C x h x w layout:
-// their argmax is the mean's, and the softmax of their winner is the winner's mean probability,
-// so the single-pass argmax and confidence read them like the network's own scores.
-cv::Mat meanWithMirrorAsScores(const cv::Mat& scores, const cv::Mat& mirrored_scores) {
-  const int channels = scores.size[1];
-  const int height = scores.size[2];
-  const int width = scores.size[3];
-  cv::Mat mean = channelSoftmax(scores);
-  const cv::Mat mirrored = channelSoftmax(mirrored_scores);
-  cv::Mat unmirrored;
-  for (int c = 0; c < channels; ++c) {
-    cv::flip(mirrored.row(c).reshape(1, height), unmirrored, 1);
-    cv::Mat plane = mean.row(c).reshape(1, height);
-    cv::addWeighted(plane, 0.5, unmirrored, 0.5, 0.0, plane);
-  }
-  cv::max(mean, 1e-30, mean);  // an underflowed probability: a finite log
-  cv::log(mean, mean);
-  const int sizes[] = {1, channels, height, width};
-  return mean.reshape(1, 4, sizes);
-}
-
 // Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
 // over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
 // channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
@@ -324,18 +287,47 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
     }
   }
 
+  return labelsFromProbabilitySums(sum, weight, valid, bgr.size());
+}
+
+Segmentation Segmenter::segmentMirrorAveraged(const cv::Mat& network_image, const cv::Rect& valid,
+                                              const cv::Size& image_size) {
+  const int channels = card_.numOutputChannels();
+  const cv::Rect whole(cv::Point(0, 0), network_image.size());
+  std::vector<cv::Mat> sum(channels);
+  for (cv::Mat& plane : sum) plane = cv::Mat::zeros(network_image.size(), CV_32F);
+  const std::vector<float> column_weight(network_image.cols, 1.f);
+  const std::vector<float> row_weight(network_image.rows, 1.f);
+  cv::Mat mirrored;
+  cv::flip(network_image, mirrored, 1);
+  for (const bool is_mirrored : {false, true}) {
+    cv::Mat scores;
+    {
+      ScopedTimer timer("segmentation/forward");
+      scores = forward(is_mirrored ? mirrored : network_image);
+    }
+    ScopedTimer timer("segmentation/softmax");
+    addSoftmax(scores, is_mirrored, whole, column_weight, row_weight, &sum);
+  }
+  const cv::Mat weight(network_image.size(), CV_32F, cv::Scalar(2.0));
+  return labelsFromProbabilitySums(sum, weight, valid, image_size);
+}
+
+Segmentation Segmenter::labelsFromProbabilitySums(const std::vector<cv::Mat>& sum,
+                                                  const cv::Mat& weight, const cv::Rect& valid,
+                                                  const cv::Size& image_size) const {
   Segmentation result;
   ScopedTimer timer("segmentation/argmax");
   // Argmax of the summed probabilities (the same as of their mean: every channel of a pixel has
-  // the same weight) at the scaled image's resolution, then labels and confidence back to the
+  // the same weight) at the network's resolution, then labels and confidence back to the
   // image's size: two resizes instead of one per channel.
   const cv::Size scaled = valid.size();
   cv::Mat best_sum(scaled, CV_32F, cv::Scalar(-1.0));
   cv::Mat best_index(scaled, CV_8U, cv::Scalar(0));
-  for (int c = 0; c < channels; ++c) {
+  for (int c = 0; c < static_cast<int>(sum.size()); ++c) {
     if (skipsInArgmax(c)) continue;
     for (int row = 0; row < scaled.height; ++row) {
-      const float* channel_sum = sum[c].ptr<float>(row);
+      const float* channel_sum = sum[c].ptr<float>(valid.y + row) + valid.x;
       float* best = best_sum.ptr<float>(row);
       std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
       for (int col = 0; col < scaled.width; ++col) {
@@ -350,9 +342,9 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
   cv::divide(best_sum, weight(valid), confidence);
   cv::Mat label_ids;
   cv::LUT(best_index, network_->label_lut, label_ids);
-  if (scaled != bgr.size()) {
-    cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST);
-    cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_LINEAR);
+  if (scaled != image_size) {
+    cv::resize(label_ids, result.label_ids, image_size, 0, 0, cv::INTER_NEAREST);
+    cv::resize(confidence, result.confidence, image_size, 0, 0, cv::INTER_LINEAR);
   } else {
     result.label_ids = label_ids;
     result.confidence = confidence;
@@ -376,20 +368,12 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
     ScopedTimer timer("segmentation/preprocess");
     prepared = prepareInput(bgr, card_);
   }
+  if (card_.flip_average) {
+    return segmentMirrorAveraged(prepared.network_image, prepared.valid_region, bgr.size());
+  }
   {
     ScopedTimer timer("segmentation/forward");
     output = forward(prepared.network_image);
-  }
-  if (card_.flip_average) {
-    output = output.clone();  // the next forward pass reuses the network's output buffer
-    cv::Mat mirrored_input, mirrored_output;
-    cv::flip(prepared.network_image, mirrored_input, 1);
-    {
-      ScopedTimer timer("segmentation/forward");
-      mirrored_output = forward(mirrored_input);
-    }
-    ScopedTimer timer("segmentation/softmax");
-    output = meanWithMirrorAsScores(output, mirrored_output);
   }
   const int channels = output.size[1];
   const int height = output.size[2];

@@ -6,6 +6,7 @@
 #include <opencv2/core/mat.hpp>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/perception/model_card.h"
 
@@ -47,6 +48,14 @@ class Segmenter {
  private:
   struct Network;
   Segmentation segmentTiles(const cv::Mat& bgr, double camera_focal_px);
+  // One network input and its mirror image, their probabilities averaged (flip_average on the
+  // single-pass policies); valid: the image's region of network_image.
+  Segmentation segmentMirrorAveraged(const cv::Mat& network_image, const cv::Rect& valid,
+                                     const cv::Size& image_size);
+  // Argmax and mean winning probability of per-channel probability sums over `weight`, in
+  // `valid`, back to image_size.
+  Segmentation labelsFromProbabilitySums(const std::vector<cv::Mat>& sum, const cv::Mat& weight,
+                                         const cv::Rect& valid, const cv::Size& image_size) const;
   cv::Mat forward(const cv::Mat& network_image);  // 1 x C x h x w scores, checked
   bool skipsInArgmax(int channel) const;
   std::string model_path_;
