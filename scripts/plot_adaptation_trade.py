@@ -17,6 +17,7 @@ STYLE = {  # kind -> marker, colour
     "adapted": ("o", "tab:blue"),
     "interpolated": ("D", "tab:orange"),
     "student": ("^", "tab:green"),
+    "flip-averaged": ("v", "tab:purple"),  # an adapted network with its mirror image averaged
 }
 
 
