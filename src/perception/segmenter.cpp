@@ -256,60 +256,50 @@ Segmentation Segmenter::segmentTiles(const cv::Mat& bgr, double camera_focal_px)
         tiles.emplace_back(cv::Point(x, y), tile_size);
   }
 
-  const int channels = card_.numOutputChannels();
-  std::vector<cv::Mat> sum(channels);
+  std::vector<cv::Mat> sum(card_.numOutputChannels());
   for (cv::Mat& plane : sum) plane = cv::Mat::zeros(canvas.size(), CV_32F);
   cv::Mat weight = cv::Mat::zeros(canvas.size(), CV_32F);
   const int ramp = std::max(1, card_.tile_overlap / 2);
   for (const cv::Rect& tile : tiles) {
-    const cv::Mat input = canvas(tile);
-    const std::vector<float> column_weight = featherWeights(tile.x, tile.width, canvas.cols, ramp);
-    const std::vector<float> row_weight = featherWeights(tile.y, tile.height, canvas.rows, ramp);
-    const cv::Mat tile_weights =
-        cv::Mat(row_weight).reshape(1, tile.height) * cv::Mat(column_weight).reshape(1, 1);
-    // One pass over the tile (or its mirror image): probabilities and weights accumulated.
-    const auto accumulate = [&](const cv::Mat& network_input, bool mirrored) {
-      cv::Mat scores;
-      {
-        ScopedTimer timer("segmentation/forward");
-        scores = forward(network_input);
-      }
-      ScopedTimer timer("segmentation/softmax");
-      addSoftmax(scores, mirrored, tile, column_weight, row_weight, &sum);
-      cv::Mat tile_weight = weight(tile);
-      tile_weight += tile_weights;
-    };
-    accumulate(input, false);
-    if (card_.flip_average) {
-      cv::Mat mirrored;
-      cv::flip(input, mirrored, 1);
-      accumulate(mirrored, true);
-    }
+    accumulateProbabilities(canvas, tile, featherWeights(tile.x, tile.width, canvas.cols, ramp),
+                            featherWeights(tile.y, tile.height, canvas.rows, ramp), &sum, &weight);
   }
 
   return labelsFromProbabilitySums(sum, weight, valid, bgr.size());
 }
 
-Segmentation Segmenter::segmentMirrorAveraged(const cv::Mat& network_image, const cv::Rect& valid,
-                                              const cv::Size& image_size) {
-  const int channels = card_.numOutputChannels();
-  const cv::Rect whole(cv::Point(0, 0), network_image.size());
-  std::vector<cv::Mat> sum(channels);
-  for (cv::Mat& plane : sum) plane = cv::Mat::zeros(network_image.size(), CV_32F);
-  const std::vector<float> column_weight(network_image.cols, 1.f);
-  const std::vector<float> row_weight(network_image.rows, 1.f);
+void Segmenter::accumulateProbabilities(const cv::Mat& canvas, const cv::Rect& tile,
+                                        const std::vector<float>& column_weight,
+                                        const std::vector<float>& row_weight,
+                                        std::vector<cv::Mat>* sum, cv::Mat* weight) {
+  const cv::Mat input = canvas(tile);
+  const cv::Mat tile_weights =
+      cv::Mat(row_weight).reshape(1, tile.height) * cv::Mat(column_weight).reshape(1, 1);
   cv::Mat mirrored;
-  cv::flip(network_image, mirrored, 1);
-  for (const bool is_mirrored : {false, true}) {
+  if (card_.flip_average) cv::flip(input, mirrored, 1);
+  const int passes = card_.flip_average ? 2 : 1;
+  for (int pass = 0; pass < passes; ++pass) {
+    const bool is_mirrored = pass == 1;
     cv::Mat scores;
     {
       ScopedTimer timer("segmentation/forward");
-      scores = forward(is_mirrored ? mirrored : network_image);
+      scores = forward(is_mirrored ? mirrored : input);
     }
     ScopedTimer timer("segmentation/softmax");
-    addSoftmax(scores, is_mirrored, whole, column_weight, row_weight, &sum);
+    addSoftmax(scores, is_mirrored, tile, column_weight, row_weight, sum);
+    cv::Mat tile_weight = (*weight)(tile);
+    tile_weight += tile_weights;
   }
-  const cv::Mat weight(network_image.size(), CV_32F, cv::Scalar(2.0));
+}
+
+Segmentation Segmenter::segmentMirrorAveraged(const cv::Mat& network_image, const cv::Rect& valid,
+                                              const cv::Size& image_size) {
+  std::vector<cv::Mat> sum(card_.numOutputChannels());
+  for (cv::Mat& plane : sum) plane = cv::Mat::zeros(network_image.size(), CV_32F);
+  cv::Mat weight = cv::Mat::zeros(network_image.size(), CV_32F);
+  accumulateProbabilities(network_image, cv::Rect(cv::Point(0, 0), network_image.size()),
+                          std::vector<float>(network_image.cols, 1.f),
+                          std::vector<float>(network_image.rows, 1.f), &sum, &weight);
   return labelsFromProbabilitySums(sum, weight, valid, image_size);
 }
 

@@ -48,6 +48,12 @@ class Segmenter {
  private:
   struct Network;
   Segmentation segmentTiles(const cv::Mat& bgr, double camera_focal_px);
+  // The probabilities of canvas(tile), and of its mirror image when the card's flip_average
+  // says so, added into `sum` with the feathering weights (their outer product into `weight`).
+  void accumulateProbabilities(const cv::Mat& canvas, const cv::Rect& tile,
+                               const std::vector<float>& column_weight,
+                               const std::vector<float>& row_weight, std::vector<cv::Mat>* sum,
+                               cv::Mat* weight);
   // One network input and its mirror image, their probabilities averaged (flip_average on the
   // single-pass policies); valid: the image's region of network_image.
   Segmentation segmentMirrorAveraged(const cv::Mat& network_image, const cv::Rect& valid,
