@@ -386,13 +386,14 @@ class Scorer:
 def predict(model, torch, images, batch=2, suppress_background=True):
     """argmax trainIds (background never wins, as the card's suppress_unlabeled)."""
     model.eval()
+    device = next(model.parameters()).device  # validation runs where training does
     out = []
     with torch.no_grad():
         for i in range(0, len(images), batch):
-            logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:i + batch])))
+            logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:i + batch])).to(device))
             if suppress_background:
                 logits[:, labels.BACKGROUND_CHANNEL] = -1e9
-            out.extend(logits.argmax(dim=1).numpy().astype(np.uint8))
+            out.extend(logits.argmax(dim=1).cpu().numpy().astype(np.uint8))
     return out
 
 
