@@ -18,6 +18,7 @@ STYLE = {  # kind -> marker, colour
     "interpolated": ("D", "tab:orange"),
     "student": ("^", "tab:green"),
     "flip-averaged": ("v", "tab:purple"),  # an adapted network with its mirror image averaged
+    "weight-averaged": ("P", "tab:brown"),  # the mean of the weights of a run's steps or of runs
 }
 
 

@@ -37,6 +37,7 @@ import base_networks  # noqa: E402
 import datasets  # noqa: E402
 import labels  # noqa: E402
 import preprocess  # noqa: E402
+import weight_average  # noqa: E402
 
 
 def log(message):
@@ -125,6 +126,10 @@ def parse_args(argv=None):
                         "best is exported (1: the adapted weights; 0: the base network's)")
     p.add_argument("--max-images", type=int, default=0,
                    help="use at most this many images of each source (0: all; CI uses a few)")
+    p.add_argument("--average-weights", type=float, default=0.0,
+                   help="average the weights of every step in the last FRACTION of the budget "
+                        "(stochastic weight averaging); the mean competes with the best "
+                        "validated step on the held-out frames (0: off)")
     p.add_argument("--val-interval", type=float, default=5.0, help="minutes between validations")
     p.add_argument("--gamma", type=float, default=0.7, help="the card's tone curve")
     p.add_argument("--no-standardize", action="store_true",
@@ -453,6 +458,22 @@ def validate_and_keep(model, torch, val, step, history, best, best_path):
     return best
 
 
+def keep_average_if_better(model, torch, val, averager, step, best, best_path, averaged_path):
+    """Loads the averaged weights into the model, saves them to averaged_path, scores them on the
+    validation samples and, when they beat the best step, saves them as best_path too. Returns
+    (the best scores, the average's scores with the number of steps averaged)."""
+    model.load_state_dict(averager.state_dict())
+    torch.save(model.state_dict(), averaged_path)
+    averaged = dict(step=step, steps_averaged=averager.count, **validate(model, torch, val))
+    log(f"mean of the last {averager.count} steps' weights: validation " + ", ".join(
+        f"{k} {averaged[k]:.4f}" for k in ("dense_pixel_accuracy", "sparse_point_accuracy",
+                                           "miou")))
+    if averaged["miou"] > best["miou"]:
+        torch.save(model.state_dict(), best_path)
+        return averaged, averaged
+    return best, averaged
+
+
 def write_card(path, base, width, height, gamma, standardize, summary):
     lines = [
         f"# Model card for {os.path.basename(path)[:-5]}.onnx, written by",
@@ -574,6 +595,9 @@ def main(argv=None):
                           ("--encoder-lr-scale", args.encoder_lr_scale)):
         if not value >= 0:
             raise SystemExit(f"{option} {value}: must be 0 or more")
+    if not 0.0 <= args.average_weights < 1.0:
+        raise SystemExit(f"--average-weights {args.average_weights}: a fraction of the budget "
+                         "in [0, 1)")
     os.makedirs(args.output, exist_ok=True)
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
@@ -635,6 +659,7 @@ def main(argv=None):
     best_path = os.path.join(args.output, "best.pt")
     torch.save(model.state_dict(), best_path)
 
+    averager = weight_average.WeightAverage() if args.average_weights > 0 else None
     budget_s = args.minutes * 60.0
     start = time.time()
     last_val = start
@@ -689,6 +714,8 @@ def main(argv=None):
         loss.backward()
         optimizer.step()
         step += 1
+        if averager is not None and progress >= 1.0 - args.average_weights:
+            averager.add(model.state_dict())
         values = np.array([loss.item(), label_loss.item(), distill_loss.item()])
         running = values if running is None else 0.95 * running + 0.05 * values
         if step % 10 == 0 or step == 1:
@@ -706,9 +733,18 @@ def main(argv=None):
 
     if history["val"][-1]["step"] != step:
         best = validate_and_keep(model, torch, val, step, history, best, best_path)
+    averaged = None
+    if averager is not None and averager.count:
+        best, averaged = keep_average_if_better(model, torch, val, averager, step, best,
+                                                best_path,
+                                                os.path.join(args.output, "averaged.pt"))
     model.load_state_dict(torch.load(best_path, map_location="cpu"))
     model.to("cpu").eval()
-    log(f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})")
+    if best.get("steps_averaged"):
+        log(f"kept the mean of the last {best['steps_averaged']} steps' weights (validation mIoU "
+            f"{best['miou']:.4f})")
+    else:
+        log(f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})")
 
     import onnx_export
 
@@ -763,6 +799,7 @@ def main(argv=None):
         "validation_at_export_size": at_export_size,
         "onnx_parity": parity,
         "interpolation": interpolation,
+        "averaged": averaged,
         "args": vars(args),
     }
     write_card(stem + ".yaml", base, export_width, export_height, args.gamma, standardize,

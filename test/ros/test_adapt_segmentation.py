@@ -410,6 +410,88 @@ class WeightInterpolation(unittest.TestCase):
             adapt.validate = real_validate
 
 
+class WeightAveraging(unittest.TestCase):
+    """The mean of the weights over the end of a run (--average-weights)."""
+
+    def setUp(self):
+        if not HAVE_TORCH:
+            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+
+    def test_floats_are_the_running_mean_and_the_batch_counter_the_latest(self):
+        import torch
+        import weight_average
+
+        net = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1), torch.nn.BatchNorm2d(4)).double()
+        first = {k: v.clone() for k, v in net.state_dict().items()}
+        average = weight_average.WeightAverage()
+        for shift in (1.0, 2.0, 6.0):
+            average.add({k: (v + shift if v.is_floating_point() else v + int(shift))
+                         for k, v in first.items()})
+        self.assertEqual(average.count, 3)
+        mean = average.state_dict()
+        for key, value in first.items():
+            self.assertEqual(mean[key].dtype, value.dtype, key)
+            if value.is_floating_point():
+                self.assertTrue(torch.allclose(mean[key], value + 3.0, atol=1e-5), key)
+            else:
+                self.assertTrue(torch.equal(mean[key], value + 6), key)
+        # The mean is a copy: training on after it was taken does not move it.
+        mean["0.weight"] += 100.0
+        self.assertTrue(torch.allclose(average.state_dict()["0.weight"], first["0.weight"] + 3.0,
+                                       atol=1e-5))
+
+    def test_nothing_averaged_or_another_network_is_refused(self):
+        import torch
+        import weight_average
+
+        average = weight_average.WeightAverage()
+        with self.assertRaisesRegex(ValueError, "no weights"):
+            average.state_dict()
+        average.add(torch.nn.Linear(2, 2).state_dict())
+        with self.assertRaisesRegex(ValueError, "other tensors"):
+            average.add(torch.nn.Conv2d(2, 2, 1).state_dict() | {"extra": torch.zeros(1)})
+
+    def test_the_mean_is_kept_only_when_it_validates_better(self):
+        import torch
+        import adapt_segmentation as adapt
+        import weight_average
+
+        model = torch.nn.Linear(1, 1, bias=False)
+        average = weight_average.WeightAverage()
+        for w in (0.2, 0.4):  # mean 0.3
+            average.add({"weight": torch.full((1, 1), w)})
+        out = tempfile.mkdtemp(prefix="ism_average_")
+        best_path, averaged_path = (os.path.join(out, n) for n in ("best.pt", "averaged.pt"))
+        real_validate = adapt.validate
+        # Validation peaks at weight 0.3: the mean beats a step at 0.5, not a step at 0.3.
+        adapt.validate = lambda m, t, v: {"dense_pixel_accuracy": 0.0, "sparse_point_accuracy": 0.0,
+                                          "miou": -(m.weight.item() - 0.3) ** 2}
+        try:
+            step_at = {"step": 7, "dense_pixel_accuracy": 0.0, "sparse_point_accuracy": 0.0}
+            torch.save({"weight": torch.full((1, 1), 0.5)}, best_path)
+            best, averaged = adapt.keep_average_if_better(
+                model, torch, [], average, 9, dict(step_at, miou=-0.04), best_path, averaged_path)
+            self.assertEqual(averaged["steps_averaged"], 2)
+            self.assertIs(best, averaged)
+            self.assertAlmostEqual(torch.load(best_path)["weight"].item(), 0.3, places=6)
+            self.assertAlmostEqual(torch.load(averaged_path)["weight"].item(), 0.3, places=6)
+            torch.save({"weight": torch.full((1, 1), 0.3)}, best_path)
+            best, averaged = adapt.keep_average_if_better(
+                model, torch, [], average, 9, dict(step_at, miou=0.0), best_path, averaged_path)
+            self.assertEqual(best["step"], 7)
+            self.assertNotIn("steps_averaged", best)
+        finally:
+            adapt.validate = real_validate
+
+    def test_a_fraction_outside_zero_to_one_is_refused_naming_the_option(self):
+        import adapt_segmentation as adapt
+
+        for bad in ("1", "-0.5"):
+            with self.assertRaises(SystemExit) as caught:
+                adapt.main(["--shared", "/nonexistent", "--average-weights", bad])
+            self.assertIn("--average-weights", str(caught.exception))
+
+
 class EncoderLearningRate(unittest.TestCase):
     """--encoder-lr-scale: the encoder learns slower than the decoder, or not at all."""
 
@@ -564,7 +646,7 @@ class TinyPipeline(unittest.TestCase):
         command = ["/usr/bin/python3", os.path.join(REPO_ROOT, "training", "adapt_segmentation.py"),
                    "--shared", shared, "--output", out, "--max-steps", "3", "--max-images", "2",
                    "--input", "512x160", "--export-input", "416x128", "--crop", "128x256",
-                   "--batch", "2", "--interpolate", "0.5,1",
+                   "--batch", "2", "--interpolate", "0.5,1", "--average-weights", "0.7",
                    "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2"]
         result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, timeout=600)
@@ -586,6 +668,9 @@ class TinyPipeline(unittest.TestCase):
         self.assertGreaterEqual(summary["onnx_parity"]["argmax_agreement"], 0.995)
         self.assertEqual([f["alpha"] for f in summary["interpolation"]["factors"]], [0.5, 1.0])
         self.assertIn(summary["interpolation"]["chosen"], (0.5, 1.0))
+        # Steps 2 and 3 of 3 lie in the last 70 % of the budget; their mean was scored.
+        self.assertEqual(summary["averaged"]["steps_averaged"], 2)
+        self.assertTrue(os.path.exists(os.path.join(out, "averaged.pt")))
 
         # The C++ Segmenter, with the card the script wrote, against PyTorch on a held-out image
         # at the exported size (labels at the image's own size, trainIds).
