@@ -485,6 +485,10 @@ def write_card(path, base, width, height, gamma, standardize, summary):
         f"# Distillation teacher: {summary['teacher']}"
         + (f" ({summary['teacher_init']})" if summary["teacher_init"] else "") + ".",
     ]
+    steps_averaged = summary["best_validation"].get("steps_averaged")
+    if steps_averaged:
+        lines.append(f"# Weights: the mean of the last {steps_averaged} steps' "
+                     "(--average-weights), which validated above every single step.")
     if summary.get("interpolation"):
         lines.append(f"# Weights: the base network's + {summary['interpolation']['chosen']:g} x "
                      "(adapted - base), chosen on the held-out frames (--interpolate).")
