@@ -40,6 +40,12 @@ def skip_loudly(test, what):
     test.skipTest(what)
 
 
+def require_torch(test):
+    """Skips the test, loudly, where PyTorch (needed only for training) is not installed."""
+    if not HAVE_TORCH:
+        skip_loudly(test, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+
+
 class LabelTables(unittest.TestCase):
     def test_semantickitti_classes_map_as_the_cpp_evaluation_scores_them(self):
         lut = labels.semantickitti_to_train_id_lut()
@@ -183,8 +189,7 @@ class CamVidSubset(unittest.TestCase):
 
 class Distillation(unittest.TestCase):
     def test_soft_loss_is_zero_for_the_teacher_and_ignores_pixels_outside_the_zone(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
         import torch
         import torch.nn.functional as F
         import adapt_segmentation as adapt
@@ -204,8 +209,7 @@ class Distillation(unittest.TestCase):
         self.assertGreater(adapt.soft_distillation_loss(other, teacher, 2.0, F).item(), 0.01)
 
     def test_frozen_batch_norm_keeps_its_statistics_while_training(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
         import torch
         import adapt_segmentation as adapt
 
@@ -222,8 +226,7 @@ class Distillation(unittest.TestCase):
 
 class LabelLoss(unittest.TestCase):
     def test_each_image_weighs_its_weight_however_many_labels_it_has(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
         import torch
         import adapt_segmentation as adapt
 
@@ -314,8 +317,7 @@ class Teacher(unittest.TestCase):
         self.assertIn("espnetv2_s1", name)
 
     def test_a_named_teacher_is_its_own_network_and_wrong_weights_name_the_file(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
         shared = shared_dir()
         import adapt_segmentation as adapt
         import base_networks
@@ -348,8 +350,7 @@ class WeightInterpolation(unittest.TestCase):
     """Weight-space ensembling of the adapted network with its base (--interpolate)."""
 
     def setUp(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
 
     def test_floats_move_by_the_factor_and_the_batch_counter_is_the_adapted_one(self):
         import torch
@@ -414,8 +415,7 @@ class WeightAveraging(unittest.TestCase):
     """The mean of the weights over the end of a run (--average-weights)."""
 
     def setUp(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
 
     def test_floats_are_the_running_mean_and_the_batch_counter_the_latest(self):
         import torch
@@ -496,8 +496,7 @@ class EncoderLearningRate(unittest.TestCase):
     """--encoder-lr-scale: the encoder learns slower than the decoder, or not at all."""
 
     def setUp(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
 
     def test_each_base_network_splits_into_its_encoder_and_decoder(self):
         import enet
@@ -629,8 +628,7 @@ class TinyPipeline(unittest.TestCase):
     """The whole command on a tiny budget: the export loads in C++ and agrees with PyTorch."""
 
     def test_a_few_steps_export_a_model_the_cpp_segmenter_runs_like_pytorch(self):
-        if not HAVE_TORCH:
-            skip_loudly(self, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        require_torch(self)
         shared = shared_dir()
         needed = ["models/espnetv2-cityscapes/espnetv2_s_2.0_city_1024x512.pth",
                   "data/kitti_semantics/training", "data/semantickitti_train/sequences/06"]
