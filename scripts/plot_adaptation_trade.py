@@ -19,6 +19,7 @@ STYLE = {  # kind -> marker, colour
     "student": ("^", "tab:green"),
     "flip-averaged": ("v", "tab:purple"),  # an adapted network with its mirror image averaged
     "weight-averaged": ("P", "tab:brown"),  # the mean of the weights of a run's steps or of runs
+    "calibrated": ("*", "tab:red"),  # a network exported with logit offsets (--calibrate-offsets)
 }
 
 
@@ -31,8 +32,10 @@ def read_runs(path):
     except OSError as e:
         raise SystemExit(f"{path}: {e.strerror}")
     reader = csv.DictReader(line for _, line in lines)
-    rows = []
+    rows, labels = [], {}
     for (number, _), row in zip(lines[1:], reader):
+        if None in row:
+            raise SystemExit(f"{path}:{number}: more fields than the header names")
         try:
             row["raw_05"], row["raw_08"] = float(row["raw_05"]), float(row["raw_08"])
         except (TypeError, ValueError):
@@ -40,6 +43,13 @@ def read_runs(path):
         if row.get("kind") not in STYLE:
             raise SystemExit(f"{path}:{number}: kind '{row.get('kind')}' is not one of "
                              f"{', '.join(STYLE)}")
+        # 'from' (optional): the label of an earlier row this network was made from (an arrow).
+        origin = row.get("from") or None
+        if origin is not None and origin not in labels:
+            raise SystemExit(f"{path}:{number}: from '{origin}' is not the label of an earlier "
+                             "row")
+        row["from"] = labels.get(origin)
+        labels[row["label"]] = len(rows)
         rows.append(row)
     if not rows:
         raise SystemExit(f"{path}: no runs")
@@ -60,6 +70,11 @@ def plot(rows, output, target):
         if mine:
             ax.scatter([r["raw_05"] for r in mine], [r["raw_08"] for r in mine], marker=marker,
                        color=colour, label=kind, zorder=3)
+    for r in rows:
+        if r["from"] is not None:
+            origin = rows[r["from"]]
+            ax.annotate("", (r["raw_05"], r["raw_08"]), (origin["raw_05"], origin["raw_08"]),
+                        arrowprops=dict(arrowstyle="->", color="tab:red", alpha=0.6, lw=0.8))
     # Numbers beside the points, their labels in a key: the points lie too close for names.
     for number, r in enumerate(rows, start=1):
         ax.annotate(str(number), (r["raw_05"], r["raw_08"]), fontsize=7, xytext=(4, 2),

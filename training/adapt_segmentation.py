@@ -36,7 +36,9 @@ import augment  # noqa: E402
 import base_networks  # noqa: E402
 import datasets  # noqa: E402
 import labels  # noqa: E402
+import logit_calibration  # noqa: E402
 import preprocess  # noqa: E402
+from scoring import Scorer  # noqa: E402
 import weight_average  # noqa: E402
 
 
@@ -124,6 +126,10 @@ def parse_args(argv=None):
                         "2022): for each a of this comma list, the weights base + a * (adapted - "
                         "base) are validated on the held-out frames at the export size and the "
                         "best is exported (1: the adapted weights; 0: the base network's)")
+    p.add_argument("--calibrate-offsets", default="on", choices=["on", "off"],
+                   help="fit one logit offset per class on the held-out frames at the export "
+                        "size (the mIoU's coordinate ascent, training/logit_calibration.py) and "
+                        "export the network with them; kept only when they raise that mIoU")
     p.add_argument("--max-images", type=int, default=0,
                    help="use at most this many images of each source (0: all; CI uses a few)")
     p.add_argument("--average-weights", type=float, default=0.0,
@@ -365,29 +371,6 @@ def class_weights(samples, power):
     return weights
 
 
-class Scorer:
-    """Confusion over the 19 trainIds: pixel accuracy and mIoU (classes present in truth)."""
-
-    def __init__(self):
-        self.confusion = np.zeros((labels.NUM_TRAIN_IDS, labels.NUM_TRAIN_IDS), np.int64)
-
-    def add(self, truth, predicted):
-        keep = truth != labels.IGNORE
-        t = truth[keep].astype(np.int64)
-        p = np.minimum(predicted[keep].astype(np.int64), labels.NUM_TRAIN_IDS - 1)
-        np.add.at(self.confusion, (t, p), 1)
-
-    def accuracy(self):
-        total = self.confusion.sum()
-        return float(np.trace(self.confusion) / total) if total else float("nan")
-
-    def miou(self):
-        tp = np.diag(self.confusion).astype(float)
-        union = self.confusion.sum(0) + self.confusion.sum(1) - tp
-        present = self.confusion.sum(1) > 0
-        return float(np.mean(tp[present] / union[present])) if present.any() else float("nan")
-
-
 def predict(model, torch, images, batch=2, suppress_background=True):
     """argmax trainIds (background never wins, as the card's suppress_unlabeled)."""
     model.eval()
@@ -474,6 +457,22 @@ def keep_average_if_better(model, torch, val, averager, step, best, best_path, a
     return best, averaged
 
 
+def calibrate_offsets(model, torch, val):
+    """Fits the per-class logit offsets on the validation samples (logit_calibration) and logs
+    them; returns what the summary records (the offsets as a list per channel)."""
+    t0 = time.time()
+    logits, truth = logit_calibration.labelled_logits(model, torch, val)
+    offsets, before, after = logit_calibration.fit_class_offsets(logits, truth)
+    kept = after > before
+    described = logit_calibration.describe(offsets)
+    log(f"logit offsets fitted on {len(truth)} held-out pixels in {time.time() - t0:.0f} s: "
+        f"{described}; validation mIoU {before:.4f} -> {after:.4f}"
+        + ("" if kept else " (none kept)"))
+    return {"offsets": [float(v) for v in offsets], "offsets_by_class": described,
+            "miou_before": before, "miou_after": after, "kept": kept,
+            "pixels": int(len(truth))}
+
+
 def write_card(path, base, width, height, gamma, standardize, summary):
     lines = [
         f"# Model card for {os.path.basename(path)[:-5]}.onnx, written by",
@@ -492,6 +491,10 @@ def write_card(path, base, width, height, gamma, standardize, summary):
     if summary.get("interpolation"):
         lines.append(f"# Weights: the base network's + {summary['interpolation']['chosen']:g} x "
                      "(adapted - base), chosen on the held-out frames (--interpolate).")
+    calibration = summary.get("logit_offsets")
+    if calibration and calibration["kept"]:
+        lines.append("# Logits: one offset per class in the graph, fitted on the held-out frames "
+                     f"(--calibrate-offsets): {calibration['offsets_by_class']}.")
     lines += [
         f"name: kitti_adapted_{base.name}",
         f"input: {{width: {width}, height: {height}}}",
@@ -766,24 +769,34 @@ def main(argv=None):
         log(f"exporting base + {chosen['alpha']:g} (adapted - base)")
     # The weights in the ONNX graph (best.pt stays the adapted ones, to re-export from).
     torch.save(model.state_dict(), os.path.join(args.output, "exported.pt"))
-    onnx_export.export_onnx(model, stem + ".onnx", export_width, export_height)
-    parity = onnx_export.check_onnx_against_torch(model, stem + ".onnx",
+    calibration = None
+    exported = model
+    # The base network exported untrained (--minutes 0 without --init) is the starting point
+    # that the adapted one is measured against: it stays as it came.
+    if args.calibrate_offsets == "on" and (train_at_all or args.init):
+        calibration = calibrate_offsets(model, torch, val_export)
+        if calibration["kept"]:
+            exported = logit_calibration.with_offsets(model, calibration["offsets"], torch)
+    onnx_export.export_onnx(exported, stem + ".onnx", export_width, export_height)
+    parity = onnx_export.check_onnx_against_torch(exported, stem + ".onnx",
                                                   [s.image for s in val_export], export_width,
                                                   export_height, args.threads)
     log(f"ONNX through OpenCV dnn against PyTorch on {len(val)} validation images: argmax "
         f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
     at_export_size = best
-    if chosen is not None:  # scored on these frames already
+    if exported is not model:
+        at_export_size = dict(step=best["step"], **validate(exported, torch, val_export))
+    elif chosen is not None:  # scored on these frames already
         at_export_size = dict(step=best["step"], **{k: v for k, v in chosen.items()
                                                     if k != "alpha"})
     elif resized_export:
         at_export_size = dict(step=best["step"], **validate(model, torch, val_export))
-    if resized_export or interpolation is not None:
+    if resized_export or interpolation is not None or exported is not model:
         log(f"exported at {export_width}x{export_height} (trained at {width}x{height}): "
             "validation " + ", ".join(f"{k} {at_export_size[k]:.4f}" for k in
                                       ("dense_pixel_accuracy", "sparse_point_accuracy", "miou")))
-    cityscapes = cityscapes_sample_accuracy(model, torch, shared, args.gamma, standardize)
+    cityscapes = cityscapes_sample_accuracy(exported, torch, shared, args.gamma, standardize)
     if cityscapes is not None:
         log(f"the shared Cityscapes frame at 1024x512: pixel accuracy {cityscapes:.4f}")
     summary = {
@@ -804,6 +817,7 @@ def main(argv=None):
         "onnx_parity": parity,
         "interpolation": interpolation,
         "averaged": averaged,
+        "logit_offsets": calibration,
         "args": vars(args),
     }
     write_card(stem + ".yaml", base, export_width, export_height, args.gamma, standardize,

@@ -492,6 +492,86 @@ class WeightAveraging(unittest.TestCase):
             self.assertIn("--average-weights", str(caught.exception))
 
 
+class LogitCalibration(unittest.TestCase):
+    """Per-class logit offsets fitted on the held-out frames (--calibrate-offsets)."""
+
+    def setUp(self):
+        require_torch(self)
+
+    @staticmethod
+    def logits_for(truth, rng, shift=None):
+        """Logits that favour the true class by 2 under unit noise on the classes in truth (the
+        others far below); shift[c] is added to channel c (negative: the class is
+        under-predicted)."""
+        logits = np.full((len(truth), labels.NUM_CLASSES), -10.0, np.float32)
+        present = np.unique(truth)
+        logits[:, present] = rng.normal(0.0, 1.0, (len(truth), len(present)))
+        logits[np.arange(len(truth)), truth] += 2.0
+        for c, v in (shift or {}).items():
+            logits[:, c] += v
+        logits[:, labels.BACKGROUND_CHANNEL] = -1e9
+        return logits
+
+    def test_an_under_predicted_class_gets_its_offset_back_and_the_miou_rises(self):
+        import logit_calibration as cal
+
+        rng = np.random.default_rng(3)
+        truth = np.repeat(np.arange(3), 3000)
+        logits = self.logits_for(truth, rng, {1: -1.5})
+        offsets, before, after = cal.fit_class_offsets(logits, truth)
+        self.assertGreater(after, before + 0.05)
+        # Offsets are relative: class 1 is lifted against the other two by about what it lost.
+        lift = offsets[1] - max(offsets[0], offsets[2])
+        self.assertGreaterEqual(lift, 1.0)
+        self.assertLessEqual(lift, 2.0)
+        self.assertTrue(np.all(offsets[3:] == 0))
+        self.assertAlmostEqual(cal.mean_iou(logits, truth, offsets), after, places=9)
+
+    def test_only_classes_the_frames_can_measure_move(self):
+        import logit_calibration as cal
+
+        rng = np.random.default_rng(4)
+        # Class 5 has too few pixels to be measured; class 11 (person) is absent but predicted
+        # now and then, so pushing it down would always gain: neither may move.
+        truth = np.concatenate([np.repeat([0, 1], 3000), np.full(20, 5)])
+        logits = self.logits_for(truth, rng, {5: -3.0})
+        logits[:200, 11] = 5.0
+        offsets, _, _ = cal.fit_class_offsets(logits, truth, min_pixels=1000)
+        self.assertEqual(offsets[5], 0.0)
+        self.assertEqual(offsets[11], 0.0)
+
+    def test_calibrated_logits_keep_zero_offsets(self):
+        import logit_calibration as cal
+
+        truth = np.repeat(np.arange(4), 2000)
+        logits = np.full((len(truth), labels.NUM_CLASSES), -5.0, np.float32)
+        logits[np.arange(len(truth)), truth] = 5.0
+        offsets, before, after = cal.fit_class_offsets(logits, truth)
+        self.assertTrue(np.all(offsets == 0))
+        self.assertEqual(before, 1.0)
+        self.assertEqual(after, 1.0)
+        self.assertEqual(cal.describe(offsets), "none")
+
+    def test_the_offsets_are_in_the_exported_graph(self):
+        import cv2
+        import logit_calibration as cal
+        import onnx_export
+
+        torch.manual_seed(0)
+        net = torch.nn.Conv2d(3, labels.NUM_CLASSES, 3, padding=1).eval()
+        offsets = np.zeros(labels.NUM_CLASSES, np.float32)
+        offsets[[0, 1, 8]] = (-1.0, 0.75, 0.25)
+        self.assertEqual(cal.describe(offsets), "road -1, sidewalk +0.75, vegetation +0.25")
+        path = os.path.join(tempfile.mkdtemp(prefix="ism_offsets_"), "net.onnx")
+        onnx_export.export_onnx(cal.with_offsets(net, offsets, torch), path, 64, 32)
+        x = torch.rand(1, 3, 32, 64)
+        opencv = cv2.dnn.readNetFromONNX(path)
+        opencv.setInput(x.numpy())
+        with torch.no_grad():
+            expected = (net(x) + torch.from_numpy(offsets).view(1, -1, 1, 1)).numpy()
+        self.assertLess(float(np.abs(opencv.forward() - expected).max()), 1e-4)
+
+
 class EncoderLearningRate(unittest.TestCase):
     """--encoder-lr-scale: the encoder learns slower than the decoder, or not at all."""
 
@@ -587,15 +667,21 @@ class AdaptationTradePlot(unittest.TestCase):
         return runs, output
 
     def test_the_table_becomes_a_figure(self):
-        _, output = self.run_plot("# a comment\nlabel,kind,raw_05,raw_08,section\n"
-                                  "base,base,0.74,0.78,x\nrun,adapted,0.88,0.73,y\n")
+        runs, output = self.run_plot("# a comment\nlabel,kind,raw_05,raw_08,section,from\n"
+                                     "base,base,0.74,0.78,x\nrun,adapted,0.88,0.73,y\n"
+                                     "run calibrated,calibrated,0.89,0.73,z,run\n")
         with open(output, "rb") as f:
             self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
+        import plot_adaptation_trade as trade
+
+        self.assertEqual([r["from"] for r in trade.read_runs(runs)], [None, None, 1])
 
     def test_a_bad_row_is_named_by_its_file_line(self):
-        header = "# comment\nlabel,kind,raw_05,raw_08,section\nok,base,0.7,0.7,x\n"
+        header = "# comment\nlabel,kind,raw_05,raw_08,section,from\nok,base,0.7,0.7,x\n"
         for row, what in (("bad,adapted,0.8x,0.7,y\n", r"runs\.csv:4: raw_05 and raw_08 must"),
-                          ("bad,teacher,0.8,0.7,y\n", r"runs\.csv:4: kind 'teacher'")):
+                          ("bad,teacher,0.8,0.7,y\n", r"runs\.csv:4: kind 'teacher'"),
+                          ("bad,calibrated,0.8,0.7,y,later\n", r"runs\.csv:4: from 'later'"),
+                          ("bad,adapted,0.8,0.7,y,ok,z\n", r"runs\.csv:4: more fields")):
             with self.assertRaises(SystemExit) as caught:
                 self.run_plot(header + row)
             self.assertRegex(str(caught.exception), what)
@@ -688,6 +774,13 @@ class TinyPipeline(unittest.TestCase):
         model = base_networks.get("espnetv2_s2").build(None)
         state = torch.load(os.path.join(out, "exported.pt"), map_location="cpu")
         model.load_state_dict(state)
+        # The offsets fitted on the held-out frames are in the graph, not in exported.pt.
+        calibration = summary["logit_offsets"]
+        self.assertEqual(len(calibration["offsets"]), labels.NUM_CLASSES)
+        self.assertGreaterEqual(calibration["miou_after"], calibration["miou_before"])
+        if calibration["kept"]:
+            import logit_calibration
+            model = logit_calibration.with_offsets(model, calibration["offsets"], torch)
         prepared = preprocess.resize_to_input(preprocess.card_colors(image, 0.7, True), 416, 128)
         torch_labels = adapt.predict(model, torch, [prepared])[0]
         torch_labels = cv2.resize(torch_labels, (image.shape[1], image.shape[0]),
