@@ -371,18 +371,22 @@ def class_weights(samples, power):
     return weights
 
 
-def predict(model, torch, images, batch=2, suppress_background=True):
-    """argmax trainIds (background never wins, as the card's suppress_unlabeled)."""
+def batched_logits(model, torch, images, batch=2):
+    """The model's logits for the images, a batch at a time on the model's device, with the
+    background channel never winning (as the card's suppress_unlabeled)."""
     model.eval()
     device = next(model.parameters()).device  # validation runs where training does
-    out = []
     with torch.no_grad():
         for i in range(0, len(images), batch):
             logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:i + batch])).to(device))
-            if suppress_background:
-                logits[:, labels.BACKGROUND_CHANNEL] = -1e9
-            out.extend(logits.argmax(dim=1).cpu().numpy().astype(np.uint8))
-    return out
+            logits[:, labels.BACKGROUND_CHANNEL] = -1e9
+            yield logits
+
+
+def predict(model, torch, images, batch=2):
+    """argmax trainIds of each image (background never wins)."""
+    return [labels_ for logits in batched_logits(model, torch, images, batch)
+            for labels_ in logits.argmax(dim=1).cpu().numpy().astype(np.uint8)]
 
 
 def validate(model, torch, val):
@@ -461,7 +465,9 @@ def calibrate_offsets(model, torch, val):
     """Fits the per-class logit offsets on the validation samples (logit_calibration) and logs
     them; returns what the summary records (the offsets as a list per channel)."""
     t0 = time.time()
-    logits, truth = logit_calibration.labelled_logits(model, torch, val)
+    per_image = (o for logits in batched_logits(model, torch, [s.image for s in val])
+                 for o in logits.cpu().numpy())
+    logits, truth = logit_calibration.at_labelled_pixels(per_image, [s.target for s in val])
     offsets, before, after = logit_calibration.fit_class_offsets(logits, truth)
     kept = after > before
     described = logit_calibration.describe(offsets)

@@ -5,10 +5,11 @@ Why it is here: the fine-tuned network's class priors come from the training mix
 weights, distillation towards the base network, images drawn by their rarest class), not from
 what the KITTI camera sees. On the held-out frames an adapted network predicts sidewalk at four
 fifths as many pixels as are sidewalk and calls a third of the sidewalk road, and every fit
-measured lowers road against the other classes (docs/segmentation_adaptation.md). A constant added to each class's logit moves its prior without
-touching the features: the offsets that maximise the held-out frames' mIoU (the criterion the
-training keeps its weights by) are found by coordinate ascent over a bounded grid, and the
-network exported with them, so the C++ Segmenter loads the model unchanged.
+measured lowers road against the other classes (docs/segmentation_adaptation.md). A constant
+added to each class's logit moves its prior without touching the features: the offsets that
+maximise the held-out frames' mIoU (the criterion the training keeps its weights by) are found
+by coordinate ascent over a bounded grid, and the network exported with them, so the C++
+Segmenter loads the model unchanged.
 
 Only classes the held-out frames can measure (at least min_pixels labelled pixels) get an offset.
 A class they never show would only be pushed down (each of its predictions there is a false
@@ -19,32 +20,22 @@ class with a few thousand pixels from moving the others far.
 import numpy as np
 
 import labels
-import preprocess
 from scoring import Scorer
 
 GRID = tuple(float(v) for v in np.arange(-1.0, 1.0001, 0.25))
 
 
-def labelled_logits(model, torch, samples, batch=2):
-    """The logits at every labelled pixel of the samples (background channel suppressed, as the
-    card's suppress_unlabeled), as (pixels x channels) float32, and the trainId at each."""
-    model.eval()
-    device = next(model.parameters()).device
+def at_labelled_pixels(per_image_logits, targets):
+    """The logits (channels x H x W per image) at every labelled pixel of its target, as
+    (pixels x channels) float32, and the trainId at each."""
     logits, truth = [], []
-    with torch.no_grad():
-        for i in range(0, len(samples), batch):
-            chunk = samples[i:i + batch]
-            x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
-            out = model(x.to(device)).cpu().numpy()
-            for s, o in zip(chunk, out):
-                keep = s.target != labels.IGNORE
-                logits.append(np.moveaxis(o, 0, -1)[keep])
-                truth.append(s.target[keep].astype(np.int64))
+    for image_logits, target in zip(per_image_logits, targets):
+        keep = target != labels.IGNORE
+        logits.append(np.moveaxis(image_logits, 0, -1)[keep])
+        truth.append(target[keep].astype(np.int64))
     if not logits:
         return np.zeros((0, labels.NUM_CLASSES), np.float32), np.zeros(0, np.int64)
-    logits = np.concatenate(logits).astype(np.float32)
-    logits[:, labels.BACKGROUND_CHANNEL] = -1e9
-    return logits, np.concatenate(truth)
+    return np.concatenate(logits).astype(np.float32), np.concatenate(truth)
 
 
 def mean_iou(logits, truth, offsets):
