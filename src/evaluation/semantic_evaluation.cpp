@@ -134,22 +134,27 @@ std::string PointLabelScore::toJson() const {
   return out.str();
 }
 
-std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir) {
+std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir,
+                                                 std::vector<std::string>* incomplete) {
   const fs::path dir(sequence_dir);
   if (!fs::is_directory(dir / "velodyne"))
     throw std::runtime_error("not a SemanticKITTI sequence (no velodyne/): " + sequence_dir);
-  std::vector<std::string> names;
+  std::vector<std::string> names, lacking;
   for (const auto& entry : fs::directory_iterator(dir / "velodyne")) {
     if (entry.path().extension() != ".bin") continue;
     const std::string name = entry.path().stem().string();
-    if (fs::exists(dir / "labels" / (name + ".label")) &&
-        fs::exists(dir / "image_2" / (name + ".png")))
-      names.push_back(name);
+    const bool complete = fs::exists(dir / "labels" / (name + ".label")) &&
+                          fs::exists(dir / "image_2" / (name + ".png"));
+    (complete ? names : lacking).push_back(name);
   }
   if (names.empty())
     throw std::runtime_error("no frame with velodyne/, labels/ and image_2/ files in " +
                              sequence_dir);
   std::sort(names.begin(), names.end());
+  if (incomplete) {
+    std::sort(lacking.begin(), lacking.end());
+    *incomplete = std::move(lacking);
+  }
   return names;
 }
 

@@ -373,7 +373,16 @@ int main(int argc, char** argv) {
     int total_frames = 0;
     for (std::size_t s = 0; s < sequences.size(); ++s) {
       const std::string& dir = sequences[s];
-      std::vector<std::string> frames = evaluation::listSemanticKittiFrames(dir);
+      std::vector<std::string> incomplete;
+      std::vector<std::string> frames = evaluation::listSemanticKittiFrames(dir, &incomplete);
+      if (!incomplete.empty()) {
+        // A sequence downloaded in parts (labels for some scans, images for others) is scored
+        // on what it has; the user hears which scans that leaves out.
+        std::printf(
+            "note: %s: %zu scan(s) in velodyne/ skipped, without labels/NAME.label or "
+            "image_2/NAME.png (first %s)\n",
+            dir.c_str(), incomplete.size(), incomplete.front().c_str());
+      }
       if (max_frames > 0 && static_cast<int>(frames.size()) > max_frames) frames.resize(max_frames);
       std::vector<evaluation::PointLabelScore> scores(variants.size());
       // Per geometry variant: the labels the geometry check took away (truth vs the label).

@@ -1,6 +1,7 @@
 // The package's one map metric: evaluation::mapLabelAt and the evaluate_map tool, on a short
 // synthetic drive mapped from its own true point labels (the score must be near perfect) and
-// from poses shifted by a metre (it must drop), and the tool's errors on bad inputs.
+// from poses shifted by a metre (it must drop), and the tool's errors on bad inputs; the listing
+// of a SemanticKITTI sequence's frames.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -8,7 +9,9 @@
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
@@ -183,6 +186,36 @@ TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
       run(std::string(EVALUATE_MAP_PATH) + " --drive " + drive_);
   EXPECT_NE(usage_status, 0);
   EXPECT_NE(usage_output.find("--map"), std::string::npos) << usage_output;
+}
+
+TEST(SemanticKittiListing, NamesTheScansWithoutTheirLabelOrImage) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("ism_semantickitti_listing_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  for (const char* sub : {"velodyne", "labels", "image_2"}) fs::create_directories(dir / sub);
+  const auto touch = [](const fs::path& path) { std::ofstream(path.string()) << ""; };
+  for (const char* name : {"000002", "000000", "000001"})
+    touch(dir / "velodyne" / (std::string(name) + ".bin"));
+  touch(dir / "velodyne" / "notes.txt");  // not a scan
+  touch(dir / "labels" / "000000.label");
+  touch(dir / "labels" / "000002.label");
+  touch(dir / "image_2" / "000000.png");
+  touch(dir / "image_2" / "000001.png");
+
+  std::vector<std::string> incomplete;
+  const std::vector<std::string> frames =
+      ism::evaluation::listSemanticKittiFrames(dir.string(), &incomplete);
+  EXPECT_EQ(frames, std::vector<std::string>{"000000"});
+  EXPECT_EQ(incomplete, (std::vector<std::string>{"000001", "000002"}));
+
+  fs::remove(dir / "labels" / "000000.label");
+  try {
+    ism::evaluation::listSemanticKittiFrames(dir.string());
+    ADD_FAILURE() << "a sequence without one complete frame was listed";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(dir.string()), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -68,8 +68,11 @@ struct SemanticKittiFrame {
 };
 
 // The frames of a SemanticKITTI sequence folder that have velodyne/, labels/ and image_2/ files,
-// sorted. Throws std::runtime_error naming the folder when it has none.
-std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir);
+// sorted. When `incomplete` is given it receives, sorted, the scans in velodyne/ that lack their
+// label or image file (what a caller tells its user it skipped). Throws std::runtime_error naming
+// the folder when it has no complete frame.
+std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir,
+                                                 std::vector<std::string>* incomplete = nullptr);
 
 // Throws std::runtime_error / kitti::KittiFormatError naming the file that cannot be read, or
 // when the label file does not have one label per point.
