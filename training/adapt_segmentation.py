@@ -653,8 +653,12 @@ def main(argv=None):
     before = validate(model, torch, val)
     log("before fine-tuning: " + ", ".join(f"{k} {v:.4f}" for k, v in before.items()))
 
-    weights = torch.tensor(class_weights(train, args.class_weight_power), dtype=torch.float32,
-                           device=device)
+    weights_np = class_weights(train, args.class_weight_power)
+    if args.class_weight_power > 0:
+        names = labels.train_id_names()
+        log(f"class weights (median / frequency)^{args.class_weight_power:g}: " + ", ".join(
+            f"{names[c]} {weights_np[c]:.2f}" for c in range(labels.NUM_TRAIN_IDS)))
+    weights = torch.tensor(weights_np, dtype=torch.float32, device=device)
     model.to(device)
     groups = parameter_groups(model, base.is_encoder, args.encoder_lr_scale)
     if args.encoder_lr_scale != 1.0:
