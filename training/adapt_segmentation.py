@@ -37,6 +37,7 @@ import base_networks  # noqa: E402
 import datasets  # noqa: E402
 import labels  # noqa: E402
 import logit_calibration  # noqa: E402
+import lovasz  # noqa: E402
 import preprocess  # noqa: E402
 from scoring import Scorer  # noqa: E402
 import weight_average  # noqa: E402
@@ -94,6 +95,10 @@ def parse_args(argv=None):
                    help="the base network's labels below this softmax confidence teach nothing")
     p.add_argument("--class-weight-power", type=float, default=0.25,
                    help="class weights (median frequency / frequency)^power, 0: none")
+    p.add_argument("--lovasz-weight", type=float, default=0.0,
+                   help="weight of the Lovasz-softmax loss (a surrogate of 1 - IoU per class, "
+                        "training/lovasz.py) on the human labels beside their cross-entropy; "
+                        "0: none")
     p.add_argument("--sparse-sequences", default="01,02,03,09",
                    help="semantickitti_train sequences to train on")
     p.add_argument("--sparse-weight", type=float, default=1.0,
@@ -605,6 +610,7 @@ def main(argv=None):
                          "multiples of 32")
     interpolate_at = interpolation_factors(args.interpolate)
     for option, value in (("--sparse-weight", args.sparse_weight),
+                          ("--lovasz-weight", args.lovasz_weight),
                           ("--encoder-lr-scale", args.encoder_lr_scale)):
         if not value >= 0:
             raise SystemExit(f"{option} {value}: must be 0 or more")
@@ -659,6 +665,8 @@ def main(argv=None):
         log(f"class weights (median / frequency)^{args.class_weight_power:g}: " + ", ".join(
             f"{names[c]} {weights_np[c]:.2f}" for c in range(labels.NUM_TRAIN_IDS)))
     weights = torch.tensor(weights_np, dtype=torch.float32, device=device)
+    if args.lovasz_weight > 0:
+        log(f"the label loss adds the Lovasz-softmax at weight {args.lovasz_weight:g}")
     model.to(device)
     groups = parameter_groups(model, base.is_encoder, args.encoder_lr_scale)
     if args.encoder_lr_scale != 1.0:
@@ -719,6 +727,9 @@ def main(argv=None):
         ce = F.cross_entropy(logits, target, weight=weights, ignore_index=labels.IGNORE,
                              reduction="none")
         label_loss = per_image_label_loss(ce, target, image_weights)
+        if args.lovasz_weight > 0:
+            label_loss = label_loss + args.lovasz_weight * lovasz.lovasz_softmax(
+                F.softmax(logits, dim=1), target, labels.IGNORE, torch)
         if soft:
             distill_loss = soft_distillation_loss(logits, teacher, args.temperature, F)
         else:

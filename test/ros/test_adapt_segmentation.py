@@ -572,6 +572,75 @@ class LogitCalibration(unittest.TestCase):
         self.assertLess(float(np.abs(opencv.forward() - expected).max()), 1e-4)
 
 
+class LovaszLoss(unittest.TestCase):
+    """The Lovasz-softmax loss (--lovasz-weight): a surrogate of 1 - IoU per class."""
+
+    def setUp(self):
+        require_torch(self)
+
+    @staticmethod
+    def one_hot(predicted, num_classes):
+        import torch
+
+        return torch.nn.functional.one_hot(predicted, num_classes).permute(0, 3, 1, 2).float()
+
+    def test_one_hot_predictions_give_one_minus_the_mean_iou_of_the_present_classes(self):
+        import torch
+        import lovasz
+
+        g = torch.Generator().manual_seed(4)
+        target = torch.randint(0, 4, (2, 6, 8), generator=g)  # class 4 in no label: not averaged
+        target[0, 0, :] = labels.IGNORE
+        predicted = torch.randint(0, 5, (2, 6, 8), generator=g)
+        loss = lovasz.lovasz_softmax(self.one_hot(predicted, 5), target, labels.IGNORE, torch)
+        labelled = target != labels.IGNORE
+        ious = []
+        for c in range(4):
+            t, p = target[labelled] == c, predicted[labelled] == c
+            ious.append((t & p).sum().item() / (t | p).sum().item())
+        self.assertAlmostEqual(loss.item(), 1.0 - float(np.mean(ious)), places=5)
+        # Predictions at unlabelled pixels do not count.
+        predicted[0, 0, :] = (predicted[0, 0, :] + 1) % 5
+        again = lovasz.lovasz_softmax(self.one_hot(predicted, 5), target, labels.IGNORE, torch)
+        self.assertAlmostEqual(again.item(), loss.item(), places=6)
+        perfect = lovasz.lovasz_softmax(self.one_hot(target.clamp(max=4), 5), target,
+                                        labels.IGNORE, torch)
+        self.assertAlmostEqual(perfect.item(), 0.0, places=6)
+
+    def test_its_gradient_raises_the_iou_of_a_small_class(self):
+        import torch
+        import lovasz
+
+        # A class of 20 pixels against one of 980, all predicted as the large one: the mean
+        # cross-entropy spreads its gradient over the 1000 pixels (20 such steps of it leave the
+        # small class's IoU at 0); the per-class loss weighs the small class's IoU as much.
+        target = torch.zeros(1, 20, 50, dtype=torch.long)
+        target[0, :, :1] = 1
+        logits = torch.zeros(1, 2, 20, 50)
+        logits[0, 0] = 1.0
+        logits.requires_grad_(True)
+        optimizer = torch.optim.SGD([logits], lr=10.0)
+        for _ in range(20):
+            optimizer.zero_grad()
+            loss = lovasz.lovasz_softmax(torch.softmax(logits, 1), target, labels.IGNORE, torch)
+            loss.backward()
+            optimizer.step()
+        predicted = logits.argmax(1)
+        small = target == 1
+        iou = (small & (predicted == 1)).sum().item() / (small | (predicted == 1)).sum().item()
+        self.assertGreater(iou, 0.9)
+
+    def test_nothing_labelled_gives_zero_with_a_gradient_path(self):
+        import torch
+        import lovasz
+
+        logits = torch.randn(1, 3, 4, 4, requires_grad=True)
+        target = torch.full((1, 4, 4), labels.IGNORE, dtype=torch.long)
+        loss = lovasz.lovasz_softmax(torch.softmax(logits, 1), target, labels.IGNORE, torch)
+        self.assertEqual(loss.item(), 0.0)
+        loss.backward()  # the training step must not fail on a batch without labels
+
+
 class EncoderLearningRate(unittest.TestCase):
     """--encoder-lr-scale: the encoder learns slower than the decoder, or not at all."""
 
