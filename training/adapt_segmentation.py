@@ -10,7 +10,8 @@ Losses: cross-entropy on the human labels (each image weighs the same, sparse or
 distillation from the base network where no human label is (by default its whole class
 distribution, KL at a temperature, at every unlabelled pixel: between the lidar's beams and above
 them in the sparse images, the unlabelled pixels of the dense ones), so that the sky, building
-tops and the rare classes it knew are not forgotten. Batch normalisation keeps the base
+tops and the rare classes it knew are not forgotten; optionally the Lovasz-softmax (a surrogate
+of 1 - IoU per class) beside the cross-entropy. Batch normalisation keeps the base
 network's statistics by default (small KITTI batches would replace them).
 
 Training runs at the network's input scale (the images resized to input width x height, as the
