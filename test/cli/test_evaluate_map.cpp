@@ -21,6 +21,7 @@
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
+#include "synthetic_kitti_drive.h"
 
 namespace fs = std::filesystem;
 namespace ism = inekf_semantic_mapping;
@@ -192,8 +193,7 @@ TEST(SemanticKittiListing, NamesTheScansWithoutTheirLabelOrImage) {
   const fs::path dir =
       fs::temp_directory_path() / ("ism_semantickitti_listing_" + std::to_string(::getpid()));
   fs::remove_all(dir);
-  for (const char* sub : {"velodyne", "labels", "image_2"}) fs::create_directories(dir / sub);
-  const auto touch = [](const fs::path& path) { std::ofstream(path.string()) << ""; };
+  const auto touch = [](const fs::path& path) { ism::test_drive::writeFile(path.string(), ""); };
   for (const char* name : {"000002", "000000", "000001"})
     touch(dir / "velodyne" / (std::string(name) + ".bin"));
   touch(dir / "velodyne" / "notes.txt");  // not a scan
