@@ -8,6 +8,9 @@
 // ../shared/models/kitti-adapted/kitti_adapted.onnx; skipped when there is none) with its card.
 // Compare BM_KittiAdaptedKittiFrame with BM_EnetCityscapesKittiFrame: the ratio of their times
 // (BM_KittiAdaptedKittiFrameFlipAveraged: the same network averaged with its mirror image).
+// BM_ResizeLayer*: ESPNetv2's last upsampling (20 channels, 416x128 -> 832x256, aligned corners)
+// in OpenCV dnn's own Resize layer and in the one the Segmenter registers
+// (perception/dnn_bilinear_resize.h).
 // filterLabels: the confidence / boundary filter at its defaults.
 // Threads: 2 (the machine).
 //
@@ -19,9 +22,13 @@
 #include <iostream>
 #include <memory>
 #include <opencv2/core.hpp>
+#include <opencv2/dnn.hpp>
+#include <opencv2/dnn/all_layers.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
+#include <vector>
 
+#include "inekf_semantic_mapping/perception/dnn_bilinear_resize.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
 
@@ -132,6 +139,41 @@ void BM_KittiAdaptedKittiFrameFlipAveraged(benchmark::State& state) {
   runSegmenter(state, model, card);
 }
 
+void runResizeLayer(benchmark::State& state, const cv::Ptr<cv::dnn::Layer>& layer) {
+  cv::setNumThreads(static_cast<int>(state.range(0)));
+  const int input_sizes[] = {1, 20, 128, 416};
+  const int output_sizes[] = {1, 20, 256, 832};
+  std::vector<cv::Mat> inputs{cv::Mat(4, input_sizes, CV_32F)};
+  std::vector<cv::Mat> outputs{cv::Mat(4, output_sizes, CV_32F)};
+  std::vector<cv::Mat> internals;
+  cv::randn(inputs[0], 0.0, 3.0);
+  layer->finalize(cv::_InputArray(inputs), cv::_OutputArray(outputs));
+  for (auto _ : state) {
+    layer->forward(cv::_InputArray(inputs), cv::_OutputArray(outputs), cv::_OutputArray(internals));
+    benchmark::DoNotOptimize(outputs[0].data);
+  }
+}
+
+cv::dnn::LayerParams alignedBilinearParams() {
+  cv::dnn::LayerParams params;
+  params.name = "upsample";
+  params.type = "Resize";
+  params.set("interpolation", "bilinear");
+  params.set("align_corners", true);
+  params.set("height", 256);
+  params.set("width", 832);
+  return params;
+}
+
+void BM_ResizeLayerOpenCv(benchmark::State& state) {
+  runResizeLayer(state, cv::dnn::ResizeLayer::create(alignedBilinearParams()));
+}
+
+void BM_ResizeLayerRegistered(benchmark::State& state) {
+  cv::dnn::LayerParams params = alignedBilinearParams();
+  runResizeLayer(state, perception::createResizeLayer(params));
+}
+
 void BM_FilterLabelsKittiFrame(benchmark::State& state) {
   perception::Segmentation segmentation;
   segmentation.label_ids.create(375, 1242, CV_8UC1);
@@ -171,6 +213,8 @@ BENCHMARK(BM_KittiAdaptedKittiFrameFlipAveraged)
     ->Arg(2)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+BENCHMARK(BM_ResizeLayerOpenCv)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ResizeLayerRegistered)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_FilterLabelsKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OverlayKittiFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -11,6 +11,9 @@ ism_add_core_library(${PROJECT_NAME}_perception
 ism_add_gtest(test_segmenter
   SOURCES test/unit/test_segmenter.cpp
   LINK ${PROJECT_NAME}_perception)
+ism_add_gtest(test_dnn_bilinear_resize
+  SOURCES test/unit/test_dnn_bilinear_resize.cpp
+  LINK ${PROJECT_NAME}_perception)
 ism_add_gtest(test_segmenter_data
   SOURCES test/data/test_segmenter_data.cpp
   LINK ${PROJECT_NAME}_perception)

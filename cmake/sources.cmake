@@ -37,7 +37,7 @@ set(ISM_PROJECTION_SOURCES src/perception/projection.cpp src/perception/label_ge
 # perception: model cards (YAML only) and the Segmenter (OpenCV dnn).
 set(ISM_MODEL_CARD_SOURCES src/perception/model_card.cpp)
 set(ISM_PERCEPTION_SOURCES ${ISM_MODEL_CARD_SOURCES} src/perception/segmenter.cpp
-  src/perception/segmenter_input.cpp src/perception/segmenter_labels.cpp)
+  src/perception/segmenter_input.cpp src/perception/dnn_bilinear_resize.cpp src/perception/segmenter_labels.cpp)
 # mapping: SemanticOcTree, the hashed grid, map files, the offline mapping and the session, grids.
 set(ISM_MAPPING_SOURCES
   src/mapping/semantic_classes.cpp

@@ -5,14 +5,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sstream>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/dnn_bilinear_resize.h"
 #include "segmenter_input.h"
 
 namespace inekf_semantic_mapping {
@@ -30,6 +34,7 @@ namespace fs = std::filesystem;
 cv::dnn::Net readNetwork(const std::string& model_path) {
   if (!fs::exists(model_path)) throw SegmentationError("model file not found: " + model_path);
   const std::string extension = fs::path(model_path).extension().string();
+  useFastBilinearResize();  // before reading: OpenCV creates the layers as it reads
   try {
     if (extension == ".onnx") return cv::dnn::readNetFromONNX(model_path);
     if (extension == ".net" || extension == ".t7") return cv::dnn::readNetFromTorch(model_path);
@@ -100,35 +105,42 @@ void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
     }
     return;
   }
-  cv::Mat exps(channels, width, CV_32F);
-  cv::Mat row_max(1, width, CV_32F);
-  cv::Mat row_sum(1, width, CV_32F);
-  for (int y = 0; y < height; ++y) {
-    const auto score_row = [&](int c) {
-      return cv::Mat(1, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c, y)));
-    };
-    score_row(0).copyTo(row_max);
-    for (int c = 1; c < channels; ++c) cv::max(row_max, score_row(c), row_max);
-    for (int c = 0; c < channels; ++c) {
-      cv::Mat exp_row = exps.row(c);
-      cv::subtract(score_row(c), row_max, exp_row);
-    }
-    cv::exp(exps, exps);
-    cv::reduce(exps, row_sum, 0, cv::REDUCE_SUM);
-    // inverse[x]: the weight of output pixel x over its exp sum (in output order).
-    cv::divide(row_weight[y], row_sum, row_sum);
-    float* inverse = row_sum.ptr<float>();
-    for (int x = 0; x < width; ++x) inverse[x] *= column_weight[flipped ? width - 1 - x : x];
-    for (int c = 0; c < channels; ++c) {
-      const float* e = exps.ptr<float>(c);
-      float* target = (*sum)[c].ptr<float>(tile.y + y) + tile.x;
-      if (flipped) {
-        for (int x = 0; x < width; ++x) target[x] += e[width - 1 - x] * inverse[width - 1 - x];
-      } else {
-        for (int x = 0; x < width; ++x) target[x] += e[x] * inverse[x];
-      }
-    }
-  }
+  // Rows are independent (each adds into its own row of `sum`): spread over OpenCV's threads.
+  cv::parallel_for_(
+      cv::Range(0, height),
+      [&](const cv::Range& rows) {
+        cv::Mat exps(channels, width, CV_32F);
+        cv::Mat row_max(1, width, CV_32F);
+        cv::Mat row_sum(1, width, CV_32F);
+        for (int y = rows.start; y < rows.end; ++y) {
+          const auto score_row = [&](int c) {
+            return cv::Mat(1, width, CV_32F, const_cast<float*>(scores.ptr<float>(0, c, y)));
+          };
+          score_row(0).copyTo(row_max);
+          for (int c = 1; c < channels; ++c) cv::max(row_max, score_row(c), row_max);
+          for (int c = 0; c < channels; ++c) {
+            cv::Mat exp_row = exps.row(c);
+            cv::subtract(score_row(c), row_max, exp_row);
+          }
+          cv::exp(exps, exps);
+          cv::reduce(exps, row_sum, 0, cv::REDUCE_SUM);
+          // inverse[x]: the weight of output pixel x over its exp sum (in output order).
+          cv::divide(row_weight[y], row_sum, row_sum);
+          float* inverse = row_sum.ptr<float>();
+          for (int x = 0; x < width; ++x) inverse[x] *= column_weight[flipped ? width - 1 - x : x];
+          for (int c = 0; c < channels; ++c) {
+            const float* e = exps.ptr<float>(c);
+            float* target = (*sum)[c].ptr<float>(tile.y + y) + tile.x;
+            if (flipped) {
+              for (int x = 0; x < width; ++x)
+                target[x] += e[width - 1 - x] * inverse[width - 1 - x];
+            } else {
+              for (int x = 0; x < width; ++x) target[x] += e[x] * inverse[x];
+            }
+          }
+        }
+      },
+      std::max(1.0, height / 8.0));
 }
 
 }  // namespace
@@ -314,20 +326,25 @@ Segmentation Segmenter::labelsFromProbabilitySums(const std::vector<cv::Mat>& su
   const cv::Size scaled = valid.size();
   cv::Mat best_sum(scaled, CV_32F, cv::Scalar(-1.0));
   cv::Mat best_index(scaled, CV_8U, cv::Scalar(0));
-  for (int c = 0; c < static_cast<int>(sum.size()); ++c) {
-    if (skipsInArgmax(c)) continue;
-    for (int row = 0; row < scaled.height; ++row) {
-      const float* channel_sum = sum[c].ptr<float>(valid.y + row) + valid.x;
-      float* best = best_sum.ptr<float>(row);
-      std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
-      for (int col = 0; col < scaled.width; ++col) {
-        if (channel_sum[col] > best[col]) {
-          best[col] = channel_sum[col];
-          index[col] = static_cast<std::uint8_t>(c);
+  cv::parallel_for_(
+      cv::Range(0, scaled.height),
+      [&](const cv::Range& rows) {
+        for (int row = rows.start; row < rows.end; ++row) {
+          float* best = best_sum.ptr<float>(row);
+          std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
+          for (int c = 0; c < static_cast<int>(sum.size()); ++c) {
+            if (skipsInArgmax(c)) continue;
+            const float* channel_sum = sum[c].ptr<float>(valid.y + row) + valid.x;
+            for (int col = 0; col < scaled.width; ++col) {
+              if (channel_sum[col] > best[col]) {
+                best[col] = channel_sum[col];
+                index[col] = static_cast<std::uint8_t>(c);
+              }
+            }
+          }
         }
-      }
-    }
-  }
+      },
+      std::max(1.0, scaled.height / 8.0));
   cv::Mat confidence;
   cv::divide(best_sum, weight(valid), confidence);
   cv::Mat label_ids;
@@ -372,34 +389,49 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
   Segmentation result;
   {
     ScopedTimer timer("segmentation/argmax");
-    cv::Mat best_score(height, width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
-    cv::Mat best_index(height, width, CV_8U, cv::Scalar(0));
-    const auto plane = [&](int c) {
-      return cv::Mat(height, width, CV_32F, output.ptr<float>(0, c));
-    };
-    const std::size_t pixels = static_cast<std::size_t>(height) * width;
-    float* best = best_score.ptr<float>();
-    std::uint8_t* index = best_index.ptr<std::uint8_t>();
-    for (int c = 0; c < channels; ++c) {
-      if (skipsInArgmax(c)) continue;
-      const float* score = output.ptr<float>(0, c);
-      for (std::size_t i = 0; i < pixels; ++i) {
-        if (score[i] > best[i]) {
-          best[i] = score[i];
-          index[i] = static_cast<std::uint8_t>(c);
-        }
-      }
-    }
-    // Softmax probability of the winner: 1 / sum_c exp(score_c - best).
-    cv::Mat exp_sum(height, width, CV_32F, cv::Scalar(0));
-    cv::Mat shifted;
-    for (int c = 0; c < channels; ++c) {
-      cv::subtract(plane(c), best_score, shifted);
-      cv::exp(shifted, shifted);
-      exp_sum += shifted;
-    }
-    cv::Mat confidence;
-    cv::divide(1.0, exp_sum, confidence);
+    // Argmax and the winner's softmax probability, 1 / sum_c exp(score_c - best), row by row
+    // over OpenCV's threads: one row's channels stay in cache (whole planes are 17 MB at
+    // 832x256), and the per-pixel sums run in channel order.
+    cv::Mat best_index(height, width, CV_8U);
+    cv::Mat confidence(height, width, CV_32F);
+    const std::size_t plane_size = static_cast<std::size_t>(height) * width;
+    const float* scores = output.ptr<float>();
+    cv::parallel_for_(
+        cv::Range(0, height),
+        [&](const cv::Range& rows) {
+          std::vector<float> best(width);
+          cv::Mat shifted(channels, width, CV_32F);
+          for (int y = rows.start; y < rows.end; ++y) {
+            const std::size_t offset = static_cast<std::size_t>(y) * width;
+            std::uint8_t* index = best_index.ptr<std::uint8_t>(y);
+            std::fill(best.begin(), best.end(), -std::numeric_limits<float>::infinity());
+            std::fill(index, index + width, std::uint8_t{0});
+            for (int c = 0; c < channels; ++c) {
+              if (skipsInArgmax(c)) continue;
+              const float* score = scores + c * plane_size + offset;
+              for (int x = 0; x < width; ++x) {
+                if (score[x] > best[x]) {
+                  best[x] = score[x];
+                  index[x] = static_cast<std::uint8_t>(c);
+                }
+              }
+            }
+            for (int c = 0; c < channels; ++c) {
+              const float* score = scores + c * plane_size + offset;
+              float* row = shifted.ptr<float>(c);
+              for (int x = 0; x < width; ++x) row[x] = score[x] - best[x];
+            }
+            cv::exp(shifted, shifted);
+            float* sum = confidence.ptr<float>(y);
+            std::fill(sum, sum + width, 0.f);
+            for (int c = 0; c < channels; ++c) {
+              const float* e = shifted.ptr<float>(c);
+              for (int x = 0; x < width; ++x) sum[x] += e[x];
+            }
+            for (int x = 0; x < width; ++x) sum[x] = 1.f / sum[x];
+          }
+        },
+        std::max(1.0, height / 8.0));
     cv::Mat label_ids;
     cv::LUT(best_index, network_->label_lut, label_ids);
 
