@@ -14,6 +14,24 @@ namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
 
+// Where each output index samples one input axis with aligned corners: the lower neighbour, the
+// upper one (clamped) and the fraction between them.
+struct SampleTable {
+  SampleTable() = default;
+  SampleTable(int in_size, int out_size) : lower(out_size), upper(out_size), fraction(out_size) {
+    const float scale = out_size > 1 ? static_cast<float>(in_size - 1) / (out_size - 1)
+                                     : static_cast<float>(in_size) / out_size;
+    for (int i = 0; i < out_size; ++i) {
+      const float position = i * scale;
+      lower[i] = static_cast<int>(position);
+      upper[i] = std::min(lower[i] + 1, in_size - 1);
+      fraction[i] = position - lower[i];
+    }
+  }
+  std::vector<int> lower, upper;
+  std::vector<float> fraction;
+};
+
 class AlignedBilinearResizeLayer : public cv::dnn::Layer {
  public:
   explicit AlignedBilinearResizeLayer(const cv::dnn::LayerParams& params)
@@ -38,28 +56,8 @@ class AlignedBilinearResizeLayer : public cv::dnn::Layer {
     in_width_ = inputs[0].size[3];
     out_height_ = outputs[0].size[2];
     out_width_ = outputs[0].size[3];
-    const float scale_y = out_height_ > 1 ? static_cast<float>(in_height_ - 1) / (out_height_ - 1)
-                                          : static_cast<float>(in_height_) / out_height_;
-    const float scale_x = out_width_ > 1 ? static_cast<float>(in_width_ - 1) / (out_width_ - 1)
-                                         : static_cast<float>(in_width_) / out_width_;
-    row0_.resize(out_height_);
-    row1_.resize(out_height_);
-    fy_.resize(out_height_);
-    for (int y = 0; y < out_height_; ++y) {
-      const float position = y * scale_y;
-      row0_[y] = static_cast<int>(position);
-      row1_[y] = std::min(row0_[y] + 1, in_height_ - 1);
-      fy_[y] = position - row0_[y];
-    }
-    col0_.resize(out_width_);
-    col1_.resize(out_width_);
-    fx_.resize(out_width_);
-    for (int x = 0; x < out_width_; ++x) {
-      const float position = x * scale_x;
-      col0_[x] = static_cast<int>(position);
-      col1_[x] = std::min(col0_[x] + 1, in_width_ - 1);
-      fx_[x] = position - col0_[x];
-    }
+    rows_ = SampleTable(in_height_, out_height_);
+    cols_ = SampleTable(in_width_, out_width_);
   }
 
   void forward(cv::InputArrayOfArrays inputs_arr, cv::OutputArrayOfArrays outputs_arr,
@@ -92,16 +90,17 @@ class AlignedBilinearResizeLayer : public cv::dnn::Layer {
             const int plane = r / out_height_;
             const int y = r % out_height_;
             const float* r0 =
-                source + plane * in_plane + static_cast<std::size_t>(row0_[y]) * in_width_;
+                source + plane * in_plane + static_cast<std::size_t>(rows_.lower[y]) * in_width_;
             const float* r1 =
-                source + plane * in_plane + static_cast<std::size_t>(row1_[y]) * in_width_;
+                source + plane * in_plane + static_cast<std::size_t>(rows_.upper[y]) * in_width_;
             float* out = target + plane * out_plane + static_cast<std::size_t>(y) * out_width_;
-            const float fy = fy_[y];
+            const float fy = rows_.fraction[y];
             for (int x = 0; x < out_width_; ++x) {
-              const int x0 = col0_[x];
-              const int x1 = col1_[x];
-              out[x] = r0[x0] + fy * (r1[x0] - r0[x0]) +
-                       fx_[x] * (r0[x1] - r0[x0] + fy * (r1[x1] - r0[x1] - r1[x0] + r0[x0]));
+              const int x0 = cols_.lower[x];
+              const int x1 = cols_.upper[x];
+              out[x] =
+                  r0[x0] + fy * (r1[x0] - r0[x0]) +
+                  cols_.fraction[x] * (r0[x1] - r0[x0] + fy * (r1[x1] - r0[x1] - r1[x0] + r0[x0]));
             }
           }
         },
@@ -111,8 +110,7 @@ class AlignedBilinearResizeLayer : public cv::dnn::Layer {
  private:
   cv::Ptr<cv::dnn::ResizeLayer> builtin_;
   int in_height_ = 0, in_width_ = 0, out_height_ = 0, out_width_ = 0;
-  std::vector<int> row0_, row1_, col0_, col1_;
-  std::vector<float> fy_, fx_;
+  SampleTable rows_, cols_;
 };
 
 }  // namespace
