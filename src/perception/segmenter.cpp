@@ -143,6 +143,23 @@ void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
       std::max(1.0, height / 8.0));
 }
 
+// One row's argmax over the channels: index[x] = the channel c (not skipped) whose row_of(c)[x]
+// is highest, best[x] its value; best holds the starting value (lower than any score) on entry.
+template <typename RowOf, typename Skip>
+void argmaxOverChannels(int channels, int width, RowOf row_of, Skip skip, float* best,
+                        std::uint8_t* index) {
+  for (int c = 0; c < channels; ++c) {
+    if (skip(c)) continue;
+    const float* value = row_of(c);
+    for (int x = 0; x < width; ++x) {
+      if (value[x] > best[x]) {
+        best[x] = value[x];
+        index[x] = static_cast<std::uint8_t>(c);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 struct Segmenter::Network {
@@ -330,18 +347,11 @@ Segmentation Segmenter::labelsFromProbabilitySums(const std::vector<cv::Mat>& su
       cv::Range(0, scaled.height),
       [&](const cv::Range& rows) {
         for (int row = rows.start; row < rows.end; ++row) {
-          float* best = best_sum.ptr<float>(row);
-          std::uint8_t* index = best_index.ptr<std::uint8_t>(row);
-          for (int c = 0; c < static_cast<int>(sum.size()); ++c) {
-            if (skipsInArgmax(c)) continue;
-            const float* channel_sum = sum[c].ptr<float>(valid.y + row) + valid.x;
-            for (int col = 0; col < scaled.width; ++col) {
-              if (channel_sum[col] > best[col]) {
-                best[col] = channel_sum[col];
-                index[col] = static_cast<std::uint8_t>(c);
-              }
-            }
-          }
+          argmaxOverChannels(
+              static_cast<int>(sum.size()), scaled.width,
+              [&](int c) { return sum[c].ptr<float>(valid.y + row) + valid.x; },
+              [this](int c) { return skipsInArgmax(c); }, best_sum.ptr<float>(row),
+              best_index.ptr<std::uint8_t>(row));
         }
       },
       std::max(1.0, scaled.height / 8.0));
@@ -406,16 +416,9 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
             std::uint8_t* index = best_index.ptr<std::uint8_t>(y);
             std::fill(best.begin(), best.end(), -std::numeric_limits<float>::infinity());
             std::fill(index, index + width, std::uint8_t{0});
-            for (int c = 0; c < channels; ++c) {
-              if (skipsInArgmax(c)) continue;
-              const float* score = scores + c * plane_size + offset;
-              for (int x = 0; x < width; ++x) {
-                if (score[x] > best[x]) {
-                  best[x] = score[x];
-                  index[x] = static_cast<std::uint8_t>(c);
-                }
-              }
-            }
+            argmaxOverChannels(
+                channels, width, [&](int c) { return scores + c * plane_size + offset; },
+                [this](int c) { return skipsInArgmax(c); }, best.data(), index);
             for (int c = 0; c < channels; ++c) {
               const float* score = scores + c * plane_size + offset;
               float* row = shifted.ptr<float>(c);
