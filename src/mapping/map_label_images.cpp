@@ -1,7 +1,6 @@
 #include "inekf_semantic_mapping/mapping/map_label_images.h"
 
 #include <algorithm>
-#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -54,24 +53,18 @@ OwnedLabelImage mapLabelImage(const SemanticOcTree& tree, const Eigen::Matrix3Xf
                                    perception::OcclusionOptions(), kNone, &labels, &hidden);
   local.hidden = hidden;
 
+  for (std::uint32_t& label : labels) {
+    if (label > 255) label = kNone;  // an 8-bit image cannot hold it
+  }
+  std::vector<std::uint32_t> pixels;
+  local.labelled = perception::rasterizePointLabels(projected, labels, camera.width, camera.height,
+                                                    kNone, options.none_label, &pixels);
   OwnedLabelImage image;
   image.width = camera.width;
   image.height = camera.height;
-  image.pixels.assign(static_cast<std::size_t>(camera.width) * camera.height,
-                      static_cast<std::uint8_t>(options.none_label));
-  std::vector<float> nearest(image.pixels.size(), std::numeric_limits<float>::infinity());
-  for (std::size_t i = 0; i < projected.size(); ++i) {
-    if (!projected.valid[i] || labels[i] == kNone || labels[i] > 255) continue;
-    // The pixel labelPointsFromImage reads for the point (centres at integers).
-    const int u = std::min(static_cast<int>(std::lround(projected.u[i])), camera.width - 1);
-    const int v = std::min(static_cast<int>(std::lround(projected.v[i])), camera.height - 1);
-    if (u < 0 || v < 0) continue;
-    const std::size_t pixel = static_cast<std::size_t>(v) * camera.width + u;
-    if (projected.depth[i] >= nearest[pixel]) continue;
-    if (nearest[pixel] == std::numeric_limits<float>::infinity()) ++local.labelled;
-    nearest[pixel] = projected.depth[i];
-    image.pixels[pixel] = static_cast<std::uint8_t>(labels[i]);
-  }
+  image.pixels.resize(pixels.size());
+  std::transform(pixels.begin(), pixels.end(), image.pixels.begin(),
+                 [](std::uint32_t label) { return static_cast<std::uint8_t>(label); });
   if (stats) *stats = local;
   return image;
 }

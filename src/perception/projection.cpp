@@ -63,6 +63,35 @@ void labelPointsFromImage(const ProjectedPoints& projected, const std::uint8_t* 
   }
 }
 
+std::size_t rasterizePointLabels(const ProjectedPoints& projected,
+                                 const std::vector<std::uint32_t>& labels, int width, int height,
+                                 std::uint32_t skip_label, std::uint32_t none_label,
+                                 std::vector<std::uint32_t>* image) {
+  if (labels.size() != projected.size()) {
+    throw std::invalid_argument("rasterizePointLabels: " + std::to_string(labels.size()) +
+                                " labels for " + std::to_string(projected.size()) + " points");
+  }
+  if (width <= 0 || height <= 0) {
+    throw std::invalid_argument("rasterizePointLabels: image size " + std::to_string(width) + "x" +
+                                std::to_string(height) + " is not positive");
+  }
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  image->assign(pixels, none_label);
+  std::vector<float> nearest(pixels, std::numeric_limits<float>::infinity());
+  std::size_t written = 0;
+  for (std::size_t i = 0; i < projected.size(); ++i) {
+    if (!projected.valid[i] || labels[i] == skip_label) continue;
+    const int col = std::min(static_cast<int>(std::lround(projected.u[i])), width - 1);
+    const int row = std::min(static_cast<int>(std::lround(projected.v[i])), height - 1);
+    const std::size_t pixel = static_cast<std::size_t>(row) * width + col;
+    if (!(projected.depth[i] < nearest[pixel])) continue;
+    if (nearest[pixel] == std::numeric_limits<float>::infinity()) ++written;
+    nearest[pixel] = projected.depth[i];
+    (*image)[pixel] = labels[i];
+  }
+  return written;
+}
+
 void rejectOccludedPoints(const ProjectedPoints& projected, int width, int height,
                           const OcclusionOptions& options, std::uint32_t unknown_label,
                           std::vector<std::uint32_t>* labels, std::size_t* rejected) {

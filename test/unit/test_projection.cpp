@@ -189,6 +189,44 @@ TEST(Occlusion, RejectsMismatchedSizesAndBadOptions) {
   EXPECT_EQ(labels, (std::vector<std::uint32_t>{7, 7}));
 }
 
+// Points -> label image, the inverse of labelPointsFromImage: the nearest point that carries a
+// label wins its pixel, points to skip and invalid ones write nothing, and reading the image
+// back at the points gives each winner its own label.
+TEST(RasterizePointLabels, NearestLabelledPointWinsAndReadsBack) {
+  ProjectedPoints projected;
+  projected.u = Eigen::VectorXf(5);
+  projected.v = Eigen::VectorXf(5);
+  projected.depth = Eigen::VectorXf(5);
+  projected.u << 2.4f, 2.6f, 2.2f, 0.f, 4.49f;
+  projected.v << 1.f, 1.f, 1.f, 0.f, 2.51f;
+  projected.depth << 5.f, 4.f, 3.f, 1.f, 2.f;
+  projected.valid = {1, 1, 1, 0, 1};
+  // Points 0 and 2 land on pixel (2, 1), point 1 on (3, 1); point 2 is nearer than 0 but skipped.
+  const std::vector<std::uint32_t> labels = {7, 8, 99, 9, 300};
+  std::vector<std::uint32_t> image;
+  EXPECT_EQ(rasterizePointLabels(projected, labels, 5, 3, 99, 0, &image), 3u);
+  ASSERT_EQ(image.size(), 15u);
+  EXPECT_EQ(image[1 * 5 + 2], 7u);
+  EXPECT_EQ(image[1 * 5 + 3], 8u);
+  EXPECT_EQ(image[2 * 5 + 4], 300u);  // (4.49, 2.51): rounded, clamped to the last column
+  EXPECT_EQ(image[0], 0u);            // point 3 is not valid
+
+  // The nearer of two labelled points wins whatever their order.
+  std::vector<std::uint32_t> both = labels;
+  both[2] = 11;
+  rasterizePointLabels(projected, both, 5, 3, 99, 0, &image);
+  EXPECT_EQ(image[1 * 5 + 2], 11u);
+
+  std::vector<std::uint8_t> bytes(image.begin(), image.end());
+  std::vector<std::uint32_t> back;
+  labelPointsFromImage(projected, bytes.data(), 5, 3, 5, 255, &back);
+  EXPECT_EQ(back[2], 11u);
+  EXPECT_EQ(back[1], 8u);
+
+  EXPECT_THROW(rasterizePointLabels(projected, {1, 2}, 5, 3, 99, 0, &image), std::invalid_argument);
+  EXPECT_THROW(rasterizePointLabels(projected, labels, 0, 3, 99, 0, &image), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

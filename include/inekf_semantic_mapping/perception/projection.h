@@ -54,6 +54,17 @@ void labelPointsFromImage(const ProjectedPoints& projected, const std::uint8_t* 
                           int width, int height, std::size_t row_stride_bytes,
                           std::uint32_t unknown_label, std::vector<std::uint32_t>* labels);
 
+// The inverse of labelPointsFromImage: each valid point whose label is not skip_label writes
+// its label at its pixel (the nearest pixel center, as labelPointsFromImage reads it) of a
+// row-major width x height image, and the nearest such point (smallest depth) wins a pixel.
+// `image` is resized to width * height and filled with none_label first. Returns the number of
+// pixels that took a label. Throws std::invalid_argument when labels and points differ in number
+// or the size is not positive.
+std::size_t rasterizePointLabels(const ProjectedPoints& projected,
+                                 const std::vector<std::uint32_t>& labels, int width, int height,
+                                 std::uint32_t skip_label, std::uint32_t none_label,
+                                 std::vector<std::uint32_t>* image);
+
 // Lidar-camera parallax: the lidar sits elsewhere than the camera, so it measures surfaces the
 // camera does not see (behind a pole, past a car's edge...), which then project onto the pixels
 // of what hides them and would take its label. A depth buffer of the projected scan finds them:
