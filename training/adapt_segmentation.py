@@ -3,8 +3,10 @@
 Segmenter (ONNX + model card). The front is scripts/adapt_segmentation.sh.
 
 Data (../shared, read its README): dense human labels (data/kitti_semantics), the human lidar
-labels projected into both cameras (data/semantickitti_train: sparse), optionally CamVid.
-SemanticKITTI 05 and 08 are the evaluation frames: this script refuses them.
+labels projected into both cameras (data/semantickitti_train: sparse), optionally CamVid; or the
+same layouts elsewhere (--dense-root, --sparse-root: make_camera_labels writes the sparse one
+from SemanticKITTI sequences). SemanticKITTI 05 and 08 are the evaluation frames: this script
+refuses them.
 
 Losses: cross-entropy on the human labels (each image weighs the same, sparse or dense), plus
 distillation from the base network where no human label is (by default its whole class
@@ -100,15 +102,25 @@ def parse_args(argv=None):
                    help="weight of the Lovasz-softmax loss (a surrogate of 1 - IoU per class, "
                         "training/lovasz.py) on the human labels beside their cross-entropy; "
                         "0: none")
+    p.add_argument("--dense-root", default="",
+                   help="a folder of KITTI frames with dense labels (image_2/, semantic/: the "
+                        "KITTI semantics benchmark's training/ layout); default "
+                        "SHARED/data/kitti_semantics/training")
+    p.add_argument("--sparse-root", default="",
+                   help="a folder of sequences/NN/ with image_{2,3}/ and labels_{2,3}/ (16-bit "
+                        "SemanticKITTI classes, 0 where none): ../shared's semantickitti_train "
+                        "or what make_camera_labels writes from your SemanticKITTI sequences; "
+                        "default SHARED/data/semantickitti_train")
     p.add_argument("--sparse-sequences", default="01,02,03,09",
-                   help="semantickitti_train sequences to train on")
+                   help="sequences of --sparse-root to train on")
     p.add_argument("--sparse-weight", type=float, default=1.0,
                    help="weight of the projected lidar labels' loss against the dense frames' "
                         "(each image's mean; 0: those images teach by distillation only)")
     p.add_argument("--sparse-parking", default="road", choices=["road", "ignore"],
                    help="SemanticKITTI's parking points in the sparse training labels: road (as "
                         "the evaluation scores them) or unlabelled (left to the distillation)")
-    p.add_argument("--val-sequence", default="06", help="semantickitti_train sequence held out")
+    p.add_argument("--val-sequence", default="06",
+                   help="the sequence of --sparse-root held out for validation")
     p.add_argument("--dense-val-every", type=int, default=7,
                    help="every N-th dense frame is held out for validation")
     p.add_argument("--camvid", type=int, default=0, help="CamVid frames to add (0: none)")
@@ -568,9 +580,9 @@ def load_samples(args, shared, width, height, standardize, limit):
     counts per source). Raises datasets.DatasetError naming a missing or malformed file."""
     val_sequence = [args.val_sequence] if args.val_sequence else []
     sparse_train = [s for s in args.sparse_sequences.split(",") if s]
-    sparse_root = os.path.join(shared, "data", "semantickitti_train")
-    dense = datasets.load_dense(os.path.join(shared, "data", "kitti_semantics", "training"),
-                                width, height, args.gamma, standardize, limit)
+    sparse_root = args.sparse_root or os.path.join(shared, "data", "semantickitti_train")
+    dense_root = args.dense_root or os.path.join(shared, "data", "kitti_semantics", "training")
+    dense = datasets.load_dense(dense_root, width, height, args.gamma, standardize, limit)
     sparse = datasets.load_sparse(sparse_root, sparse_train, width, height, args.gamma,
                                   standardize, limit, args.sparse_parking == "road")
     for s in sparse:
@@ -652,7 +664,9 @@ def main(argv=None):
         teacher_targets(train, teacher, torch, args.teacher_confidence,
                         args.distill_zone == "outside-lidar", soft,
                         labelled_weight=args.distill_labelled_weight)
-        log(f"{teacher_name}'s labels for distillation in {time.time() - teacher_t0:.0f} s")
+        teacher_gb = sum(s.teacher.nbytes for s in train) / 1e9
+        log(f"{teacher_name}'s labels for distillation in {time.time() - teacher_t0:.0f} s "
+            f"({teacher_gb:.1f} GB held)")
         del teacher
     if args.init:
         model.load_state_dict(torch.load(args.init, map_location="cpu"))

@@ -779,6 +779,64 @@ class Preprocessing(unittest.TestCase):
         self.assertEqual(out.reshape(-1, 3)[128, 0], round(255 * (128 / 255) ** 0.7))
 
 
+class OwnSemanticKitti(unittest.TestCase):
+    """A user's SemanticKITTI sequence: make_camera_labels writes the sparse layout, and
+    --sparse-root / --dense-root make the training read it instead of ../shared."""
+
+    def test_make_camera_labels_output_is_read_through_the_root_options(self):
+        import cv2
+        import e2e_support
+        import adapt_segmentation as adapt
+
+        [tool] = e2e_support.require_executables(self, "make_camera_labels")
+        with tempfile.TemporaryDirectory() as tmp:
+            seq = os.path.join(tmp, "semantickitti", "sequences", "00")
+            for sub in ("velodyne", "labels", "image_2"):
+                os.makedirs(os.path.join(seq, sub))
+            with open(os.path.join(seq, "calib.txt"), "w") as f:
+                for p in ("P0", "P1", "P2", "P3"):
+                    f.write(f"{p}: 100 0 100 0 0 100 50 0 0 0 1 0\n")
+                f.write("Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n")  # velodyne x forward = camera z
+            # Two points straight ahead at 10 m: road at pixel (100, 50), sidewalk at (80, 70).
+            np.array([[10, 0, 0, 0], [10, 2, -2, 0]], np.float32).tofile(
+                os.path.join(seq, "velodyne", "000000.bin"))
+            np.array([40 | (5 << 16), 48], np.uint32).tofile(
+                os.path.join(seq, "labels", "000000.label"))
+            cv2.imwrite(os.path.join(seq, "image_2", "000000.png"),
+                        np.full((100, 200, 3), 120, np.uint8))
+            sparse_root = os.path.join(tmp, "camera_labels")
+            run = subprocess.run([tool, "--sequence", seq, "--output",
+                                  os.path.join(sparse_root, "sequences", "00")],
+                                 capture_output=True, text=True)
+            self.assertEqual(run.returncode, 0, run.stdout + run.stderr)
+
+            dense_root = os.path.join(tmp, "dense")
+            for sub in ("image_2", "semantic"):
+                os.makedirs(os.path.join(dense_root, sub))
+            cv2.imwrite(os.path.join(dense_root, "image_2", "000000_10.png"),
+                        np.full((100, 200, 3), 90, np.uint8))
+            cv2.imwrite(os.path.join(dense_root, "semantic", "000000_10.png"),
+                        np.full((100, 200), 26, np.uint8))  # car everywhere
+
+            args = adapt.parse_args(["--shared", os.path.join(tmp, "no_shared"),
+                                     "--sparse-root", sparse_root, "--sparse-sequences", "00",
+                                     "--val-sequence", "", "--dense-root", dense_root,
+                                     "--dense-val-every", "1"])
+            train, val, counts = adapt.load_samples(args, args.shared, 200, 100, True, None)
+            self.assertEqual(counts["sparse"], 1)
+            [sparse] = [s for s in train if s.kind == "sparse"]
+            road, sidewalk, car = labels.semantickitti_to_train_id_lut()[[40, 48, 10]]
+            self.assertEqual(sparse.target[50, 100], road)
+            self.assertEqual(sparse.target[70, 80], sidewalk)
+            self.assertEqual(int((sparse.target != labels.IGNORE).sum()), 2)
+            self.assertEqual([s.kind for s in val], ["dense"])
+            self.assertTrue((val[0].target == car).all())
+
+            # An evaluation sequence stays refused under any root.
+            with self.assertRaisesRegex(datasets.DatasetError, "05 is an evaluation sequence"):
+                datasets.load_sparse(sparse_root, ["05"], 200, 100, 0.7, True)
+
+
 class TinyPipeline(unittest.TestCase):
     """The whole command on a tiny budget: the export loads in C++ and agrees with PyTorch."""
 
