@@ -22,23 +22,13 @@
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
 #include "synthetic_kitti_drive.h"
+#include "test_data.h"
 
 namespace fs = std::filesystem;
 namespace ism = inekf_semantic_mapping;
 namespace cs = ism::cityscapes;
 
 namespace {
-
-// Runs a command; returns its exit status and stdout.
-std::pair<int, std::string> run(const std::string& command) {
-  std::string output;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return {-1, ""};
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof(buffer), pipe)) output += buffer;
-  const int status = pclose(pipe);
-  return {WEXITSTATUS(status), output};
-}
 
 double jsonNumber(const std::string& json, const std::string& key) {
   const std::size_t at = json.find("\"" + key + "\":");
@@ -123,8 +113,8 @@ TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
   const std::vector<Eigen::Isometry3d> poses = ism::kitti::readKittiPoses(truePoses());
   ASSERT_GE(poses.size(), 20u);
   const std::string exact = buildMap(poses, "exact");
-  const auto [status, output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_);
+  const auto [status, output] = ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " +
+                                                      exact + " --drive " + drive_);
   ASSERT_EQ(status, 0) << output;
   const std::string result = output.substr(output.rfind("RESULT "));
   EXPECT_GT(jsonNumber(result, "miou"), 0.9) << result;
@@ -146,8 +136,8 @@ TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
     }
   }
   const auto [shifted_status, shifted_output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
-          shifted_poses);
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " +
+                            drive_ + " --poses " + shifted_poses);
   ASSERT_EQ(shifted_status, 0) << shifted_output;
   const std::string shifted_result = shifted_output.substr(shifted_output.rfind("RESULT "));
   EXPECT_LT(jsonNumber(shifted_result, "miou"), jsonNumber(result, "miou") - 0.1)
@@ -163,8 +153,8 @@ TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
     for (std::size_t i = 0; i < poses.size(); ++i) out << i << "\n";
   }
   const auto [frames_status, frames_output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
-          truePoses() + " --frames " + frames);
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " +
+                            drive_ + " --poses " + truePoses() + " --frames " + frames);
   ASSERT_EQ(frames_status, 0) << frames_output;
   EXPECT_EQ(frames_output.substr(frames_output.rfind("RESULT ")), result);
   {
@@ -172,19 +162,19 @@ TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
     out << poses.size() << "\n";
   }
   const auto [bad_status, bad_output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --poses " +
-          truePoses() + " --frames " + frames);
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " +
+                            drive_ + " --poses " + truePoses() + " --frames " + frames);
   EXPECT_NE(bad_status, 0);
   EXPECT_NE(bad_output.find(frames), std::string::npos) << bad_output;
 }
 
 TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
-  const auto [status, output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --map " + dir_ + "/missing.ot --drive " + drive_);
+  const auto [status, output] = ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " +
+                                                      dir_ + "/missing.ot --drive " + drive_);
   EXPECT_NE(status, 0);
   EXPECT_NE(output.find("missing.ot"), std::string::npos) << output;
   const auto [usage_status, usage_output] =
-      run(std::string(EVALUATE_MAP_PATH) + " --drive " + drive_);
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --drive " + drive_);
   EXPECT_NE(usage_status, 0);
   EXPECT_NE(usage_output.find("--map"), std::string::npos) << usage_output;
 }

@@ -4,7 +4,6 @@
 // parallax), which frames and files it writes, and its errors on bad input.
 #include <gtest/gtest.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -17,16 +16,6 @@
 namespace fs = std::filesystem;
 
 namespace {
-
-std::pair<int, std::string> run(const std::string& command) {
-  std::string output;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return {-1, ""};
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof(buffer), pipe)) output += buffer;
-  const int status = pclose(pipe);
-  return {WEXITSTATUS(status), output};
-}
 
 template <typename T>
 void writeBinary(const fs::path& path, const std::vector<T>& values) {
@@ -85,8 +74,9 @@ class MakeCameraLabelsTest : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
 
   std::pair<int, std::string> makeLabels(const std::string& args) const {
-    return run(std::string(MAKE_CAMERA_LABELS_PATH) + " --sequence " + seq_.string() +
-               " --output " + out_.string() + " " + args);
+    return inekf_semantic_mapping::test::runCommand(std::string(MAKE_CAMERA_LABELS_PATH) +
+                                                    " --sequence " + seq_.string() + " --output " +
+                                                    out_.string() + " " + args);
   }
   fs::path labelPath(int camera, const std::string& frame) const {
     return out_ / ("labels_" + std::to_string(camera)) / (frame + ".png");
