@@ -236,7 +236,7 @@ std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vecto
 
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
                                     int max_frames, const mapping::SemanticMappingConfig& config,
-                                    int label_every) {
+                                    int label_every, const FrameProgress& on_frame) {
   if (label_every < 1) throw std::invalid_argument("scoreSequenceMaps: label_every must be >= 1");
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
   if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
@@ -313,6 +313,7 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
     }
     human_map.insertScanWithPointLabels(k.points_in_view, T_w_velo, human, kIgnoredLabel);
     kept.push_back(std::move(k));
+    if (on_frame) on_frame(kept.size(), names.size());
   }
   if (label_every > 1) camera_map.flush();
   SequenceMapScores scores;

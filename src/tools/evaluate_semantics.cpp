@@ -20,6 +20,7 @@
 // line printed is `RESULT <json>` (the same JSON --json writes).
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -27,6 +28,7 @@
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/common/progress_log.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
@@ -389,8 +391,12 @@ int main(int argc, char** argv) {
       std::vector<evaluation::PointLabelScore> rejected(variants.size());
       double sequence_ms = 0.0;
       double scale = 1.0;
-      for (const std::string& name : frames) {
-        const evaluation::SemanticKittiFrame frame = evaluation::readSemanticKittiFrame(dir, name);
+      const std::string sequence_name = std::filesystem::path(dir).filename().string();
+      ism::common::ProgressLog label_progress("evaluate_semantics: " + sequence_name + " labels",
+                                              frames.size(), "frames");
+      for (std::size_t f = 0; f < frames.size(); ++f) {
+        const evaluation::SemanticKittiFrame frame =
+            evaluation::readSemanticKittiFrame(dir, frames[f]);
         const ism::kitti::CameraProjection camera =
             evaluation::readSemanticKittiCamera(dir, frame.image.cols, frame.image.rows);
         const double focal = use_focal ? camera.P_rect(0, 0) : 0.0;
@@ -420,6 +426,7 @@ int main(int argc, char** argv) {
             }
           }
         }
+        label_progress.update(f + 1);
       }
       const double ms_per_image = sequence_ms / frames.size();
       total_ms += sequence_ms;
@@ -438,8 +445,11 @@ int main(int argc, char** argv) {
       json << "}";
       if (!cli.has("--no-map")) {
         // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
-        const evaluation::SequenceMapScores maps =
-            evaluation::scoreSequenceMaps(dir, &segmenter, max_frames, map_config, map_label_every);
+        ism::common::ProgressLog map_progress("evaluate_semantics: " + sequence_name + " maps",
+                                              frames.size(), "frames");
+        const evaluation::SequenceMapScores maps = evaluation::scoreSequenceMaps(
+            dir, &segmenter, max_frames, map_config, map_label_every,
+            [&](std::size_t done, std::size_t) { map_progress.update(done); });
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);
         std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",

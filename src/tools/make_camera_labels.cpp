@@ -22,6 +22,7 @@
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/common/progress_log.h"
 #include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
@@ -165,6 +166,7 @@ int run(const ism::common::CommandLine& cli) {
   std::fflush(stdout);
 
   const auto start = std::chrono::steady_clock::now();
+  ism::common::ProgressLog progress("make_camera_labels", frames.size(), "frames");
   Totals totals;
   for (std::size_t f = 0; f < frames.size(); ++f) {
     const std::string& frame = frames[f];
@@ -186,13 +188,7 @@ int run(const ism::common::CommandLine& cli) {
       writeCameraLabels(scan, point_labels, calibration, camera, image_path, output, frame,
                         &totals);
     }
-    if ((f + 1) % 100 == 0 || f + 1 == frames.size()) {
-      const double seconds =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      std::printf("make_camera_labels: frame %zu of %zu (%s), %zu label images, %.0f s\n", f + 1,
-                  frames.size(), frame.c_str(), totals.images, seconds);
-      std::fflush(stdout);
-    }
+    progress.update(f + 1);
   }
   if (totals.missing_images > 0) {
     std::fprintf(stderr,
@@ -204,10 +200,12 @@ int run(const ism::common::CommandLine& cli) {
       totals.images ? static_cast<double>(totals.labelled_pixels) / totals.images : 0.0;
   const double hidden_share =
       totals.points_in_view ? 100.0 * totals.hidden / totals.points_in_view : 0.0;
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf(
       "make_camera_labels: %zu label images, %.0f labelled pixels per image, %.1f %% of "
-      "the points in view hidden from the camera\n",
-      totals.images, per_image, hidden_share);
+      "the points in view hidden from the camera, %.1f s\n",
+      totals.images, per_image, hidden_share, seconds);
   return 0;
 }
 

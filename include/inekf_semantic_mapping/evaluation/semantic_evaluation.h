@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
@@ -131,10 +132,13 @@ struct SequenceMapScores {
   PointLabelScore ceiling;  // map built from the human labels
   std::size_t map_voxels = 0;
 };
+// on_frame (optional) is called after each frame goes into both maps with the frames done and
+// the frames in all (a tool's progress line).
+using FrameProgress = std::function<void(std::size_t done, std::size_t total)>;
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
                                     perception::Segmenter* segmenter, int max_frames = -1,
                                     const mapping::SemanticMappingConfig& config = {},
-                                    int label_every = 1);
+                                    int label_every = 1, const FrameProgress& on_frame = {});
 
 }  // namespace evaluation
 }  // namespace inekf_semantic_mapping
