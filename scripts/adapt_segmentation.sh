@@ -9,7 +9,7 @@
 # The result derives from non-commercial weights and data: keep it out of any commit.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
-[[ ${ISM_SKIP_DEPS:-0} == 1 ]] || "$ISM_ROOT/scripts/install_deps.sh" --with-training
+[[ ${ISM_SKIP_DEPS:-0} == 1 ]] || "$ISM_ROOT/scripts/install_deps.sh"
 args=("$@")
 has_output=0
 for a in "$@"; do [[ $a == --output ]] && has_output=1; done

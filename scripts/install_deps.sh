@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages this package needs (ROS 1 from Debian's own archive).
 # Idempotent: runs `apt-get update` and `apt-get install` only when something is missing.
-# Usage: scripts/install_deps.sh [--with-training]   (--with-training adds the ONNX checker)
+# Usage: scripts/install_deps.sh   (the training's packages are in the list: its test runs in CI)
 set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 
@@ -39,12 +39,10 @@ PACKAGES=(
   iproute2
   # fuzz harnesses (libFuzzer with clang) run by scripts/fuzz.sh
   clang-14 libfuzzer-14-dev
-  # the camera adaptation (training/) and its test: PyTorch, OpenCV's Python binding
-  python3-torch python3-opencv
+  # the camera adaptation (training/) and its test: PyTorch, ONNX (the export's input size and
+  # checks), OpenCV's Python binding
+  python3-torch python3-onnx python3-opencv
 )
-if [[ ${1:-} == --with-training ]]; then
-  PACKAGES+=(python3-onnx)
-fi
 
 missing=()
 for pkg in "${PACKAGES[@]}"; do

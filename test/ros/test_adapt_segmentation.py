@@ -43,7 +43,7 @@ def skip_loudly(test, what):
 def require_torch(test):
     """Skips the test, loudly, where PyTorch (needed only for training) is not installed."""
     if not HAVE_TORCH:
-        skip_loudly(test, "PyTorch not installed (scripts/install_deps.sh --with-training)")
+        skip_loudly(test, "PyTorch not installed (scripts/install_deps.sh)")
 
 
 class LabelTables(unittest.TestCase):
