@@ -22,6 +22,7 @@ step count on one thread count (the time budget decides the step count: --max-st
 """
 
 import argparse
+import atexit
 import csv
 import json
 import math
@@ -43,6 +44,7 @@ import logit_calibration  # noqa: E402
 import lovasz  # noqa: E402
 import preprocess  # noqa: E402
 from scoring import Scorer  # noqa: E402
+import teacher_store  # noqa: E402
 import weight_average  # noqa: E402
 
 
@@ -96,6 +98,12 @@ def parse_args(argv=None):
                         "holding its rarest class; this is t (0: every image once)")
     p.add_argument("--teacher-confidence", type=float, default=0.7,
                    help="the base network's labels below this softmax confidence teach nothing")
+    p.add_argument("--teacher-store", default="auto", choices=teacher_store.MODES,
+                   help="where the teacher's distributions are held while training (about 14 MB "
+                        "an image at 1024x320): memory, or disk (memory-mapped files in "
+                        "OUTPUT/teacher_cache, removed at the end: for hundreds of images); "
+                        "auto: disk once they would take more than a quarter of the available "
+                        "memory")
     p.add_argument("--class-weight-power", type=float, default=0.25,
                    help="class weights (median frequency / frequency)^power, 0: none")
     p.add_argument("--lovasz-weight", type=float, default=0.0,
@@ -278,11 +286,13 @@ def epoch_order(factors, rng):
 
 
 def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft, batch=2,
-                    labelled_weight=0.0):
+                    labelled_weight=0.0, store=None):
     """What the base network teaches in its zone. Hard: its labels where its softmax confidence
     is >= confidence (H x W trainIds, IGNORE elsewhere). Soft: its logits with the per-pixel
     weight as a last channel (H x W x (C + 1), float16: the whole distribution, confident or
-    not; distillation_weights)."""
+    not; distillation_weights). store (a teacher_store.TeacherStore) decides where each image's
+    targets are held; without one, in memory."""
+    keep = store.keep if store is not None else (lambda index, array: array)
     model.eval()
     with torch.no_grad():
         for i in range(0, len(samples), batch):
@@ -290,18 +300,18 @@ def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft,
             x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
             logits = model(x)
             if soft:
-                for s, z in zip(chunk, logits.numpy()):
+                for j, (s, z) in enumerate(zip(chunk, logits.numpy())):
                     weights = distillation_weights(s, outside_lidar_only, labelled_weight)
-                    s.teacher = np.concatenate(
-                        [z.transpose(1, 2, 0), weights[..., None]], axis=2).astype(np.float16)
+                    s.teacher = keep(i + j, np.concatenate(
+                        [z.transpose(1, 2, 0), weights[..., None]], axis=2).astype(np.float16))
                 continue
             prob = torch.softmax(logits, dim=1)
             conf, arg = prob.max(dim=1)
-            for s, c, a in zip(chunk, conf.numpy(), arg.numpy().astype(np.uint8)):
+            for j, (s, c, a) in enumerate(zip(chunk, conf.numpy(), arg.numpy().astype(np.uint8))):
                 t = np.where((c >= confidence) & (a != labels.BACKGROUND_CHANNEL), a, labels.IGNORE)
                 t = t.astype(np.uint8)
                 t[~distillation_zone(s, outside_lidar_only)] = labels.IGNORE
-                s.teacher = t
+                s.teacher = keep(i + j, t)
 
 
 def build_teacher(args, base, model, shared, torch):
@@ -659,14 +669,17 @@ def main(argv=None):
     soft = args.distill == "soft"
     if args.distill_labelled_weight > 0 and not soft:
         raise SystemExit("--distill-labelled-weight needs --distill soft")
+    store = teacher_store.TeacherStore(args.teacher_store,
+                                       os.path.join(args.output, "teacher_cache"), len(train),
+                                       teacher_store.available_memory_bytes())
+    atexit.register(store.close)  # a run stopped by an error leaves no cache behind
     if train_at_all:
         teacher, teacher_name = build_teacher(args, base, model, shared, torch)
         teacher_targets(train, teacher, torch, args.teacher_confidence,
                         args.distill_zone == "outside-lidar", soft,
-                        labelled_weight=args.distill_labelled_weight)
-        teacher_gb = sum(s.teacher.nbytes for s in train) / 1e9
+                        labelled_weight=args.distill_labelled_weight, store=store)
         log(f"{teacher_name}'s labels for distillation in {time.time() - teacher_t0:.0f} s "
-            f"({teacher_gb:.1f} GB held)")
+            f"({store.describe()})")
         del teacher
     if args.init:
         model.load_state_dict(torch.load(args.init, map_location="cpu"))
@@ -774,6 +787,9 @@ def main(argv=None):
             last_val = time.time()  # the interval is of training time, not of validations
             plot_history(history, os.path.join(args.output, "training.png"))
 
+    for s in train:
+        s.teacher = None  # the maps into the cache are closed before the cache goes
+    store.close()
     if history["val"][-1]["step"] != step:
         best = validate_and_keep(model, torch, val, step, history, best, best_path)
     averaged = None

@@ -346,6 +346,105 @@ class Teacher(unittest.TestCase):
         self.assertIn("no such file", str(caught.exception))
 
 
+class TeacherStore(unittest.TestCase):
+    """The teacher's distributions in memory or memory-mapped from disk: the same numbers either
+    way, the folder gone afterwards, and auto going to disk only when memory would run short."""
+
+    def test_auto_goes_to_disk_past_a_quarter_of_the_available_memory(self):
+        import teacher_store
+
+        gb = 1 << 30
+        self.assertEqual(teacher_store.choose_place("auto", 2 * gb, 20 * gb), "memory")
+        self.assertEqual(teacher_store.choose_place("auto", 6 * gb, 20 * gb), "disk")
+        self.assertEqual(teacher_store.choose_place("auto", 600 * gb, None), "memory")
+        self.assertEqual(teacher_store.choose_place("disk", 1, 20 * gb), "disk")
+        self.assertEqual(teacher_store.choose_place("memory", 600 * gb, 20 * gb), "memory")
+        with self.assertRaises(ValueError):
+            teacher_store.choose_place("ram", 1, 1)
+
+    def test_available_memory_is_read_from_meminfo(self):
+        import teacher_store
+
+        folder = tempfile.mkdtemp(prefix="ism_meminfo_")
+        path = os.path.join(folder, "meminfo")
+        with open(path, "w") as f:
+            f.write("MemTotal:       24000000 kB\nMemFree:  100 kB\nMemAvailable:   20000000 kB\n")
+        self.assertEqual(teacher_store.available_memory_bytes(path), 20000000 * 1024)
+        self.assertIsNone(teacher_store.available_memory_bytes(path + ".missing"))
+
+    def test_disk_keeps_the_same_numbers_read_only_and_removes_its_folder(self):
+        import teacher_store
+
+        folder = os.path.join(tempfile.mkdtemp(prefix="ism_store_"), "teacher_cache")
+        os.makedirs(folder)
+        with open(os.path.join(folder, "000007.npy.partial"), "w") as f:
+            f.write("a killed run's leftover")
+        store = teacher_store.TeacherStore("disk", folder, 2)
+        rng = np.random.default_rng(0)
+        arrays = [rng.normal(size=(4, 6, 3)).astype(np.float16) for _ in range(2)]
+        kept = [store.keep(i, a) for i, a in enumerate(arrays)]
+        self.assertEqual(sorted(os.listdir(folder)), ["000000.npy", "000001.npy"])
+        for a, k in zip(arrays, kept):
+            self.assertIsInstance(k, np.memmap)
+            np.testing.assert_array_equal(np.asarray(k), a)
+            with self.assertRaises(ValueError):
+                k[0, 0, 0] = 1  # read-only: the training cannot spoil the cache
+        self.assertIn("on disk", store.describe())
+        del kept
+        store.close()
+        self.assertFalse(os.path.exists(folder))
+
+    def test_memory_hands_back_the_array_and_writes_nothing(self):
+        import teacher_store
+
+        folder = os.path.join(tempfile.mkdtemp(prefix="ism_store_"), "teacher_cache")
+        store = teacher_store.TeacherStore("auto", folder, 3, available_bytes=1 << 30)
+        a = np.zeros((8, 8, 21), np.float16)
+        self.assertIs(store.keep(0, a), a)
+        self.assertFalse(os.path.exists(folder))
+        self.assertIn("0.0 GB held in memory", store.describe())
+        small = teacher_store.TeacherStore("auto", folder, 3, available_bytes=a.nbytes)
+        self.assertIsInstance(small.keep(0, a), np.memmap)  # 3 images > a quarter of it
+        small.close()
+
+    def test_the_training_reads_the_same_targets_from_either_place(self):
+        require_torch(self)
+        import adapt_segmentation as adapt
+        import augment
+        import teacher_store
+
+        torch.manual_seed(0)
+        model = torch.nn.Conv2d(3, labels.NUM_TRAIN_IDS + 1, 3, padding=1)
+
+        def samples():
+            out = []
+            for i in range(3):
+                target = np.full((16, 24), labels.IGNORE, np.uint8)
+                target[10:, :] = i
+                image = np.random.default_rng(i).integers(0, 255, (16, 24, 3), dtype=np.uint8)
+                out.append(datasets.Sample(f"s{i}", "dense", image, target))
+            return out
+
+        folder = os.path.join(tempfile.mkdtemp(prefix="ism_store_"), "teacher_cache")
+        for soft in (True, False):
+            in_memory, on_disk = samples(), samples()
+            adapt.teacher_targets(in_memory, model, torch, 0.0, False, soft, labelled_weight=0.3)
+            store = teacher_store.TeacherStore("disk", folder, len(on_disk))
+            adapt.teacher_targets(on_disk, model, torch, 0.0, False, soft, labelled_weight=0.3,
+                                  store=store)
+            for m, d in zip(in_memory, on_disk):
+                self.assertIsInstance(d.teacher, np.memmap)
+                np.testing.assert_array_equal(m.teacher, np.asarray(d.teacher))
+                crop = lambda x: x.teacher.astype(np.float32) if soft else x.teacher  # noqa: E731
+                a = augment.random_crop(m, crop, np.random.default_rng(2), 8, 12)
+                b = augment.random_crop(d, crop, np.random.default_rng(2), 8, 12)
+                for x, y in zip(a, b):  # image, target, teacher: one crop from either place
+                    np.testing.assert_array_equal(x, y)
+            for d in on_disk:
+                d.teacher = None
+            store.close()
+
+
 class WeightInterpolation(unittest.TestCase):
     """Weight-space ensembling of the adapted network with its base (--interpolate)."""
 
@@ -858,11 +957,15 @@ class TinyPipeline(unittest.TestCase):
                    "--shared", shared, "--output", out, "--max-steps", "3", "--max-images", "2",
                    "--input", "512x160", "--export-input", "416x128", "--crop", "128x256",
                    "--batch", "2", "--interpolate", "0.5,1", "--average-weights", "0.7",
-                   "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2"]
+                   "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2",
+                   "--teacher-store", "disk"]
         result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, timeout=600)
         print(result.stdout[-3000:])
         self.assertEqual(result.returncode, 0, result.stdout[-2000:])
+        # The teacher's distributions were read from disk while training, and the cache is gone.
+        self.assertRegex(result.stdout, r"labels for distillation in \d+ s \(0\.\d GB on disk")
+        self.assertFalse(os.path.exists(os.path.join(out, "teacher_cache")))
         for name in ("kitti_adapted.onnx", "kitti_adapted.yaml", "training.png", "summary.json"):
             self.assertTrue(os.path.exists(os.path.join(out, name)), name)
         with open(os.path.join(out, "summary.json")) as f:
