@@ -294,8 +294,14 @@ def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft,
     targets are held; without one, in memory."""
     keep = store.keep if store is not None else (lambda index, array: array)
     model.eval()
+    start = last_line = time.time()
     with torch.no_grad():
         for i in range(0, len(samples), batch):
+            if time.time() - last_line >= 30:  # hundreds of images take minutes
+                last_line = time.time()
+                rate = i / (last_line - start)
+                log(f"teacher: {i} of {len(samples)} images, {(len(samples) - i) / rate:.0f} s "
+                    "left")
             chunk = samples[i:i + batch]
             x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
             logits = model(x)
