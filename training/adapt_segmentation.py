@@ -742,8 +742,7 @@ def main(argv=None):
             s = train[order.pop()]
             label_weights.append(s.label_weight)
             image, target, teacher = augment.random_crop(
-                s, lambda x: x.teacher.astype(np.float32) if soft else x.teacher, rng, crop_h,
-                crop_w)
+                s, rng, crop_h, crop_w, teacher_dtype=np.float32 if soft else None)
             images.append(image)
             targets.append(target)
             teachers.append(teacher)

@@ -435,14 +435,53 @@ class TeacherStore(unittest.TestCase):
             for m, d in zip(in_memory, on_disk):
                 self.assertIsInstance(d.teacher, np.memmap)
                 np.testing.assert_array_equal(m.teacher, np.asarray(d.teacher))
-                crop = lambda x: x.teacher.astype(np.float32) if soft else x.teacher  # noqa: E731
-                a = augment.random_crop(m, crop, np.random.default_rng(2), 8, 12)
-                b = augment.random_crop(d, crop, np.random.default_rng(2), 8, 12)
+                dtype = np.float32 if soft else None
+                a = augment.random_crop(m, np.random.default_rng(2), 8, 12, dtype)
+                b = augment.random_crop(d, np.random.default_rng(2), 8, 12, dtype)
                 for x, y in zip(a, b):  # image, target, teacher: one crop from either place
                     np.testing.assert_array_equal(x, y)
             for d in on_disk:
                 d.teacher = None
             store.close()
+
+
+class Crops(unittest.TestCase):
+    """The training crop reads only its window of the teacher, as a whole resize would give it."""
+
+    def test_the_window_is_what_opencv_nearest_resize_then_crop_gives(self):
+        import cv2
+
+        import augment
+
+        rng = np.random.default_rng(3)
+        for trial in range(300):
+            h0, w0 = int(rng.integers(8, 400)), int(rng.integers(8, 1300))
+            channels = (1, 3, 21)[trial % 3]
+            source = rng.integers(0, 255, (h0, w0, channels)).astype(np.float32)
+            if channels == 1:
+                source = source[..., 0].astype(np.uint8)
+            s = rng.uniform(0.5, 1.6)
+            h, w = max(8, int(round(h0 * s))), max(8, int(round(w0 * s)))
+            crop_h, crop_w = int(rng.integers(1, h + 1)), int(rng.integers(1, w + 1))
+            y, x = int(rng.integers(0, h - crop_h + 1)), int(rng.integers(0, w - crop_w + 1))
+            whole = cv2.resize(source, (w, h), interpolation=cv2.INTER_NEAREST)
+            np.testing.assert_array_equal(
+                augment.nearest_window(source, h, w, y, x, crop_h, crop_w),
+                whole[y:y + crop_h, x:x + crop_w], err_msg=f"{w0}x{h0} -> {w}x{h} at {x},{y}")
+
+    def test_crops_larger_than_the_image_pad_the_teacher_empty(self):
+        import augment
+
+        target = np.zeros((10, 12), np.uint8)
+        sample = datasets.Sample("s", "dense", np.zeros((10, 12, 3), np.uint8), target)
+        sample.teacher = np.ones((10, 12, 4), np.float16)
+        _, target, teacher = augment.random_crop(sample, np.random.default_rng(0), 20, 30,
+                                                 np.float32)
+        self.assertEqual(teacher.shape, (20, 30, 4))
+        self.assertEqual(teacher.dtype, np.float32)
+        self.assertTrue((teacher.sum(axis=2) == 0).any())  # padded: nothing taught there
+        self.assertTrue((teacher.sum(axis=2) == 4).any())
+        self.assertTrue((target == labels.IGNORE).any())
 
 
 class WeightInterpolation(unittest.TestCase):
