@@ -41,6 +41,20 @@ std::string jsonNumber(double value) {
   return out.str();
 }
 
+// A label image from a LabelImageSource, refused (naming the frame) unless it is one byte per
+// pixel at the image's size: the map reads it by the image's pixel coordinates.
+cv::Mat checkedLabelImage(cv::Mat labels, const cv::Mat& image, const std::string& sequence_dir,
+                          const std::string& frame) {
+  if (labels.type() != CV_8UC1 || labels.size() != image.size()) {
+    throw std::runtime_error(sequence_dir + "/image_2/" + frame + ".png: its label image is " +
+                             std::to_string(labels.cols) + "x" + std::to_string(labels.rows) +
+                             " of type " + std::to_string(labels.type()) + ", not " +
+                             std::to_string(image.cols) + "x" + std::to_string(image.rows) +
+                             " CV_8UC1");
+  }
+  return labels;
+}
+
 }  // namespace
 
 PointLabelScore::PointLabelScore() : confusion_(static_cast<std::size_t>(kRows) * kCols, 0) {}
@@ -237,6 +251,16 @@ std::uint32_t mapLabelAt(const mapping::SemanticOcTree& tree, const Eigen::Vecto
 SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* segmenter,
                                     int max_frames, const mapping::SemanticMappingConfig& config,
                                     int label_every, const FrameProgress& on_frame) {
+  const LabelImageSource segment = [segmenter](const std::string&, const cv::Mat& image) {
+    return filterLabels(segmenter->segment(image), segmenter->card().label_filter);
+  };
+  return scoreSequenceMaps(sequence_dir, segment, max_frames, config, label_every, on_frame);
+}
+
+SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
+                                    const LabelImageSource& label_image_of, int max_frames,
+                                    const mapping::SemanticMappingConfig& config, int label_every,
+                                    const FrameProgress& on_frame) {
   if (label_every < 1) throw std::invalid_argument("scoreSequenceMaps: label_every must be >= 1");
   std::vector<std::string> names = listSemanticKittiFrames(sequence_dir);
   if (max_frames > 0 && static_cast<int>(names.size()) > max_frames) names.resize(max_frames);
@@ -277,7 +301,7 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
                                       width, height};
     if (label_every == 1) {
       const cv::Mat labels =
-          filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
+          checkedLabelImage(label_image_of(name, frame.image), frame.image, sequence_dir, name);
       const mapping::LabelImageView view{labels.ptr<std::uint8_t>(), labels.cols, labels.rows,
                                          labels.step};
       camera_map.insertScan(points, T_w_velo, &view, &camera);
@@ -287,7 +311,7 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir, Segmenter* 
       camera_map.setCameraView(camera);
       if (kept.size() % static_cast<std::size_t>(label_every) == 0) {
         const cv::Mat labels =
-            filterLabels(segmenter->segment(frame.image), segmenter->card().label_filter);
+            checkedLabelImage(label_image_of(name, frame.image), frame.image, sequence_dir, name);
         camera_map.addLabelImage(stamp,
                                  mapping::LabelImageView{labels.ptr<std::uint8_t>(), labels.cols,
                                                          labels.rows, labels.step},

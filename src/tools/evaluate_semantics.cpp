@@ -22,6 +22,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -392,6 +394,12 @@ int main(int argc, char** argv) {
       double sequence_ms = 0.0;
       double scale = 1.0;
       const std::string sequence_name = std::filesystem::path(dir).filename().string();
+      // The map pass builds its camera map from the label images made here (the card's label
+      // filter applied), so each frame is segmented once: a whole sequence took twice as long.
+      // PNG-encoded: a sequence of 4,500 frames holds a few hundred MB, not 2 GB. A frame whose
+      // scale the focal length changes (--network-focal) is segmented again, as the node would.
+      const bool score_map = !cli.has("--no-map");
+      std::map<std::string, std::vector<uchar>> map_label_images;
       ism::common::ProgressLog label_progress("evaluate_semantics: " + sequence_name + " labels",
                                               frames.size(), "frames");
       for (std::size_t f = 0; f < frames.size(); ++f) {
@@ -408,6 +416,11 @@ int main(int argc, char** argv) {
                 .count();
         const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
                                                    frame.image.cols, frame.image.rows);
+        if (score_map && scale == segmenter.tileScaleFor(frame.image.size(), 0.0)) {
+          cv::imencode(".png",
+                       perception::filterLabels(segmentation, segmenter.card().label_filter),
+                       map_label_images[frames[f]], {cv::IMWRITE_PNG_COMPRESSION, 1});
+        }
         perception::ProjectedPoints projected;
         for (std::size_t v = 0; v < variants.size(); ++v) {
           const std::vector<std::uint32_t> labels = evaluation::labelScanPoints(
@@ -443,12 +456,19 @@ int main(int argc, char** argv) {
         json << (v ? "," : "") << "\"" << variants[v].name << "\":" << scores[v].toJson();
       }
       json << "}";
-      if (!cli.has("--no-map")) {
+      if (score_map) {
         // The maps of the sequence (ground-truth poses, 0.2 m): camera labels and the ceiling.
         ism::common::ProgressLog map_progress("evaluate_semantics: " + sequence_name + " maps",
                                               frames.size(), "frames");
+        const evaluation::LabelImageSource label_image_of = [&](const std::string& name,
+                                                                const cv::Mat& image) {
+          const auto kept = map_label_images.find(name);
+          if (kept != map_label_images.end())
+            return cv::imdecode(kept->second, cv::IMREAD_UNCHANGED);
+          return perception::filterLabels(segmenter.segment(image), segmenter.card().label_filter);
+        };
         const evaluation::SequenceMapScores maps = evaluation::scoreSequenceMaps(
-            dir, &segmenter, max_frames, map_config, map_label_every,
+            dir, label_image_of, max_frames, map_config, map_label_every,
             [&](std::size_t done, std::size_t) { map_progress.update(done); });
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);

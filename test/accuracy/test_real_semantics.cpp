@@ -164,6 +164,39 @@ TEST(RealSemantics, MapFromCameraLabelsOnSemanticKitti) {
   }
 }
 
+// The map built from label images that a caller hands in (evaluate_semantics passes the ones its
+// label pass made, so each frame is segmented once): every frame's image is asked for once, by
+// name, in order; a map made from "road" everywhere (the lidar checks off, which would change
+// some) calls every covered point road; a label image of the wrong size is refused, naming the
+// frame.
+TEST(RealSemantics, MapFromHandedInLabelImages) {
+  ISM_REQUIRE_SHARED(kSequences);
+  const std::string dir = test::sharedPath(kSequences) + "/05";
+  mapping::SemanticMappingConfig config;
+  config.label_geometry_check = false;
+  config.label_geometry_curbs = false;
+  std::vector<std::string> asked;
+  const LabelImageSource all_road = [&](const std::string& frame, const cv::Mat& image) {
+    asked.push_back(frame);
+    return cv::Mat(image.size(), CV_8UC1, cv::Scalar(cityscapes::kRoad));
+  };
+  const SequenceMapScores maps = scoreSequenceMaps(dir, all_road, -1, config);
+  EXPECT_EQ(asked, listSemanticKittiFrames(dir));
+  EXPECT_GT(maps.camera.coverage(), 0.8);
+  EXPECT_EQ(maps.camera.predictedCount(cityscapes::kRoad), maps.camera.labelled());
+  EXPECT_GE(maps.ceiling.meanIoU(), 0.93);  // the human-label map does not use the source
+
+  const LabelImageSource too_small = [](const std::string&, const cv::Mat& image) {
+    return cv::Mat(image.rows / 2, image.cols, CV_8UC1, cv::Scalar(0));
+  };
+  try {
+    scoreSequenceMaps(dir, too_small, 2, config);
+    FAIL() << "a label image of half the height was taken";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("05/image_2/000000.png"), std::string::npos) << e.what();
+  }
+}
+
 // The network adapted to the KITTI camera (scripts/adapt_segmentation.sh), where one is kept
 // (test::adaptedModelPath: a trained model is never committed, so this skips in a fresh clone):
 // the raw camera labels at every lidar point in the image (no filter, no occlusion test, no lidar

@@ -140,5 +140,15 @@ SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
                                     const mapping::SemanticMappingConfig& config = {},
                                     int label_every = 1, const FrameProgress& on_frame = {});
 
+// Where the camera map's label images come from: a frame's name (as listSemanticKittiFrames
+// gives it) and image_2 in, its label image out (CV_8UC1 Cityscapes labelIds, the image's size,
+// the card's label filter applied). The Segmenter overload above segments each frame; a tool
+// that has segmented the frames already (evaluate_semantics' label pass) hands its own back.
+using LabelImageSource = std::function<cv::Mat(const std::string& frame, const cv::Mat& image)>;
+SequenceMapScores scoreSequenceMaps(const std::string& sequence_dir,
+                                    const LabelImageSource& label_image_of, int max_frames = -1,
+                                    const mapping::SemanticMappingConfig& config = {},
+                                    int label_every = 1, const FrameProgress& on_frame = {});
+
 }  // namespace evaluation
 }  // namespace inekf_semantic_mapping
