@@ -44,6 +44,7 @@ import logit_calibration  # noqa: E402
 import lovasz  # noqa: E402
 import preprocess  # noqa: E402
 from scoring import Scorer  # noqa: E402
+import semantickitti_download  # noqa: E402
 import teacher_store  # noqa: E402
 import weight_average  # noqa: E402
 
@@ -119,6 +120,15 @@ def parse_args(argv=None):
                         "SemanticKITTI classes, 0 where none): ../shared's semantickitti_train "
                         "or what make_camera_labels writes from your SemanticKITTI sequences; "
                         "default SHARED/data/semantickitti_train")
+    p.add_argument("--semantickitti", default="",
+                   help="a SemanticKITTI download (the dataset/ folder: sequences/NN with "
+                        "velodyne/, labels/, image_2/, image_3/): every labelled sequence but "
+                        "05 and 08 is turned into camera labels (make_camera_labels, into "
+                        "OUTPUT/camera_labels) and trained on instead of --sparse-root, "
+                        "--val-sequence held out (the last one where it is missing)")
+    p.add_argument("--semantickitti-every", type=int, default=50,
+                   help="with --semantickitti: every N-th frame of each sequence (consecutive "
+                        "frames are 0.1 s apart and nearly equal)")
     p.add_argument("--sparse-sequences", default="01,02,03,09",
                    help="sequences of --sparse-root to train on")
     p.add_argument("--sparse-weight", type=float, default=1.0,
@@ -589,6 +599,30 @@ def plot_history(history, path):
     plt.close(fig)
 
 
+def use_semantickitti_download(args):
+    """--semantickitti: converts the download's labelled sequences (make_camera_labels) into
+    OUTPUT/camera_labels and points --sparse-root, --sparse-sequences and --val-sequence at
+    them."""
+    if args.sparse_root:
+        raise SystemExit("--semantickitti and --sparse-root: give one (--semantickitti writes "
+                         "its own sparse root)")
+    if args.semantickitti_every < 1:
+        raise SystemExit(f"--semantickitti-every {args.semantickitti_every}: must be 1 or more")
+    out_root = os.path.join(args.output, "camera_labels")
+    try:
+        sequences = semantickitti_download.trainable_sequences(args.semantickitti)
+        tool = semantickitti_download.find_make_camera_labels(os.path.dirname(HERE))
+        semantickitti_download.convert(args.semantickitti, sequences, out_root,
+                                       args.semantickitti_every, tool, log)
+    except semantickitti_download.DownloadError as e:
+        raise SystemExit(f"[adapt_segmentation] --semantickitti: {e}")
+    train, val = semantickitti_download.split_validation(sequences, args.val_sequence)
+    args.sparse_root, args.sparse_sequences, args.val_sequence = out_root, ",".join(train), val
+    log(f"SemanticKITTI {args.semantickitti}: training on sequences {args.sparse_sequences}, "
+        f"validating on {val or 'the dense frames alone'} (one frame in "
+        f"{args.semantickitti_every}, labels in {out_root})")
+
+
 def load_samples(args, shared, width, height, standardize, limit):
     """The training and validation samples at width x height (the card's preparation applied):
     the dense frames (every dense_val_every-th held out), the sparse sequences, the validation
@@ -652,6 +686,8 @@ def main(argv=None):
     shared = os.path.abspath(args.shared)
     limit = args.max_images or None
 
+    if args.semantickitti:
+        use_semantickitti_download(args)
     t0 = time.time()
     val_sequence = [args.val_sequence] if args.val_sequence else []
     sparse_train = [s for s in args.sparse_sequences.split(",") if s]

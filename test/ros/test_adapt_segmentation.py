@@ -917,6 +917,23 @@ class Preprocessing(unittest.TestCase):
         self.assertEqual(out.reshape(-1, 3)[128, 0], round(255 * (128 / 255) ** 0.7))
 
 
+def write_tiny_semantickitti_sequence(seq):
+    """A one-frame SemanticKITTI sequence folder: two labelled points straight ahead at 10 m,
+    road at pixel (100, 50) and sidewalk at (80, 70) of a 200x100 image_2."""
+    import cv2
+
+    for sub in ("velodyne", "labels", "image_2"):
+        os.makedirs(os.path.join(seq, sub))
+    with open(os.path.join(seq, "calib.txt"), "w") as f:
+        for p in ("P0", "P1", "P2", "P3"):
+            f.write(f"{p}: 100 0 100 0 0 100 50 0 0 0 1 0\n")
+        f.write("Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n")  # velodyne x forward = camera z
+    np.array([[10, 0, 0, 0], [10, 2, -2, 0]], np.float32).tofile(
+        os.path.join(seq, "velodyne", "000000.bin"))
+    np.array([40 | (5 << 16), 48], np.uint32).tofile(os.path.join(seq, "labels", "000000.label"))
+    cv2.imwrite(os.path.join(seq, "image_2", "000000.png"), np.full((100, 200, 3), 120, np.uint8))
+
+
 class OwnSemanticKitti(unittest.TestCase):
     """A user's SemanticKITTI sequence: make_camera_labels writes the sparse layout, and
     --sparse-root / --dense-root make the training read it instead of ../shared."""
@@ -929,19 +946,7 @@ class OwnSemanticKitti(unittest.TestCase):
         [tool] = e2e_support.require_executables(self, "make_camera_labels")
         with tempfile.TemporaryDirectory() as tmp:
             seq = os.path.join(tmp, "semantickitti", "sequences", "00")
-            for sub in ("velodyne", "labels", "image_2"):
-                os.makedirs(os.path.join(seq, sub))
-            with open(os.path.join(seq, "calib.txt"), "w") as f:
-                for p in ("P0", "P1", "P2", "P3"):
-                    f.write(f"{p}: 100 0 100 0 0 100 50 0 0 0 1 0\n")
-                f.write("Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n")  # velodyne x forward = camera z
-            # Two points straight ahead at 10 m: road at pixel (100, 50), sidewalk at (80, 70).
-            np.array([[10, 0, 0, 0], [10, 2, -2, 0]], np.float32).tofile(
-                os.path.join(seq, "velodyne", "000000.bin"))
-            np.array([40 | (5 << 16), 48], np.uint32).tofile(
-                os.path.join(seq, "labels", "000000.label"))
-            cv2.imwrite(os.path.join(seq, "image_2", "000000.png"),
-                        np.full((100, 200, 3), 120, np.uint8))
+            write_tiny_semantickitti_sequence(seq)
             sparse_root = os.path.join(tmp, "camera_labels")
             run = subprocess.run([tool, "--sequence", seq, "--output",
                                   os.path.join(sparse_root, "sequences", "00")],
@@ -973,6 +978,59 @@ class OwnSemanticKitti(unittest.TestCase):
             # An evaluation sequence stays refused under any root.
             with self.assertRaisesRegex(datasets.DatasetError, "05 is an evaluation sequence"):
                 datasets.load_sparse(sparse_root, ["05"], 200, 100, 0.7, True)
+
+
+class SemanticKittiDownload(unittest.TestCase):
+    """--semantickitti DIR: every labelled sequence of the download but 05 / 08 converted by
+    make_camera_labels and trained on, one held out."""
+
+    def test_the_labelled_sequences_but_the_evaluation_ones_are_converted_and_read(self):
+        import e2e_support
+        import adapt_segmentation as adapt
+
+        e2e_support.require_executables(self, "make_camera_labels")
+        with tempfile.TemporaryDirectory() as tmp:
+            root = os.path.join(tmp, "dataset")
+            for seq in ("00", "01", "05", "08"):
+                write_tiny_semantickitti_sequence(os.path.join(root, "sequences", seq))
+            os.makedirs(os.path.join(root, "sequences", "11", "velodyne"))  # no labels: test set
+            out = os.path.join(tmp, "out")
+            args = adapt.parse_args(["--shared", os.path.join(tmp, "no_shared"), "--output", out,
+                                     "--semantickitti", root, "--semantickitti-every", "1"])
+            adapt.use_semantickitti_download(args)
+            # 06 (the default validation sequence) is not there: the last one is held out.
+            self.assertEqual((args.sparse_sequences, args.val_sequence), ("00", "01"))
+            self.assertEqual(args.sparse_root, os.path.join(out, "camera_labels"))
+            self.assertEqual(sorted(os.listdir(os.path.join(out, "camera_labels", "sequences"))),
+                             ["00", "01"])
+            samples = datasets.load_sparse(args.sparse_root, ["00"], 200, 100, 0.7, True)
+            self.assertEqual(len(samples), 1)
+            self.assertEqual(int((samples[0].target != labels.IGNORE).sum()), 2)
+
+            both = adapt.parse_args(["--shared", tmp, "--output", out, "--semantickitti", root,
+                                     "--sparse-root", out])
+            with self.assertRaisesRegex(SystemExit, "--semantickitti and --sparse-root"):
+                adapt.use_semantickitti_download(both)
+
+    def test_sequences_validation_and_tool_errors_are_named(self):
+        import semantickitti_download as download
+
+        with tempfile.TemporaryDirectory() as tmp:
+            with self.assertRaisesRegex(download.DownloadError, "no sequences/ folder"):
+                download.trainable_sequences(tmp)
+            for seq in ("05", "08"):
+                write_tiny_semantickitti_sequence(os.path.join(tmp, "sequences", seq))
+            with self.assertRaisesRegex(download.DownloadError, "data_odometry_color"):
+                download.trainable_sequences(tmp)
+            tool = os.path.join(tmp, "failing_tool")
+            with open(tool, "w") as f:
+                f.write("#!/bin/sh\necho 'calib.txt: no Tr line' >&2\nexit 3\n")
+            os.chmod(tool, 0o755)
+            with self.assertRaisesRegex(download.DownloadError,
+                                        r"sequence 02 \(exit 3\):\ncalib.txt: no Tr line"):
+                download.convert(tmp, ["02"], os.path.join(tmp, "out"), 10, tool, lambda m: None)
+        self.assertEqual(download.split_validation(["00", "06", "07"], "06"), (["00", "07"], "06"))
+        self.assertEqual(download.split_validation(["00"], "06"), (["00"], ""))
 
 
 class TinyPipeline(unittest.TestCase):
