@@ -44,7 +44,8 @@ constexpr char kUsage[] =
     "                class of the lidar point the camera sees at that pixel, 0 where none),\n"
     "                calib.txt, poses.txt, times.txt\n"
     "  --every       every N-th frame (default 1; a whole sequence holds thousands of nearly\n"
-    "                equal frames, and each training image costs about 14 MB of memory)\n"
+    "                equal frames, and each training image holds about 14 MB of the\n"
+    "                teacher's distributions while adapt_segmentation trains)\n"
     "  --max-frames  at most this many frames (after --every; default: all)\n"
     "  --cameras     2, 3 or 2,3 (default): camera 3 where image_3/ holds the frame\n";
 
