@@ -4,8 +4,9 @@ The soft distillation keeps the base network's whole class distribution for ever
 (about 14 MB an image at 1024x320 in float16): 114 images are 1.6 GB, but the several hundred
 images that make_camera_labels writes from a user's SemanticKITTI sequences are more than a
 24 GB machine holds beside the training. On disk, each image's targets are one .npy file,
-memory-mapped: a crop reads its image's file from the page cache, and the training's resident
-memory no longer grows with the number of images.
+memory-mapped for each read: a crop reads its image's file from the page cache, and the
+training's resident memory no longer grows with the number of images. Nothing stays open between
+reads (a map holds a file descriptor, and a few thousand images would pass a 1024-file limit).
 """
 
 import os
@@ -43,6 +44,24 @@ def choose_place(mode, estimate_bytes, available_bytes):
     return "disk" if estimate_bytes > AUTO_MEMORY_SHARE * available_bytes else "memory"
 
 
+class StoredArray:
+    """An array in a .npy file, read through a memory map opened for each access: shape, dtype,
+    indexing (what a crop needs) and np.asarray."""
+
+    def __init__(self, path, shape, dtype):
+        self.path = path
+        self.shape = shape
+        self.dtype = dtype
+        self.ndim = len(shape)
+
+    def __getitem__(self, index):
+        return np.array(np.load(self.path, mmap_mode="r")[index])  # a copy: the map closes here
+
+    def __array__(self, dtype=None):
+        out = np.load(self.path)
+        return out if dtype is None else out.astype(dtype)
+
+
 class TeacherStore:
     """Keeps one array per training image, in memory or as memory-mapped files in folder.
 
@@ -61,7 +80,7 @@ class TeacherStore:
         choose_place(mode, 0, None)  # a bad mode fails here, before the teacher's pass
 
     def keep(self, index, array):
-        """The array to hold for image index: array itself, or a read-only map of its file."""
+        """The array to hold for image index: array itself, or a StoredArray of its file."""
         if self.place is None:
             self.place = choose_place(self.mode, array.nbytes * self.count, self.available_bytes)
             if self.place == "disk":
@@ -76,7 +95,7 @@ class TeacherStore:
         with open(partial, "wb") as f:
             np.save(f, np.ascontiguousarray(array))
         os.replace(partial, path)
-        return np.load(path, mmap_mode="r")
+        return StoredArray(path, array.shape, array.dtype)
 
     def describe(self):
         """One phrase for the log: how much is held and where."""

@@ -372,23 +372,30 @@ class TeacherStore(unittest.TestCase):
         self.assertEqual(teacher_store.available_memory_bytes(path), 20000000 * 1024)
         self.assertIsNone(teacher_store.available_memory_bytes(path + ".missing"))
 
-    def test_disk_keeps_the_same_numbers_read_only_and_removes_its_folder(self):
+    def test_disk_keeps_the_same_numbers_holds_no_file_open_and_removes_its_folder(self):
         import teacher_store
 
         folder = os.path.join(tempfile.mkdtemp(prefix="ism_store_"), "teacher_cache")
         os.makedirs(folder)
         with open(os.path.join(folder, "000007.npy.partial"), "w") as f:
             f.write("a killed run's leftover")
-        store = teacher_store.TeacherStore("disk", folder, 2)
+        count = 40
+        store = teacher_store.TeacherStore("disk", folder, count)
         rng = np.random.default_rng(0)
-        arrays = [rng.normal(size=(4, 6, 3)).astype(np.float16) for _ in range(2)]
+        arrays = [rng.normal(size=(4, 6, 3)).astype(np.float16) for _ in range(count)]
+        open_before = len(os.listdir("/proc/self/fd"))
         kept = [store.keep(i, a) for i, a in enumerate(arrays)]
-        self.assertEqual(sorted(os.listdir(folder)), ["000000.npy", "000001.npy"])
-        for a, k in zip(arrays, kept):
-            self.assertIsInstance(k, np.memmap)
+        crops = [k[1:3, 2:5] for k in kept]
+        # Thousands of images would pass a 1024-file limit if each kept its map open.
+        self.assertEqual(len(os.listdir("/proc/self/fd")), open_before)
+        self.assertEqual(len(os.listdir(folder)), count)
+        for a, k, crop in zip(arrays, kept, crops):
+            self.assertIsInstance(k, teacher_store.StoredArray)
+            self.assertEqual((k.shape, k.dtype, k.ndim), (a.shape, a.dtype, 3))
             np.testing.assert_array_equal(np.asarray(k), a)
-            with self.assertRaises(ValueError):
-                k[0, 0, 0] = 1  # read-only: the training cannot spoil the cache
+            np.testing.assert_array_equal(crop, a[1:3, 2:5])
+            crop[0, 0, 0] = 7  # a copy: the cache stays as written
+        np.testing.assert_array_equal(np.asarray(kept[0]), arrays[0])
         self.assertIn("on disk", store.describe())
         del kept
         store.close()
@@ -404,7 +411,7 @@ class TeacherStore(unittest.TestCase):
         self.assertFalse(os.path.exists(folder))
         self.assertIn("0.0 GB held in memory", store.describe())
         small = teacher_store.TeacherStore("auto", folder, 3, available_bytes=a.nbytes)
-        self.assertIsInstance(small.keep(0, a), np.memmap)  # 3 images > a quarter of it
+        self.assertIsInstance(small.keep(0, a), teacher_store.StoredArray)  # 3 > a quarter
         small.close()
 
     def test_the_training_reads_the_same_targets_from_either_place(self):
@@ -433,7 +440,7 @@ class TeacherStore(unittest.TestCase):
             adapt.teacher_targets(on_disk, model, torch, 0.0, False, soft, labelled_weight=0.3,
                                   store=store)
             for m, d in zip(in_memory, on_disk):
-                self.assertIsInstance(d.teacher, np.memmap)
+                self.assertIsInstance(d.teacher, teacher_store.StoredArray)
                 np.testing.assert_array_equal(m.teacher, np.asarray(d.teacher))
                 dtype = np.float32 if soft else None
                 a = augment.random_crop(m, np.random.default_rng(2), 8, 12, dtype)
