@@ -124,8 +124,9 @@ def parse_args(argv=None):
                    help="a SemanticKITTI download (the dataset/ folder: sequences/NN with "
                         "velodyne/, labels/, image_2/, image_3/): every labelled sequence but "
                         "05 and 08 is turned into camera labels (make_camera_labels, into "
-                        "OUTPUT/camera_labels) and trained on instead of --sparse-root, "
-                        "--val-sequence held out (the last one where it is missing)")
+                        "OUTPUT/camera_labels) and trained on instead of --sparse-root and "
+                        "--sparse-sequences, --val-sequence held out (the last one where it is "
+                        "missing)")
     p.add_argument("--semantickitti-every", type=int, default=50,
                    help="with --semantickitti: every N-th frame of each sequence (consecutive "
                         "frames are 0.1 s apart and nearly equal)")
