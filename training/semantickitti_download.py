@@ -50,9 +50,11 @@ def split_validation(sequences, wanted):
 
 
 def find_make_camera_labels(repo_root):
-    """The make_camera_labels executable: the workspace's build, else one on PATH."""
-    built = os.path.join(repo_root, ".ws", "devel", "lib", "inekf_semantic_mapping",
-                         "make_camera_labels")
+    """The make_camera_labels executable: the workspace's build (ISM_BIN, which scripts/env.sh
+    sets from ISM_WS, else .ws of the repository), else one on PATH."""
+    bin_dir = os.environ.get("ISM_BIN") or os.path.join(repo_root, ".ws", "devel", "lib",
+                                                         "inekf_semantic_mapping")
+    built = os.path.join(bin_dir, "make_camera_labels")
     if os.access(built, os.X_OK):
         return built
     on_path = shutil.which("make_camera_labels")

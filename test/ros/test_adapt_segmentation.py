@@ -1036,6 +1036,16 @@ class SemanticKittiDownload(unittest.TestCase):
             with self.assertRaisesRegex(download.DownloadError,
                                         r"sequence 02 \(exit 3\):\ncalib.txt: no Tr line"):
                 download.convert(tmp, ["02"], os.path.join(tmp, "out"), 10, tool, lambda m: None)
+            # The workspace scripts/env.sh names (ISM_BIN) before the repository's own .ws.
+            os.environ["ISM_BIN"], saved = tmp, os.environ.get("ISM_BIN")
+            try:
+                os.rename(tool, os.path.join(tmp, "make_camera_labels"))
+                self.assertEqual(download.find_make_camera_labels("/nonexistent"),
+                                 os.path.join(tmp, "make_camera_labels"))
+            finally:
+                os.environ.pop("ISM_BIN")
+                if saved is not None:
+                    os.environ["ISM_BIN"] = saved
         self.assertEqual(download.split_validation(["00", "06", "07"], "06"), (["00", "07"], "06"))
         self.assertEqual(download.split_validation(["00"], "06"), (["00"], ""))
 
