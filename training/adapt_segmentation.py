@@ -97,6 +97,11 @@ def parse_args(argv=None):
                    help="repeat-factor sampling (Gupta et al. 2019): an image is drawn "
                         "max(1, sqrt(t / f)) times per epoch, f the share of training images "
                         "holding its rarest class; this is t (0: every image once)")
+    p.add_argument("--paste-rare", type=float, default=0.0,
+                   help="probability that a training crop gets one or two objects of the rare "
+                        "classes (person, rider, truck, bus, train, motorcycle, bicycle), cut "
+                        "from the dense training frames, pasted in (simple copy-paste, Ghiasi et "
+                        "al. 2021; 0: never)")
     p.add_argument("--teacher-confidence", type=float, default=0.7,
                    help="the base network's labels below this softmax confidence teach nothing")
     p.add_argument("--teacher-store", default="auto", choices=teacher_store.MODES,
@@ -284,6 +289,35 @@ def repeat_factors(samples, threshold, min_pixels=50):
     share = present.mean(axis=0)
     per_class = np.sqrt(threshold / np.maximum(share, 1e-9))
     return np.array([max(1.0, per_class[p].max()) if p.any() else 1.0 for p in present])
+
+
+RARE_CLASS_NAMES = ("person", "rider", "truck", "bus", "train", "motorcycle", "bicycle")
+
+
+def rare_object_paster(samples, probability):
+    """The crop's paste step for --paste-rare: None at probability 0 (the random draws of a run
+    without it stay as they were), else a function that pastes one or two objects of the rare
+    classes cut from the dense samples into a crop with the given probability."""
+    if probability == 0:
+        return None
+    names = labels.train_id_names()
+    ids = [names.index(n) for n in RARE_CLASS_NAMES]
+    objects = augment.cut_objects(samples, ids)
+    if not objects:
+        log("--paste-rare: the dense training frames hold no object of the rare classes; "
+            "nothing is pasted")
+        return None
+    per_class = np.bincount(np.concatenate([
+        np.unique(o.target[o.target != labels.IGNORE]) for o in objects]),
+        minlength=labels.NUM_TRAIN_IDS)
+    log(f"--paste-rare {probability:g}: {len(objects)} objects cut from "
+        f"{len({o.source for o in objects})} dense frames ("
+        + ", ".join(f"{names[c]} {per_class[c]}" for c in ids if per_class[c]) + ")")
+
+    def paste(image, target, teacher, rng):
+        if rng.random() < probability:
+            augment.paste_objects(image, target, teacher, objects, rng, 1 + rng.integers(2))
+    return paste
 
 
 def epoch_order(factors, rng):
@@ -678,6 +712,8 @@ def main(argv=None):
                           ("--encoder-lr-scale", args.encoder_lr_scale)):
         if not value >= 0:
             raise SystemExit(f"{option} {value}: must be 0 or more")
+    if not 0.0 <= args.paste_rare <= 1.0:
+        raise SystemExit(f"--paste-rare {args.paste_rare}: a probability in [0, 1]")
     if not 0.0 <= args.average_weights < 1.0:
         raise SystemExit(f"--average-weights {args.average_weights}: a fraction of the budget "
                          "in [0, 1)")
@@ -750,6 +786,7 @@ def main(argv=None):
         log(f"repeat-factor sampling at t = {args.rare_repeat}: {len(train)} images drawn "
             f"{factors.sum():.0f} times per epoch, most repeated x{factors.max():.1f} "
             f"({int((factors > 1).sum())} images above 1)")
+    paste = rare_object_paster(train, args.paste_rare)
     history = {"train": [], "val": [dict(step=0, **before)]}
     best = dict(step=0, **before)
     best_path = os.path.join(args.output, "best.pt")
@@ -779,7 +816,8 @@ def main(argv=None):
             s = train[order.pop()]
             label_weights.append(s.label_weight)
             image, target, teacher = augment.random_crop(
-                s, rng, crop_h, crop_w, teacher_dtype=np.float32 if soft else None)
+                s, rng, crop_h, crop_w, teacher_dtype=np.float32 if soft else None,
+                paste=paste)
             images.append(image)
             targets.append(target)
             teachers.append(teacher)
