@@ -491,6 +491,91 @@ class Crops(unittest.TestCase):
         self.assertTrue((target == labels.IGNORE).any())
 
 
+class RareObjectPaste(unittest.TestCase):
+    """--paste-rare: regions of rare-class labels cut from the dense frames, pasted into crops."""
+
+    PERSON, BICYCLE, BUS, ROAD = 11, 18, 15, 0
+
+    def frame(self, kind="dense"):
+        target = np.full((40, 60), self.ROAD, np.uint8)
+        target[5:25, 10:18] = self.PERSON  # 160 pixels
+        target[20:30, 18:26] = self.BICYCLE  # 80 more, touching the person: one cyclist
+        target[35:38, 50:53] = self.BUS  # 9 stray pixels
+        image = np.zeros((40, 60, 3), np.uint8)
+        image[target == self.PERSON] = (0, 0, 200)
+        image[target == self.BICYCLE] = (0, 200, 0)
+        return datasets.Sample("f", kind, image, target)
+
+    def test_a_touching_region_is_one_object_and_stray_pixels_and_sparse_frames_are_not(self):
+        import augment
+
+        ids = [self.PERSON, self.BICYCLE, self.BUS]
+        objects = augment.cut_objects([self.frame(), self.frame("sparse")], ids)
+        self.assertEqual(len(objects), 1)
+        obj = objects[0]
+        self.assertEqual(obj.target.shape, (25, 16))  # rows 5-29, columns 10-25
+        self.assertEqual(int((obj.target == self.PERSON).sum()), 160)
+        self.assertEqual(int((obj.target == self.BICYCLE).sum()), 80)
+        # The box's corner outside both regions is road in the frame: not part of the object.
+        self.assertEqual(obj.target[0, 15], labels.IGNORE)
+        self.assertEqual(obj.image[0, 0].tolist(), [0, 0, 200])
+
+    def test_pasted_pixels_take_the_labels_and_the_teacher_teaches_nothing_there(self):
+        import augment
+
+        obj = augment.cut_objects([self.frame()], [self.PERSON, self.BICYCLE])[0]
+        image = np.full((50, 80, 3), 90, np.uint8)
+        target = np.full((50, 80), self.ROAD, np.uint8)
+        soft = np.ones((50, 80, 4), np.float32)
+        hard = np.full((50, 80), self.ROAD, np.uint8)
+        for teacher in (soft, hard):
+            im, tg = image.copy(), target.copy()
+            augment.paste_objects(im, tg, teacher, [obj], np.random.default_rng(5), 1,
+                                  scale_range=(1.0, 1.0))
+            pasted = tg != self.ROAD
+            self.assertEqual(int(pasted.sum()), 240)  # the cyclist's pixels, nothing else
+            self.assertTrue(np.all(im[pasted].sum(axis=1) == 200))  # its colours came along
+            self.assertTrue(np.all(im[~pasted] == 90))
+            if teacher.ndim == 3:
+                np.testing.assert_array_equal(teacher[..., -1] == 0, pasted)
+                self.assertTrue(np.all(teacher[..., :-1] == 1))  # only the weight changes
+            else:
+                np.testing.assert_array_equal(teacher == labels.IGNORE, pasted)
+
+    def test_an_object_larger_than_the_crop_is_skipped(self):
+        import augment
+
+        obj = augment.cut_objects([self.frame()], [self.PERSON, self.BICYCLE])[0]
+        image, target = np.zeros((10, 80, 3), np.uint8), np.zeros((10, 80), np.uint8)
+        teacher = np.ones((10, 80, 4), np.float32)
+        augment.paste_objects(image, target, teacher, [obj], np.random.default_rng(0), 3)
+        self.assertTrue(np.all(target == 0) and np.all(teacher == 1))
+
+    def test_the_paster_pastes_at_its_probability_and_is_absent_at_zero(self):
+        import augment
+        import adapt_segmentation as adapt
+
+        frames = [self.frame()]
+        self.assertIsNone(adapt.rare_object_paster(frames, 0.0))  # no draw a run did not make
+        paste = adapt.rare_object_paster(frames, 1.0)
+        rng = np.random.default_rng(1)
+        frames[0].teacher = np.ones((40, 60, 4), np.float16)
+        changed = 0
+        for _ in range(20):
+            _, target, teacher = augment.random_crop(frames[0], rng, 40, 60, np.float32,
+                                                     scale_range=(1.0, 1.0), paste=paste)
+            changed += int((teacher[..., -1] == 0).any())
+        self.assertEqual(changed, 20)
+        self.assertTrue(np.all(frames[0].teacher == 1))  # the sample itself is left alone
+
+    def test_a_probability_outside_zero_to_one_is_refused_naming_the_option(self):
+        import adapt_segmentation as adapt
+
+        with self.assertRaises(SystemExit) as e:
+            adapt.main(["--shared", "/nonexistent", "--paste-rare", "1.5"])
+        self.assertIn("--paste-rare", str(e.exception))
+
+
 class WeightInterpolation(unittest.TestCase):
     """Weight-space ensembling of the adapted network with its base (--interpolate)."""
 
@@ -899,6 +984,77 @@ class AdaptationTradePlot(unittest.TestCase):
             with self.assertRaises(SystemExit) as caught:
                 self.run_plot(header + row)
             self.assertRegex(str(caught.exception), what)
+
+
+class ClassIouPlot(unittest.TestCase):
+    """scripts/plot_class_iou.py: evaluate_semantics JSON results read strictly, one panel per
+    sequence and variant with the first result's classes."""
+
+    @staticmethod
+    def result(road_iou, person_truth=20):
+        def scores(iou):
+            return {"miou": iou, "classes": {
+                "road": {"truth": 100, "iou": iou},
+                "person": {"truth": person_truth, "iou": 0.5},
+                "truck": {"truth": 0, "iou": 0},  # predicted only: not a class of the truth
+            }}
+        return {"sequences": {"seq/05": {"variants": {"raw": scores(road_iou)},
+                                         "map": scores(road_iou + 0.1)}}}
+
+    def write(self, tmp, name, content):
+        path = os.path.join(tmp, name)
+        with open(path, "w") as f:
+            f.write(content if isinstance(content, str) else json.dumps(content))
+        return path
+
+    def setUp(self):
+        sys.path.insert(0, os.path.join(REPO_ROOT, "scripts"))
+
+    def test_two_networks_become_panels_of_the_classes_with_labelled_points(self):
+        import plot_class_iou as plot
+
+        tmp = tempfile.mkdtemp()
+        a = self.write(tmp, "a.json", self.result(0.6))
+        b = self.write(tmp, "b.json", self.result(0.8, person_truth=0))
+        results = [plot.read_result(f"enet={a}"), plot.read_result(f"adapted={b}")]
+        panels = plot.panels(results, ["raw", "map"])
+        self.assertEqual([(p[0], p[1]) for p in panels], [("seq/05", "raw"), ("seq/05", "map")])
+        seq, variant, classes, rows, truth = panels[1]
+        self.assertEqual(classes, ["road", "person"])  # the first result's truth decides
+        self.assertEqual(truth, [100, 20])
+        self.assertEqual([r[0] for r in rows], ["enet", "adapted"])
+        self.assertAlmostEqual(rows[1][2][0], 0.9)  # adapted's map road IoU
+        output = os.path.join(tmp, "classes.png")
+        plot.main([f"enet={a}", f"adapted={b}", "--output", output])
+        with open(output, "rb") as f:
+            self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
+        self.assertEqual(os.listdir(tmp).count("classes.png.tmp.png"), 0)
+
+    def test_bad_results_are_named_by_their_file_or_network(self):
+        import plot_class_iou as plot
+
+        tmp = tempfile.mkdtemp()
+        good = self.write(tmp, "good.json", self.result(0.6))
+        cut = self.write(tmp, "cut.json", '{\n  "sequences": ')
+        cases = (
+            (["no-equals-sign"], r"'no-equals-sign': expected NAME=RESULT.json"),
+            ([f"x={tmp}/missing.json"], r"missing\.json: No such file"),
+            ([f"x={cut}"], r"cut\.json:2: not JSON"),
+            ([f"x={self.write(tmp, 'other.json', {'frames': 3})}"],
+             r"other\.json: not an evaluate_semantics --json result"),
+            ([f"a={good}", "--variants", "conf=0.9"],
+             r"a: sequence seq/05 has no variant 'conf=0.9' \(it has raw, map\)"),
+        )
+        for argv, what in cases:
+            with self.assertRaises(SystemExit) as caught:
+                plot.main(argv + ["--output", os.path.join(tmp, "x.png")])
+            self.assertRegex(str(caught.exception), what)
+        other = self.result(0.6)
+        other["sequences"] = {"seq/08": other["sequences"]["seq/05"]}
+        with self.assertRaises(SystemExit) as caught:
+            plot.panels([plot.read_result(f"a={good}"),
+                         plot.read_result(f"b={self.write(tmp, 'o.json', other)}")], ["raw"])
+        self.assertIn("b: no sequence seq/05 (it has seq/08)", str(caught.exception))
 
 
 class Preprocessing(unittest.TestCase):
