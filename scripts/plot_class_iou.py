@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Plots the per-class IoU of networks side by side from evaluate_semantics --json results: one
 panel per sequence and variant (the raw labels at every point, the map's voxel class at each
-point), a bar per network and class, each class named with its labelled points (a mean over
-classes weighs a class of 100 points as much as the road), each network with its mIoU.
+point), a bar per network and class, each class named with its labelled points in the sequence
+(a mean over classes weighs a class of 100 points as much as the road), each network with its
+mIoU.
 
     scripts/plot_class_iou.py NAME=RESULT.json [NAME=RESULT.json ...]
         [--variants raw,map] [--output class_iou.png]
@@ -44,9 +45,9 @@ def read_result(spec):
 
 
 def panels(results, variants):
-    """[(sequence, variant, classes, [(name, miou, [iou per class])], [truth per class])] for
+    """[(sequence, variant, classes, [(name, miou, [iou per class])], [points per class])] for
     every sequence of the first result and every variant; classes are those with labelled
-    points in the first result's variant. SystemExit where a result lacks a sequence or a
+    points in the first result's variant, counted in its raw variant (every point). SystemExit where a result lacks a sequence or a
     variant, naming both."""
     first_name, first = results[0]
     out = []
@@ -62,7 +63,10 @@ def panels(results, variants):
                 bars.append((name, result[seq][variant]))
             reference = bars[0][1]["classes"]
             classes = [c for c, v in reference.items() if v.get("truth", 0) > 0]
-            truth = [reference[c]["truth"] for c in classes]
+            # The points of each class in the sequence: the map's own count leaves out the
+            # points in voxels without a class, which differ from network to network.
+            counts = first[seq].get("raw", bars[0][1])["classes"]
+            truth = [counts.get(c, reference[c])["truth"] for c in classes]
             rows = [(name, scores["miou"],
                      [scores["classes"].get(c, {}).get("iou") or 0.0 for c in classes])
                     for name, scores in bars]
@@ -85,12 +89,12 @@ def plot(panel_list, output):
                    width, label=f"{name} (mIoU {miou:.3f})")
         ax.set_xticks(range(len(classes)))
         ax.set_xticklabels([f"{c}\n{n}" for c, n in zip(classes, truth)], fontsize=8)
-        ax.set_ylim(0, 1.05)
+        ax.set_ylim(0, 1.3)  # room for the key above the bars
         ax.set_ylabel("IoU")
         ax.set_title(f"{os.path.basename(os.path.normpath(seq))}: {variant} (under each class "
                      "its labelled points)", fontsize=10)
         ax.grid(axis="y", alpha=0.3)
-        ax.legend(fontsize=8, loc="upper right")
+        ax.legend(fontsize=8, loc="upper center", ncol=len(rows))
     fig.tight_layout()
     tmp = output + ".tmp.png"
     fig.savefig(tmp, dpi=110)

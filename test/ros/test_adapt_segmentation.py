@@ -998,8 +998,9 @@ class ClassIouPlot(unittest.TestCase):
                 "person": {"truth": person_truth, "iou": 0.5},
                 "truck": {"truth": 0, "iou": 0},  # predicted only: not a class of the truth
             }}
-        return {"sequences": {"seq/05": {"variants": {"raw": scores(road_iou)},
-                                         "map": scores(road_iou + 0.1)}}}
+        in_map = scores(road_iou + 0.1)
+        in_map["classes"]["person"]["truth"] = person_truth // 4  # the rest in unclassed voxels
+        return {"sequences": {"seq/05": {"variants": {"raw": scores(road_iou)}, "map": in_map}}}
 
     def write(self, tmp, name, content):
         path = os.path.join(tmp, name)
@@ -1021,7 +1022,7 @@ class ClassIouPlot(unittest.TestCase):
         self.assertEqual([(p[0], p[1]) for p in panels], [("seq/05", "raw"), ("seq/05", "map")])
         seq, variant, classes, rows, truth = panels[1]
         self.assertEqual(classes, ["road", "person"])  # the first result's truth decides
-        self.assertEqual(truth, [100, 20])
+        self.assertEqual(truth, [100, 20])  # every point of the class, as the raw labels count
         self.assertEqual([r[0] for r in rows], ["enet", "adapted"])
         self.assertAlmostEqual(rows[1][2][0], 0.9)  # adapted's map road IoU
         output = os.path.join(tmp, "classes.png")
