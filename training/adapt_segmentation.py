@@ -97,7 +97,7 @@ def parse_args(argv=None):
                    help="repeat-factor sampling (Gupta et al. 2019): an image is drawn "
                         "max(1, sqrt(t / f)) times per epoch, f the share of training images "
                         "holding its rarest class; this is t (0: every image once)")
-    p.add_argument("--paste-rare", type=float, default=0.0,
+    p.add_argument("--paste-rare", type=float, default=0.5,
                    help="probability that a training crop gets one or two objects of the rare "
                         "classes (person, rider, truck, bus, train, motorcycle, bicycle), cut "
                         "from the dense training frames, pasted in (simple copy-paste, Ghiasi et "
