@@ -62,7 +62,11 @@ def plot(rows, output, target):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, key) = plt.subplots(1, 2, figsize=(12, 6.5), gridspec_kw={"width_ratios": [3, 2]})
+    # Tall enough for the key's lines (7.5 pt type, about 0.13 inch a line): past 49 runs a fixed
+    # height cut the key off.
+    height = max(6.5, 0.13 * len(rows) + 0.8)
+    fig, (ax, key) = plt.subplots(1, 2, figsize=(12, height),
+                                  gridspec_kw={"width_ratios": [3, 2]})
     ax.fill_between([target, 1.0], target, 1.0, color="tab:green", alpha=0.12,
                     label=f"target (>= {target:g} on each)")
     for kind, (marker, colour) in STYLE.items():
