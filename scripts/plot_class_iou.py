@@ -38,7 +38,9 @@ def read_result(spec):
     # set of names.
     out = {}
     for seq, entry in sequences.items():
-        scored = dict(entry.get("variants", {}))
+        if not isinstance(entry, dict) or not isinstance(entry.get("variants"), dict):
+            raise SystemExit(f"{path}: sequence {seq} has no 'variants'")
+        scored = dict(entry["variants"])
         scored.update({k: v for k, v in entry.items() if k.startswith("map")})
         out[seq] = scored
     return name, out

@@ -1043,6 +1043,8 @@ class ClassIouPlot(unittest.TestCase):
             ([f"x={cut}"], r"cut\.json:2: not JSON"),
             ([f"x={self.write(tmp, 'other.json', {'frames': 3})}"],
              r"other\.json: not an evaluate_semantics --json result"),
+            ([f"x={self.write(tmp, 'flat.json', {'sequences': {'seq/05': 0.5}})}"],
+             r"flat\.json: sequence seq/05 has no 'variants'"),
             ([f"a={good}", "--variants", "conf=0.9"],
              r"a: sequence seq/05 has no variant 'conf=0.9' \(it has raw, map\)"),
         )
