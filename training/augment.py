@@ -78,7 +78,8 @@ def random_crop(sample, rng, crop_h, crop_w, teacher_dtype=None, scale_range=(0.
     if teacher_dtype is not None:
         teacher = teacher.astype(teacher_dtype)
     if paste is not None:
-        image, target, teacher = image.copy(), target.copy(), teacher.copy()
+        # Writing in place is safe: the image and target are windows of their resized copies,
+        # the teacher a window picked by index (a copy) or converted; none is the sample's own.
         paste(image, target, teacher, rng)
     if rng.random() < 0.5:
         image, target, teacher = image[:, ::-1], target[:, ::-1], teacher[:, ::-1]

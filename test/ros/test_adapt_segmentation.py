@@ -560,13 +560,18 @@ class RareObjectPaste(unittest.TestCase):
         paste = adapt.rare_object_paster(frames, 1.0)
         rng = np.random.default_rng(1)
         frames[0].teacher = np.ones((40, 60, 4), np.float16)
+        image, target = frames[0].image.copy(), frames[0].target.copy()
         changed = 0
-        for _ in range(20):
-            _, target, teacher = augment.random_crop(frames[0], rng, 40, 60, np.float32,
-                                                     scale_range=(1.0, 1.0), paste=paste)
+        for trial in range(20):  # as training calls it (float32) and unconverted
+            _, _, teacher = augment.random_crop(frames[0], rng, 40, 60,
+                                                np.float32 if trial % 2 else None,
+                                                scale_range=(1.0, 1.0), paste=paste)
             changed += int((teacher[..., -1] == 0).any())
         self.assertEqual(changed, 20)
-        self.assertTrue(np.all(frames[0].teacher == 1))  # the sample itself is left alone
+        # The crop is pasted in place: the sample itself is left alone.
+        self.assertTrue(np.all(frames[0].teacher == 1))
+        np.testing.assert_array_equal(frames[0].image, image)
+        np.testing.assert_array_equal(frames[0].target, target)
 
     def test_a_probability_outside_zero_to_one_is_refused_naming_the_option(self):
         import adapt_segmentation as adapt
