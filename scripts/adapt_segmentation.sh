@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Fine-tunes a Cityscapes network on the KITTI camera and exports it for the C++ Segmenter:
 #   scripts/adapt_segmentation.sh --shared ../shared [--output output/models/kitti]
-#       [--minutes 45] [--device cpu|cuda] [--base espnetv2_s2|espnetv2_s1|enet] [...]
+#       [--minutes 40] [--device cpu|cuda] [--base espnetv2_s2|espnetv2_s1|enet] [...]
 # Writes OUTPUT/kitti_adapted.onnx and its model card OUTPUT/kitti_adapted.yaml (which
 # segment_image, segmentation_node, semantic_map_offline and evaluate_semantics load as they are),
 # training.png (loss and validation accuracy), history.csv and summary.json.
