@@ -66,12 +66,13 @@ void SemanticMappingConfig::validate() const {
 
 const std::vector<std::string>& semanticMappingNodeKeys() {
   // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does. marker_rate is
-  // marker_rate_hz's old name, which the node still accepts (with a warning).
+  // marker_rate_hz's old name, which the node still accepts (with a warning). diagnostic_period
+  // is diagnostic_updater's own, read from every node's private namespace.
   static const std::vector<std::string> keys = {
       "map_frame",     "marker_rate_hz",    "marker_rate",  "max_display_cpu_fraction",
       "marker_depth",  "calib_dir",         "camera_index", "map_file",
       "autosave_path", "autosave_period_s", "log_period_s", "grid.*",
-      "diagnostics.*"};
+      "diagnostics.*", "diagnostic_period"};
   return keys;
 }
 

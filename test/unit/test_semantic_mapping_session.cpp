@@ -120,6 +120,8 @@ TEST(SemanticMappingConfigTest, ErrorsNameTheSourceAndTheKey) {
                 .insertion,
             InsertionStructure::kOctree);
   EXPECT_EQ(message("resolution_m: 0.1\nlabel_wait_s: 0.5"), "no error");
+  // The node's private namespace also holds diagnostic_updater's own ~diagnostic_period.
+  EXPECT_EQ(message("diagnostic_period: 2"), "no error");
   // Keys that gained their unit: the old name is still read (with a warning), both is an error.
   const SemanticMappingConfig old_names = readSemanticMappingConfig(
       YAML::Load("resolution: 0.1\nlabel_wait: 0.5\nmax_range: 40\n"
