@@ -662,7 +662,7 @@ def main(argv=None):
     parser.add_argument("--exclude-frames", action="append", default=[], metavar="FIRST:LAST",
                         type=frame_range,
                         help="leave frames FIRST..LAST (0-based, inclusive) out of every metric, "
-                             "e.g. 860:1080 on 2011_09_30_drive_0028, where the OXTS truth is "
+                             "e.g. 769:1202 on 2011_09_30_drive_0028, where the OXTS truth is "
                              "wrong; KITTI segments and RPE pairs that touch them are skipped; "
                              "repeatable")
     args = parser.parse_args(argv)

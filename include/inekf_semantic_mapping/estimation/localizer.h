@@ -26,7 +26,7 @@
 //    filter's own position/velocity covariance is what is wrong (e.g. after a long outage or a
 //    jump in the receiver's solution): the position and velocity covariance are inflated by the
 //    innovation (in the map frame) and the fix is applied. Without this a diverged filter would
-//    reject every later fix forever (KITTI 0028 frames 860..1080).
+//    reject every later fix forever (KITTI 0028 frames 769..1202).
 //  - The heading monitor. Every fix also goes into a GPS track: the chord from a fix to the
 //    one after next, or to a later one until the chord is heading_track_min_chord_m long (a
 //    slow car), of a car moving at heading_track_min_speed_mps or more, points along its
