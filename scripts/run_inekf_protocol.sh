@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# The issue-3 evaluation protocol for all three filters on every KITTI raw drive in ../shared:
+# The degraded-GPS evaluation protocol for all three filters on every KITTI raw drive in ../shared:
 # GPS = OXTS lat/lon/alt + N(0, 1.5 m) horizontal / N(0, 3 m) vertical, once a second
 # (--gps-every 10), seed 1, config/inekf.yaml; plus the 90-deg initial-yaw-error test on
 # 2011_09_30_drive_0027 (--init-yaw-error-deg 90 --init-yaw-sigma-deg 180).
-# Prints a Markdown table (unaligned ATE in m, rotation RMSE in deg, as inekf_offline reports
-# them against the OXTS truth). Needs inekf_offline built: scripts/build.sh inekf_offline.
+# Prints a Markdown table: unaligned ATE in m and rotation RMSE in deg of each filter over all
+# frames, as inekf_offline reports them against the OXTS truth; then the left filter scored by
+# scripts/evaluate_trajectory.py with 2011_09_30_drive_0028's wrong-truth frames 769..1202 left
+# out (the other drives score as over all frames), causal and smoothed (--smooth).
+# Needs inekf_offline built: scripts/build.sh inekf_offline.
 #   usage: scripts/run_inekf_protocol.sh [SHARED_DIR]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
@@ -20,19 +23,31 @@ protocol=(--gps-every 10 --gps-sigma-h 1.5 --gps-sigma-v 3 --seed 1 --config "$c
 
 # "ATE rot" from inekf_offline's summary line.
 errors() { sed -n 's/.*ATE \([0-9.]*\) m, rotation RMSE \([0-9.]*\) deg.*/\1 \2/p'; }
+# "ATE / rot" of $work/p.txt against $work/t.txt, frames $1 (FIRST:LAST, may be empty) left out.
+scored() {
+  /usr/bin/python3 "$ISM_ROOT/scripts/evaluate_trajectory.py" --estimate "$work/p.txt" \
+    --truth "$work/t.txt" --json "$work/m.json" ${1:+--exclude-frames $1} > /dev/null
+  /usr/bin/python3 -c "import json; d = json.load(open('$work/m.json')); \
+print('%.2f / %.2f' % (d['ate_unaligned_rmse_m'], d['rotation_rmse_deg']))"
+}
 
-echo "| drive | frames | left ATE (m) | left rot (deg) | right ATE | right rot | ekf ATE | ekf rot |"
-echo "|---|---|---|---|---|---|---|---|"
+echo "| drive | frames | left ATE (m) | left rot (deg) | right ATE | right rot | ekf ATE | ekf rot | left, bad truth out: ATE / rot | left smoothed: ATE / rot |"
+echo "|---|---|---|---|---|---|---|---|---|---|"
 for oxts in "$shared"/data/kitti_raw/*/*_sync/oxts; do
   drive=$(basename "$(dirname "$oxts")" _sync)
   frames=$(wc -l < "$oxts/timestamps.txt")
+  exclude=""
+  [[ $drive == 2011_09_30_drive_0028 ]] && exclude=769:1202
   row="| $drive | $frames |"
   for filter in left right ekf; do
     read -r ate rot < <("$offline" --oxts "$oxts" --output-kitti "$work/p.txt" \
-      --filter "$filter" "${protocol[@]}" | errors)
+      --output-truth "$work/t.txt" --filter "$filter" "${protocol[@]}" | errors)
     row+=" $ate | $rot |"
+    [[ $filter == left ]] && causal=$(scored "$exclude")
   done
-  echo "$row"
+  "$offline" --oxts "$oxts" --output-kitti "$work/p.txt" --output-truth "$work/t.txt" \
+    --filter left --smooth "${protocol[@]}" > /dev/null
+  echo "$row $causal | $(scored "$exclude") |"
 done
 
 yaw_drive=$shared/data/kitti_raw/2011_09_30/2011_09_30_drive_0027_sync/oxts
