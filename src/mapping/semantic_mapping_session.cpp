@@ -305,13 +305,29 @@ std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> lab
 std::size_t SemanticMappingSession::advanceTo(double now) { return insertReadyScans(now); }
 
 std::size_t SemanticMappingSession::insertReadyScans(double now) {
-  return pairing_.insertReady(
-      now, [this](PendingScan& scan) { return insertWhenReady(scan, /*may_wait=*/true); });
+  const std::size_t rejected = statistics_.scans_rejected;
+  const std::size_t taken = pairing_.insertReady(
+      now, [this](PendingScan& scan) { return insertOrReject(scan, /*may_wait=*/true); });
+  return taken - (statistics_.scans_rejected - rejected);
 }
 
 std::size_t SemanticMappingSession::flush() {
-  return pairing_.flush(
-      [this](PendingScan& scan) { return insertWhenReady(scan, /*may_wait=*/false); });
+  const std::size_t rejected = statistics_.scans_rejected;
+  const std::size_t taken = pairing_.flush(
+      [this](PendingScan& scan) { return insertOrReject(scan, /*may_wait=*/false); });
+  return taken - (statistics_.scans_rejected - rejected);
+}
+
+bool SemanticMappingSession::insertOrReject(PendingScan& scan, bool may_wait) {
+  try {
+    return insertWhenReady(scan, may_wait);
+  } catch (const std::exception& e) {
+    // Left in the queue it would fail again at every call and hold back every scan behind it
+    // (after a bag loop, every new one too): the map would stop growing for good.
+    ++statistics_.scans_rejected;
+    if (scan_warning_) scan_warning_(scan.stamp, e.what());
+    return true;
+  }
 }
 
 bool SemanticMappingSession::resolveCamera(PendingLabels& labels, bool* unusable) {

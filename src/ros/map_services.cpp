@@ -87,11 +87,11 @@ std::string mappingStatusLine(const mapping::SemanticMappingSession& session) {
   const auto insert = stats.find("semantic_map/insert");
   char line[400];
   std::snprintf(line, sizeof(line),
-                "%zu of %zu scans in the map (%zu with labels, %zu pending, %zu without pose), "
-                "%zu of %zu label images used (%zu late), map %s, insert %.1f ms",
+                "%zu of %zu scans in the map (%zu with labels, %zu pending, %zu without pose, "
+                "%zu rejected), %zu of %zu label images used (%zu late), map %s, insert %.1f ms",
                 s.scans_inserted, s.scans_received, s.scans_with_labels, session.pendingScans(),
-                s.scans_without_pose, s.label_images_used, s.label_images_received,
-                s.label_images_late, session.mapSizeText().c_str(),
+                s.scans_without_pose, s.scans_rejected, s.label_images_used,
+                s.label_images_received, s.label_images_late, session.mapSizeText().c_str(),
                 insert == stats.end() ? 0.0 : 1e3 * insert->second.meanSeconds());
   return line;
 }

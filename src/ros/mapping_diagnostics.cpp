@@ -1,5 +1,6 @@
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace inekf_semantic_mapping {
@@ -64,6 +65,11 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
     level = DiagnosticStatus::WARN;
     message = "the last save failed";
   }
+  if (stats.scans_rejected > 0) {
+    level = std::max(level, static_cast<unsigned char>(DiagnosticStatus::WARN));
+    message = std::to_string(stats.scans_rejected) +
+              " scans rejected by the map (pose beyond its extent or not finite)";
+  }
   if (stats.scans_received >= 5 && stats.scans_without_pose * 2 > stats.scans_received) {
     level = DiagnosticStatus::ERROR;
     message = "most scans dropped without a pose (map -> sensor not in tf)";
@@ -75,6 +81,7 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
   status->add("scans inserted", stats.scans_inserted);
   status->add("pending scans", session.pendingScans());
   status->add("scans without pose", stats.scans_without_pose);
+  status->add("scans rejected by the map", stats.scans_rejected);
   status->addf("insertion latency p50 (s)", "%.3f", scans_inserted_.percentile(0.5));
   status->addf("insertion latency p95 (s)", "%.3f", p95_s);
   status->add("map size", session.mapSizeText());

@@ -74,6 +74,11 @@ class SemanticOctomapNodeCore::Impl {
       }
       return pose;
     });
+    session_->setScanWarningCallback([](double stamp, const std::string& why) {
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
+                                                             << ros::Time(stamp)
+                                                             << " not mapped: " << why);
+    });
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
       monitor_->noteInserted(stamp, wallNow());
       display_->scanInserted(scan);

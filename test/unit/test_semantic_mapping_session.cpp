@@ -541,6 +541,43 @@ TEST(SemanticMappingSessionTest, ScansWithoutPoseAreDroppedAfterTheWaitAndTimeJu
   EXPECT_EQ(session.statistics().scans_inserted, 1u);
 }
 
+TEST(SemanticMappingSessionTest, AScanTheMapCannotTakeIsDroppedAndTheScansBehindItGoOn) {
+  SemanticMappingConfig config = testConfig(0.5);
+  for (const InsertionStructure insertion :
+       {InsertionStructure::kHashedGrid, InsertionStructure::kOctree}) {
+    config.insertion = insertion;
+    SemanticMappingSession session(config);
+    // 1.0: a pose that is not finite; 1.1: one beyond the map's +-6.5 km at 0.2 m voxels.
+    session.setPoseLookup([](double stamp, const std::string&) {
+      Eigen::Isometry3d pose = poseAt(stamp);
+      if (stamp == 1.0) pose.translation().x() = std::nan("");
+      if (stamp == 1.1) pose.translation().x() = 1e5;
+      return std::optional<Eigen::Isometry3d>(pose);
+    });
+    std::vector<double> warned;
+    session.setScanWarningCallback([&](double stamp, const std::string& why) {
+      warned.push_back(stamp);
+      EXPECT_FALSE(why.empty());
+    });
+    for (const double stamp : {1.0, 1.1, 1.2}) session.addScan(stamp, "velo", testScan());
+    EXPECT_EQ(session.advanceTo(2.0), 1u);  // the two bad ones are not counted as inserted
+    EXPECT_EQ(session.pendingScans(), 0u);
+    EXPECT_EQ(session.statistics().scans_rejected, 2u);
+    EXPECT_EQ(session.statistics().scans_inserted, 1u);
+    EXPECT_EQ(warned, (std::vector<double>{1.0, 1.1}));
+    // No label image has come for a whole wait: segmentation is not running, in at once.
+    EXPECT_EQ(session.addScan(2.1, "velo", testScan()), 1u);
+    // Back in time (a bag loop): the bad scan waits for its label image, a flush (as at the
+    // next loop or at the end) drops it, and the scans after it still go in.
+    EXPECT_EQ(session.addScan(1.0, "velo", testScan()), 0u);
+    EXPECT_EQ(session.flush(), 0u);
+    EXPECT_EQ(session.statistics().scans_rejected, 3u);
+    session.addScan(1.2, "velo", testScan());
+    EXPECT_EQ(session.advanceTo(3.0), 1u);
+    EXPECT_EQ(session.statistics().scans_inserted, 3u);
+  }
+}
+
 TEST(SemanticMappingSessionTest, BadLabelImagesAreRejectedAndTheMapIsKept) {
   SemanticMappingSession session(testConfig());
   session.insertScan(testScan(), Eigen::Isometry3d::Identity());

@@ -37,6 +37,8 @@ struct MappingStatistics {
   std::size_t scans_inserted = 0;
   std::size_t scans_with_labels = 0;
   std::size_t scans_without_pose = 0;  // dropped after pose_wait_s
+  std::size_t scans_rejected = 0;      // the map could not take them (a pose beyond the map's
+                                       // extent or not finite): dropped and reported
   std::size_t label_images_received = 0;
   std::size_t label_images_used = 0;
   std::size_t label_images_late = 0;            // of the used ones: came after their scan went in
@@ -84,6 +86,10 @@ class SemanticMappingSession {
   // stamp; the node logs it.
   using LabelWarning = std::function<void(double stamp, const std::string& why)>;
   void setLabelWarningCallback(LabelWarning callback) { label_warning_ = std::move(callback); }
+  // Told why a streamed scan could not go into the map (it is dropped, the scans behind it go
+  // on), with its stamp; the node logs it.
+  using ScanWarning = std::function<void(double stamp, const std::string& why)>;
+  void setScanWarningCallback(ScanWarning callback) { scan_warning_ = std::move(callback); }
   // Data time has reached `now` (the clock, when no scan arrives): inserts scans whose wait is
   // over.
   std::size_t advanceTo(double now);
@@ -171,6 +177,8 @@ class SemanticMappingSession {
   // Streaming: the pairing's scans go in through these.
   std::size_t addLabels(std::shared_ptr<PendingLabels> labels);
   std::size_t insertReadyScans(double now);
+  // insertWhenReady, with a scan the map cannot take dropped and reported (true: off the queue).
+  bool insertOrReject(PendingScan& scan, bool may_wait);
   // Inserts a ready scan if its pose is known: false if not, or if its labels' camera is not
   // known yet and `may_wait` (else it goes in without them).
   bool insertWhenReady(PendingScan& scan, bool may_wait);
@@ -204,6 +212,7 @@ class SemanticMappingSession {
   PoseLookup pose_lookup_;
   CameraLookup camera_lookup_;
   LabelWarning label_warning_;
+  ScanWarning scan_warning_;
   InsertedCallback inserted_callback_;
   ScanLabelPairing pairing_;
   std::optional<CameraModel> last_camera_;
