@@ -79,6 +79,13 @@ class SegmentationNodeCore::Impl {
   void imageCallback(const sensor_msgs::ImageConstPtr& msg) {
     Frame frame;
     frame.header = msg->header;
+    if (msg->width == 0 || msg->height == 0) {
+      ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: image on "
+                                         << image_subscriber_.getTopic() << " at "
+                                         << msg->header.stamp << " is " << msg->width << "x"
+                                         << msg->height << " (frame skipped)");
+      return;
+    }
     try {
       if (msg->encoding == enc::BGR8 || msg->encoding == enc::RGB8) {
         frame.image = cv_bridge::toCvCopy(msg, enc::BGR8)->image;
@@ -92,7 +99,7 @@ class SegmentationNodeCore::Impl {
                                               "(frame skipped)");
         return;
       }
-    } catch (const cv_bridge::Exception& e) {
+    } catch (const std::exception& e) {  // cv_bridge's own, and OpenCV's from its conversion
       ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: cannot convert image ("
                                          << msg->width << "x" << msg->height << " " << msg->encoding
                                          << "): " << e.what());

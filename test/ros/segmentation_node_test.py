@@ -106,12 +106,17 @@ class SegmentationNodeTest(unittest.TestCase):
 
     def test_3_unsupported_encoding_is_skipped_and_node_stays_up(self):
         bad = make_image("16UC1", rospy.Time(2000), "cam_bad", 4)
+        # An empty rgb8 image passes cv_bridge's own checks and fails in OpenCV's conversion.
+        empty = Image(encoding="rgb8", height=0, width=0, step=0, data=b"")
+        empty.header.stamp, empty.header.frame_id = rospy.Time(2001), "cam_empty"
         for _ in range(3):
             self.publisher.publish(bad)
+            self.publisher.publish(empty)
             rospy.sleep(0.2)
         rospy.sleep(1.0)
         with self.lock:
             self.assertNotIn("cam_bad", self.labels)
+            self.assertNotIn("cam_empty", self.labels)
         reply, stamp = self.publish_until_answered("bgr8", "cam_after_bad", 5)
         self.check_labels(reply, stamp, "cam_after_bad")
 
