@@ -4,6 +4,8 @@
 #include <cmath>
 #include <iomanip>
 #include <sstream>
+#include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
@@ -50,9 +52,20 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   return config;
 }
 
+bool isGeodeticInRange(double lat_deg, double lon_deg, double alt_m) {
+  return std::isfinite(alt_m) && std::abs(lat_deg) < 90.0 && std::abs(lon_deg) <= 180.0;
+}
+
 LocalizationSession::LocalizationSession(LocalizationSessionConfig config)
     : config_(std::move(config)), localizer_(config_.localizer), lazy_start_(startConfig(config_)) {
   if (config_.origin) {
+    const GeodeticOrigin& o = *config_.origin;
+    if (!isGeodeticInRange(o.lat_deg, o.lon_deg, o.alt_m)) {
+      throw std::invalid_argument("map origin (" + std::to_string(o.lat_deg) + ", " +
+                                  std::to_string(o.lon_deg) + ", " + std::to_string(o.alt_m) +
+                                  "): latitude must be in (-90, 90) deg, longitude in "
+                                  "[-180, 180] deg, altitude finite");
+    }
     projection_.emplace(config_.origin->lat_deg, config_.origin->lon_deg, config_.origin->alt_m);
   }
 }
@@ -192,9 +205,17 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
   Update update;
   ++statistics_.fixes_received;
   checkStamp(event.stamp_s, "GPS fix", &update);
-  if (!event.has_solution || !std::isfinite(event.stamp_s) || !std::isfinite(event.lat_deg) ||
-      !std::isfinite(event.lon_deg) || !std::isfinite(event.alt_m)) {
+  if (!event.has_solution || !std::isfinite(event.stamp_s)) {
     ++statistics_.fixes_ignored;
+    return update;
+  }
+  if (!isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
+    ++statistics_.fixes_ignored;
+    std::ostringstream note;
+    note << "GPS fix at " << event.stamp_s << " s ignored: latitude " << event.lat_deg
+         << ", longitude " << event.lon_deg << ", altitude " << event.alt_m
+         << " (latitude must be in (-90, 90) deg, longitude in [-180, 180] deg)";
+    update.note = note.str();
     return update;
   }
   if (!projection_) projection_.emplace(event.lat_deg, event.lon_deg, event.alt_m);

@@ -51,6 +51,11 @@ estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlRe
   reader->read("origin_lon", &origin.lon_deg);
   reader->read("origin_alt", &origin.alt_m);
   if (origin_parts == 3) {
+    if (!(std::abs(origin.lat_deg) < 90.0)) reader->fail("origin_lat", "must be in (-90, 90) deg");
+    if (!(std::abs(origin.lon_deg) <= 180.0)) {
+      reader->fail("origin_lon", "must be in [-180, 180] deg");
+    }
+    if (!std::isfinite(origin.alt_m)) reader->fail("origin_alt", "must be a finite number");
     config.origin = origin;
   } else if (origin_parts != 0) {
     reader->fail("origin_lat", "set all three of origin_lat, origin_lon, origin_alt or none");
@@ -79,7 +84,7 @@ std::optional<Eigen::Matrix3d> imuOrientation(const sensor_msgs::Imu& message) {
 
 bool isUsableFix(const sensor_msgs::NavSatFix& fix) {
   return fix.status.status >= sensor_msgs::NavSatStatus::STATUS_FIX &&
-         std::isfinite(fix.latitude) && std::isfinite(fix.longitude) && std::isfinite(fix.altitude);
+         estimation::isGeodeticInRange(fix.latitude, fix.longitude, fix.altitude);
 }
 
 std::optional<Eigen::Matrix3d> fixCovarianceEnu(const sensor_msgs::NavSatFix& fix) {

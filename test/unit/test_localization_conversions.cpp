@@ -109,6 +109,30 @@ TEST(UsableFix, RejectsNoFixAndNaN) {
   fix.status.status = sensor_msgs::NavSatStatus::STATUS_GBAS_FIX;
   fix.longitude = kNaN;
   EXPECT_FALSE(isUsableFix(fix));
+  fix.longitude = 8.4;
+  fix.latitude = 90.0;  // the Mercator projection's pole
+  EXPECT_FALSE(isUsableFix(fix));
+  fix.latitude = 49.0;
+  fix.longitude = 181.0;
+  EXPECT_FALSE(isUsableFix(fix));
+}
+
+TEST(SessionParameters, AnOriginOffTheProjectionIsAnErrorNamingTheParameter) {
+  const auto error = [](const std::string& yaml) {
+    common::YamlReader reader("ROS parameters of /inekf_node", YAML::Load(yaml));
+    std::string config_file;
+    try {
+      sessionConfigFromParameters(&reader, "/nonexistent/inekf.yaml", &config_file);
+    } catch (const common::ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error("{origin_lat: 49.0, origin_lon: 8.4, origin_alt: 110}"), "no error");
+  EXPECT_NE(error("{origin_lat: 95.0, origin_lon: 8.4, origin_alt: 110}").find("origin_lat"),
+            std::string::npos);
+  EXPECT_NE(error("{origin_lat: 49.0, origin_lon: 200, origin_alt: 110}").find("origin_lon"),
+            std::string::npos);
 }
 
 TEST(Velocity, MapFrameOrBodyFrameByFrameId) {

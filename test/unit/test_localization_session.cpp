@@ -144,14 +144,19 @@ TEST(LocalizationSession, MapOriginIsTheFirstUsableFixUnlessConfigured) {
   GeodeticFixEvent nan_fix = fixAt(9.5, 50.0);
   nan_fix.lat_deg = kNaN;
   session.addFix(nan_fix);
+  // Beyond the pole: as the origin it would make every later fix not finite.
+  GeodeticFixEvent polar_fix = fixAt(9.6, 50.0);
+  polar_fix.lat_deg = 95.0;
+  EXPECT_NE(session.addFix(polar_fix).note.find("latitude 95"), std::string::npos);
   EXPECT_FALSE(session.projection().has_value());
   session.addImu(restingImu(10.0));
   session.addGpsVelocity(stillAt(10.0));
   session.addFix(fixAt(10.0, 20.0));
   ASSERT_TRUE(session.started());
   EXPECT_LT(session.state().position_map.norm(), 1e-9);  // the origin is this fix
-  EXPECT_EQ(session.statistics().fixes_ignored, 2);
-  EXPECT_EQ(session.statistics().fixes_received, 3);
+  EXPECT_EQ(session.statistics().fixes_ignored, 3);
+  EXPECT_EQ(session.statistics().fixes_received, 4);
+  EXPECT_TRUE(session.state().position_map.allFinite());
 
   LocalizationSession configured(originConfig());
   configured.addImu(restingImu(10.0));
@@ -159,6 +164,10 @@ TEST(LocalizationSession, MapOriginIsTheFirstUsableFixUnlessConfigured) {
   configured.addFix(fixAt(10.0, 20.0));
   ASSERT_TRUE(configured.started());
   EXPECT_NEAR(configured.state().position_map.x(), 20.0, 1e-6);
+
+  LocalizationSessionConfig polar = originConfig();
+  polar.origin->lat_deg = -90.0;
+  EXPECT_THROW(LocalizationSession{polar}, std::invalid_argument);
 }
 
 // The position covariance the filter starts with is the fix's, after the session's policy.
