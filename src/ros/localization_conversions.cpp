@@ -127,7 +127,8 @@ estimation::GeodeticFixEvent fixEvent(const sensor_msgs::NavSatFix& message) {
   event.lon_deg = message.longitude;
   event.alt_m = message.altitude;
   event.covariance_enu = fixCovarianceEnu(message);
-  event.has_solution = isUsableFix(message);
+  // The values are the session's to check: it says why a fix it cannot use is ignored.
+  event.has_solution = message.status.status >= sensor_msgs::NavSatStatus::STATUS_FIX;
   return event;
 }
 

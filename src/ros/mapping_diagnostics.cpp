@@ -1,6 +1,5 @@
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
-#include <algorithm>
 #include <utility>
 
 namespace inekf_semantic_mapping {
@@ -64,11 +63,6 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
   if ((save.wall_s >= 0 && !save.ok) || (autosave.wall_s >= 0 && !autosave.ok)) {
     level = DiagnosticStatus::WARN;
     message = "the last save failed";
-  }
-  if (stats.scans_rejected > 0) {
-    level = std::max(level, static_cast<unsigned char>(DiagnosticStatus::WARN));
-    message = std::to_string(stats.scans_rejected) +
-              " scans rejected by the map (pose beyond its extent or not finite)";
   }
   if (stats.scans_received >= 5 && stats.scans_without_pose * 2 > stats.scans_received) {
     level = DiagnosticStatus::ERROR;

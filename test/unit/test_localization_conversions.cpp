@@ -95,6 +95,12 @@ TEST(FixEvent, CarriesTheFixAndWhetherItIsASolution) {
   EXPECT_FALSE(event.covariance_enu.has_value());
   fix.status.status = sensor_msgs::NavSatStatus::STATUS_NO_FIX;
   EXPECT_FALSE(fixEvent(fix).has_solution);
+  // A solution with a value off the map projection goes to the session, which says why it is
+  // ignored (LocalizationSession.MapOriginIsTheFirstUsableFixUnlessConfigured).
+  fix.status.status = sensor_msgs::NavSatStatus::STATUS_FIX;
+  fix.latitude = 95.0;
+  EXPECT_TRUE(fixEvent(fix).has_solution);
+  EXPECT_DOUBLE_EQ(fixEvent(fix).lat_deg, 95.0);
 }
 
 TEST(UsableFix, RejectsNoFixAndNaN) {
