@@ -90,6 +90,7 @@ install(FILES nodelet_plugins.xml DESTINATION ${CATKIN_PACKAGE_SHARE_DESTINATION
 if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_shutdown_save.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_grids.test DEPENDENCIES semantic_octomap_node)
 endif()
 

@@ -25,7 +25,8 @@ std::optional<mapping::CameraModel> LabelCamera::cameraFor(const std::string& ca
     ROS_WARN_THROTTLE(5,
                       "semantic_octomap_node: waiting for the camera (%s and tf %s -> camera, or "
                       "~calib_dir) to use label images",
-                      topics::kCameraColorLeftInfo, lidar_frame_.c_str());
+                      topics::kCameraColorLeftInfo,
+                      lidar_frame_.empty() ? "<lidar frame>" : lidar_frame_.c_str());
   }
   return camera;
 }

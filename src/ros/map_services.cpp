@@ -36,6 +36,22 @@ void MapServices::autosave() {
   }
 }
 
+void MapServices::finalAutosave() {
+  if (autosave_path_.empty()) return;
+  if (session_.statistics().scans_inserted == 0) {
+    ROS_INFO("semantic_octomap_node: no scan in the map: nothing autosaved");
+    return;
+  }
+  autosave();
+  if (last_autosave_.ok) {
+    ROS_INFO_STREAM("semantic_octomap_node: map saved to "
+                    << autosave_path_ << " (" << session_.statistics().scans_inserted << " scans)");
+  } else {
+    ROS_ERROR_STREAM("semantic_octomap_node: the final autosave to "
+                     << autosave_path_ << " failed: " << last_autosave_.error);
+  }
+}
+
 bool MapServices::onSave(SaveMap::Request& request, SaveMap::Response& response) {
   last_save_ = SaveRecord{request.path, wallNow(), true, ""};
   try {

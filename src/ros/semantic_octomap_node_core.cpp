@@ -82,7 +82,8 @@ class SemanticOctomapNodeCore::Impl {
     session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
       monitor_->noteInserted(stamp, wallNow());
       display_->scanInserted(scan);
-      if (cloud_pub_.getNumSubscribers() == 0) return;
+      // Not after ROS has shut down (the scans flushed at shutdown): the publisher is invalid.
+      if (!cloud_pub_ || cloud_pub_.getNumSubscribers() == 0) return;
       cloud_pub_.publish(labeledCloudMessage(scan, session_->classSet(), options_.display.map_frame,
                                              ros::Time(stamp)));
     });
@@ -134,6 +135,28 @@ class SemanticOctomapNodeCore::Impl {
                     << c.resolution_m << " m, max range " << c.max_range_m << " m, classes "
                     << mapping::mapClassSetName(c.class_set) << ", label wait " << c.label_wait_s
                     << " s");
+  }
+
+  ~Impl() { finish(); }
+
+  // Once: the scans still waiting for their label image go into the map with what has arrived,
+  // then the final autosave. At the end of a bag the clock stops and they would wait forever:
+  // without this the saved map missed up to label_wait_s of the last scans.
+  void finish() {
+    if (finished_) return;
+    finished_ = true;
+    try {
+      const std::size_t pending = session_->pendingScans();
+      if (pending > 0) {
+        const std::size_t inserted = session_->flush();
+        ROS_INFO_STREAM("semantic_octomap_node: finishing: " << inserted << " of " << pending
+                                                             << " waiting scans put in the map");
+      }
+    } catch (const std::exception& e) {
+      ROS_ERROR_STREAM(
+          "semantic_octomap_node: finishing: the waiting scans are lost: " << e.what());
+    }
+    services_->finalAutosave();
   }
 
  private:
@@ -200,16 +223,19 @@ class SemanticOctomapNodeCore::Impl {
   std::unique_ptr<LabelCamera> label_camera_;
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher cloud_pub_;
-  std::unique_ptr<MapServices> services_;  // after the session: autosaves at shutdown
+  std::unique_ptr<MapServices> services_;
   std::unique_ptr<NodeDiagnostics> diagnostics_;
   ros::WallTimer clock_timer_, display_timer_, log_timer_;
   ros::Time last_clock_;
+  bool finished_ = false;
 };
 
 SemanticOctomapNodeCore::SemanticOctomapNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : impl_(std::make_unique<Impl>(nh, private_nh)) {}
 
 SemanticOctomapNodeCore::~SemanticOctomapNodeCore() = default;
+
+void SemanticOctomapNodeCore::finish() { impl_->finish(); }
 
 }  // namespace ros_conversions
 }  // namespace inekf_semantic_mapping

@@ -1,9 +1,9 @@
 // semantic_octomap_node's services on its map, in its private namespace: ~save_map (SaveMap:
 // .ot / .bt / .ply by format or extension), ~load_map (LoadMap: the current map is kept when the
-// file is refused), ~reset (std_srvs/Empty); and the autosave: every autosave_period_s and at
-// shutdown to autosave_path. Every save is atomic, so a crash never leaves a broken file; a
-// failure is reported in the response and the node keeps running.
-// ROS-facing (src/ros): only nodes include this header.
+// file is refused), ~reset (std_srvs/Empty); and the autosave to autosave_path: every
+// autosave_period_s, and once more when the node finishes (finalAutosave). Every save is atomic, so
+// a crash never leaves a broken file; a failure is reported in the response and the node keeps
+// running. ROS-facing (src/ros): only nodes include this header.
 #pragma once
 
 #include <ros/node_handle.h>
@@ -28,10 +28,11 @@ class MapServices {
   MapServices(ros::NodeHandle& nh, ros::NodeHandle& private_nh,
               mapping::SemanticMappingSession& session, MapDisplay& display,
               std::string autosave_path, double autosave_period_s);
-  ~MapServices() { autosave(); }
 
   // Saves to autosave_path when it is set and the map has scans; errors are logged.
   void autosave();
+  // The save when the node finishes: as autosave, and says where the map went.
+  void finalAutosave();
   // The last ~save_map and autosave (for /diagnostics).
   const SaveRecord& lastSave() const { return last_save_; }
   const SaveRecord& lastAutosave() const { return last_autosave_; }

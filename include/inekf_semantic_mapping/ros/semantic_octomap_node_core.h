@@ -9,7 +9,7 @@
 // a scan: scans queue until their pose is there, nothing blocks the spinner. Publishes
 // semantic_map/{markers, labeled_cloud, info, projected_map, drivable_map}; services ~save_map,
 // ~load_map, ~reset; ~map_file resumes from a saved map, ~autosave_path saves every
-// ~autosave_period_s and when the core is destroyed. Parameters: config/semantic_mapping.yaml.
+// ~autosave_period_s and at finish(). Parameters: config/semantic_mapping.yaml.
 // /diagnostics: "map" and "labels" statuses at 1 Hz (ros/mapping_diagnostics.h).
 // ROS-facing (src/ros): only nodes and nodelets include this header.
 #pragma once
@@ -25,7 +25,12 @@ class SemanticOctomapNodeCore {
  public:
   // Throws (std::exception) on a bad parameter, calibration or map file.
   SemanticOctomapNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh);
-  ~SemanticOctomapNodeCore();  // autosaves when ~autosave_path is set
+  ~SemanticOctomapNodeCore();  // finish() unless it was called
+
+  // The end of the run: the scans still waiting for their label image go into the map (with the
+  // labels that came), then the final autosave (~autosave_path). Call it while ROS still runs
+  // (after ros::shutdown() roscpp logs nothing); later calls do nothing.
+  void finish();
   SemanticOctomapNodeCore(const SemanticOctomapNodeCore&) = delete;
   SemanticOctomapNodeCore& operator=(const SemanticOctomapNodeCore&) = delete;
 
