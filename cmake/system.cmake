@@ -47,3 +47,19 @@ foreach(common_test test_atomic_file test_cli_args test_progress_log)
     target_include_directories(${common_test} PRIVATE ${ISM_CORE_INCLUDE_DIRS})
   endif()
 endforeach()
+
+# Every flag each command-line tool's usage names is accepted by its parser.
+set(ISM_CLI_TOOLS evaluate_map evaluate_semantics generate_synthetic_drive inekf_offline kitti2bag
+  make_camera_labels project_cloud segment_image semantic_map_offline)
+ism_add_gtest(test_tool_usage SOURCES test/cli/test_tool_usage.cpp)
+if(TARGET test_tool_usage)
+  set(ism_tool_paths "")
+  foreach(tool ${ISM_CLI_TOOLS})
+    string(APPEND ism_tool_paths "$<TARGET_FILE:${tool}>\n")
+    add_dependencies(test_tool_usage ${tool})
+  endforeach()
+  file(GENERATE OUTPUT ${CMAKE_BINARY_DIR}/${PROJECT_NAME}_cli_tools.txt
+    CONTENT "${ism_tool_paths}")
+  target_compile_definitions(test_tool_usage PRIVATE
+    ISM_TOOL_PATHS_FILE="${CMAKE_BINARY_DIR}/${PROJECT_NAME}_cli_tools.txt")
+endif()

@@ -93,7 +93,10 @@ std::uint8_t scoredTruth(std::uint32_t raw_label) {
 }
 
 int run(const ism::common::CommandLine& cli) {
-  const std::string drive = cli.require("--drive");
+  // Normalised: its parent is the date folder (the calibration), also for "DRIVE/" and ".".
+  fs::path drive_path = fs::absolute(cli.require("--drive")).lexically_normal();
+  if (!drive_path.has_filename()) drive_path = drive_path.parent_path();
+  const std::string drive = drive_path.string();
   const std::string map_path = cli.require("--map");
   const std::string labels_dir =
       cli.get("--labels", (fs::path(drive) / "ground_truth" / "velodyne_labels").string());
@@ -197,7 +200,8 @@ int main(int argc, char** argv) {
   return ism::common::runCli("evaluate_map", kUsage, [&] {
     const ism::common::CommandLine cli(argc, argv,
                                        {"--map", "--drive", "--labels", "--poses", "--frames",
-                                        "--scan-step", "--max-range", "--json"});
+                                        "--scan-step", "--max-range", "--json", "--camera"},
+                                       {"--all-points"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
     return run(cli);
   });

@@ -166,6 +166,19 @@ TEST_F(EvaluateMapTest, AMapOfTheTrueLabelsScoresNearOneAndAShiftedOneLess) {
                             drive_ + " --poses " + truePoses() + " --frames " + frames);
   EXPECT_NE(bad_status, 0);
   EXPECT_NE(bad_output.find(frames), std::string::npos) << bad_output;
+
+  // The drive folder with a trailing '/' (its parent is still the date folder), --camera 2 (the
+  // default) and --all-points, which scores the whole sweep: more points than the camera sees.
+  const auto [slash_status, slash_output] = ism::test::runCommand(
+      std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + "/ --camera 2");
+  ASSERT_EQ(slash_status, 0) << slash_output;
+  EXPECT_EQ(slash_output.substr(slash_output.rfind("RESULT ")), result);
+  const auto [all_status, all_output] = ism::test::runCommand(
+      std::string(EVALUATE_MAP_PATH) + " --map " + exact + " --drive " + drive_ + " --all-points");
+  ASSERT_EQ(all_status, 0) << all_output;
+  const std::string all_result = all_output.substr(all_output.rfind("RESULT "));
+  EXPECT_GT(jsonNumber(all_result, "scored"), 1.5 * jsonNumber(result, "scored"))
+      << all_result << "\ncamera 2: " << result;
 }
 
 TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
