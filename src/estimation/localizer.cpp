@@ -65,6 +65,7 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   initialized_ = true;
   consecutive_rejected_fixes_ = 0;
   last_accepted_fix_s_ = initial.stamp_s;
+  last_accepted_fix_position_ = initial.position_map;
   clearHistory();
   last_fix_stamp_s_ = -std::numeric_limits<double>::infinity();
   heading_correction_rad_ = 0.0;
@@ -401,8 +402,12 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     }
   }
   const double since_last_fix_s = std::max(1.0, filter_->state().stamp_s - last_accepted_fix_s_);
+  // Measured from the last accepted fix, not from the filter: a filter that runs away (a wrong
+  // velocity from a bad start) would otherwise outrun this bound and refuse every fix for good.
+  const double fix_jump_m = (used.position_map - last_accepted_fix_position_).norm();
+  const bool receiver_jumped = fix_jump_m > config_.max_reacquisition_speed_mps * since_last_fix_s;
   if (!reopen_why.empty()) {
-    if (innovation.norm() > config_.max_reacquisition_speed_mps * since_last_fix_s) {
+    if (receiver_jumped) {
       reopen_why.clear();  // a broken receiver, not a wrong heading: the gate keeps rejecting
     } else {
       if (result.accepted) {
@@ -423,10 +428,10 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   if (gated_out && config_.max_consecutive_rejected_fixes > 0 &&
       consecutive_rejected_fixes_ >= config_.max_consecutive_rejected_fixes) {
     const NavState& state = filter_->state();
-    if (innovation.norm() > config_.max_reacquisition_speed_mps * since_last_fix_s) {
-      result.reason = "re-acquisition refused: the fix is " + std::to_string(innovation.norm()) +
-                      " m away, more than a car moves in " + std::to_string(since_last_fix_s) +
-                      " s";
+    if (receiver_jumped) {
+      result.reason = "re-acquisition refused: the fix is " + std::to_string(fix_jump_m) +
+                      " m from the last accepted one, more than a car moves in " +
+                      std::to_string(since_last_fix_s) + " s";
       ++statistics_.gps_rejected;
       return result;
     }
@@ -444,6 +449,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     noteHeadingChange(heading_before);
     consecutive_rejected_fixes_ = 0;
     last_accepted_fix_s_ = filter_->state().stamp_s;
+    last_accepted_fix_position_ = used.position_map;
   }
   if (result.accepted) {
     ++statistics_.gps_used;
@@ -677,7 +683,9 @@ void Localizer::realignHeading(const TrackHeading& track, const std::string& why
   if (!world.allFinite() || !state.rotation.allFinite() || !state.velocity_map.allFinite()) return;
   filter_->initialize(state, filter_->fromWorldCovariance(state, world));
   heading_correction_rad_ += delta;
-  consecutive_rejected_fixes_ = 0;
+  // The rejected fixes are still counted: a heading realigned from the track does not mend an
+  // error the track cannot see (altitude, speed), and zeroing the count here kept re-acquisition
+  // from ever firing (each re-open made the heading unknown, the next fix realigned it).
   horizontal_nis_.clear();
   noteHeadingEvent(why);
 }

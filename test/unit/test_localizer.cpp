@@ -164,6 +164,51 @@ TEST(Localizer, NeverReacquiresAFixFartherThanACarCanMove) {
   EXPECT_LT(localizer.state().position_map.norm(), 1.0);
 }
 
+// Found by review: a start 200 m off in altitude. The fixes kept failing the gate on z, each
+// re-open of the heading made it unknown, the next fix realigned it from the track and zeroed the
+// count of rejected fixes, so re-acquisition never fired: 0 of 300 fixes accepted, the estimate
+// 200 m off for good. The track cannot see altitude; the count must go on.
+TEST(Localizer, RecoversFromAnAltitudeErrorTheHeadingTrackCannotSee) {
+  Localizer localizer{LocalizerConfig()};  // the defaults: heading monitor on
+  NavState start = startState(0.0);
+  start.velocity_map = Eigen::Vector3d(10.0, 0.0, 0.0);
+  start.position_map.z() = 200.0;
+  localizer.initialize(start);
+  ImuSample sample = restingSample(0.0);
+  int accepted = 0;
+  for (int i = 1; i <= 600; ++i) {  // 60 s straight at 10 m/s, a fix every second
+    sample.stamp_s = 0.1 * i;
+    localizer.addImu(sample);
+    if (i % 10 != 0) continue;
+    PositionFix fix = fixAt(sample.stamp_s, Eigen::Vector3d(1.0 * i, 0.0, 0.0), 1.5);
+    fix.covariance_map(2, 2) = 9.0;
+    if (localizer.addPositionFix(fix).accepted) ++accepted;
+  }
+  EXPECT_GE(localizer.statistics().gps_reacquisitions, 1);
+  EXPECT_GT(accepted, 45);  // of 60
+  EXPECT_LT((localizer.state().position_map - Eigen::Vector3d(600.0, 0.0, 0.0)).norm(), 5.0)
+      << localizer.state().position_map.transpose();
+}
+
+// Found by review: a first fix 500 m off with the car standing still. The next good fix the gate
+// let through explained the 500 m by a velocity of about 70 m/s; the estimate ran off faster than
+// the re-acquisition bound, which compared the fixes with the runaway estimate, so every later
+// fix was refused as "a broken receiver" (20,000 km off after 50 min). The bound is now on the
+// fixes themselves: these ones stay put.
+TEST(Localizer, ABadFirstFixDoesNotSendAStandingCarAway) {
+  Localizer localizer{LocalizerConfig()};
+  localizer.addImu(restingSample(0.0));
+  ASSERT_TRUE(localizer.addPositionFix(fixAt(0.0, Eigen::Vector3d(500.0, 0.0, 0.0), 1.5)).accepted);
+  for (int i = 1; i <= 1200; ++i) {  // 120 s, a fix every second, all at the true place
+    localizer.addImu(restingSample(0.1 * i));
+    if (i % 10 == 0) localizer.addPositionFix(fixAt(0.1 * i, Eigen::Vector3d::Zero(), 1.5));
+  }
+  EXPECT_LT(localizer.state().position_map.norm(), 5.0)
+      << localizer.state().position_map.transpose();
+  EXPECT_LT(localizer.state().velocity_map.norm(), 1.0)
+      << localizer.state().velocity_map.transpose();
+}
+
 TEST(Localizer, DropsImuSamplesBeyondTheSensorRange) {
   Localizer localizer{LocalizerConfig()};
   localizer.initialize(startState(0.0));

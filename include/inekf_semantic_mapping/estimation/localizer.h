@@ -222,6 +222,9 @@ class Localizer {
   double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
   int consecutive_rejected_fixes_ = 0;
   double last_accepted_fix_s_ = 0.0;
+  // Where the last accepted fix (or the start) put the car: a fix farther from it than a car
+  // moves in the time since is a jump of the receiver, wherever the filter has drifted.
+  Eigen::Vector3d last_accepted_fix_position_ = Eigen::Vector3d::Zero();
   double last_fix_stamp_s_ = 0.0;  // newest fix that reached the correction
   // The steps of the last fix_history_s, oldest first, from history_[history_begin_] (the ones
   // before it expired and are erased in bulk).
