@@ -22,10 +22,15 @@ LazyStart::Config startConfig(const LocalizationSessionConfig& config) {
   return start;
 }
 
-bool isFinite(const NavState& state, const PoseCovariance& covariance) {
-  return state.rotation.allFinite() && state.velocity_map.allFinite() &&
-         state.position_map.allFinite() && state.gyro_bias.allFinite() &&
-         state.accel_bias.allFinite() && covariance.allFinite();
+// Why the state cannot be reported, or "" when it can.
+std::string unsoundness(const NavState& state, const ErrorCovariance& covariance) {
+  if (!(state.rotation.allFinite() && state.velocity_map.allFinite() &&
+        state.position_map.allFinite() && state.gyro_bias.allFinite() &&
+        state.accel_bias.allFinite() && covariance.allFinite())) {
+    return "non-finite state";
+  }
+  if (!(covariance.diagonal().minCoeff() >= 0.0)) return "negative variance in the state";
+  return "";
 }
 
 }  // namespace
@@ -44,6 +49,10 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   positive("session.default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
   positive("session.default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
   positive("session.time_jump_back_s", &config.time_jump_back_s);
+  reader.read("session.restart_after_imu_gap_s", &config.restart_after_imu_gap_s);
+  if (!(config.restart_after_imu_gap_s >= 0.0)) {
+    reader.fail("session.restart_after_imu_gap_s", "must be a number >= 0");
+  }
   reader.read("session.fix_wait_for_imu_s", &config.fix_wait_for_imu_s);
   if (!(config.fix_wait_for_imu_s >= 0.0)) {
     reader.fail("session.fix_wait_for_imu_s", "must be a number >= 0");
@@ -145,12 +154,15 @@ LocalizationSession::Update LocalizationSession::addClock(double now_s) {
   return update;
 }
 
-void LocalizationSession::guardFinite(Update* update) {
-  if (!started() || isFinite(state(), poseCovariance())) return;
+void LocalizationSession::guardSound(Update* update) {
+  if (!started()) return;
+  const std::string unsound = unsoundness(state(), localizer_.filter().covariance());
+  if (unsound.empty()) return;
   std::ostringstream why;
-  why << std::fixed << std::setprecision(3) << "non-finite state at " << state().stamp_s << " s";
+  why << std::fixed << std::setprecision(3) << unsound << " at " << state().stamp_s << " s";
   reset(why.str(), update);
   update->new_estimate = false;
+  update->start_estimate.reset();
 }
 
 LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
@@ -162,6 +174,14 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
       !sample.specific_force.allFinite()) {
     ++statistics_.imu_invalid;
     return update;
+  }
+  if (started() && config_.restart_after_imu_gap_s > 0.0 &&
+      sample.stamp_s - state().stamp_s > config_.restart_after_imu_gap_s) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "IMU silent from " << state().stamp_s << " s to "
+        << sample.stamp_s << " s (more than session.restart_after_imu_gap_s): not bridged, the "
+        << "filter starts again at the next fix";
+    reset(why.str(), &update);
   }
   latest_angular_velocity_ = sample.angular_velocity;
   if (!started() && event.orientation) {
@@ -197,7 +217,7 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
                                                   : "duplicate or out of order: dropped");
     update.note = note.str();
   }
-  guardFinite(&update);
+  guardSound(&update);
   return update;
 }
 
@@ -249,7 +269,7 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
     correct(fix, &update);
   }
   releaseWaitingFixes(&update);
-  guardFinite(&update);
+  guardSound(&update);
   return update;
 }
 

@@ -173,10 +173,21 @@ void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
   reference_velocity_.reset();
   reference_rotation_covariance_.reset();
   if (velocity_map && velocity_map->allFinite()) reference_velocity_ = *velocity_map;
-  if (rotation_covariance && rotation_covariance->allFinite() &&
-      rotation_covariance->diagonal().minCoeff() >= 0.0) {
-    reference_rotation_covariance_ =
-        0.5 * (*rotation_covariance + rotation_covariance->transpose());
+  if (rotation_covariance) {
+    // Only a covariance: symmetric positive semi-definite, and no wider than a rotation can be
+    // wrong (an indefinite one made the filter's covariance indefinite, its variances negative
+    // and every later fix rejected; an absurd one overflowed it).
+    const Eigen::Matrix3d stated = 0.5 * (*rotation_covariance + rotation_covariance->transpose());
+    if (stated.allFinite()) {
+      const Eigen::Vector3d eigenvalues =
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(stated, Eigen::EigenvaluesOnly)
+              .eigenvalues();
+      const double widest = M_PI * M_PI;
+      if (eigenvalues.minCoeff() >= -1e-12 * std::max(1.0, eigenvalues.maxCoeff()) &&
+          stated.diagonal().maxCoeff() <= widest) {
+        reference_rotation_covariance_ = stated;
+      }
+    }
   }
 }
 

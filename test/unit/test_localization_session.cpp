@@ -236,6 +236,34 @@ TEST(LocalizationSession, AClockJumpingBackResets) {
   EXPECT_EQ(session.statistics().resets, 1);
 }
 
+// Found by review: a clock jumping an hour forward was bridged in one propagation; the covariance
+// lost its positive definiteness (variances below zero) and every later fix was rejected. A gap
+// longer than restart_after_imu_gap_s starts over instead; a shorter one is still bridged.
+TEST(LocalizationSession, AnImuGapLongerThanTheRestartLimitStartsOverAtTheNextFix) {
+  LocalizationSession session(originConfig());
+  session.setGpsVelocityExpected(false);
+  for (int i = 0; i <= 20; ++i) {
+    session.addImu(restingImu(10.0 + 0.1 * i));
+    if (i % 10 == 0) session.addFix(fixAt(10.0 + 0.1 * i));
+  }
+  ASSERT_TRUE(session.started());
+  const LocalizationSession::Update bridged = session.addImu(restingImu(17.0));  // 5 s gap
+  EXPECT_FALSE(bridged.reset) << bridged.note;
+  EXPECT_EQ(bridged.imu_status, Localizer::ImuStatus::kGap);
+
+  const LocalizationSession::Update jumped = session.addImu(restingImu(17.0 + 3600.0));
+  EXPECT_TRUE(jumped.reset);
+  EXPECT_FALSE(jumped.new_estimate);
+  EXPECT_NE(jumped.note.find("IMU silent"), std::string::npos) << jumped.note;
+  EXPECT_FALSE(session.started());
+  EXPECT_EQ(session.statistics().resets, 1);
+  // The next fix starts the filter again, at that fix, with a sound covariance.
+  const LocalizationSession::Update restarted = session.addFix(fixAt(3617.0, 5.0));
+  ASSERT_TRUE(restarted.started) << restarted.note;
+  EXPECT_NEAR(session.state().position_map.x(), 5.0, 1e-6);
+  EXPECT_GE(session.errorCovariance().diagonal().minCoeff(), 0.0);
+}
+
 // A short drive: a car accelerating east at 1 m/s^2 from 5 m/s, IMU at 10 Hz, a fix every 5th
 // sample. One entry per sample, in stamp order: the IMU sample, then its fix if any.
 struct DriveStep {
@@ -403,6 +431,7 @@ TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
   EXPECT_EQ(config.default_fix_sigma_horizontal_m, defaults.default_fix_sigma_horizontal_m);
   EXPECT_EQ(config.default_fix_sigma_vertical_m, defaults.default_fix_sigma_vertical_m);
   EXPECT_EQ(config.time_jump_back_s, defaults.time_jump_back_s);
+  EXPECT_EQ(config.restart_after_imu_gap_s, defaults.restart_after_imu_gap_s);
   EXPECT_EQ(config.fix_wait_for_imu_s, defaults.fix_wait_for_imu_s);
   EXPECT_EQ(config.localizer.min_gps_sigma_m, defaults.localizer.min_gps_sigma_m);
 
@@ -443,6 +472,11 @@ TEST(LocalizationSession, TheStartTakesTheOrientationsStatedCovarianceOrTheConfi
       {Eigen::Matrix3d::Zero(), true, 1.0},  // stated as unknown: initial_sigma.yaw_deg
       {std::nullopt, true, 1.0},
       {std::nullopt, false, 180.0},  // no orientation: initial_sigma.unknown_yaw_deg
+      // Not a covariance: indefinite (made the filter's variances negative and every later fix
+      // rejected), and finite but absurd (overflowed the start's covariance to NaN, which was
+      // published): the configured sigma, as for "unknown".
+      {(Eigen::Matrix3d() << 1e-4, 1e-2, 0, 1e-2, 1e-4, 0, 0, 0, 1e-4).finished(), true, 1.0},
+      {Eigen::Matrix3d::Constant(1e308), true, 1.0},
   };
   for (const Case& c : cases) {
     LocalizationSession session(originConfig());

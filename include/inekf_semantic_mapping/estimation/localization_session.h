@@ -20,8 +20,12 @@
 //  - the time-jump reset: a stamp or a clock time_jump_back_s earlier than the newest one means a
 //    bag loop or a restarted player: the state is meaningless in the new time line, start over
 //    (the map origin is kept: the same place keeps the same coordinates);
-//  - a non-finite state (never expected: the filter rejects such updates) is never reported:
-//    the session resets instead;
+//  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
+//    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
+//    over an hour broke the covariance; the session starts over at the next fix;
+//  - an unsound state (a value not finite or a variance below zero: never expected, the filter
+//    rejects such updates and the inputs are checked) is never reported, the start estimate
+//    included: the session resets instead;
 //  - statistics.
 // Estimates are made at IMU stamps: an IMU event whose Update says `new_estimate` leaves state()
 // at that sample's stamp (a node publishes it then). A fix corrects the current estimate. The
@@ -64,6 +68,9 @@ struct LocalizationSessionConfig {
   double default_fix_sigma_horizontal_m = 1.5;
   double default_fix_sigma_vertical_m = 3.0;
   double time_jump_back_s = 1.0;
+  // An IMU gap longer than this starts the session over instead of being bridged. 0: always
+  // bridge.
+  double restart_after_imu_gap_s = 10.0;
   // A fix ahead of the filter waits this long (data time) for the IMU to reach its stamp; then
   // it is applied at the filter's time as the Localizer does (the IMU has stopped). 0: never wait.
   double fix_wait_for_imu_s = 0.3;
@@ -179,7 +186,7 @@ class LocalizationSession {
   // fix_wait_for_imu_s of the newest stamp, in stamp order.
   void releaseWaitingFixes(Update* update);
   // Resets if the state or its covariance is not finite.
-  void guardFinite(Update* update);
+  void guardSound(Update* update);
 
   LocalizationSessionConfig config_;
   Localizer localizer_;
