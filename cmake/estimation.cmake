@@ -28,6 +28,10 @@ ism_add_core_library(${PROJECT_NAME}_registration
 target_compile_options(${PROJECT_NAME}_registration PRIVATE -Wno-error=array-bounds)
 ism_add_tool(inekf_offline SOURCES src/tools/inekf_offline.cpp
   LINK ${PROJECT_NAME}_estimation_oxts ${PROJECT_NAME}_registration)
+# On a synthetic drive (cmake/synthetic.cmake's library: resolved when the build is generated).
+ism_add_gtest(test_inekf_offline SOURCES test/cli/test_inekf_offline.cpp
+  LINK ${PROJECT_NAME}_synthetic
+  TOOL inekf_offline TOOL_MACRO INEKF_OFFLINE_PATH)
 ism_add_gtest(test_smoother SOURCES test/unit/test_smoother.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_pose_graph SOURCES test/unit/test_pose_graph.cpp

@@ -221,6 +221,12 @@ int main(int argc, char** argv) {
       ism::ScopedTimer timer("filter_total");
       run = estimation::runLocalizerOnOxts(frames, options);
     }
+    if (run.first_estimated_frame >= static_cast<int>(frames.size())) {
+      // Written out, its start-state defaults would score as a perfect ATE of 0.
+      throw std::runtime_error(
+          cli.get("--oxts") + ": the filter never started (" + std::to_string(run.fixes_offered) +
+          " of " + std::to_string(frames.size()) + " frames gave it a GPS fix): nothing written");
+    }
     estimation::TrajectoryErrors smoothed_errors;
     estimation::LoopClosureResult loops;
     if (loop_closure) {

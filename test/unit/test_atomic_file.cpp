@@ -144,6 +144,21 @@ TEST(AtomicFileSet, AFailingOutputLeavesNoneOfTheSetAndNoTemporary) {
   }
   EXPECT_EQ(readFile(dir + "/a.txt"), "new a\n");
   EXPECT_EQ(listDir(dir), (std::vector<std::string>{"a.txt", "b.txt", "d_is_a_dir"}));
+
+  // One file named for two outputs (inekf_offline --output-kitti X --output-truth X wrote the
+  // truth over the estimate and said nothing), also spelt differently: refused, nothing written.
+  {
+    AtomicFileSet twice;
+    twice.addStream(dir + "/a.txt", [](std::ostream& out) { out << "estimate\n"; });
+    try {
+      twice.addStream(dir + "/./d_is_a_dir/../a.txt", [](std::ostream& out) { out << "truth\n"; });
+      ADD_FAILURE() << "no exception";
+    } catch (const AtomicWriteError& e) {
+      EXPECT_NE(std::string(e.what()).find("two outputs"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(readFile(dir + "/a.txt"), "new a\n");
+  EXPECT_EQ(listDir(dir), (std::vector<std::string>{"a.txt", "b.txt", "d_is_a_dir"}));
   fs::remove_all(dir);
 }
 

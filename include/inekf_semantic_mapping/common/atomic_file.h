@@ -131,6 +131,13 @@ class AtomicFileSet {
     if (path.empty()) throw AtomicWriteError(path, "empty output path");
     // The one target a rename cannot replace, refused before any of the set is renamed.
     if (std::filesystem::is_directory(path)) throw AtomicWriteError(path, "is a directory");
+    // Two outputs of one set on one file: the later rename would silently replace the earlier.
+    const std::filesystem::path target = std::filesystem::absolute(path).lexically_normal();
+    for (const auto& staged : staged_) {
+      if (std::filesystem::absolute(staged.first).lexically_normal() == target) {
+        throw AtomicWriteError(path, "given as two outputs (the second would replace the first)");
+      }
+    }
     staged_.push_back({path, temporaryPathFor(path)});
     write(staged_.back().second);
   }

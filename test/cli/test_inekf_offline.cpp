@@ -1,0 +1,94 @@
+// inekf_offline on a short synthetic drive: it localizes and writes what it is asked for; a drive
+// whose frames carry no GPS solution is an error, not a perfect score; one file named for two
+// outputs is refused with nothing written.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "inekf_semantic_mapping/synthetic/drive_generator.h"
+#include "test_data.h"
+
+namespace fs = std::filesystem;
+namespace ism = inekf_semantic_mapping;
+
+namespace {
+
+class InekfOfflineTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = ism::test::makeTempDir("inekf_offline_cli");
+    ism::synthetic::DriveOptions options;
+    options.output_dir = dir_;
+    options.seed = 3;
+    options.duration_s = 5.0;
+    options.write_images = false;
+    options.lidar.beams = 4;
+    options.lidar.azimuth_step_deg = 2.0;
+    oxts_ = ism::synthetic::generateSyntheticDrive(options).sync_dir + "/oxts";
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+
+  static std::pair<int, std::string> run(const std::string& arguments) {
+    return ism::test::runCommand(std::string(INEKF_OFFLINE_PATH) + " " + arguments);
+  }
+
+  static std::size_t lineCount(const std::string& path) {
+    std::ifstream in(path);
+    std::size_t lines = 0;
+    for (std::string line; std::getline(in, line);) ++lines;
+    return lines;
+  }
+
+  static std::string dir_, oxts_;
+};
+std::string InekfOfflineTest::dir_, InekfOfflineTest::oxts_;
+
+TEST_F(InekfOfflineTest, LocalizesASyntheticDrive) {
+  const std::string poses = dir_ + "/poses.txt";
+  const auto [status, output] = run("--oxts " + oxts_ + " --output-kitti " + poses);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_EQ(lineCount(poses), lineCount(oxts_ + "/timestamps.txt"));
+  const std::size_t at = output.find("ATE ");
+  ASSERT_NE(at, std::string::npos) << output;
+  EXPECT_LT(std::stod(output.substr(at + 4)), 3.0) << output;
+}
+
+// Every frame without a GPS solution (posmode 0): the filter never starts. It used to write the
+// unstarted defaults for every frame and print "ATE 0.000 m".
+TEST_F(InekfOfflineTest, ADriveWithoutAnyGpsFixIsAnError) {
+  const fs::path no_fix = fs::path(dir_) / "no_fix" / "oxts";
+  fs::create_directories(no_fix.parent_path());
+  fs::copy(oxts_, no_fix, fs::copy_options::recursive);
+  for (const fs::directory_entry& entry : fs::directory_iterator(no_fix / "data")) {
+    std::ifstream in(entry.path());
+    std::vector<std::string> fields;
+    for (std::string field; in >> field;) fields.push_back(field);
+    ASSERT_EQ(fields.size(), 30u) << entry.path();
+    fields[27] = "0";  // posmode
+    std::ofstream out(entry.path());
+    for (std::size_t i = 0; i < fields.size(); ++i) out << (i ? " " : "") << fields[i];
+    out << "\n";
+  }
+  const std::string poses = dir_ + "/no_fix_poses.txt";
+  const auto [status, output] = run("--oxts " + no_fix.string() + " --output-kitti " + poses);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find(no_fix.string()), std::string::npos) << output;
+  EXPECT_NE(output.find("never started"), std::string::npos) << output;
+  EXPECT_EQ(output.find("ATE "), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(poses));
+}
+
+TEST_F(InekfOfflineTest, OneFileForTwoOutputsIsRefused) {
+  const std::string both = dir_ + "/both.txt";
+  const auto [status, output] =
+      run("--oxts " + oxts_ + " --output-kitti " + both + " --output-truth " + both);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(output.find("two outputs"), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(both));
+}
+
+}  // namespace
