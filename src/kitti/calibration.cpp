@@ -44,6 +44,31 @@ struct KeyValues {
       for (int c = 0; c < 4; ++c) m(r, c) = v[4 * r + c];
     return m;
   }
+  // A rotation, refused (naming the key and its line) unless it is one within the files'
+  // printing precision: a wrong R_rect turned every camera's tf and projection without a word.
+  Eigen::Matrix3d rotation3(const std::string& key) const {
+    const Eigen::Matrix3d r = matrix3(key);
+    const double error = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    if (!(error < 1e-3) || !(r.determinant() > 0)) {
+      throw KittiFormatError(
+          path, line_of.at(key),
+          "'" + key + "' is not a rotation (|R^T R - I| = " + std::to_string(error) + ")");
+    }
+    return r;
+  }
+  // A rectified pinhole projection K [I | t]: refused unless its focal lengths and P(2,2) are
+  // positive (a zero focal length made the camera's tf NaN and put every point at the principal
+  // point).
+  Eigen::Matrix<double, 3, 4> projection34(const std::string& key) const {
+    const Eigen::Matrix<double, 3, 4> p = matrix34(key);
+    if (!(p(0, 0) > 0 && p(1, 1) > 0 && p(2, 2) > 0)) {
+      throw KittiFormatError(path, line_of.at(key),
+                             "'" + key + "' is not a camera projection (focal lengths " +
+                                 std::to_string(p(0, 0)) + ", " + std::to_string(p(1, 1)) +
+                                 " and P(2,2) " + std::to_string(p(2, 2)) + " must be > 0)");
+    }
+    return p;
+  }
   Eigen::Isometry3d isometry34(const std::string& key) const {
     Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
     const Eigen::Matrix<double, 3, 4> m = matrix34(key);
@@ -182,8 +207,8 @@ RawCalibration readRawCalibration(const std::string& date_dir) {
           cam_to_cam.path, cam_to_cam.line_of.at(std::string("S_rect") + suffix),
           std::string("'S_rect") + suffix + "' must be an image size in [1, 100000]");
     }
-    camera.R_rect = cam_to_cam.matrix3(std::string("R_rect") + suffix);
-    camera.P_rect = cam_to_cam.matrix34(std::string("P_rect") + suffix);
+    camera.R_rect = cam_to_cam.rotation3(std::string("R_rect") + suffix);
+    camera.P_rect = cam_to_cam.projection34(std::string("P_rect") + suffix);
   }
   if (!any_camera) throw KittiFormatError(cam_to_cam.path, "no P_rect_0N camera entries");
   return calib;
@@ -206,8 +231,8 @@ CameraProjection ObjectCalibration::projection(int camera_index, int width, int 
 ObjectCalibration readObjectCalibration(const std::string& calib_txt) {
   const KeyValues kv = readKeyValues(calib_txt);
   ObjectCalibration calib;
-  for (int i = 0; i < 4; ++i) calib.P[i] = kv.matrix34("P" + std::to_string(i));
-  if (kv.has("R0_rect")) calib.R0_rect = kv.matrix3("R0_rect");
+  for (int i = 0; i < 4; ++i) calib.P[i] = kv.projection34("P" + std::to_string(i));
+  if (kv.has("R0_rect")) calib.R0_rect = kv.rotation3("R0_rect");
   if (kv.has("Tr_velo_to_cam")) {
     calib.Tr_velo_to_cam = kv.isometry34("Tr_velo_to_cam");
   } else if (kv.has("Tr")) {  // odometry / SemanticKITTI calib.txt

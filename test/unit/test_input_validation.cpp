@@ -108,6 +108,39 @@ TEST_F(CalibrationFiles, RectifiedImageSizeMustBeAnImageSize) {
                  {"calib_cam_to_cam.txt", "S_rect_00"});
 }
 
+// Found by review: a zero focal length made the camera's tf NaN in the bag and put every point
+// at the principal point; an R_rect that is no rotation turned every camera without a word.
+TEST_F(CalibrationFiles, CameraProjectionsAndRectifyingRotationsMustBeThat) {
+  write("calib_imu_to_velo.txt", "R: 1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
+  write("calib_velo_to_cam.txt", "R: 0 -1 0 0 0 -1 1 0 0\nT: 0 0 0\n");
+  const std::string head =
+      "S_00: 1392 512\nK_00: 700 0 600 0 700 180 0 0 1\nD_00: 0 0 0 0 0\n"
+      "R_00: 1 0 0 0 1 0 0 0 1\nT_00: 0 0 0\nS_rect_00: 1242 375\n";
+  write("calib_cam_to_cam.txt",
+        head + "R_rect_00: 1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 0 0 600 0 0 0 180 0 0 0 1 0\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt:8", "P_rect_00", "not a camera projection"});
+  write("calib_cam_to_cam.txt",
+        head + "R_rect_00: 5 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt:7", "R_rect_00", "not a rotation"});
+  expectMentions(errorOf([&] {
+                   kitti::readObjectCalibration(write(
+                       "r0.txt", std::string(kOdometryCalib) + "R0_rect: 3 0 0 0 1 0 0 0 1\n" +
+                                     "Tr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"));
+                 }),
+                 {"r0.txt:5", "R0_rect", "not a rotation"});
+  expectMentions(errorOf([&] {
+                   kitti::readObjectCalibration(write("p2.txt",
+                                                      "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n"
+                                                      "P1: 700 0 600 0 0 700 180 0 0 0 1 0\n"
+                                                      "P2: 0 0 600 45 0 0 180 0 0 0 1 0\n"
+                                                      "P3: 700 0 600 0 0 700 180 0 0 0 1 0\n"
+                                                      "Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"));
+                 }),
+                 {"p2.txt:3", "'P2' is not a camera projection"});
+}
+
 TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
   EXPECT_EQ(kitti::readKittiPoses(write("ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n")).size(), 1u);
   expectMentions(
