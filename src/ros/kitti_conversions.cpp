@@ -7,6 +7,8 @@
 #include <ctime>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/ros/names.h"
@@ -294,8 +296,20 @@ std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> DriveMessageFactory::came
   const ros::Time stamp = toRosTime(camera.stamps_ns.at(frame));
   const char* frame_id = cameraFrameId(camera_index);
   const bool color = camera_index >= 2;
-  return {readImageMessage(camera.framePath(frame), color, frame_id, stamp),
-          toCameraInfoMessage(calibration_->projection(camera_index), frame_id, stamp)};
+  const kitti::CameraProjection projection = calibration_->projection(camera_index);
+  const std::string path = camera.framePath(frame);
+  sensor_msgs::Image image = readImageMessage(path, color, frame_id, stamp);
+  // Its camera_info says the calibration's size: an image of another size would be projected
+  // with the wrong intrinsics by everything downstream.
+  if (projection.width > 0 && projection.height > 0 &&
+      (static_cast<int>(image.width) != projection.width ||
+       static_cast<int>(image.height) != projection.height)) {
+    throw kitti::KittiFormatError(
+        path, std::to_string(image.width) + "x" + std::to_string(image.height) +
+                  ", the calibration's S_rect_0" + std::to_string(camera_index) + " says " +
+                  std::to_string(projection.width) + "x" + std::to_string(projection.height));
+  }
+  return {std::move(image), toCameraInfoMessage(projection, frame_id, stamp)};
 }
 
 std::vector<geometry_msgs::TransformStamped> DriveMessageFactory::staticTransformMessages(

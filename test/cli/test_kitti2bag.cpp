@@ -121,6 +121,19 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
   const std::string message((std::istreambuf_iterator<char>(log)),
                             std::istreambuf_iterator<char>());
   EXPECT_NE(message.find("cannot write " + bag_path + ".4"), std::string::npos) << message;
+
+  // An image of another size than the calibration's S_rect (its camera_info would say 40x30 and
+  // every projection downstream would be wrong): an error naming the image, no bag.
+  const std::string cropped = drive + "/image_02/data/0000000003.png";
+  cv::imwrite(cropped, cv::Mat(20, 40, CV_8UC3, cv::Scalar(1, 2, 3)));
+  const auto [size_status, size_output] = test::runCommand(
+      std::string(KITTI2BAG_PATH) + " --drive " + drive + " --output " + bag_path + ".5");
+  EXPECT_EQ(size_status, 1) << size_output;
+  EXPECT_NE(size_output.find(cropped), std::string::npos) << size_output;
+  EXPECT_NE(size_output.find("40x20, the calibration's S_rect_02 says 40x30"), std::string::npos)
+      << size_output;
+  EXPECT_FALSE(fs::exists(bag_path + ".5"));
+  EXPECT_FALSE(fs::exists(bag_path + ".5.partial"));
   fs::remove_all(fs::path(drive).parent_path().parent_path());
 }
 
