@@ -26,6 +26,10 @@ ism_add_gtest(test_unet_synthetic_accuracy
 ism_add_tool(segment_image
   SOURCES src/tools/segment_image.cpp
   LINK ${PROJECT_NAME}_perception)
+ism_add_gtest(test_segment_image
+  SOURCES test/cli/test_segment_image.cpp
+  LINK ${PROJECT_NAME}_perception
+  TOOL segment_image TOOL_MACRO SEGMENT_IMAGE_PATH)
 
 ism_add_gtest(test_segmenter_frame_buffer
   SOURCES test/unit/test_segmenter_frame_buffer.cpp

@@ -62,6 +62,22 @@ int main(int argc, char** argv) {
     const int repeat = cli.getInt("--repeat", 1);
     const double alpha = cli.getDouble("--alpha", 0.5);
     const int threads = cli.getInt("--threads", 2);
+    if (repeat < 1) throw UsageError("--repeat must be >= 1");
+    if (!(alpha >= 0.0 && alpha <= 1.0)) throw UsageError("--alpha must be in [0, 1]");
+    if (threads < 1) throw UsageError("--threads must be >= 1");
+    // Checked before the network runs. Labels and confidences are data: a lossy format (.jpg)
+    // changed the ids of one pixel in ten.
+    for (const char* flag : {"--output", "--confidence"}) {
+      const std::string path = cli.get(flag);
+      const std::string extension = path.size() >= 4 ? path.substr(path.size() - 4) : "";
+      if (cli.has(flag) && extension != ".png" && extension != ".PNG") {
+        throw UsageError(std::string(flag) + " must be a .png file (lossless), not '" + path + "'");
+      }
+    }
+    if (cli.has("--overlay") && !cv::haveImageWriter(cli.get("--overlay"))) {
+      throw UsageError("--overlay: OpenCV writes no image format named by the extension of '" +
+                       cli.get("--overlay") + "'");
+    }
 
     const perception::ModelCard card = cli.has("--model-card")
                                            ? perception::loadModelCard(cli.get("--model-card"))
@@ -73,7 +89,7 @@ int main(int argc, char** argv) {
     perception::Segmenter segmenter(model, card, threads);
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     perception::Segmentation result;
-    for (int i = 0; i < std::max(1, repeat); ++i) {
+    for (int i = 0; i < repeat; ++i) {
       ism::ScopedTimer timer("segmentation/total");
       result = segmenter.segment(image);
     }
