@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
@@ -50,47 +51,48 @@ void requireMap(YamlReader* card, const YAML::Node& root, const std::string& key
   if (node.IsDefined() && !node.IsMap()) card->fail(key, "must be a map " + shape);
 }
 
-// The value checks, each naming its key (and line): a typo in a card fails here, not later
-// inside OpenCV.
-void validate(const ModelCard& card, YamlReader* r) {
+}  // namespace
+
+void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail) {
   // A network input beyond 16384 pixels a side is a typo, and would fail later inside OpenCV.
   constexpr int kMaxInputSide = 16384;
   if (card.input_width < 0 || card.input_height < 0 || card.input_width > kMaxInputSide ||
       card.input_height > kMaxInputSide)
-    r->fail("input", "width/height must be in [0, 16384]");
+    fail("input", "width/height must be in [0, 16384]");
   if (card.resize_policy != ResizePolicy::kPadToMultiple &&
       (card.input_width == 0 || card.input_height == 0))
-    r->fail("input", "needs width and height > 0 for resize, letterbox and tiles");
-  if (card.pad_multiple < 1) r->fail("pad_multiple", "must be >= 1");
+    fail("input", "needs width and height > 0 for resize, letterbox and tiles");
+  if (card.pad_multiple < 1) fail("pad_multiple", "must be >= 1");
   if (!(card.resize_factor > 0.0 && card.resize_factor <= 8.0))
-    r->fail("resize_factor", "must be in (0, 8]");
-  if (!(card.scale > 0.0)) r->fail("scale", "must be > 0");
+    fail("resize_factor", "must be in (0, 8]");
+  if (!(card.scale > 0.0)) fail("scale", "must be > 0");
   if (!(card.tile_scale >= 0.0 && card.tile_scale <= 8.0))
-    r->fail("tile_scale", "must be in [0, 8] (0: fit one tile)");
-  if (!(card.network_focal_px >= 0.0)) r->fail("network_focal_px", "must be >= 0 (0: unknown)");
+    fail("tile_scale", "must be in [0, 8] (0: fit one tile)");
+  if (!(card.network_focal_px >= 0.0)) fail("network_focal_px", "must be >= 0 (0: unknown)");
   if (card.tile_overlap < 0 ||
       (card.resize_policy == ResizePolicy::kTiles &&
        (2 * card.tile_overlap >= card.input_width || 2 * card.tile_overlap >= card.input_height)))
-    r->fail("tile_overlap", "must be >= 0 and less than half the input width and height");
+    fail("tile_overlap", "must be >= 0 and less than half the input width and height");
   if (card.tile_max_width != 0 &&
       (card.tile_max_width < card.input_width || card.tile_max_width > kMaxInputSide))
-    r->fail("tile_max_width", "must be 0 or in [input width, 16384]");
+    fail("tile_max_width", "must be 0 or in [input width, 16384]");
   if (card.tile_bottom_margin < 0 || (card.resize_policy == ResizePolicy::kTiles &&
                                       2 * card.tile_bottom_margin >= card.input_height))
-    r->fail("tile_bottom_margin", "must be >= 0 and less than half the input height");
+    fail("tile_bottom_margin", "must be >= 0 and less than half the input height");
   if (!(card.gamma >= ModelCard::kMinGamma && card.gamma <= ModelCard::kMaxGamma))
-    r->fail("gamma", "must be in [0.2, 5] (1: no tone curve)");
+    fail("gamma", "must be in [0.2, 5] (1: no tone curve)");
   for (double value : card.color_std) {
-    if (!(value > 0.0)) r->fail("color_std", "values must be > 0");
+    if (!(value > 0.0)) fail("color_std", "values must be > 0");
   }
   const LabelFilterOptions& filter = card.label_filter;
   if (!(filter.min_confidence >= 0 && filter.min_confidence < 1))
-    r->fail("label_filter.min_confidence", "must be in [0, 1)");
+    fail("label_filter.min_confidence", "must be in [0, 1)");
   if (filter.boundary_radius_px < 0 || filter.boundary_radius_px > 50)
-    r->fail("label_filter.boundary_radius_px", "must be in [0, 50]");
+    fail("label_filter.boundary_radius_px", "must be in [0, 50]");
+  for (double value : card.color_mean) {
+    if (!std::isfinite(value)) fail("color_mean", "values must be finite");
+  }
 }
-
-}  // namespace
 
 const char* resizePolicyName(ResizePolicy policy) {
   switch (policy) {
@@ -195,7 +197,7 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
                                       std::to_string(card.numOutputChannels()) + " entries");
   r.allow("validation_miou");  // informational (the training scripts record their score)
   r.rejectUnknown();           // a misspelt key would leave its default silently in place
-  validate(card, &r);
+  checkModelCard(card, [&r](const std::string& key, const std::string& why) { r.fail(key, why); });
   return card;
 }
 }  // namespace

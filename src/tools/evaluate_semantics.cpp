@@ -238,12 +238,19 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   for (const char* flag : {"--color-mean", "--color-std"}) {
     if (!cli.has(flag)) continue;
     double rgb[3];
-    if (std::sscanf(cli.get(flag).c_str(), "%lf,%lf,%lf", &rgb[0], &rgb[1], &rgb[2]) != 3)
-      throw UsageError(std::string(flag) + " expects R,G,B");
+    int consumed = 0;
+    const std::string text = cli.get(flag);
+    if (std::sscanf(text.c_str(), "%lf,%lf,%lf%n", &rgb[0], &rgb[1], &rgb[2], &consumed) != 3 ||
+        consumed != static_cast<int>(text.size()))
+      throw UsageError(std::string(flag) + " expects R,G,B, got '" + text + "'");
     std::array<double, 3>& target =
         std::string(flag) == "--color-mean" ? card.color_mean : card.color_std;
     for (int c = 0; c < 3; ++c) target[c] = rgb[card.swap_rb ? c : 2 - c];
   }
+  // The card's own checks, on the card as overridden (--color-std 0,0,0 scored 0.0004).
+  perception::checkModelCard(card, [](const std::string& key, const std::string& why) {
+    throw UsageError("the model card with this command line's overrides: '" + key + "' " + why);
+  });
   return card;
 }
 

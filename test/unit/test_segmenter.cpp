@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -304,6 +305,33 @@ TEST(ModelCard, BadTileAndColorFieldsAreRejectedNamingTheField) {
   EXPECT_NE(cardError(head + "color_mean: [1, 2]\n" + tail).find("color_mean"), std::string::npos);
   EXPECT_NE(cardError(head + "color_std: [1, 0, 2]\n" + tail).find("color_std"), std::string::npos);
   EXPECT_NE(cardError("resize_policy: tiles\n" + tail).find("input"), std::string::npos);
+}
+
+// The same checks on a card changed after loading (evaluate_semantics' overrides: --color-std
+// 0,0,0 scored 0.0004 without a word): the first value out of range is reported by its key.
+TEST(ModelCard, CheckModelCardReportsTheFirstValueOutOfRange) {
+  const auto firstFailure = [](const ModelCard& card) {
+    std::string key;
+    try {
+      checkModelCard(card, [](const std::string& k, const std::string& why) {
+        throw std::runtime_error(k + ": " + why);
+      });
+    } catch (const std::runtime_error& error) {
+      key = error.what();
+    }
+    return key.substr(0, key.find(':'));
+  };
+  const ModelCard good = builtinEnetCityscapesCard();
+  EXPECT_EQ(firstFailure(good), "");
+  ModelCard bad = good;
+  bad.color_std = {0.0, 1.0, 1.0};
+  EXPECT_EQ(firstFailure(bad), "color_std");
+  bad = good;
+  bad.color_mean[1] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(firstFailure(bad), "color_mean");
+  bad = good;
+  bad.tile_scale = -1.0;
+  EXPECT_EQ(firstFailure(bad), "tile_scale");
 }
 
 // A 20 x 20 label image, road left of column 10 and car right of it, all confident but a 3 x 3

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -118,6 +119,11 @@ class ModelCardError : public std::runtime_error {
 
 // Parses a model card YAML file (format: models/unet_synthetic.yaml).
 ModelCard loadModelCard(const std::string& yaml_path);
+
+// The value checks loadModelCard makes, for a card changed after loading (a tool's overrides):
+// calls fail(key, why) for the first value out of its range; fail must throw.
+using ModelCardCheckFailure = std::function<void(const std::string& key, const std::string& why)>;
+void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail);
 
 // Writes a card in the format loadModelCard reads (atomic: temporary file + rename).
 void saveModelCard(const ModelCard& card, const std::string& yaml_path);
