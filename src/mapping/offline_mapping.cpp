@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/mapping/offline_mapping.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -77,9 +78,15 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     const fs::path scan_path(scan_paths[n]);
     const std::string stem = scan_path.stem().string();
     std::size_t frame = 0;
+    std::size_t digits = 0;
     try {
-      frame = std::stoul(stem);
+      frame = std::stoul(stem, &digits);
     } catch (const std::exception&) {
+      digits = 0;
+    }
+    // The whole name: "000001_copy.bin" was mapped as frame 1 a second time.
+    if (digits == 0 || digits != stem.size() ||
+        !std::isdigit(static_cast<unsigned char>(stem[0]))) {
       throw std::runtime_error(scan_path.string() + ": scan name is not a frame number");
     }
     if (frame >= poses.size()) {
@@ -168,6 +175,8 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
     }
   }
   std::size_t frames = raw.velodyne().size();
+  // An empty drive would be written out as an empty map, with no word of why.
+  if (frames == 0) throw std::runtime_error(drive.drive_dir + "/velodyne_points: no scans");
   if (drive.max_scans >= 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
   const std::string poses_source =
       drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path;

@@ -91,6 +91,43 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   }
 }
 
+// Found by review: a copy named 000001_copy.bin went in as frame 1 a second time (the frame
+// number was read from the leading digits), and a drive without scans was written out as an
+// empty map. Both are errors naming the file or folder.
+TEST_F(OfflineMappingTest, ScanNamesAreWholeFrameNumbersAndADriveNeedsScans) {
+  std::filesystem::copy_file(dir_ + "/velodyne/000001.bin", dir_ + "/velodyne/000001_copy.bin");
+  try {
+    buildMap(options());
+    ADD_FAILURE() << "000001_copy.bin was mapped";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("000001_copy.bin: scan name is not a frame number"),
+              std::string::npos)
+        << error.what();
+  }
+
+  // A raw drive with its calibration and an empty velodyne_points/ (poses from a file).
+  const std::string date_dir = dir_ + "/2011_01_01";
+  const std::string drive = date_dir + "/2011_01_01_drive_0001_sync";
+  std::filesystem::create_directories(drive + "/velodyne_points/data");
+  std::ofstream(drive + "/velodyne_points/timestamps.txt");
+  std::ofstream(date_dir + "/calib_imu_to_velo.txt") << "R: 1 0 0 0 1 0 0 0 1\nT: 0 0 0\n";
+  std::ofstream(date_dir + "/calib_velo_to_cam.txt") << "R: 0 -1 0 0 0 -1 1 0 0\nT: 0 0 0\n";
+  std::ofstream(date_dir + "/calib_cam_to_cam.txt")
+      << "S_02: 1392 512\nK_02: 700 0 600 0 700 180 0 0 1\nD_02: 0 0 0 0 0\n"
+         "R_02: 1 0 0 0 1 0 0 0 1\nT_02: 0 0 0\nS_rect_02: 1242 375\n"
+         "R_rect_02: 1 0 0 0 1 0 0 0 1\nP_rect_02: 700 0 600 0 0 700 180 0 0 0 1 0\n";
+  OfflineRawDrive raw;
+  raw.drive_dir = drive;
+  raw.poses_path = dir_ + "/poses.txt";
+  try {
+    forEachRawDriveScan(raw, [](auto&&...) { ADD_FAILURE() << "a scan of an empty drive"; });
+    ADD_FAILURE() << "an empty drive was mapped";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("velodyne_points: no scans"), std::string::npos)
+        << error.what();
+  }
+}
+
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping
