@@ -132,6 +132,10 @@ int main(int argc, char** argv) {
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
     }
+    for (const char* flag : {"--output-kitti", "--output-tum", "--output-truth", "--output-states",
+                             "--output-loops"}) {
+      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));  // before the run
+    }
 
     estimation::OxtsRunOptions options;
     const bool loop_closure = cli.has("--loop-closure");

@@ -64,6 +64,7 @@ Arguments parseArguments(const common::CommandLine& cli) {
   if (args.drive_dir.empty() || args.output.empty()) {
     throw UsageError("--drive and --output are required");
   }
+  common::checkOutputPath(args.output);  // before the bag is written, not at its rename
   return args;
 }
 

@@ -74,6 +74,9 @@ int main(int argc, char** argv) {
         throw UsageError(std::string(flag) + " must be a .png file (lossless), not '" + path + "'");
       }
     }
+    for (const char* flag : {"--output", "--overlay", "--confidence"}) {
+      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));
+    }
     if (cli.has("--overlay") && !cv::haveImageWriter(cli.get("--overlay"))) {
       throw UsageError("--overlay: OpenCV writes no image format named by the extension of '" +
                        cli.get("--overlay") + "'");

@@ -228,6 +228,16 @@ int main(int argc, char** argv) {
     if (cli.has("--label-min-probability") && !cli.has("--label-images")) {
       throw UsageError("--label-min-probability goes with --label-images");
     }
+    // Every output's place is checked before the run (a mistyped folder failed after it, with
+    // the map written and the grids not).
+    ism::common::checkOutputPath(output);
+    for (const char* flag : {"--export-ply", "--color-ot"}) {
+      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));
+    }
+    if (cli.has("--grid")) ism::common::checkOutputPath(cli.get("--grid") + "_projected.pgm");
+    if (cli.has("--label-images")) {  // the folder is made if its parent is there
+      ism::common::checkOutputPath(cli.get("--label-images") + "/x.png");
+    }
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {

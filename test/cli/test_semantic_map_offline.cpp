@@ -49,6 +49,17 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
                               dir_ + "/y.ot 2>/dev/null";
   EXPECT_NE(std::system(bad_dir.c_str()), 0);
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/y.ot"));
+
+  // An output folder that is not there fails before any scan is read, naming the output (the
+  // grids were found unwritable after the run, with the map already written).
+  const auto [status, output] = test::runCommand(
+      std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ + "/velodyne --labels " + dir_ +
+      "/labels --poses " + dir_ + "/poses.txt --calib " + dir_ + "/calib.txt --output " + dir_ +
+      "/z.ot --grid " + dir_ + "/no_such_dir/grid");
+  EXPECT_NE(status, 0);
+  EXPECT_NE(output.find(dir_ + "/no_such_dir/grid"), std::string::npos) << output;
+  EXPECT_EQ(output.find("inserted"), std::string::npos) << output;
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/z.ot"));
 }
 
 // --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.

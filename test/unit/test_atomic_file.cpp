@@ -162,6 +162,32 @@ TEST(AtomicFileSet, AFailingOutputLeavesNoneOfTheSetAndNoTemporary) {
   fs::remove_all(dir);
 }
 
+// Tools check their outputs before their long work: a mistyped folder fails in a second.
+TEST(AtomicFile, CheckOutputPathRefusesWhatCannotBeWritten) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_check");
+  EXPECT_NO_THROW(checkOutputPath(dir + "/new.txt"));
+  EXPECT_FALSE(fs::exists(dir + "/new.txt"));  // checked, not created
+  const auto reason = [](const std::string& path) {
+    try {
+      checkOutputPath(path);
+    } catch (const AtomicWriteError& e) {
+      EXPECT_EQ(e.path(), path);
+      return e.reason();
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(reason(dir), "is a directory");
+  EXPECT_EQ(reason(dir + "/no/such/out.txt").rfind("no directory ", 0), 0u);
+  EXPECT_EQ(reason(""), "empty output path");
+  if (::geteuid() != 0) {  // root writes anywhere
+    fs::create_directories(dir + "/read_only");
+    fs::permissions(dir + "/read_only", fs::perms::owner_read | fs::perms::owner_exec);
+    EXPECT_NE(reason(dir + "/read_only/out.txt"), "accepted");
+    fs::permissions(dir + "/read_only", fs::perms::owner_all);
+  }
+  fs::remove_all(dir);
+}
+
 TEST(AtomicFile, AMissingDirectoryThrowsNamingThePath) {
   const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_nodir");
   const std::string path = dir + "/no/such/dir/out.txt";

@@ -58,6 +58,22 @@ inline std::string temporaryPathFor(const std::string& path) {
   return (target.parent_path() / name).string();
 }
 
+// Throws AtomicWriteError unless `path` can be written atomically: not a directory, in an
+// existing directory this process may write to. A tool calls it for each output before its long
+// work, so that a mistyped output folder fails in a second, not after the whole run.
+inline void checkOutputPath(const std::string& path) {
+  if (path.empty()) throw AtomicWriteError(path, "empty output path");
+  namespace fs = std::filesystem;
+  if (fs::is_directory(path)) throw AtomicWriteError(path, "is a directory");
+  const fs::path parent = fs::absolute(path).parent_path();
+  if (!fs::is_directory(parent)) {
+    throw AtomicWriteError(path, "no directory " + parent.string());
+  }
+  if (::access(parent.c_str(), W_OK) != 0) {
+    throw AtomicWriteError(path, "directory " + parent.string() + ": " + std::strerror(errno));
+  }
+}
+
 // Calls write(tmp_path), which must create and fully write tmp_path (throwing on failure), then
 // renames tmp_path over path. If write throws, the temporary is removed and the exception
 // propagates unchanged; if the rename fails, the temporary is removed and AtomicWriteError is
