@@ -139,6 +139,21 @@ std::vector<std::string> RawDrive::missingParts() const {
   return missing;
 }
 
+std::vector<std::string> RawDrive::stampWarnings() const {
+  std::vector<std::string> warnings;
+  const auto check = [&warnings](const SensorStream& stream) {
+    if (!stream.present) return;
+    for (std::string& warning :
+         timestampWarnings(stream.stamps_ns, stream.dir + "/timestamps.txt")) {
+      warnings.push_back(std::move(warning));
+    }
+  };
+  check(oxts_);
+  check(velodyne_);
+  for (const SensorStream& camera : cameras_) check(camera);
+  return warnings;
+}
+
 std::int64_t RawDrive::firstStampNs() const {
   std::int64_t first = 0;
   bool found = false;

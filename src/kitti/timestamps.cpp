@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -97,6 +98,29 @@ std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
       daysFromCivil(year, static_cast<unsigned>(month), static_cast<unsigned>(day));
   const std::int64_t seconds = days * 86400 + hour * 3600 + minute * 60 + second;
   return seconds * 1000000000LL + fraction_ns;
+}
+
+std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stamps_ns,
+                                           const std::string& path, double max_gap_s,
+                                           std::size_t max_messages) {
+  std::vector<std::string> warnings;
+  std::size_t more = 0;
+  for (std::size_t i = 1; i < stamps_ns.size(); ++i) {
+    const double step_s = secondsBetween(stamps_ns[i - 1], stamps_ns[i]);
+    if (step_s >= 0.0 && step_s <= max_gap_s) continue;
+    if (warnings.size() == max_messages) {
+      ++more;
+      continue;
+    }
+    char text[96];
+    std::snprintf(text, sizeof(text), ":%zu: %.3f s %s the line above", i + 1, std::abs(step_s),
+                  step_s < 0.0 ? "before" : "after");
+    warnings.push_back(path + text);
+  }
+  if (more > 0) {
+    warnings.push_back(path + ": " + std::to_string(more) + " more such steps");
+  }
+  return warnings;
 }
 
 std::vector<std::int64_t> readTimestampsFile(const std::string& path) {

@@ -45,6 +45,9 @@ class KittiPlayer {
       ROS_WARN_STREAM("kitti_player: " << drive_->driveDir() << " has no" << text.str()
                                        << ": those topics will not be published");
     }
+    for (const std::string& step : drive_->stampWarnings()) {
+      ROS_WARN_STREAM("kitti_player: " << step << " (published in stamp order)");
+    }
     if (drive_->hasCamera(2) && !drive_->hasCalibration()) {
       ROS_WARN("kitti_player: image_02 present but no calibration: camera not published");
       options_.timeline.cameras[2] = false;

@@ -97,6 +97,9 @@ int run(const Arguments& args) {
     std::cerr << "kitti2bag: warning: " << drive.driveDir() << " has no " << part
               << ": not written\n";
   }
+  for (const std::string& step : drive.stampWarnings()) {
+    std::cerr << "kitti2bag: warning: " << step << " (the bag is written in stamp order)\n";
+  }
   kitti::TimelineOptions timeline_options = args.timeline;
   if (timeline_options.cameras[2] && drive.hasCamera(2) && !drive.hasCalibration()) {
     std::cerr << "kitti2bag: warning: image_02 without calibration: camera not written\n";

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
 #include "test_data.h"
 
@@ -80,6 +81,36 @@ TEST_F(InekfOfflineTest, ADriveWithoutAnyGpsFixIsAnError) {
   EXPECT_NE(output.find("never started"), std::string::npos) << output;
   EXPECT_EQ(output.find("ATE "), std::string::npos) << output;
   EXPECT_FALSE(fs::exists(poses));
+}
+
+// Line 3 of timestamps.txt an hour back: named by file and line; the session starts over at
+// the jump and again after it, and the drive still localizes.
+TEST_F(InekfOfflineTest, AStampThatGoesBackIsNamedAndTheRunGoesOn) {
+  const fs::path jumped = fs::path(dir_) / "jumped" / "oxts";
+  fs::create_directories(jumped.parent_path());
+  fs::copy(oxts_, jumped, fs::copy_options::recursive);
+  std::vector<std::string> lines;
+  {
+    std::ifstream in(jumped / "timestamps.txt");
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+  }
+  ASSERT_GT(lines.size(), 10u);
+  lines[2] = ism::kitti::formatKittiTimestamp(ism::kitti::parseKittiTimestampNs(lines[2]) -
+                                              3600LL * 1000000000LL);
+  {
+    std::ofstream out(jumped / "timestamps.txt");
+    for (const std::string& line : lines) out << line << "\n";
+  }
+  const auto [status, output] =
+      run("--oxts " + jumped.string() + " --output-kitti " + dir_ + "/jumped_poses.txt");
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find((jumped / "timestamps.txt").string() + ":3: 3599.890 s before"),
+            std::string::npos)
+      << output;
+  EXPECT_NE(output.find("time jumped back"), std::string::npos) << output;
+  const std::size_t at = output.find("ATE ");
+  ASSERT_NE(at, std::string::npos) << output;
+  EXPECT_LT(std::stod(output.substr(at + 4)), 3.0) << output;
 }
 
 TEST_F(InekfOfflineTest, OneFileForTwoOutputsIsRefused) {

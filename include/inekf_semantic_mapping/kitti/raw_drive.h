@@ -60,6 +60,9 @@ class RawDrive {
   // "calibration (no calib_*.txt in DIR)"),
   // for one warning that tells the user what will not be published.
   std::vector<std::string> missingParts() const;
+  // Every present sensor's timestamps.txt steps that go back or jump ahead by more than a second
+  // (timestampWarnings): played or converted in stamp order, such frames land out of place.
+  std::vector<std::string> stampWarnings() const;
 
   // Earliest stamp over all present sensors (0 if none).
   std::int64_t firstStampNs() const;

@@ -20,6 +20,14 @@ std::string formatKittiTimestamp(std::int64_t stamp_ns);
 // and path on a missing file.
 std::vector<std::int64_t> readTimestampsFile(const std::string& path);
 
+// The steps of a timestamps file that a recording should not have, one message each:
+// "<path>:<line>: 4251.276 s before the line above" (time goes back) or "... after the line
+// above" (a jump of more than max_gap_s). Lines are counted as stamps (KITTI writes no blank
+// lines). At most max_messages, then one saying how many more. Empty for a clean file.
+std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stamps_ns,
+                                           const std::string& path, double max_gap_s = 1.0,
+                                           std::size_t max_messages = 5);
+
 // Seconds between two nanosecond stamps, without the precision loss of converting each first.
 inline double secondsBetween(std::int64_t from_ns, std::int64_t to_ns) {
   return static_cast<double>(to_ns - from_ns) * 1e-9;
