@@ -40,15 +40,20 @@ YamlReader::YamlReader(std::string source, YAML::Node root, bool cite_lines)
   }
 }
 
-YamlReader YamlReader::fromFile(const std::string& path) {
+YAML::Node loadYamlFile(const std::string& path) {
+  if (std::filesystem::is_directory(path)) throw ConfigError(path + ": is a folder, not a file");
   if (!std::filesystem::is_regular_file(path)) {
-    throw ConfigError(path + ": config file not found (or not a regular file)");
+    throw ConfigError(path + ": file not found (or not a regular file)");
   }
   try {
-    return YamlReader(path, YAML::LoadFile(path), /*cite_lines=*/true);
+    return YAML::LoadFile(path);
   } catch (const YAML::Exception& e) {
-    throw ConfigError(path + ": not valid YAML: " + e.what());
+    throw ConfigError(path + ": YAML syntax error: " + e.what());
   }
+}
+
+YamlReader YamlReader::fromFile(const std::string& path) {
+  return YamlReader(path, loadYamlFile(path), /*cite_lines=*/true);
 }
 
 std::string YamlReader::citation(const YAML::Node& node) const {

@@ -135,13 +135,7 @@ SemanticMappingConfig readSemanticMappingConfig(const YAML::Node& root, const st
 }
 
 SemanticMappingConfig loadSemanticMappingConfig(const std::string& yaml_path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::Exception& e) {
-    throw common::ConfigError(yaml_path + ": cannot read config: " + e.what());
-  }
-  return readSemanticMappingConfig(root, yaml_path);
+  return readSemanticMappingConfig(common::loadYamlFile(yaml_path), yaml_path);
 }
 
 }  // namespace mapping

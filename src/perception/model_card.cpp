@@ -125,12 +125,9 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root);
 ModelCard loadModelCard(const std::string& yaml_path) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::BadFile&) {
-    throw ModelCardError("model card " + yaml_path + ": cannot open file");
-  } catch (const YAML::Exception& e) {
-    throw ModelCardError("model card " + yaml_path + ":" + std::to_string(e.mark.line + 1) +
-                         ": YAML syntax error: " + e.msg);
+    root = common::loadYamlFile(yaml_path);
+  } catch (const common::ConfigError& e) {
+    throw ModelCardError(std::string("model card ") + e.what());
   }
   if (!root.IsMap()) throw ModelCardError("model card " + yaml_path + ": top level is not a map");
   try {

@@ -49,7 +49,7 @@ InekfNodeParameters readParameters(const ros::NodeHandle& private_nh) {
   if (std::filesystem::is_regular_file(parameters.config_file)) {
     // The config file's node-only section (LocalizationSessionConfig leaves it alone).
     common::YamlReader file(parameters.config_file + " (section node)",
-                            YAML::LoadFile(parameters.config_file)["node"]);
+                            common::loadYamlFile(parameters.config_file)["node"]);
     readLocalizationDiagnosticsOptions(&file, "diagnostics.", &parameters.diagnostics);
     file.rejectUnknown();
   }

@@ -28,6 +28,7 @@
 #include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/cli_args.h"
 #include "inekf_semantic_mapping/common/timing.h"
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/mapping/grid_projection.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/map_label_images.h"
@@ -241,8 +242,8 @@ int main(int argc, char** argv) {
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {
-      grid_config = mapping::readGridProjectionConfig(YAML::LoadFile(cli.get("--config")),
-                                                      cli.get("--config"));
+      grid_config = mapping::readGridProjectionConfig(
+          ism::common::loadYamlFile(cli.get("--config")), cli.get("--config"));
     }
     mapping::GroundTrace ground_trace(grid_config.sensor_height);
     // --octomap-reference: the scans as inserted (map frame) are kept and go into a plain

@@ -711,7 +711,7 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("imu:\n  max_gap_s: [1, 2]\n", "imu.max_gap_s");
   expectError("gps:\n  min_sigma_m: {a: 1}\n", "gps.min_sigma_m");
   expectError("init_orientation_from_reference: [true]\n", "init_orientation_from_reference");
-  expectError("a: [\n", "not valid YAML");
+  expectError("a: [\n", "YAML syntax error");
   // A folder passed as the config file.
   try {
     LocalizerConfig::fromYamlFile(dir);

@@ -1,15 +1,19 @@
 // The strict config reader that every config file and every node's private parameters go through.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <string>
 #include <vector>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "test_data.h"
 
 namespace {
 
 using inekf_semantic_mapping::common::ConfigError;
+using inekf_semantic_mapping::common::loadYamlFile;
 using inekf_semantic_mapping::common::YamlReader;
 
 std::string errorOf(const std::string& yaml, void (*reads)(YamlReader*)) {
@@ -122,6 +126,31 @@ TEST(YamlReader, AParsedFileNamesTheLineOfTheKey) {
     EXPECT_EQ(std::string(e.what()),
               "ROS parameters of /node: key 'section.typo' is not a known key");
   }
+}
+
+// A folder given for a file (--config, --model-card) failed with "basic_filebuf::underflow error
+// reading the file: Is a directory", naming neither; a syntax error names the file and its line.
+TEST(YamlReader, AFileThatIsAFolderMissingOrNotYamlIsNamed) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("yaml_files");
+  const auto error = [](const std::string& path) {
+    try {
+      loadYamlFile(path);
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("loaded");
+  };
+  EXPECT_EQ(error(dir), dir + ": is a folder, not a file");
+  EXPECT_EQ(error(dir + "/missing.yaml"),
+            dir + "/missing.yaml: file not found (or not a regular file)");
+  std::ofstream(dir + "/bad.yaml") << "a: 1\nb: [2, 3\n";
+  EXPECT_EQ(error(dir + "/bad.yaml")
+                .rfind(dir + "/bad.yaml: YAML syntax error: yaml-cpp: error at line 3", 0),
+            0u)
+      << error(dir + "/bad.yaml");
+  std::ofstream(dir + "/good.yaml") << "a: 1\n";
+  EXPECT_EQ(loadYamlFile(dir + "/good.yaml")["a"].as<int>(), 1);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(YamlReader, AMissingSectionIsAnEmptyMap) {

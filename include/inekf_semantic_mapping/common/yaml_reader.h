@@ -22,6 +22,11 @@ class ConfigError : public std::invalid_argument {
   using std::invalid_argument::invalid_argument;
 };
 
+// The YAML document in `path`. Throws ConfigError naming the path when it is missing, is not a
+// regular file (a folder given for a file failed with "basic_filebuf::underflow") or is not
+// valid YAML (with the line).
+YAML::Node loadYamlFile(const std::string& path);
+
 // Where the readers' warnings (a deprecated key name) go: by default "warning: ..." on stderr;
 // the ROS nodes route them to rosconsole; an empty handler drops them. Set it before any reader
 // runs (not thread-safe).
