@@ -308,7 +308,8 @@ DriveSummary generateInto(const DriveOptions& options) {
   }
   std::atomic<std::size_t> next_task{0};
   std::atomic<std::size_t> lidar_points{0};
-  std::mutex error_mutex;
+  std::mutex error_mutex, progress_mutex;
+  std::size_t tasks_done = 0;  // under progress_mutex
   std::exception_ptr first_error;
   const std::size_t lidar_tasks = options.write_lidar ? frames : 0;
   const std::size_t image_tasks = options.write_images ? camera_frames.size() : 0;
@@ -355,6 +356,10 @@ DriveSummary generateInto(const DriveOptions& options) {
                    cv::Mat(image.height, image.width, CV_8UC3, image.bgr.data()));
           writePng(gt_dir + "/image_02_labels/" + frameName(i, ".png"),
                    cv::Mat(image.height, image.width, CV_8UC1, image.labels.data()));
+        }
+        if (options.on_progress) {
+          std::lock_guard<std::mutex> lock(progress_mutex);
+          options.on_progress(++tasks_done, lidar_tasks + image_tasks);
         }
       }
     } catch (...) {

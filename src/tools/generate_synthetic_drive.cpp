@@ -1,9 +1,11 @@
 // generate_synthetic_drive: writes a synthetic drive in the KITTI raw layout with full ground
 // truth (see include/inekf_semantic_mapping/synthetic/drive_generator.h for the layout).
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "inekf_semantic_mapping/common/cli_args.h"
+#include "inekf_semantic_mapping/common/progress_log.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/synthetic/drive_generator.h"
 
@@ -85,6 +87,14 @@ int main(int argc, char** argv) {
       throw UsageError("noise levels must be >= 0");
     }
 
+    // The sensors take most of the time (a minute or more for the default drive on 2 cores).
+    std::optional<common::ProgressLog> progress;  // made at the first frame: its total
+    options.on_progress = [&progress](std::size_t done, std::size_t total) {
+      if (!progress) {
+        progress.emplace("generate_synthetic_drive: lidar scans and images", total, "frames", 10.0);
+      }
+      progress->update(done);
+    };
     const synthetic::DriveSummary summary = synthetic::generateSyntheticDrive(options);
     std::printf(
         "wrote %s\n  %d OXTS frames (10 Hz), %d extract frames (100 Hz), %d scans "

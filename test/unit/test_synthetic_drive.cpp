@@ -351,7 +351,17 @@ TEST(SyntheticDriveDeterminism, SameSeedSameFilesWhateverTheThreads) {
   generateSyntheticDrive(options);
   options.output_dir = b;
   options.threads = 3;
+  // The progress callback: once per scan and image, one call at a time, counting up to the total.
+  std::vector<std::pair<std::size_t, std::size_t>> progress;
+  options.on_progress = [&progress](std::size_t done, std::size_t total) {
+    progress.emplace_back(done, total);
+  };
   const DriveSummary summary = generateSyntheticDrive(options);
+  ASSERT_EQ(progress.size(), static_cast<std::size_t>(summary.scans + summary.images));
+  for (std::size_t i = 0; i < progress.size(); ++i) {
+    EXPECT_EQ(progress[i].first, i + 1);
+    EXPECT_EQ(progress[i].second, progress.size());
+  }
   auto slurp = [](const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     return std::string(std::istreambuf_iterator<char>(in), {});

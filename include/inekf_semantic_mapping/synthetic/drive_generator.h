@@ -27,6 +27,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "inekf_semantic_mapping/synthetic/sensors.h"
@@ -53,6 +54,9 @@ struct DriveOptions {
   int threads = 2;
   // Geodetic position of the map origin (the first fix), Karlsruhe by default.
   double origin_lat_deg = 49.0112128, origin_lon_deg = 8.4163, origin_alt_m = 112.5;
+  // Called after each lidar scan or image is written (done of total, the long part of the run),
+  // from one thread at a time; may be empty.
+  std::function<void(std::size_t done, std::size_t total)> on_progress;
 };
 
 struct DriveSummary {
