@@ -82,15 +82,18 @@ namespace {
 //   Q = 1/2 U + a (P U + U P + P U P) + b (P P U + U P P - 3 P U P) + c (P U P P + P P U P),
 //   P = phi^, U = u^, a = (t - sin t) / t^3, b = (t^2 + 2 cos t - 2) / (2 t^4),
 //   c = (2 t - 3 sin t + t cos t) / (2 t^5), t = |phi|.
-// Near 0 the three coefficients cancel catastrophically: their Taylor series instead.
+// Below 0.2 rad the closed forms cancel (c's numerator is t^5 / 60 out of terms of size t: at
+// 1e-4 rad it came out -1.35 instead of 1/120), so their Taylor series to t^6 instead, whose
+// first omitted terms are below 1e-12 of each coefficient there (so3.cpp switches at the same
+// angle for the same reason).
 Eigen::Matrix3d couplingSE3(const Eigen::Vector3d& phi, const Eigen::Vector3d& u) {
   const double t = phi.norm();
   double a, b, c;
-  if (t < 1e-4) {
-    const double t2 = t * t;
-    a = 1.0 / 6.0 - t2 / 120.0;
-    b = 1.0 / 24.0 - t2 / 720.0;
-    c = 1.0 / 120.0 - t2 / 2520.0;
+  if (t < 0.2) {
+    const double t2 = t * t, t4 = t2 * t2, t6 = t4 * t2;
+    a = 1.0 / 6.0 - t2 / 120.0 + t4 / 5040.0 - t6 / 362880.0;
+    b = 1.0 / 24.0 - t2 / 720.0 + t4 / 40320.0 - t6 / 3628800.0;
+    c = 1.0 / 120.0 - t2 / 2520.0 + t4 / 120960.0 - t6 / 9979200.0;
   } else {
     const double s = std::sin(t), co = std::cos(t), t2 = t * t;
     a = (t - s) / (t2 * t);

@@ -161,6 +161,37 @@ TEST(Se23, RightJacobianMatchesFiniteDifferences) {
   EXPECT_LT((rightJacobianSE23(Vector9d::Zero()) - Matrix9d::Identity()).norm(), 1e-15);
 }
 
+// Against the defining series J_r(xi) = sum_n (-ad_xi)^n / (n+1)! (exact in long double for
+// these sizes), around the switch from the coefficients' Taylor series to their closed forms:
+// just above a switch at 1e-4 rad the closed forms cancelled to c = -1.35 instead of 1/120.
+TEST(Se23, RightJacobianMatchesItsSeriesAcrossTheSeriesSwitch) {
+  using MatrixL = Eigen::Matrix<long double, 9, 9>;
+  const auto hatL = [](const Eigen::Vector3d& w) {
+    Eigen::Matrix<long double, 3, 3> m;
+    m << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+    return m;
+  };
+  for (double angle : {1.2e-4, 3e-4, 1e-3, 1e-2, 0.15, 0.199, 0.201, 0.5}) {
+    Vector9d xi;
+    xi << angle * axis(), 3.0, -1.5, 0.7, 12.0, 5.0, -2.0;
+    MatrixL ad = MatrixL::Zero();
+    const auto phi = hatL(xi.head<3>());
+    ad.block<3, 3>(0, 0) = phi;
+    ad.block<3, 3>(3, 3) = phi;
+    ad.block<3, 3>(6, 6) = phi;
+    ad.block<3, 3>(3, 0) = hatL(xi.segment<3>(3));
+    ad.block<3, 3>(6, 0) = hatL(xi.segment<3>(6));
+    MatrixL term = MatrixL::Identity(), sum = MatrixL::Identity();
+    for (int n = 1; n < 120; ++n) {
+      term = (term * -ad) / static_cast<long double>(n + 1);
+      sum += term;
+    }
+    const Matrix9d reference = sum.cast<double>();
+    EXPECT_LT((rightJacobianSE23(xi) - reference).norm(), 1e-12 * reference.norm())
+        << "angle " << angle;
+  }
+}
+
 }  // namespace
 }  // namespace lie
 }  // namespace inekf_semantic_mapping

@@ -30,7 +30,7 @@ ExtendedPose expSE23(const Vector9d& xi);  // exact: (Exp(phi), J_l(phi) v, J_l(
 Vector9d logSE23(const ExtendedPose& x);
 // Right Jacobian: exp(xi + d) = exp(xi) exp(J_r(xi) d) to first order in d. Its (phi, p) rows and
 // columns are SE(3)'s right Jacobian (the pose part of exp does not depend on v). Series below
-// 1e-4 rad.
+// 0.2 rad.
 Matrix9d rightJacobianSE23(const Vector9d& xi);
 
 }  // namespace lie
