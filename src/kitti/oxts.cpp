@@ -104,6 +104,7 @@ std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir) {
                                          " files in data/ but " + std::to_string(stamps.size()) +
                                          " lines in timestamps.txt");
   }
+  if (stamps.empty()) throw KittiFormatError(oxts_dir, "no frames (timestamps.txt is empty)");
   std::vector<OxtsFrame> frames(stamps.size());
   char name[32];
   for (std::size_t i = 0; i < stamps.size(); ++i) {

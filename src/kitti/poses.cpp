@@ -5,32 +5,39 @@
 #include <sstream>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
+#include "text_parsing.h"
 
 namespace inekf_semantic_mapping {
 namespace kitti {
 
 std::vector<Eigen::Isometry3d> readKittiPoses(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw KittiFormatError(path, "cannot open poses file");
+  // A folder opens as an empty stream: refused by name (it read as "0 poses").
+  std::ifstream in = detail::openOrThrow(path);
   std::vector<Eigen::Isometry3d> poses;
   std::string line;
   int line_number = 0;
   while (std::getline(in, line)) {
     ++line_number;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    std::istringstream values(line);
+    const std::vector<std::string> tokens = detail::splitWhitespace(line);
+    if (tokens.size() > 12) {
+      throw KittiFormatError(
+          path, line_number,
+          "more than 12 numbers (3x4 row-major pose), extra '" + tokens[12] + "'");
+    }
+    if (tokens.size() < 12) {
+      throw KittiFormatError(
+          path, line_number,
+          "expected 12 numbers (3x4 row-major pose), got " + std::to_string(tokens.size()));
+    }
     Eigen::Matrix<double, 3, 4> pose;
     for (int i = 0; i < 12; ++i) {
-      if (!(values >> pose(i / 4, i % 4))) {
+      // Each token whole: "1.0abc" read as 1.0 and "nan" stopped the stream ("got 0").
+      if (!detail::parseDouble(tokens[i], &pose(i / 4, i % 4))) {
         throw KittiFormatError(
             path, line_number,
-            "expected 12 numbers (3x4 row-major pose), got " + std::to_string(i));
+            "value " + std::to_string(i + 1) + " '" + tokens[i] + "' is not a number");
       }
-    }
-    std::string extra;
-    if (values >> extra) {
-      throw KittiFormatError(path, line_number,
-                             "more than 12 numbers (3x4 row-major pose), extra '" + extra + "'");
     }
     if (!pose.allFinite()) throw KittiFormatError(path, line_number, "non-finite pose");
     const Eigen::Matrix3d R = pose.leftCols<3>();

@@ -151,6 +151,15 @@ TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
                        write("zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n"));
                  }),
                  {"zero.txt:2", "not a rotation"});
+  // Found by review: "1.0abc" was read as 1.0 (and the rest as the next values), "nan" as
+  // "got 0 numbers", and a folder as an empty file of 0 poses.
+  expectMentions(
+      errorOf([&] { kitti::readKittiPoses(write("junk.txt", "1 0 0 0 0 1.0abc 0 0 0 0 1 0\n")); }),
+      {"junk.txt:1", "value 6 '1.0abc' is not a number"});
+  expectMentions(
+      errorOf([&] { kitti::readKittiPoses(write("nan.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n")); }),
+      {"nan.txt:1", "non-finite"});
+  expectMentions(errorOf([&] { kitti::readKittiPoses(dir_); }), {dir_.c_str(), "is a directory"});
 }
 
 // A sequence of one 300-point scan: the errors of the map insertion name the file to blame.

@@ -156,6 +156,10 @@ TEST(KittiOxts, FolderCountMismatchNamesTheFolder) {
             "2011-09-26 13:02:25.964389445\n2011-09-26 13:02:26.074347616\n");
   expectFormatError([&] { readOxtsFolder(dir + "/oxts"); }, {dir + "/oxts", "1 files", "2 lines"});
   expectFormatError([&] { RawDrive drive(dir); }, {dir + "/oxts", "mismatch"});
+  // No frames at all: named here, not as "runLocalizerOnOxts: no OXTS frames" later.
+  fs::remove(dir + "/oxts/data/0000000000.txt");
+  writeFile(dir + "/oxts/timestamps.txt", "");
+  expectFormatError([&] { readOxtsFolder(dir + "/oxts"); }, {dir + "/oxts", "no frames"});
   fs::remove_all(dir);
 }
 
