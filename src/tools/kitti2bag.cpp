@@ -58,6 +58,10 @@ Arguments parseArguments(const common::CommandLine& cli) {
   args.output = cli.get("--output");
   args.timeline.start_offset_s = cli.getDouble("--start", args.timeline.start_offset_s);
   args.timeline.duration_s = cli.getDouble("--duration", args.timeline.duration_s);
+  if (!(args.timeline.start_offset_s >= 0.0)) throw UsageError("--start must be >= 0 s");
+  if (!(args.timeline.duration_s > 0.0) && cli.has("--duration")) {
+    throw UsageError("--duration must be > 0 s (without it: to the end)");
+  }
   tools::readGpsDegradationFlags(cli, &args.gps);
   if (cli.has("--no-velodyne")) args.timeline.velodyne = false;
   if (cli.has("--no-camera")) args.timeline.cameras[2] = false;
@@ -115,6 +119,7 @@ int run(const Arguments& args) {
   // Written as FILE.bag.partial (the name the usage documents), renamed when complete; on any
   // error the partial bag is removed.
   std::size_t messages = 0;
+  bool progress_line_open = false;  // the progress bar ends its line only at the last message
   common::commitFileAtomically(
       args.output, args.output + ".partial", [&](const std::string& partial) {
         // rosbag::Bag's destructor closes the file and throws if that fails, which after a
@@ -130,6 +135,7 @@ int run(const Arguments& args) {
           bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
           ++messages;
           const bool interactive = isatty(STDERR_FILENO);
+          progress_line_open = interactive;
           for (std::size_t i = 0; i < timeline.size(); ++i) {
             const kitti::TimelineEvent& event = timeline[i];
             const ros::Time stamp = conv::toRosTime(event.stamp_ns);
@@ -168,6 +174,8 @@ int run(const Arguments& args) {
           }
           bag.close();
         } catch (const std::exception& error) {
+          // The progress bar's line ends before the error message (it was glued to it).
+          if (progress_line_open) std::fputc('\n', stderr);
           try {
             bag.close();
           } catch (const std::exception&) {
