@@ -157,6 +157,11 @@ std::vector<std::string> listSemanticKittiFrames(const std::string& sequence_dir
   for (const auto& entry : fs::directory_iterator(dir / "velodyne")) {
     if (entry.path().extension() != ".bin") continue;
     const std::string name = entry.path().stem().string();
+    // Frame numbers only (a stray copy "000001_copy.bin" stopped the run with "stoul" after the
+    // whole labelling pass).
+    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) {
+      throw std::runtime_error(entry.path().string() + ": not a frame (its name is not a number)");
+    }
     const bool complete = fs::exists(dir / "labels" / (name + ".label")) &&
                           fs::exists(dir / "image_2" / (name + ".png"));
     (complete ? names : lacking).push_back(name);

@@ -33,6 +33,7 @@
 #include "inekf_semantic_mapping/common/progress_log.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
+#include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
@@ -408,6 +409,9 @@ int main(int argc, char** argv) {
       // A frame whose scale the focal length changes (--network-focal) is segmented again, as the
       // node would.
       const bool score_map = !cli.has("--no-map");
+      if (score_map) {  // read now, not found missing after the labelling pass
+        ism::kitti::readKittiPoses(dir + "/poses.txt");
+      }
       std::map<std::string, std::vector<uchar>> map_label_images;
       ism::common::ProgressLog label_progress("evaluate_semantics: " + sequence_name + " labels",
                                               frames.size(), "frames");

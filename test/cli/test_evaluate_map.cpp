@@ -218,6 +218,17 @@ TEST(SemanticKittiListing, NamesTheScansWithoutTheirLabelOrImage) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find(dir.string()), std::string::npos) << e.what();
   }
+  // A scan whose name is not a frame number is named at once (it stopped a whole run at its end
+  // with "stoul").
+  touch(dir / "labels" / "000000.label");
+  touch(dir / "velodyne" / "000000_copy.bin");
+  try {
+    ism::evaluation::listSemanticKittiFrames(dir.string());
+    ADD_FAILURE() << "000000_copy.bin was listed";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("000000_copy.bin: not a frame"), std::string::npos)
+        << e.what();
+  }
   fs::remove_all(dir);
 }
 
