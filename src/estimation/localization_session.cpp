@@ -61,15 +61,11 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   return config;
 }
 
-bool isGeodeticInRange(double lat_deg, double lon_deg, double alt_m) {
-  return std::isfinite(alt_m) && std::abs(lat_deg) < 90.0 && std::abs(lon_deg) <= 180.0;
-}
-
 LocalizationSession::LocalizationSession(LocalizationSessionConfig config)
     : config_(std::move(config)), localizer_(config_.localizer), lazy_start_(startConfig(config_)) {
   if (config_.origin) {
     const GeodeticOrigin& o = *config_.origin;
-    if (!isGeodeticInRange(o.lat_deg, o.lon_deg, o.alt_m)) {
+    if (!kitti::isGeodeticInRange(o.lat_deg, o.lon_deg, o.alt_m)) {
       throw std::invalid_argument("map origin (" + std::to_string(o.lat_deg) + ", " +
                                   std::to_string(o.lon_deg) + ", " + std::to_string(o.alt_m) +
                                   "): latitude must be in (-90, 90) deg, longitude in "
@@ -229,7 +225,7 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
     ++statistics_.fixes_ignored;
     return update;
   }
-  if (!isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
+  if (!kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
     ++statistics_.fixes_ignored;
     std::ostringstream note;
     note << "GPS fix at " << event.stamp_s << " s ignored: latitude " << event.lat_deg

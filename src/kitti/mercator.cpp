@@ -8,6 +8,10 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 }
 
+bool isGeodeticInRange(double lat_deg, double lon_deg, double alt_m) {
+  return std::isfinite(alt_m) && std::abs(lat_deg) < 90.0 && std::abs(lon_deg) <= 180.0;
+}
+
 MercatorProjection::MercatorProjection(double lat0_deg, double lon0_deg, double alt0_m)
     : lat0_deg_(lat0_deg),
       lon0_deg_(lon0_deg),

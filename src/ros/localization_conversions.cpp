@@ -10,6 +10,7 @@
 #include <string>
 #include <utility>
 
+#include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/ros/names.h"
 
 namespace inekf_semantic_mapping {
@@ -84,7 +85,7 @@ std::optional<Eigen::Matrix3d> imuOrientation(const sensor_msgs::Imu& message) {
 
 bool isUsableFix(const sensor_msgs::NavSatFix& fix) {
   return fix.status.status >= sensor_msgs::NavSatStatus::STATUS_FIX &&
-         estimation::isGeodeticInRange(fix.latitude, fix.longitude, fix.altitude);
+         kitti::isGeodeticInRange(fix.latitude, fix.longitude, fix.altitude);
 }
 
 std::optional<Eigen::Matrix3d> fixCovarianceEnu(const sensor_msgs::NavSatFix& fix) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
@@ -199,6 +200,16 @@ TEST(KittiMercator, PoseRotationIsRzRyRx) {
   const Eigen::Vector3d forward =
       rotationFromRollPitchYaw(0, 0, M_PI / 2) * Eigen::Vector3d::UnitX();
   EXPECT_TRUE(forward.isApprox(Eigen::Vector3d::UnitY(), 1e-12));
+}
+
+TEST(KittiMercator, TheProjectionsDomainExcludesThePolesAndNonFiniteValues) {
+  EXPECT_TRUE(isGeodeticInRange(49.0, 8.4, 112.0));
+  EXPECT_TRUE(isGeodeticInRange(-89.9, -180.0, -30.0));
+  EXPECT_FALSE(isGeodeticInRange(90.0, 8.4, 112.0));
+  EXPECT_FALSE(isGeodeticInRange(-90.0, 8.4, 112.0));
+  EXPECT_FALSE(isGeodeticInRange(49.0, 180.5, 112.0));
+  EXPECT_FALSE(isGeodeticInRange(std::nan(""), 8.4, 112.0));
+  EXPECT_FALSE(isGeodeticInRange(49.0, 8.4, std::numeric_limits<double>::infinity()));
 }
 
 TEST(KittiMercator, ToGeodeticInvertsToMap) {

@@ -52,11 +52,6 @@ struct GeodeticOrigin {
   double lat_deg = 0.0, lon_deg = 0.0, alt_m = 0.0;
 };
 
-// A place the map's Mercator projection can take: finite, |latitude| < 90 deg (the projection
-// diverges at the poles), |longitude| <= 180 deg. A first fix outside it would make the origin,
-// and so every later fix, not finite.
-bool isGeodeticInRange(double lat_deg, double lon_deg, double alt_m);
-
 struct LocalizationSessionConfig {
   LocalizerConfig localizer;
   // Start timing; whether the start takes the IMU orientation and GPS velocity follows

@@ -12,6 +12,11 @@ namespace kitti {
 
 constexpr double kEarthRadiusM = 6378137.0;  // the devkit's er
 
+// A place the projection can take: finite, |latitude| < 90 deg (it diverges at the poles),
+// |longitude| <= 180 deg. A first fix outside it would make the origin, and so every later
+// fix, not finite.
+bool isGeodeticInRange(double lat_deg, double lon_deg, double alt_m);
+
 class MercatorProjection {
  public:
   explicit MercatorProjection(double lat0_deg, double lon0_deg, double alt0_m);
