@@ -19,6 +19,7 @@
 // Variant "raw" (no filter, no occlusion test, no geometry check) is always scored first. The last
 // line printed is `RESULT <json>` (the same JSON --json writes).
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -91,11 +92,17 @@ void parseGeometry(const std::string& text, evaluation::PointLabellingOptions* o
   if (!options->check_geometry) return;
   perception::LabelGeometryOptions& g = options->geometry;
   int vegetation = options->high_terrain_is_vegetation ? 1 : 0;
+  int consumed[5] = {0, 0, 0, 0, 0};
   const int fields =
-      std::sscanf(text.c_str(), "%f:%f:%f:%d:%d", &g.max_flat_height_m, &g.min_raised_height_m,
-                  &g.ground.max_slope, &g.ground.min_support, &vegetation);
+      std::sscanf(text.c_str(), "%f%n:%f%n:%f%n:%d%n:%d%n", &g.max_flat_height_m, &consumed[0],
+                  &g.min_raised_height_m, &consumed[1], &g.ground.max_slope, &consumed[2],
+                  &g.ground.min_support, &consumed[3], &vegetation, &consumed[4]);
   options->high_terrain_is_vegetation = vegetation != 0;
-  if (fields < 3)
+  // The whole text, finite numbers: "nan" and trailing junk were taken and failed later without
+  // naming the flag.
+  if (fields < 3 || consumed[fields - 1] != static_cast<int>(text.size()) ||
+      !std::isfinite(g.max_flat_height_m) || !std::isfinite(g.min_raised_height_m) ||
+      !std::isfinite(g.ground.max_slope))
     throw UsageError("--geometry expects off or FLAT:RAISED:SLOPE[:SUPPORT[:VEG]], got '" + text +
                      "'");
 }
@@ -104,11 +111,15 @@ perception::OcclusionOptions parseOcclusion(const std::string& text, bool* enabl
   perception::OcclusionOptions options;
   *enabled = text != "off";
   if (!*enabled) return options;
-  int cw = 0, ch = 0, rx = 0, up = 0, down = 0;
+  int cw = 0, ch = 0, rx = 0, up = 0, down = 0, consumed = 0;
   float rel = 0.f, abs_m = 0.f;
-  if (std::sscanf(text.c_str(), "%dx%d:%d:%d:%d:%f:%f", &cw, &ch, &rx, &up, &down, &rel, &abs_m) !=
-      7)
-    throw UsageError("--occlusion expects off or CWxCH:RX:UP:DOWN:REL:ABS, got '" + text + "'");
+  if (std::sscanf(text.c_str(), "%dx%d:%d:%d:%d:%f:%f%n", &cw, &ch, &rx, &up, &down, &rel, &abs_m,
+                  &consumed) != 7 ||
+      consumed != static_cast<int>(text.size()) || cw <= 0 || ch <= 0 || rx < 0 || up < 0 ||
+      down < 0 || !(rel >= 0.f) || !(abs_m >= 0.f) || !std::isfinite(rel) || !std::isfinite(abs_m))
+    throw UsageError(
+        "--occlusion expects off or CWxCH:RX:UP:DOWN:REL:ABS (cells > 0, the rest >= 0), got '" +
+        text + "'");
   options.cell_width_px = cw;
   options.cell_height_px = ch;
   options.window_radius_x = rx;
