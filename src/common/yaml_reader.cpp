@@ -47,6 +47,8 @@ YAML::Node loadYamlFile(const std::string& path) {
   }
   try {
     return YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw ConfigError(path + ": cannot read the file (permissions?)");
   } catch (const YAML::Exception& e) {
     throw ConfigError(path + ": YAML syntax error: " + e.what());
   }

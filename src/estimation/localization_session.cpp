@@ -50,8 +50,11 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   positive("session.default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
   positive("session.time_jump_back_s", &config.time_jump_back_s);
   reader.read("session.restart_after_imu_gap_s", &config.restart_after_imu_gap_s);
-  if (!(config.restart_after_imu_gap_s >= 0.0)) {
-    reader.fail("session.restart_after_imu_gap_s", "must be a number >= 0");
+  if (!(config.restart_after_imu_gap_s >= 0.0) ||
+      (config.restart_after_imu_gap_s > 0.0 &&
+       config.restart_after_imu_gap_s <= config.localizer.max_imu_gap_s)) {
+    // Below imu.max_gap_s a normal step would restart the filter.
+    reader.fail("session.restart_after_imu_gap_s", "must be 0 or more than imu.max_gap_s");
   }
   reader.read("session.fix_wait_for_imu_s", &config.fix_wait_for_imu_s);
   if (!(config.fix_wait_for_imu_s >= 0.0)) {
@@ -340,12 +343,19 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
        << " m, yaw " << std::setprecision(1) << yaw_deg << " deg (";
   if (start->orientation) {
     note << "orientation from the IMU";
-    const std::optional<Eigen::Matrix3d>& stated = start->orientation_covariance;
-    if (stated && stated->allFinite() && stated->diagonal().maxCoeff() > 0.0) {
+    // The covariance the filter took, not the one the message stated.
+    const std::optional<Eigen::Matrix3d>& stated = localizer_.referenceRotationCovariance();
+    const bool given =
+        start->orientation_covariance && start->orientation_covariance->diagonal().maxCoeff() > 0.0;
+    if (stated && stated->diagonal().maxCoeff() > 0.0) {
       note << ", stated yaw sigma " << std::setprecision(2)
            << (stated->diagonal()(2) > 0.0 ? std::sqrt(stated->diagonal()(2)) * 180.0 / M_PI
                                            : config_.localizer.initial_yaw_sigma_deg)
            << " deg" << std::setprecision(1);
+    } else if (given) {
+      note << ", stated covariance not one (not positive semi-definite, not finite or wider than "
+              "180 deg): yaw sigma "
+           << config_.localizer.initial_yaw_sigma_deg << " deg";
     } else {
       note << ", no stated covariance: yaw sigma " << config_.localizer.initial_yaw_sigma_deg
            << " deg";
@@ -361,6 +371,9 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
          << config_.localizer.unknown_velocity_sigma_horizontal_mps << " m/s))";
   }
   update->note = note.str();
+  // Whichever event completed the start (a fix, a GPS velocity, an IMU sample), its estimate is
+  // published only when it is sound.
+  guardSound(update);
 }
 
 }  // namespace estimation

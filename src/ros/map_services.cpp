@@ -24,26 +24,32 @@ MapServices::MapServices(ros::NodeHandle& nh, ros::NodeHandle& private_nh,
   }
 }
 
-void MapServices::autosave() {
-  if (autosave_path_.empty() || session_.statistics().scans_inserted == 0) return;
+bool MapServices::saveToAutosavePath() {
   last_autosave_ = SaveRecord{autosave_path_, wallNow(), true, ""};
   try {
     session_.save(autosave_path_, mapping::MapFormat::kSemanticOt);
   } catch (const std::exception& e) {
     last_autosave_.ok = false;
     last_autosave_.error = e.what();
-    ROS_ERROR_STREAM_THROTTLE(60, "semantic_octomap_node: autosave failed: " << e.what());
+  }
+  return last_autosave_.ok;
+}
+
+void MapServices::autosave() {
+  if (autosave_path_.empty() || session_.statistics().scans_inserted == 0) return;
+  if (!saveToAutosavePath()) {
+    ROS_ERROR_STREAM_THROTTLE(60,
+                              "semantic_octomap_node: autosave failed: " << last_autosave_.error);
   }
 }
 
 void MapServices::finalAutosave() {
   if (autosave_path_.empty()) return;
-  if (session_.statistics().scans_inserted == 0) {
-    ROS_INFO("semantic_octomap_node: no scan in the map: nothing autosaved");
+  if (session_.statistics().scans_inserted == 0) {  // a resumed map unchanged, or none at all
+    ROS_INFO("semantic_octomap_node: no scan went into the map: nothing to autosave");
     return;
   }
-  autosave();
-  if (last_autosave_.ok) {
+  if (saveToAutosavePath()) {
     ROS_INFO_STREAM("semantic_octomap_node: map saved to "
                     << autosave_path_ << " (" << session_.statistics().scans_inserted << " scans)");
   } else {

@@ -388,6 +388,13 @@ int main(int argc, char** argv) {
         perception::colorNormalizationName(card.color_normalization),
         card.suppress_unlabeled ? 1 : 0, use_focal ? 1 : 0);
 
+    // Every sequence's frames and poses before the first is labelled: a bad name or a missing
+    // poses.txt in the last sequence surfaced after all the others had run.
+    for (const std::string& dir : sequences) {
+      evaluation::listSemanticKittiFrames(dir);
+      if (!cli.has("--no-map")) ism::kitti::readKittiPoses(dir + "/poses.txt");
+    }
+
     ism::TimingRegistry::instance().reset();  // the warm-up pass is not part of the figures
     std::vector<evaluation::PointLabelScore> totals(variants.size());
     evaluation::PointLabelScore map_totals, ceiling_totals;
@@ -420,9 +427,6 @@ int main(int argc, char** argv) {
       // A frame whose scale the focal length changes (--network-focal) is segmented again, as the
       // node would.
       const bool score_map = !cli.has("--no-map");
-      if (score_map) {  // read now, not found missing after the labelling pass
-        ism::kitti::readKittiPoses(dir + "/poses.txt");
-      }
       std::map<std::string, std::vector<uchar>> map_label_images;
       ism::common::ProgressLog label_progress("evaluate_semantics: " + sequence_name + " labels",
                                               frames.size(), "frames");

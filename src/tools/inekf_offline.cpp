@@ -14,6 +14,7 @@
 #include <iostream>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "gps_degradation_flags.h"
 #include "inekf_semantic_mapping/common/atomic_file.h"
@@ -133,10 +134,12 @@ int main(int argc, char** argv) {
     if (!cli.has("--oxts") || !cli.has("--output-kitti")) {
       throw UsageError("--oxts and --output-kitti are required");
     }
+    std::vector<std::string> output_paths;  // checked before the run
     for (const char* flag : {"--output-kitti", "--output-tum", "--output-truth", "--output-states",
                              "--output-loops"}) {
-      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));  // before the run
+      if (cli.has(flag)) output_paths.push_back(cli.get(flag));
     }
+    ism::common::checkOutputPaths(output_paths);
 
     estimation::OxtsRunOptions options;
     const bool loop_closure = cli.has("--loop-closure");

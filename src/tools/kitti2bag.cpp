@@ -86,12 +86,17 @@ boost::shared_ptr<ros::M_string> latchedConnectionHeader(const std::string& topi
   return header;
 }
 
+// Whether the progress bar's line is open (printed without its newline): an error message
+// ends it first.
+bool g_progress_line_open = false;
+
 void printProgress(std::size_t done, std::size_t total) {
   const int width = 40;
   const int filled = total ? static_cast<int>(width * done / total) : width;
   std::fprintf(stderr, "\r[%s%s] %zu/%zu", std::string(filled, '#').c_str(),
                std::string(width - filled, ' ').c_str(), done, total);
   if (done == total) std::fputc('\n', stderr);
+  g_progress_line_open = done < total;
   std::fflush(stderr);
 }
 
@@ -119,7 +124,6 @@ int run(const Arguments& args) {
   // Written as FILE.bag.partial (the name the usage documents), renamed when complete; on any
   // error the partial bag is removed.
   std::size_t messages = 0;
-  bool progress_line_open = false;  // the progress bar ends its line only at the last message
   common::commitFileAtomically(
       args.output, args.output + ".partial", [&](const std::string& partial) {
         // rosbag::Bag's destructor closes the file and throws if that fails, which after a
@@ -135,7 +139,6 @@ int run(const Arguments& args) {
           bag.write("/tf_static", first, tf_static, latchedConnectionHeader("/tf_static"));
           ++messages;
           const bool interactive = isatty(STDERR_FILENO);
-          progress_line_open = interactive;
           for (std::size_t i = 0; i < timeline.size(); ++i) {
             const kitti::TimelineEvent& event = timeline[i];
             const ros::Time stamp = conv::toRosTime(event.stamp_ns);
@@ -175,7 +178,7 @@ int run(const Arguments& args) {
           bag.close();
         } catch (const std::exception& error) {
           // The progress bar's line ends before the error message (it was glued to it).
-          if (progress_line_open) std::fputc('\n', stderr);
+          if (g_progress_line_open) std::fputc('\n', stderr);
           try {
             bag.close();
           } catch (const std::exception&) {

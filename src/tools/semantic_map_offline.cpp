@@ -231,14 +231,18 @@ int main(int argc, char** argv) {
     }
     // Every output's place is checked before the run (a mistyped folder failed after it, with
     // the map written and the grids not).
-    ism::common::checkOutputPath(output);
+    std::vector<std::string> output_paths{output};
     for (const char* flag : {"--export-ply", "--color-ot"}) {
-      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));
+      if (cli.has(flag)) output_paths.push_back(cli.get(flag));
     }
-    if (cli.has("--grid")) ism::common::checkOutputPath(cli.get("--grid") + "_projected.pgm");
-    if (cli.has("--label-images")) {  // the folder is made if its parent is there
-      ism::common::checkOutputPath(cli.get("--label-images") + "/x.png");
+    if (cli.has("--grid")) {
+      for (const char* suffix :
+           {"_projected.pgm", "_projected.yaml", "_drivable.pgm", "_drivable.yaml"}) {
+        output_paths.push_back(cli.get("--grid") + suffix);
+      }
     }
+    ism::common::checkOutputPaths(output_paths);
+    if (cli.has("--label-images")) ism::common::checkOutputDirectory(cli.get("--label-images"));
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {

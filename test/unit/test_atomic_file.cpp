@@ -179,6 +179,19 @@ TEST(AtomicFile, CheckOutputPathRefusesWhatCannotBeWritten) {
   EXPECT_EQ(reason(dir), "is a directory");
   EXPECT_EQ(reason(dir + "/no/such/out.txt").rfind("no directory ", 0), 0u);
   EXPECT_EQ(reason(""), "empty output path");
+  try {
+    checkOutputPaths({dir + "/a.txt", dir + "/b.txt", dir + "/./a.txt"});
+    ADD_FAILURE() << "one file for two outputs";
+  } catch (const AtomicWriteError& e) {
+    EXPECT_EQ(e.path(), dir + "/./a.txt");
+  }
+  // An output folder may be new (its parent is there) or an existing folder; not a file, not
+  // under a missing parent.
+  EXPECT_NO_THROW(checkOutputDirectory(dir + "/new_folder"));
+  EXPECT_NO_THROW(checkOutputDirectory(dir));
+  std::ofstream(dir + "/a_file") << "x";
+  EXPECT_THROW(checkOutputDirectory(dir + "/a_file"), AtomicWriteError);
+  EXPECT_THROW(checkOutputDirectory(dir + "/missing/new_folder"), AtomicWriteError);
   if (::geteuid() != 0) {  // root writes anywhere
     fs::create_directories(dir + "/read_only");
     fs::permissions(dir + "/read_only", fs::perms::owner_read | fs::perms::owner_exec);

@@ -447,6 +447,15 @@ TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
   }
   std::ofstream(path) << "session:\n  default_fix_sigma_vertical_m: 0\n";
   EXPECT_ANY_THROW(LocalizationSessionConfig::fromYamlFile(path));
+  // A restart limit within imu.max_gap_s would restart the filter at ordinary steps.
+  std::ofstream(path) << "imu:\n  max_gap_s: 0.5\nsession:\n  restart_after_imu_gap_s: 0.3\n";
+  try {
+    LocalizationSessionConfig::fromYamlFile(path);
+    ADD_FAILURE() << "a restart limit below imu.max_gap_s was accepted";
+  } catch (const std::exception& error) {
+    EXPECT_NE(std::string(error.what()).find("session.restart_after_imu_gap_s"), std::string::npos)
+        << error.what();
+  }
 }
 
 // The start's yaw sigma about the map z axis (deg).
@@ -465,18 +474,22 @@ TEST(LocalizationSession, TheStartTakesTheOrientationsStatedCovarianceOrTheConfi
     std::optional<Eigen::Matrix3d> covariance;
     bool with_orientation;
     double expected_yaw_sigma_deg;
+    const char* start_note;  // what the start's note says of the sigma
   };
   const Case cases[] = {
       {Eigen::Vector3d(1e-4, 1e-4, yaw_sigma_rad * yaw_sigma_rad).asDiagonal().toDenseMatrix(),
-       true, 5.0},
-      {Eigen::Matrix3d::Zero(), true, 1.0},  // stated as unknown: initial_sigma.yaw_deg
-      {std::nullopt, true, 1.0},
-      {std::nullopt, false, 180.0},  // no orientation: initial_sigma.unknown_yaw_deg
+       true, 5.0, "stated yaw sigma 5"},
+      // stated as unknown: initial_sigma.yaw_deg
+      {Eigen::Matrix3d::Zero(), true, 1.0, "no stated covariance"},
+      {std::nullopt, true, 1.0, "no stated covariance"},
+      // no orientation: initial_sigma.unknown_yaw_deg
+      {std::nullopt, false, 180.0, ""},
       // Not a covariance: indefinite (made the filter's variances negative and every later fix
       // rejected), and finite but absurd (overflowed the start's covariance to NaN, which was
-      // published): the configured sigma, as for "unknown".
-      {(Eigen::Matrix3d() << 1e-4, 1e-2, 0, 1e-2, 1e-4, 0, 0, 0, 1e-4).finished(), true, 1.0},
-      {Eigen::Matrix3d::Constant(1e308), true, 1.0},
+      // published): the configured sigma, and the note says so (it reported the stated one).
+      {(Eigen::Matrix3d() << 1e-4, 1e-2, 0, 1e-2, 1e-4, 0, 0, 0, 1e-4).finished(), true, 1.0,
+       "stated covariance not one"},
+      {Eigen::Matrix3d::Constant(1e308), true, 1.0, "stated covariance not one"},
   };
   for (const Case& c : cases) {
     LocalizationSession session(originConfig());
@@ -484,7 +497,11 @@ TEST(LocalizationSession, TheStartTakesTheOrientationsStatedCovarianceOrTheConfi
     ImuEvent imu = restingImu(10.0, c.with_orientation);
     imu.orientation_covariance = c.covariance;
     session.addImu(imu);
-    session.addFix(fixAt(10.0));
+    const LocalizationSession::Update start = session.addFix(fixAt(10.0));
+    if (c.with_orientation) {  // without one the start waits for start_max_wait_s
+      EXPECT_TRUE(start.start_estimate) << start.note;
+      EXPECT_NE(start.note.find(c.start_note), std::string::npos) << start.note;
+    }
     session.addImu(restingImu(10.3, c.with_orientation));
     ASSERT_TRUE(session.started());
     // Up to the 0.3 s of gyro noise propagated since the start.

@@ -58,6 +58,12 @@ inline std::string temporaryPathFor(const std::string& path) {
   return (target.parent_path() / name).string();
 }
 
+// Whether two output paths name one file, however spelt ("a.txt", "./d/../a.txt").
+inline bool isSameOutput(const std::string& a, const std::string& b) {
+  return std::filesystem::absolute(a).lexically_normal() ==
+         std::filesystem::absolute(b).lexically_normal();
+}
+
 // Throws AtomicWriteError unless `path` can be written atomically: not a directory, in an
 // existing directory this process may write to. A tool calls it for each output before its long
 // work, so that a mistyped output folder fails in a second, not after the whole run.
@@ -71,6 +77,34 @@ inline void checkOutputPath(const std::string& path) {
   }
   if (::access(parent.c_str(), W_OK) != 0) {
     throw AtomicWriteError(path, "directory " + parent.string() + ": " + std::strerror(errno));
+  }
+}
+
+// The same for a set of outputs, which must also be distinct files (one named twice would be
+// written twice, the second replacing the first).
+inline void checkOutputPaths(const std::vector<std::string>& paths) {
+  for (std::size_t i = 0; i < paths.size(); ++i) {
+    checkOutputPath(paths[i]);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (isSameOutput(paths[i], paths[j])) {
+        throw AtomicWriteError(paths[i],
+                               "given as two outputs (the second would replace the first)");
+      }
+    }
+  }
+}
+
+// An output folder: an existing one this process may write into, or a new one whose parent is
+// there to make it in.
+inline void checkOutputDirectory(const std::string& dir) {
+  namespace fs = std::filesystem;
+  if (dir.empty()) throw AtomicWriteError(dir, "empty output folder");
+  if (fs::exists(dir) && !fs::is_directory(dir)) throw AtomicWriteError(dir, "is not a folder");
+  const fs::path place =
+      fs::is_directory(dir) ? fs::path(dir) : fs::absolute(dir).lexically_normal().parent_path();
+  if (!fs::is_directory(place)) throw AtomicWriteError(dir, "no directory " + place.string());
+  if (::access(place.c_str(), W_OK) != 0) {
+    throw AtomicWriteError(dir, "directory " + place.string() + ": " + std::strerror(errno));
   }
 }
 
@@ -148,9 +182,8 @@ class AtomicFileSet {
     // The one target a rename cannot replace, refused before any of the set is renamed.
     if (std::filesystem::is_directory(path)) throw AtomicWriteError(path, "is a directory");
     // Two outputs of one set on one file: the later rename would silently replace the earlier.
-    const std::filesystem::path target = std::filesystem::absolute(path).lexically_normal();
     for (const auto& staged : staged_) {
-      if (std::filesystem::absolute(staged.first).lexically_normal() == target) {
+      if (isSameOutput(staged.first, path)) {
         throw AtomicWriteError(path, "given as two outputs (the second would replace the first)");
       }
     }

@@ -121,10 +121,16 @@ class Localizer {
   // it is counted in gps_before_start and the next fix starts it. A later call replaces the
   // reference; velocity_map = nullopt means "not known".
   // rotation_covariance: rad^2 about the map axes (sensor_msgs/Imu); nullopt or zero diagonal
-  // entries: the configured initial sigmas.
+  // entries: the configured initial sigmas. One that is not a covariance (its symmetric part
+  // not positive semi-definite, or a variance above pi^2) is not taken.
   void setInitialReference(
       const Eigen::Matrix3d& rotation, const std::optional<Eigen::Vector3d>& velocity_map,
       const std::optional<Eigen::Matrix3d>& rotation_covariance = std::nullopt);
+  // The stated rotation covariance the reference holds (symmetrized), nullopt when none was
+  // given or it was not taken.
+  const std::optional<Eigen::Matrix3d>& referenceRotationCovariance() const {
+    return reference_rotation_covariance_;
+  }
 
   ImuStatus addImu(const ImuSample& sample);
   CorrectionResult addPositionFix(const PositionFix& fix);

@@ -38,6 +38,8 @@ class MapServices {
   const SaveRecord& lastAutosave() const { return last_autosave_; }
 
  private:
+  // Saves to autosave_path and records it in last_autosave_; false (error recorded) on failure.
+  bool saveToAutosavePath();
   bool onSave(SaveMap::Request& request, SaveMap::Response& response);
   bool onLoad(LoadMap::Request& request, LoadMap::Response& response);
   bool onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
