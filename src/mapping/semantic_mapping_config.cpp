@@ -36,7 +36,9 @@ const char* insertionStructureName(InsertionStructure structure) {
 }
 
 void SemanticMappingConfig::validate() const {
-  require(resolution_m > 0 && resolution_m <= 100, "resolution_m", "must be in (0, 100] m");
+  // Below 1 cm the octree (16 levels) spans less than +-330 m and a drive falls off it, which
+  // was then reported against the poses.
+  require(resolution_m >= 0.01 && resolution_m <= 100, "resolution_m", "must be in [0.01, 100] m");
   require(max_range_m >= 0, "max_range_m", "must be >= 0 (0: unlimited)");
   require(occupancy.prob_hit > 0.5 && occupancy.prob_hit < 1, "sensor_model.hit",
           "must be in (0.5, 1)");

@@ -597,6 +597,16 @@ TEST(SemanticMappingSessionTest, BadLabelImagesAreRejectedAndTheMapIsKept) {
                  return c;
                }()),
                std::invalid_argument);
+  // A resolution the octree cannot hold a drive at is named as such (1e-9 m was blamed on the
+  // poses when the first scan fell off the map).
+  try {
+    SemanticMappingConfig c;
+    c.resolution_m = 1e-9;
+    SemanticMappingSession tiny(c);
+    ADD_FAILURE() << "a resolution of 1e-9 m was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("resolution_m"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
