@@ -178,9 +178,9 @@ class AtomicFileSet {
   ~AtomicFileSet() { discard(); }
 
   void add(const std::string& path, const std::function<void(const std::string& tmp_path)>& write) {
-    if (path.empty()) throw AtomicWriteError(path, "empty output path");
-    // The one target a rename cannot replace, refused before any of the set is renamed.
-    if (std::filesystem::is_directory(path)) throw AtomicWriteError(path, "is a directory");
+    // A target a rename cannot replace (a directory) or a place without its directory, refused
+    // before any of the set is written.
+    checkOutputPath(path);
     // Two outputs of one set on one file: the later rename would silently replace the earlier.
     for (const auto& staged : staged_) {
       if (isSameOutput(staged.first, path)) {
