@@ -294,9 +294,14 @@ void GroundTrace::addSensorOrigin(const Eigen::Vector3d& origin_map) {
   samples_.push_back(ground);
 }
 
+std::vector<std::string> mapServerGridPaths(const std::string& stem) {
+  return {stem + ".pgm", stem + ".yaml"};
+}
+
 std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::string& stem) {
-  const std::string pgm_path = stem + ".pgm";
-  const std::string yaml_path = stem + ".yaml";
+  const std::vector<std::string> paths = mapServerGridPaths(stem);
+  const std::string& pgm_path = paths[0];
+  const std::string& yaml_path = paths[1];
   // map_server with negate 0: p = (255 - value) / 255; occupied above occupied_thresh, free below
   // free_thresh, unknown between.
   common::writeStreamAtomically(pgm_path, [&](std::ostream& out) {

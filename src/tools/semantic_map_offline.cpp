@@ -42,6 +42,12 @@ namespace {
 namespace ism = inekf_semantic_mapping;
 using ism::common::UsageError;
 
+// --grid STEM writes STEM_projected.{pgm,yaml} and STEM_drivable.{pgm,yaml}.
+constexpr const char* kGridNames[] = {"projected", "drivable"};
+std::string gridStem(const ism::common::CommandLine& cli, const char* name) {
+  return cli.get("--grid") + "_" + name;
+}
+
 constexpr char kUsage[] =
     "usage: semantic_map_offline --scans DIR --poses POSES.txt --calib CALIB.txt --output MAP.ot\n"
     "         [--labels DIR | --images DIR --model MODEL [--model-card CARD.yaml]]\n"
@@ -236,9 +242,10 @@ int main(int argc, char** argv) {
       if (cli.has(flag)) output_paths.push_back(cli.get(flag));
     }
     if (cli.has("--grid")) {
-      for (const char* suffix :
-           {"_projected.pgm", "_projected.yaml", "_drivable.pgm", "_drivable.yaml"}) {
-        output_paths.push_back(cli.get("--grid") + suffix);
+      for (const char* name : kGridNames) {
+        for (const std::string& path : mapping::mapServerGridPaths(gridStem(cli, name))) {
+          output_paths.push_back(path);
+        }
       }
     }
     ism::common::checkOutputPaths(output_paths);
@@ -354,14 +361,13 @@ int main(int argc, char** argv) {
         grids = mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
       }
       for (const auto& [name, grid] :
-           {std::pair<const char*, const mapping::Grid2D*>{"projected", &grids.occupancy},
-            {"drivable", &grids.drivable}}) {
+           {std::pair<const char*, const mapping::Grid2D*>{kGridNames[0], &grids.occupancy},
+            {kGridNames[1], &grids.drivable}}) {
         std::size_t counts[3] = {0, 0, 0};  // free, occupied, unknown
         for (std::int8_t cell : grid->cells) {
           ++counts[cell == mapping::kGridFree ? 0 : cell == mapping::kGridOccupied ? 1 : 2];
         }
-        const auto paths =
-            mapping::writeMapServerGrid(*grid, cli.get("--grid") + "_" + std::string(name));
+        const auto paths = mapping::writeMapServerGrid(*grid, gridStem(cli, name));
         std::cerr << "[semantic_map_offline] wrote " << paths[0] << " and " << paths[1] << " ("
                   << name << ": " << grid->width << " x " << grid->height << " cells, " << counts[0]
                   << " free, " << counts[1] << " occupied, " << counts[2] << " unknown)\n";

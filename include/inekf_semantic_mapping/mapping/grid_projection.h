@@ -117,8 +117,10 @@ class GroundTrace {
 
 // map_server's format: `<stem>.pgm` (free 254, occupied 0, unknown 205, top row = largest y)
 // and `<stem>.yaml` (image, resolution, origin, negate, thresholds), both written atomically.
-// Returns the two paths written.
+// Returns the two paths written (mapServerGridPaths).
 std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::string& stem);
+// The two files writeMapServerGrid writes for `stem`: {stem.pgm, stem.yaml}.
+std::vector<std::string> mapServerGridPaths(const std::string& stem);
 
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping
