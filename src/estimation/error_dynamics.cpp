@@ -1,5 +1,7 @@
 #include "inekf_semantic_mapping/estimation/error_dynamics.h"
 
+#include <cmath>
+
 #include "inekf_semantic_mapping/lie/so3.h"
 
 namespace inekf_semantic_mapping {
@@ -17,25 +19,26 @@ constexpr double kNodes[4] = {-0.8611363115940526, -0.3399810435848563, 0.339981
 constexpr double kWeights[4] = {0.3478548451374538, 0.6521451548625461, 0.6521451548625461,
                                 0.3478548451374538};
 
-}  // namespace
+// The quadratures below (Gauss-Legendre for the bias couplings, Simpson for the noise) are
+// accurate to ~1e-9 on a step of at most this length and turn: every IMU step of a car at
+// 10-100 Hz. A longer step (a bridged IMU gap of seconds) is split into 2^k equal sub-steps.
+constexpr double kMaxQuadratureStepS = 0.25;
+constexpr double kMaxQuadratureTurnRad = 0.25;
+constexpr int kMaxHalvings = 30;
 
-NavState integrateImu(const NavState& state, const Eigen::Vector3d& measured_angular_velocity,
-                      const Eigen::Vector3d& measured_specific_force, double gravity_mps2,
-                      double dt) {
-  const Eigen::Vector3d w = measured_angular_velocity - state.gyro_bias;
-  const Eigen::Vector3d a = measured_specific_force - state.accel_bias;
-  const Eigen::Vector3d g(0.0, 0.0, -gravity_mps2);
-  const Eigen::Vector3d phi = w * dt;
-  NavState next = state;
-  next.rotation = state.rotation * gamma0(phi);
-  next.velocity_map = state.velocity_map + state.rotation * gamma1(phi) * a * dt + g * dt;
-  next.position_map = state.position_map + state.velocity_map * dt +
-                      state.rotation * gamma2(phi) * a * (dt * dt) + 0.5 * g * (dt * dt);
-  next.stamp_s = state.stamp_s + dt;
-  return next;
+// The number of halvings that brings dt within the quadratures' range.
+int halvingsFor(const Eigen::Vector3d& w, double dt) {
+  const double rate = w.norm();
+  int k = 0;
+  while (k < kMaxHalvings && (dt > kMaxQuadratureStepS || rate * dt > kMaxQuadratureTurnRad)) {
+    dt *= 0.5;
+    ++k;
+  }
+  return k;
 }
 
-Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a, double dt) {
+// Phi(dt) in closed form, accurate for dt and |w| dt within the quadratures' range.
+Matrix15d closedFormTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a, double dt) {
   const Eigen::Vector3d phi = w * dt;
   const Eigen::Matrix3d delta_rt = gamma0(phi).transpose();
   const Eigen::Matrix3d g1 = gamma1(phi), g2 = gamma2(phi);
@@ -67,16 +70,10 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a
   return phi_matrix;
 }
 
-Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
-                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
-                           double dt) {
-  return leftProcessNoise(w, a, noise, gyro_noise_scale, accel_noise_scale, dt,
-                          leftErrorTransition(w, a, dt));
-}
-
-Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
-                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
-                           double dt, const Matrix15d& phi_full) {
+// Simpson's rule of int_0^dt Phi(s) L Phi(s)^T ds; phi_full = Phi(dt).
+Matrix15d simpsonProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
+                              const ImuNoise& noise, double gyro_noise_scale,
+                              double accel_noise_scale, double dt, const Matrix15d& phi_full) {
   Eigen::Matrix<double, 15, 1> diagonal;
   const double gyro_sigma = gyro_noise_scale * noise.gyro_noise_density;
   const double accel_sigma = accel_noise_scale * noise.accel_noise_density;
@@ -88,11 +85,64 @@ Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
   // Phi L Phi^T = (Phi sqrt(L)) (Phi sqrt(L))^T: one product each.
   const Eigen::Matrix<double, 15, 1> sqrt_l = diagonal.cwiseSqrt();
   const Matrix15d full = phi_full * sqrt_l.asDiagonal();
-  const Matrix15d half = leftErrorTransition(w, a, 0.5 * dt) * sqrt_l.asDiagonal();
+  const Matrix15d half = closedFormTransition(w, a, 0.5 * dt) * sqrt_l.asDiagonal();
   Matrix15d q = full.lazyProduct(full.transpose()) + 4.0 * half.lazyProduct(half.transpose());
   q.diagonal() += diagonal;
   q *= dt / 6.0;
   return 0.5 * (q + q.transpose());
+}
+
+}  // namespace
+
+NavState integrateImu(const NavState& state, const Eigen::Vector3d& measured_angular_velocity,
+                      const Eigen::Vector3d& measured_specific_force, double gravity_mps2,
+                      double dt) {
+  const Eigen::Vector3d w = measured_angular_velocity - state.gyro_bias;
+  const Eigen::Vector3d a = measured_specific_force - state.accel_bias;
+  const Eigen::Vector3d g(0.0, 0.0, -gravity_mps2);
+  const Eigen::Vector3d phi = w * dt;
+  NavState next = state;
+  next.rotation = state.rotation * gamma0(phi);
+  next.velocity_map = state.velocity_map + state.rotation * gamma1(phi) * a * dt + g * dt;
+  next.position_map = state.position_map + state.velocity_map * dt +
+                      state.rotation * gamma2(phi) * a * (dt * dt) + 0.5 * g * (dt * dt);
+  next.stamp_s = state.stamp_s + dt;
+  return next;
+}
+
+// The input is held constant over a step, so the error dynamics are time-invariant over it and
+// compose exactly: Phi(2h) = Phi(h)^2.
+Matrix15d leftErrorTransition(const Eigen::Vector3d& w, const Eigen::Vector3d& a, double dt) {
+  const int halvings = halvingsFor(w, dt);
+  Matrix15d phi = closedFormTransition(w, a, std::ldexp(dt, -halvings));
+  for (int i = 0; i < halvings; ++i) phi = (phi * phi).eval();
+  return phi;
+}
+
+Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
+                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
+                           double dt) {
+  return leftProcessNoise(w, a, noise, gyro_noise_scale, accel_noise_scale, dt,
+                          leftErrorTransition(w, a, dt));
+}
+
+// Over 2^k sub-steps of length h: Q(2h) = Q(h) + Phi(h) Q(h) Phi(h)^T (time-invariant dynamics).
+Matrix15d leftProcessNoise(const Eigen::Vector3d& w, const Eigen::Vector3d& a,
+                           const ImuNoise& noise, double gyro_noise_scale, double accel_noise_scale,
+                           double dt, const Matrix15d& phi_full) {
+  const int halvings = halvingsFor(w, dt);
+  if (halvings == 0) {
+    return simpsonProcessNoise(w, a, noise, gyro_noise_scale, accel_noise_scale, dt, phi_full);
+  }
+  const double h = std::ldexp(dt, -halvings);
+  Matrix15d phi = closedFormTransition(w, a, h);
+  Matrix15d q = simpsonProcessNoise(w, a, noise, gyro_noise_scale, accel_noise_scale, h, phi);
+  for (int i = 0; i < halvings; ++i) {
+    q += propagateLeftCovariance(phi, q);
+    q = (0.5 * (q + q.transpose())).eval();
+    phi = (phi * phi).eval();
+  }
+  return q;
 }
 
 Matrix15d propagateLeftCovariance(const Matrix15d& phi, const Matrix15d& p) {

@@ -23,14 +23,16 @@ NavState integrateImu(const NavState& state, const Eigen::Vector3d& measured_ang
 //   d/dt xi_R = -w^ xi_R - b~_g,  d/dt xi_v = -a^ xi_R - w^ xi_v - b~_a,
 //   d/dt xi_p = xi_v - w^ xi_p,   d/dt b~ = 0,
 // in closed form (Gamma functions; the two gyro-bias couplings of v and p by 4-point
-// Gauss-Legendre quadrature of a smooth integrand, exact to ~(|w| dt)^8).
-// w and a are the bias-corrected rates.
+// Gauss-Legendre quadrature of a smooth integrand, exact to ~(|w| dt)^8). A step longer than
+// 0.25 s or 0.25 rad (a bridged IMU gap) is 2^k equal sub-steps composed by squaring, exact
+// for the constant input: accurate for any dt. w and a are the bias-corrected rates.
 Matrix15d leftErrorTransition(const Eigen::Vector3d& angular_velocity,
                               const Eigen::Vector3d& specific_force, double dt);
 
 // Discrete process noise of the left-invariant error over dt, Simpson's rule of
 // int_0^dt Phi(s) L Phi(s)^T ds with L = diag(sg^2, sa^2, 0, sbg^2, sba^2) (densities squared);
-// exact for the dt^3/3 position term that the usual Phi L Phi^T dt overstates threefold.
+// exact for the dt^3/3 position term that the usual Phi L Phi^T dt overstates threefold. A long
+// step is composed from sub-steps as the transition is: Q(2h) = Q(h) + Phi(h) Q(h) Phi(h)^T.
 // The scales multiply the white-noise densities only (not the bias random walks).
 Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
                            const Eigen::Vector3d& specific_force, const ImuNoise& noise,
