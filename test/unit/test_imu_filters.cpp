@@ -211,6 +211,36 @@ TEST(Filters, PositionUpdateMovesTowardTheFixAndShrinksTheCovariance) {
   }
 }
 
+// A centimetre fix on a prior that knows the position only to 10,000 km, its errors correlated
+// with the velocity's and the attitude's: the update's covariance must stay positive definite
+// (the expanded form P - KHP... cancelled to negative variances at these scales).
+TEST(Filters, PreciseFixOnAVaguePriorKeepsTheCovariancePositiveDefinite) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 1e-4, 1e-4, 1e-4, 1e3, 1e3, 1e3, 1e7, 1e7, 1e7, 1e-4, 1e-4, 1e-4, 1e-2, 1e-2, 1e-2;
+  for (FilterType type : kAllFilters) {
+    for (int trial = 0; trial < 20; ++trial) {
+      Matrix15d root;
+      for (int i = 0; i < 15; ++i) {
+        for (int j = 0; j < 15; ++j) root(i, j) = normal(rng);
+      }
+      const Matrix15d correlated = root * root.transpose() / 15.0;
+      const ErrorCovariance prior = sigma.asDiagonal() * correlated * sigma.asDiagonal();
+      auto filter = makeFilter(type, ImuNoise());
+      const NavState s = someState();
+      filter->initialize(s, prior);
+      const Eigen::Vector3d target = s.position_map + Eigen::Vector3d(3.0, -2.0, 1.0);
+      const CorrectionResult result = filter->correctPosition(fixAt(target, s.stamp_s, 1e-3), 1e6);
+      ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+      const ErrorCovariance& updated = filter->covariance();
+      EXPECT_GE(updated.diagonal().minCoeff(), 0.0) << toString(type) << " trial " << trial;
+      EXPECT_EQ(Eigen::LLT<ErrorCovariance>(updated).info(), Eigen::Success)
+          << toString(type) << " trial " << trial;
+    }
+  }
+}
+
 // The land-vehicle constraint on a car whose estimated heading is 3 deg off its velocity (known
 // well): the heading turns to the velocity, the same in all three filters (one Jacobian, mapped
 // into each filter's error coordinates), and the covariance stays symmetric positive definite.
