@@ -6,6 +6,7 @@
 //             [--seed S] [--no-velodyne] [--no-camera]
 #include <ros/time.h>
 #include <rosbag/bag.h>
+#include <rosbag/exceptions.h>
 #include <tf2_msgs/TFMessage.h>
 #include <unistd.h>
 
@@ -184,6 +185,9 @@ int run(const Arguments& args) {
           } catch (const std::exception&) {
           }
           (void)owned_bag.release();
+          // rosbag's own errors are the output's (a full disk); any other names its input file
+          // (an image of the wrong size) and is passed on as it is.
+          if (dynamic_cast<const rosbag::BagException*>(&error) == nullptr) throw;
           throw std::runtime_error("cannot write " + args.output + ": " + error.what());
         }
       });
