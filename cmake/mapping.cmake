@@ -91,6 +91,8 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_node.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_lidar_only.test DEPENDENCIES semantic_octomap_node)
   add_rostest(test/ros/semantic_octomap_shutdown_save.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_nodelet_shutdown_save.test
+              DEPENDENCIES ${PROJECT_NAME}_nodelets)
   add_rostest(test/ros/semantic_octomap_grids.test DEPENDENCIES semantic_octomap_node)
 endif()
 

@@ -71,7 +71,8 @@ set(ISM_LOCALIZATION_ROS_SOURCES
   src/ros/localization_diagnostics.cpp)
 set(ISM_MAPPING_ROS_SOURCES
   src/ros/mapping_conversions.cpp src/ros/map_display.cpp src/ros/map_services.cpp
-  src/ros/label_camera.cpp src/ros/mapping_diagnostics.cpp src/ros/semantic_octomap_node_core.cpp)
+  src/ros/label_camera.cpp src/ros/mapping_diagnostics.cpp src/ros/semantic_octomap_node_core.cpp
+  src/ros/shutdown_log.cpp)
 set(ISM_SEGMENTATION_ROS_SOURCES src/ros/segmentation_node_core.cpp)
 # The segmentation and map nodes as nodelets (nodelet_plugins.xml).
 set(ISM_NODELET_SOURCES src/nodelets/pipeline_nodelets.cpp)

@@ -29,7 +29,8 @@ int main(int argc, char** argv) {
   try {
     inekf_semantic_mapping::ros_conversions::SemanticOctomapNodeCore node{nh, private_nh};
     // ros::spin() with a stop on SIGINT; ros::ok() turns false on a shutdown request over
-    // XML-RPC (rosnode kill), after which finish() still saves but its log lines are lost.
+    // XML-RPC (rosnode kill), after which finish() still saves and, rosconsole being down,
+    // says so on stderr (logAtShutdown).
     while (ros::ok() && !g_interrupted) {
       ros::getGlobalCallbackQueue()->callAvailable(ros::WallDuration(0.1));
     }

@@ -3,10 +3,12 @@
 #include <ros/console.h>
 
 #include <cstdio>
+#include <string>
 #include <utility>
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
+#include "inekf_semantic_mapping/ros/shutdown_log.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -45,16 +47,19 @@ void MapServices::autosave() {
 
 void MapServices::finalAutosave() {
   if (autosave_path_.empty()) return;
-  if (session_.statistics().scans_inserted == 0) {  // a resumed map unchanged, or none at all
-    ROS_INFO("semantic_octomap_node: no scan went into the map: nothing to autosave");
+  const std::size_t scans = session_.statistics().scans_inserted;
+  if (scans == 0) {  // a resumed map unchanged, or none at all
+    logAtShutdown(ShutdownLogLevel::kInfo,
+                  "semantic_octomap_node: no scan went into the map: nothing to autosave");
     return;
   }
   if (saveToAutosavePath()) {
-    ROS_INFO_STREAM("semantic_octomap_node: map saved to "
-                    << autosave_path_ << " (" << session_.statistics().scans_inserted << " scans)");
+    logAtShutdown(ShutdownLogLevel::kInfo, "semantic_octomap_node: map saved to " + autosave_path_ +
+                                               " (" + std::to_string(scans) + " scans)");
   } else {
-    ROS_ERROR_STREAM("semantic_octomap_node: the final autosave to "
-                     << autosave_path_ << " failed: " << last_autosave_.error);
+    logAtShutdown(ShutdownLogLevel::kError, "semantic_octomap_node: the final autosave to " +
+                                                autosave_path_ +
+                                                " failed: " + last_autosave_.error);
   }
 }
 

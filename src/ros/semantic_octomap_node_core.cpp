@@ -9,6 +9,7 @@
 
 #include <memory>
 #include <optional>
+#include <string>
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"
@@ -20,6 +21,7 @@
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 #include "inekf_semantic_mapping/ros/names.h"
 #include "inekf_semantic_mapping/ros/node_parameters.h"
+#include "inekf_semantic_mapping/ros/shutdown_log.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -149,12 +151,14 @@ class SemanticOctomapNodeCore::Impl {
       const std::size_t pending = session_->pendingScans();
       if (pending > 0) {
         const std::size_t inserted = session_->flush();
-        ROS_INFO_STREAM("semantic_octomap_node: finishing: " << inserted << " of " << pending
-                                                             << " waiting scans put in the map");
+        logAtShutdown(ShutdownLogLevel::kInfo,
+                      "semantic_octomap_node: finishing: " + std::to_string(inserted) + " of " +
+                          std::to_string(pending) + " waiting scans put in the map");
       }
     } catch (const std::exception& e) {
-      ROS_ERROR_STREAM(
-          "semantic_octomap_node: finishing: the waiting scans are lost: " << e.what());
+      logAtShutdown(
+          ShutdownLogLevel::kError,
+          std::string("semantic_octomap_node: finishing: the waiting scans are lost: ") + e.what());
     }
     services_->finalAutosave();
   }

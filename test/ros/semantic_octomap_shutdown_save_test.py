@@ -1,7 +1,12 @@
 #!/usr/bin/python3
 """rostest: semantic_octomap_node stopped with SIGINT (Ctrl-C) while three scans wait for label
 images that will never come (the end of a bag: the clock stops). The autosave written at shutdown
-must hold them: a map of the wall they see, not an empty file or none."""
+must hold them: a map of the wall they see, not an empty file or none.
+
+Parameters (private): `stop_node`, the node to send SIGINT (the map node itself by default, or the
+nodelet manager that runs it); `stderr_log`, where that process's stderr goes: when given, its
+last lines must say what went into the map and where it was saved (a manager's Ctrl-C shuts
+rosconsole down before it unloads the nodelet)."""
 import os
 import signal
 import time
@@ -21,6 +26,8 @@ NODE = "/semantic_octomap_node"
 class ShutdownSaveTest(unittest.TestCase):
     def test_scans_waiting_at_shutdown_are_in_the_autosave(self):
         rospy.init_node("semantic_octomap_shutdown_save_test")
+        stop_node = rospy.get_param("~stop_node", NODE)
+        stderr_log = rospy.get_param("~stderr_log", "")
         path = rospy.get_param(NODE + "/autosave_path")
         self.addCleanup(lambda: os.path.exists(path) and os.remove(path))
         static_tf = tf2_ros.StaticTransformBroadcaster()
@@ -56,7 +63,7 @@ class ShutdownSaveTest(unittest.TestCase):
                          + before.message)
         self.assertFalse(os.path.exists(path), "autosave before shutdown (period 0 = none)")
 
-        e2e.kill_node(NODE, signal.SIGINT)
+        e2e.kill_node(stop_node, signal.SIGINT)
         deadline = time.time() + 30
         while not os.path.exists(path) and time.time() < deadline:
             time.sleep(0.1)
@@ -65,6 +72,20 @@ class ShutdownSaveTest(unittest.TestCase):
         # The wall (8 m x 2.5 m at 0.2 m) is about 500 occupied voxels; the tree's inner nodes
         # come on top.
         self.assertGreater(saved["size"], 400, saved)
+        if stderr_log:
+            self.addCleanup(lambda: os.path.exists(stderr_log) and os.remove(stderr_log))
+            expected = ["finishing: 3 of 3 waiting scans put in the map",
+                        "map saved to %s (3 scans)" % path]
+            deadline = time.time() + 10
+            text = ""
+            while time.time() < deadline:
+                with open(stderr_log) as log:
+                    text = log.read()
+                if all(line in text for line in expected):
+                    break
+                time.sleep(0.1)
+            for line in expected:
+                self.assertIn(line, text, "the last lines of %s's stderr" % stop_node)
 
 
 if __name__ == "__main__":
