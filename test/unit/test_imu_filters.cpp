@@ -44,19 +44,26 @@ Vector15d leftError(const NavState& estimate, const NavState& truth) {
   return leftInvariantDifference(estimate, truth);
 }
 
+// The transition by central differences of the (exact, constant-input) integration.
+Matrix15d numericalTransition(const NavState& s, const Eigen::Vector3d& gyro,
+                              const Eigen::Vector3d& accel, double dt) {
+  const NavState next = integrateImu(s, gyro, accel, kGravity, dt);
+  Matrix15d numeric;
+  const double eps = 1e-6;
+  for (int i = 0; i < 15; ++i) {
+    const Vector15d d = eps * Vector15d::Unit(i);
+    const NavState plus = integrateImu(perturbLeft(s, d), gyro, accel, kGravity, dt);
+    const NavState minus = integrateImu(perturbLeft(s, -d), gyro, accel, kGravity, dt);
+    numeric.col(i) = (leftError(next, plus) - leftError(next, minus)) / (2.0 * eps);
+  }
+  return numeric;
+}
+
 TEST(ErrorDynamics, TransitionMatchesNumericalLinearization) {
   const NavState s = someState();
   const Eigen::Vector3d gyro(0.3, -0.5, 1.2), accel(1.5, -0.7, 9.9);
   for (double dt : {0.01, 0.1, 0.5}) {
-    const NavState next = integrateImu(s, gyro, accel, kGravity, dt);
-    Matrix15d numeric;
-    const double eps = 1e-6;
-    for (int i = 0; i < 15; ++i) {
-      const Vector15d d = eps * Vector15d::Unit(i);
-      const NavState plus = integrateImu(perturbLeft(s, d), gyro, accel, kGravity, dt);
-      const NavState minus = integrateImu(perturbLeft(s, -d), gyro, accel, kGravity, dt);
-      numeric.col(i) = (leftError(next, plus) - leftError(next, minus)) / (2.0 * eps);
-    }
+    const Matrix15d numeric = numericalTransition(s, gyro, accel, dt);
     const Matrix15d phi = leftErrorTransition(gyro - s.gyro_bias, accel - s.accel_bias, dt);
     EXPECT_LT((phi - numeric).norm(), 1e-6 * numeric.norm()) << "dt " << dt << "\n"
                                                              << phi - numeric;
@@ -72,21 +79,13 @@ TEST(ErrorDynamics, TransitionComposesOverSubsteps) {
 }
 
 // A bridged IMU gap of seconds while the car turns at 1 rad/s: the transition still matches the
-// numerical linearization of the (exact, constant-input) integration. One 4-point quadrature
+// numerical linearization. One 4-point quadrature
 // over the whole 10 s was 3.7 % off.
 TEST(ErrorDynamics, TransitionIsAccurateOverALongTurningStep) {
   const NavState s = someState();
   const Eigen::Vector3d gyro(0.01, -0.02, 1.0), accel(0.5, 0.3, 9.8);
   for (double dt : {2.0, 5.0, 10.0}) {
-    const NavState next = integrateImu(s, gyro, accel, kGravity, dt);
-    Matrix15d numeric;
-    const double eps = 1e-6;
-    for (int i = 0; i < 15; ++i) {
-      const Vector15d d = eps * Vector15d::Unit(i);
-      const NavState plus = integrateImu(perturbLeft(s, d), gyro, accel, kGravity, dt);
-      const NavState minus = integrateImu(perturbLeft(s, -d), gyro, accel, kGravity, dt);
-      numeric.col(i) = (leftError(next, plus) - leftError(next, minus)) / (2.0 * eps);
-    }
+    const Matrix15d numeric = numericalTransition(s, gyro, accel, dt);
     const Matrix15d phi = leftErrorTransition(gyro - s.gyro_bias, accel - s.accel_bias, dt);
     EXPECT_LT((phi - numeric).norm(), 1e-6 * numeric.norm()) << "dt " << dt;
   }
