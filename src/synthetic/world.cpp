@@ -147,6 +147,38 @@ inline Eigen::Vector3d rotateZ(const Eigen::Vector3d& v, double c, double s) {
 
 namespace {
 
+// Slab test for a box whose faces are aligned with the axes of o and inverse_d (the map's for
+// buildings and most fences, with the inverse direction precomputed; the box's own for a rotated
+// one). An infinite inverse is a ray parallel to the slab.
+inline bool intersectAlignedBox(const Eigen::Vector3d& center, const Eigen::Vector3d& half,
+                                const Eigen::Vector3d& o, const Eigen::Vector3d& inverse_d,
+                                double t_min, double t_max, double* t_hit,
+                                Eigen::Vector3d* normal) {
+  double t_near = -std::numeric_limits<double>::infinity();
+  double t_far = std::numeric_limits<double>::infinity();
+  int axis = -1;
+  for (int i = 0; i < 3; ++i) {
+    const double lo = center[i] - half[i] - o[i], hi = center[i] + half[i] - o[i];
+    if (std::isinf(inverse_d[i])) {  // parallel to the slab
+      if (lo > 0 || hi < 0) return false;
+      continue;
+    }
+    double t1 = lo * inverse_d[i], t2 = hi * inverse_d[i];
+    if (t1 > t2) std::swap(t1, t2);
+    if (t1 > t_near) {
+      t_near = t1;
+      axis = i;
+    }
+    t_far = std::min(t_far, t2);
+    if (t_near > t_far) return false;
+  }
+  if (axis < 0 || t_near <= t_min || t_near >= t_max) return false;
+  *t_hit = t_near;
+  *normal = Eigen::Vector3d::Zero();
+  (*normal)[axis] = inverse_d[axis] > 0 ? -1.0 : 1.0;
+  return true;
+}
+
 // The intersection proper, with the box's cos/sin(yaw) precomputed (the world caches them: the
 // trigonometry was a large part of a camera frame).
 bool intersectPrimitive(const Primitive& primitive, double c, double s,
@@ -156,31 +188,15 @@ bool intersectPrimitive(const Primitive& primitive, double c, double s,
   const Eigen::Vector3d o = origin - primitive.center;
   switch (primitive.type) {
     case PrimitiveType::kBox: {
+      // In the box's own axes (rays starting inside a box, never the case for sensors, see
+      // nothing of it).
       const Eigen::Vector3d lo = rotateZ(o, c, -s);
       const Eigen::Vector3d ld = rotateZ(dir, c, -s);
-      double t_near = -std::numeric_limits<double>::infinity();
-      double t_far = std::numeric_limits<double>::infinity();
-      int axis = -1;
-      for (int i = 0; i < 3; ++i) {
-        if (std::abs(ld[i]) < 1e-12) {
-          if (std::abs(lo[i]) > half_size[i]) return false;
-          continue;
-        }
-        double t1 = (-half_size[i] - lo[i]) / ld[i];
-        double t2 = (half_size[i] - lo[i]) / ld[i];
-        if (t1 > t2) std::swap(t1, t2);
-        if (t1 > t_near) {
-          t_near = t1;
-          axis = i;
-        }
-        t_far = std::min(t_far, t2);
-        if (t_near > t_far) return false;
+      Eigen::Vector3d n_local;
+      if (!intersectAlignedBox(Eigen::Vector3d::Zero(), half_size, lo, ld.cwiseInverse(), t_min,
+                               t_max, t_hit, &n_local)) {
+        return false;
       }
-      // Rays starting inside a box (never the case for sensors) see nothing of it.
-      if (axis < 0 || t_near <= t_min || t_near >= t_max) return false;
-      *t_hit = t_near;
-      Eigen::Vector3d n_local = Eigen::Vector3d::Zero();
-      n_local[axis] = ld[axis] > 0 ? -1.0 : 1.0;
       *normal = rotateZ(n_local, c, s);
       return true;
     }
@@ -232,37 +248,6 @@ bool intersectPrimitive(const Primitive& primitive, double c, double s,
     }
   }
   return false;
-}
-
-// Slab test for a box whose faces are aligned with the map axes (buildings, most fences):
-// multiplications by the precomputed inverse direction instead of a rotation and divisions.
-inline bool intersectAlignedBox(const Eigen::Vector3d& center, const Eigen::Vector3d& half,
-                                const Eigen::Vector3d& o, const Eigen::Vector3d& inverse_d,
-                                double t_min, double t_max, double* t_hit,
-                                Eigen::Vector3d* normal) {
-  double t_near = -std::numeric_limits<double>::infinity();
-  double t_far = std::numeric_limits<double>::infinity();
-  int axis = -1;
-  for (int i = 0; i < 3; ++i) {
-    const double lo = center[i] - half[i] - o[i], hi = center[i] + half[i] - o[i];
-    if (std::isinf(inverse_d[i])) {  // parallel to the slab
-      if (lo > 0 || hi < 0) return false;
-      continue;
-    }
-    double t1 = lo * inverse_d[i], t2 = hi * inverse_d[i];
-    if (t1 > t2) std::swap(t1, t2);
-    if (t1 > t_near) {
-      t_near = t1;
-      axis = i;
-    }
-    t_far = std::min(t_far, t2);
-    if (t_near > t_far) return false;
-  }
-  if (axis < 0 || t_near <= t_min || t_near >= t_max) return false;
-  *t_hit = t_near;
-  *normal = Eigen::Vector3d::Zero();
-  (*normal)[axis] = inverse_d[axis] > 0 ? -1.0 : 1.0;
-  return true;
 }
 
 }  // namespace
