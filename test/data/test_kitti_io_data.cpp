@@ -17,6 +17,7 @@
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "kitti_format_error.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {
@@ -31,24 +32,8 @@ const char kDrive0001[] = "data/kitti_raw/2011_09_26/2011_09_26_drive_0001_sync"
 const char kDrive0005[] = "data/kitti_raw/2011_09_26/2011_09_26_drive_0005_sync";
 const char kDate0926[] = "data/kitti_raw/2011_09_26";
 
-void writeFile(const std::string& path, const std::string& content) {
-  fs::create_directories(fs::path(path).parent_path());
-  std::ofstream(path, std::ios::binary) << content;
-}
-
-// Runs `body`, expects a KittiFormatError whose message contains every fragment.
-template <typename Body>
-void expectFormatError(Body body, const std::vector<std::string>& fragments) {
-  try {
-    body();
-    ADD_FAILURE() << "expected KittiFormatError";
-  } catch (const KittiFormatError& error) {
-    for (const auto& fragment : fragments) {
-      EXPECT_NE(std::string(error.what()).find(fragment), std::string::npos)
-          << "'" << fragment << "' not in: " << error.what();
-    }
-  }
-}
+using test::expectFormatError;
+using test::writeFile;
 
 TEST(KittiTimestamps, ReadsRealFileAndNamesBadLine) {
   ISM_REQUIRE_SHARED(kDrive0001);

@@ -19,10 +19,7 @@ namespace test_drive {
 
 namespace fs = std::filesystem;
 
-inline void writeFile(const std::string& path, const std::string& content) {
-  fs::create_directories(fs::path(path).parent_path());
-  std::ofstream(path, std::ios::binary) << content;
-}
+using test::writeFile;
 
 inline kitti::OxtsRecord recordAt(int frame) {
   kitti::OxtsRecord r;

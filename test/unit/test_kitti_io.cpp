@@ -17,6 +17,7 @@
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
+#include "kitti_format_error.h"
 #include "test_data.h"
 
 namespace inekf_semantic_mapping {
@@ -24,27 +25,10 @@ namespace kitti {
 namespace {
 
 namespace fs = std::filesystem;
+using test::expectFormatError;
 using test::makeTempDir;
 using test::sharedPath;
-
-void writeFile(const std::string& path, const std::string& content) {
-  fs::create_directories(fs::path(path).parent_path());
-  std::ofstream(path, std::ios::binary) << content;
-}
-
-// Runs `body`, expects a KittiFormatError whose message contains every fragment.
-template <typename Body>
-void expectFormatError(Body body, const std::vector<std::string>& fragments) {
-  try {
-    body();
-    ADD_FAILURE() << "expected KittiFormatError";
-  } catch (const KittiFormatError& error) {
-    for (const auto& fragment : fragments) {
-      EXPECT_NE(std::string(error.what()).find(fragment), std::string::npos)
-          << "'" << fragment << "' not in: " << error.what();
-    }
-  }
-}
+using test::writeFile;
 
 const char kLine0001Frame0[] =
     "49.015003823272 8.4342971002335 116.43032836914 0.035752 0.00903 -2.6087069803847 "
