@@ -209,12 +209,10 @@ std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {
   // Check the tree type in the header before octomap's factory builds anything: octomap's own
   // readers recurse without a depth limit.
   std::string line;
-  std::string id;
-  for (int i = 0; i < 8 && std::getline(in, line); ++i) {
-    if (line.rfind("id ", 0) == 0) {
-      id = line.substr(3);
-      break;
-    }
+  std::string id, size_text;
+  for (int i = 0; i < 12 && std::getline(in, line) && line != "data"; ++i) {
+    if (line.rfind("id ", 0) == 0) id = line.substr(3);
+    if (line.rfind("size ", 0) == 0) size_text = line.substr(5);
   }
   if (id != "SemanticOcTree") {
     throw MapIoError("map '" + path + "' holds " + (id.empty() ? "no octomap header" : "a " + id) +
@@ -229,10 +227,19 @@ std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {
     throw MapIoError("map '" + path + "' holds a " + tree->getTreeType() +
                      ", not a SemanticOcTree");
   }
+  // octomap reads the node data only when the header's size is above 0: a file claiming 0
+  // would load as an empty map whatever follows, unchecked. Its class table and integrity
+  // record are read here, and must say 0 nodes too.
+  const bool header_says_empty = size_text == "0";
+  if (header_says_empty && !in.fail()) semantic->readData(in);
   if (in.fail() || !semantic->readError().empty()) {
     throw MapIoError(
         "cannot read map '" + path + "': " +
         (semantic->readError().empty() ? "truncated or corrupt data" : semantic->readError()));
+  }
+  if (std::to_string(semantic->size()) != size_text) {
+    throw MapIoError("cannot read map '" + path + "': its header says size " + size_text +
+                     ", its data holds " + std::to_string(semantic->size()) + " nodes");
   }
   tree.release();
   return std::unique_ptr<SemanticOcTree>(semantic);

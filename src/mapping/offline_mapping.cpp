@@ -38,20 +38,37 @@ void finishRun(SemanticMappingSession* session, std::ostream* progress) {
 
 }  // namespace
 
-std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans) {
+std::vector<ScanFile> listScanFiles(const std::string& scans_dir, int max_scans) {
   if (!fs::is_directory(scans_dir)) {
     throw std::runtime_error(scans_dir + ": scans directory not found");
   }
-  std::vector<std::string> paths;
+  if (max_scans == 0) throw std::invalid_argument("max_scans 0: no scan to map");
+  std::vector<ScanFile> scans;
   for (const auto& entry : fs::directory_iterator(scans_dir)) {
-    if (entry.path().extension() == ".bin") paths.push_back(entry.path().string());
+    if (entry.path().extension() != ".bin") continue;
+    const std::string stem = entry.path().stem().string();
+    // The whole name, digits only: "000001_copy.bin" was mapped as frame 1 a second time.
+    if (stem.empty() || stem.size() > 9 || !std::all_of(stem.begin(), stem.end(), [](char c) {
+          return std::isdigit(static_cast<unsigned char>(c));
+        })) {
+      throw std::runtime_error(entry.path().string() + ": scan name is not a frame number");
+    }
+    scans.push_back({entry.path().string(), static_cast<std::size_t>(std::stoul(stem))});
   }
-  std::sort(paths.begin(), paths.end());
-  if (paths.empty()) throw std::runtime_error(scans_dir + ": no .bin scans");
-  if (max_scans >= 0 && paths.size() > static_cast<std::size_t>(max_scans)) {
-    paths.resize(static_cast<std::size_t>(max_scans));
+  if (scans.empty()) throw std::runtime_error(scans_dir + ": no .bin scans");
+  // By frame number, not by name: "10.bin" sorts before "2.bin".
+  std::sort(scans.begin(), scans.end(),
+            [](const ScanFile& a, const ScanFile& b) { return a.frame < b.frame; });
+  for (std::size_t i = 1; i < scans.size(); ++i) {
+    if (scans[i].frame == scans[i - 1].frame) {
+      throw std::runtime_error(scans[i - 1].path + " and " + scans[i].path + " are both frame " +
+                               std::to_string(scans[i].frame));
+    }
   }
-  return paths;
+  if (max_scans > 0 && scans.size() > static_cast<std::size_t>(max_scans)) {
+    scans.resize(static_cast<std::size_t>(max_scans));
+  }
+  return scans;
 }
 
 CameraModel odometryColorCamera(const std::string& calib_path, int width, int height) {
@@ -67,28 +84,17 @@ CameraModel odometryColorCamera(const std::string& calib_path, int width, int he
 
 void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress) {
-  const std::vector<std::string> scan_paths = listScanFiles(sequence.scans_dir, sequence.max_scans);
+  const std::vector<ScanFile> scans = listScanFiles(sequence.scans_dir, sequence.max_scans);
   const std::vector<Eigen::Isometry3d> poses = kitti::readKittiPoses(sequence.poses_path);
   const Eigen::Isometry3d T_cam0_velo =
       kitti::readObjectCalibration(sequence.calib_path).Tr_velo_to_cam;
   const Eigen::Isometry3d T_velo_cam0 = T_cam0_velo.inverse();
 
   std::size_t total_points = 0;
-  for (std::size_t n = 0; n < scan_paths.size(); ++n) {
-    const fs::path scan_path(scan_paths[n]);
+  for (std::size_t n = 0; n < scans.size(); ++n) {
+    const fs::path scan_path(scans[n].path);
     const std::string stem = scan_path.stem().string();
-    std::size_t frame = 0;
-    std::size_t digits = 0;
-    try {
-      frame = std::stoul(stem, &digits);
-    } catch (const std::exception&) {
-      digits = 0;
-    }
-    // The whole name: "000001_copy.bin" was mapped as frame 1 a second time.
-    if (digits == 0 || digits != stem.size() ||
-        !std::isdigit(static_cast<unsigned char>(stem[0]))) {
-      throw std::runtime_error(scan_path.string() + ": scan name is not a frame number");
-    }
+    const std::size_t frame = scans[n].frame;
     if (frame >= poses.size()) {
       throw std::runtime_error(sequence.poses_path + ": no pose for scan " + scan_path.string() +
                                " (" + std::to_string(poses.size()) + " poses)");
@@ -143,7 +149,7 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
     if (sequence.on_scan_inserted) sequence.on_scan_inserted(T_w_velo);
     total_points += velodyne.size();
     if (progress) {
-      *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scan_paths.size() << " ("
+      *progress << "[semantic_map_offline] scan " << (n + 1) << "/" << scans.size() << " ("
                 << scan_path.filename().string() << ", " << velodyne.size() << " points, "
                 << evidence << "), map " << session->mapSizeText() << "\n";
     }
@@ -151,11 +157,13 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   finishRun(session, progress);
   if (progress) {
     *progress << "[semantic_map_offline] inserted " << total_points << " points from "
-              << scan_paths.size() << " scans\n";
+              << scans.size() << " scans\n";
   }
 }
 
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit) {
+  // An empty map written with exit status 0 would look like a map.
+  if (drive.max_scans == 0) throw std::invalid_argument("max_scans 0: no scan to map");
   const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
   if (!raw.hasVelodyne()) throw std::runtime_error(drive.drive_dir + ": no velodyne_points/");
   if (!raw.hasCalibration()) {
@@ -177,7 +185,7 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
   std::size_t frames = raw.velodyne().size();
   // An empty drive would be written out as an empty map, with no word of why.
   if (frames == 0) throw std::runtime_error(drive.drive_dir + "/velodyne_points: no scans");
-  if (drive.max_scans >= 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  if (drive.max_scans > 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
   const std::string poses_source =
       drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path;
   if (frames > T_map_imu.size()) {

@@ -10,7 +10,15 @@ namespace inekf_semantic_mapping {
 namespace mapping {
 
 ClassSet::ClassSet(std::vector<ClassInfo> classes) {
-  for (const ClassInfo& info : classes) addLabel(info.label_id, info.name, info.rgb);
+  for (const ClassInfo& info : classes) {
+    // A second entry of one id would be dropped and shift every later class's index.
+    if (indexOf(info.label_id) != kNoClass) {
+      throw std::invalid_argument("label id " + std::to_string(info.label_id) +
+                                  " is listed twice ('" + classes_[indexOf(info.label_id)].name +
+                                  "' and '" + info.name + "')");
+    }
+    addLabel(info.label_id, info.name, info.rgb);
+  }
 }
 
 ClassSet ClassSet::cityscapes() {

@@ -47,8 +47,16 @@ void SemanticMappingConfig::validate() const {
   require(occupancy.clamping_min > 0 && occupancy.clamping_min < occupancy.clamping_max &&
               occupancy.clamping_max < 1,
           "sensor_model.clamping_min/clamping_max", "must satisfy 0 < min < max < 1");
-  require(fusion.correct_probability > 0 && fusion.correct_probability < 1, "confusion_probability",
-          "must be in (0, 1)");
+  // The Bayes rule multiplies an observed class by c and every other by (1 - c) / (N - 1): at or
+  // below 1/N an observation counts against its own class.
+  const int classes =
+      (class_set == MapClassSet::kCityscapes ? ClassSet::cityscapes() : ClassSet::semanticKitti())
+          .size();
+  require(fusion.correct_probability > 1.0 / classes && fusion.correct_probability < 1,
+          "confusion_probability",
+          "must be in (1/N, 1) = (" + std::to_string(1.0 / classes) + ", 1) for the " +
+              std::to_string(classes) + " " + mapClassSetName(class_set) +
+              " classes: at or below 1/N an observation would count against its own class");
   require(fusion.dirichlet_prior > 0, "dirichlet_prior", "must be > 0");
   require(grazing_ray_truncation_voxels >= 0, "grazing_ray_truncation_voxels", "must be >= 0");
   require(ray_casting_threads >= 1 && ray_casting_threads <= 64, "ray_casting_threads",

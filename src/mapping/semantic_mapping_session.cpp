@@ -31,12 +31,14 @@ SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& conf
   }
 }
 
+ClassSet SemanticMappingSession::configuredClassSet() const {
+  return config_.class_set == MapClassSet::kCityscapes ? ClassSet::cityscapes()
+                                                       : ClassSet::semanticKitti();
+}
+
 std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
-  auto tree = std::make_unique<SemanticOcTree>(config_.resolution_m,
-                                               config_.class_set == MapClassSet::kCityscapes
-                                                   ? ClassSet::cityscapes()
-                                                   : ClassSet::semanticKitti(),
-                                               config_.fusion);
+  auto tree =
+      std::make_unique<SemanticOcTree>(config_.resolution_m, configuredClassSet(), config_.fusion);
   tree->setOccupancyModel(config_.occupancy);
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
@@ -478,6 +480,22 @@ void SemanticMappingSession::load(const std::string& path) {
     throw MapIoError(path + ": map resolution " + std::to_string(loaded->getResolution()) +
                      " m differs from the configured " + std::to_string(config_.resolution_m) +
                      " m");
+  }
+  // The class indices the map stores stand for its own table's label ids, and the labels to come
+  // are in the configured set's: the configured set must be where the map's table begins (the
+  // map may have added ids it met since, never reordered). A SemanticKITTI map loaded into a
+  // Cityscapes session would have turned each new camera label into another class.
+  const ClassSet expected = configuredClassSet();
+  const ClassSet& found = loaded->classSet();
+  bool same_ids = found.size() >= expected.size();
+  for (int i = 0; same_ids && i < expected.size(); ++i) {
+    same_ids = found.info(i).label_id == expected.info(i).label_id;
+  }
+  if (!same_ids) {
+    throw MapIoError(path + ": the map's classes (" + std::to_string(found.size()) +
+                     ", the first '" + (found.size() > 0 ? found.info(0).name : "none") +
+                     "') are not the configured class set " + mapClassSetName(config_.class_set) +
+                     " (" + std::to_string(expected.size()) + " classes)");
   }
   loaded->setOccupancyModel(config_.occupancy);
   loaded->setRayCastingThreads(config_.ray_casting_threads);

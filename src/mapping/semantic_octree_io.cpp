@@ -1,5 +1,6 @@
 // SemanticOcTree's file format: the class table and fusion model before octomap's node data, an
 // integrity record (node count, length, checksum) and a reader that refuses what it cannot trust.
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -229,9 +230,18 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
       return refuse(s, "integrity record: " + std::to_string(length) + " bytes for " +
                            std::to_string(node_count) + " nodes");
     }
-    bytes.resize(length);
-    if (!s.read(bytes.data(), static_cast<std::streamsize>(length))) {
-      return refuse(s, "truncated node data (" + std::to_string(length) + " bytes announced)");
+    // Read in chunks: the memory follows the bytes that are there, not the length a (crafted)
+    // record announces.
+    constexpr std::uint64_t kChunk = std::uint64_t{1} << 24;
+    while (bytes.size() < length) {
+      const std::size_t before = bytes.size();
+      const std::size_t chunk = static_cast<std::size_t>(std::min(kChunk, length - before));
+      bytes.resize(before + chunk);
+      if (!s.read(bytes.data() + before, static_cast<std::streamsize>(chunk))) {
+        return refuse(s, "truncated node data (" + std::to_string(length) + " bytes announced, " +
+                             std::to_string(before + static_cast<std::size_t>(s.gcount())) +
+                             " there)");
+      }
     }
     if (fnv1a(bytes) != checksum) return refuse(s, "checksum mismatch: the node data is corrupt");
   } else {
@@ -239,11 +249,16 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
     bytes.assign(std::istreambuf_iterator<char>(s), std::istreambuf_iterator<char>());
     node_count = bytes.size() / kSerializedNodeBytes;
   }
-  std::istringstream nodes(bytes);
   if (root) return refuse(s, "reading into a tree that is not empty");
+  if (node_count == 0) {  // an empty map: its class table and fusion model, no node
+    tree_size = 0;
+    size_changed = true;
+    return s;
+  }
+  std::istringstream nodes(bytes);
   root = new SemanticOcTreeNode();
-  std::uint64_t nodes_read = 0;
-  if (!readNodesChecked(root, nodes, 0, node_count, &nodes_read)) {
+  std::uint64_t nodes_read = 0, voxels = 0;
+  if (!readNodesChecked(root, nodes, 0, node_count, &nodes_read, &voxels)) {
     clear();
     return refuse(s, read_error_);
   }
@@ -258,9 +273,13 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
 }
 
 // octomap's readNodesRecurs without its dangers: the depth is bounded by the tree depth, the
-// node count by the file, and every stored class index and count is checked.
+// node count by the file, and every stored class index and count is checked. A leaf stands for
+// 8^(tree depth - its depth) voxels, which the grid and the PLY writer expand: a leaf coarser
+// than kMaxLeafSpanLevels (256 voxels a side: no lidar sees such a block all free or all
+// occupied) or more than kMaxMapVoxels in all are refused (a 237-byte file held 2^48).
 bool SemanticOcTree::readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
-                                      std::uint64_t max_nodes, std::uint64_t* nodes_read) {
+                                      std::uint64_t max_nodes, std::uint64_t* nodes_read,
+                                      std::uint64_t* voxels) {
   if (++*nodes_read > max_nodes) return fail(s, "more nodes than the file records");
   node->readData(s);
   std::uint8_t children = 0;
@@ -275,9 +294,22 @@ bool SemanticOcTree::readNodesChecked(SemanticOcTreeNode* node, std::istream& s,
   if (children != 0 && depth >= tree_depth) {
     return fail(s, "children below the finest level (depth " + std::to_string(depth) + ")");
   }
+  if (children == 0) {
+    const unsigned int levels = tree_depth - depth;
+    if (levels > kMaxLeafSpanLevels) {
+      return fail(s, "a leaf at depth " + std::to_string(depth) + " stands for " +
+                         std::to_string(1u << levels) + " voxels a side (at most " +
+                         std::to_string(1u << kMaxLeafSpanLevels) + ")");
+    }
+    *voxels += std::uint64_t{1} << (3 * levels);
+    if (*voxels > kMaxMapVoxels) {
+      return fail(s, "the leaves stand for more than " + std::to_string(kMaxMapVoxels) + " voxels");
+    }
+  }
   for (unsigned int i = 0; i < 8; ++i) {
     if (children & (1u << i)) {
-      if (!readNodesChecked(createNodeChild(node, i), s, depth + 1, max_nodes, nodes_read)) {
+      if (!readNodesChecked(createNodeChild(node, i), s, depth + 1, max_nodes, nodes_read,
+                            voxels)) {
         return false;
       }
     }

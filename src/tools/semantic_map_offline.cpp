@@ -222,6 +222,10 @@ int main(int argc, char** argv) {
                                         "--label-min-probability"},
                                        {"--octomap-reference"});
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
+    const int max_scans = cli.getInt("--max-scans", -1);
+    if (cli.has("--max-scans") && max_scans < 1) {
+      throw ism::common::UsageError("--max-scans must be at least 1 (without it: every scan)");
+    }
     const bool raw_drive = cli.has("--drive");
     if (raw_drive == cli.has("--scans")) throw UsageError("give --scans or --drive");
     if (cli.has("--labels") && (cli.has("--images") || cli.has("--model"))) {
@@ -310,7 +314,7 @@ int main(int argc, char** argv) {
       drive.calib_dir = cli.get("--calib-dir");
       drive.poses_path = cli.get("--poses");
       drive.camera_index = cli.getInt("--camera", 2);
-      drive.max_scans = cli.getInt("--max-scans", -1);
+      drive.max_scans = max_scans;
       drive.on_scan_inserted = on_scan_inserted;
       mapping::mapRawDrive(drive, &session, labels_source, &std::cerr);
     } else {
@@ -319,7 +323,7 @@ int main(int argc, char** argv) {
       sequence.poses_path = cli.require("--poses");
       sequence.calib_path = cli.require("--calib");
       sequence.labels_dir = cli.get("--labels");
-      sequence.max_scans = cli.getInt("--max-scans", -1);
+      sequence.max_scans = max_scans;
       sequence.on_scan_inserted = on_scan_inserted;
       mapping::mapSequence(sequence, &session, labels_source, &std::cerr);
     }

@@ -139,6 +139,37 @@ TEST_F(OfflineMappingTest, ScanNamesAreWholeFrameNumbersAndADriveNeedsScans) {
   }
 }
 
+// Found by review: 1.bin and 000001.bin were both mapped as frame 1, names were sorted as text
+// ("10.bin" before "2.bin"), and --max-scans 0 wrote an empty map with exit status 0.
+TEST_F(OfflineMappingTest, ScansAreInFrameOrderOncePerFrame) {
+  const std::string names_dir = dir_ + "/names";
+  std::filesystem::create_directories(names_dir);
+  for (const char* name : {"10.bin", "2.bin", "000003.bin", "notes.txt"}) {
+    std::ofstream(names_dir + "/" + name);
+  }
+  const std::vector<ScanFile> scans = listScanFiles(names_dir, -1);
+  ASSERT_EQ(scans.size(), 3u);
+  EXPECT_EQ(scans[0].frame, 2u);
+  EXPECT_EQ(scans[1].frame, 3u);
+  EXPECT_EQ(scans[2].frame, 10u);
+  EXPECT_EQ(std::filesystem::path(scans[2].path).filename(), "10.bin");
+  ASSERT_EQ(listScanFiles(names_dir, 2).size(), 2u);
+  EXPECT_THROW(listScanFiles(names_dir, 0), std::invalid_argument);
+
+  std::filesystem::copy_file(dir_ + "/velodyne/000001.bin", dir_ + "/velodyne/1.bin");
+  try {
+    buildMap(options());
+    ADD_FAILURE() << "1.bin and 000001.bin were both mapped";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("are both frame 1"), std::string::npos)
+        << error.what();
+  }
+  OfflineRawDrive none;
+  none.drive_dir = dir_;
+  none.max_scans = 0;
+  EXPECT_THROW(forEachRawDriveScan(none, [](auto&&...) {}), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -111,6 +112,10 @@ TEST(SemanticMappingConfigTest, ErrorsNameTheSourceAndTheKey) {
   EXPECT_NE(message("ray_casting_threads: 1.5").find("'ray_casting_threads'"), std::string::npos);
   EXPECT_NE(message("class_set: coco").find("class_set"), std::string::npos);
   EXPECT_NE(message("fusion_rule: vote").find("fusion_rule"), std::string::npos);
+  // Below 1/N (34 Cityscapes classes) the Bayes rule favoured the least-observed class.
+  EXPECT_NE(message("confusion_probability: 0.02").find("confusion_probability"),
+            std::string::npos);
+  EXPECT_EQ(message("confusion_probability: 0.05"), "no error");
   // Choices are parsed once, into enums; a bad name lists the good ones.
   EXPECT_NE(message("insertion: voxblox")
                 .find("key 'insertion' must be hashed_grid or octree, got 'voxblox'"),
@@ -735,6 +740,101 @@ TEST(SemanticMapFileTest, CorruptOrCraftedMapsAreRefusedWithAReason) {
   SemanticMappingSession loaded(testConfig());
   loaded.load(good);
   EXPECT_EQ(serialized(loaded), serialized(session));
+  std::filesystem::remove_all(dir);
+}
+
+// What the octomap header, the class table and the leaves say must be what the reader builds
+// from: each case here loaded before as another map (or ran out of memory).
+TEST(SemanticMapFileTest, HeaderClassTableAndLeavesCannotStandForAnotherMap) {
+  SemanticMappingSession session(testConfig());
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  const CameraModel camera = testCamera();
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+  const std::string dir = test::makeTempDir("map_header");
+  const std::string good = dir + "/map.ot";
+  session.save(good, MapFormat::kSemanticOt);
+  std::ifstream in(good, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto write = [&](const std::string& name, const std::string& content) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << content;
+    return dir + "/" + name;
+  };
+  const auto refusal = [&](const std::string& path, const SemanticMappingConfig& config) {
+    SemanticMappingSession target(config);
+    try {
+      target.load(path);
+    } catch (const MapIoError& e) {
+      return std::string(e.what());
+    }
+    return std::string("loaded");
+  };
+  const std::size_t size_at = bytes.find("\nsize ") + 6;
+  const std::size_t size_end = bytes.find('\n', size_at);
+  const std::size_t data_at = bytes.find("\ndata\n") + 6;
+  ASSERT_NE(bytes.find("\nsize "), std::string::npos);
+
+  // A header saying size 0 made octomap skip the node data and every check of it.
+  const std::string size0 = bytes.substr(0, size_at) + "0" + bytes.substr(size_end);
+  EXPECT_NE(refusal(write("size0.ot", size0), testConfig()).find("header says size 0"),
+            std::string::npos);
+  EXPECT_NE(
+      refusal(write("size0_cut.ot", size0.substr(0, size0.find("\ndata\n") + 46)), testConfig()),
+      "loaded");
+
+  // The class table: a label id listed twice would have shifted every later class.
+  std::string twice = bytes;
+  const std::size_t table_at = data_at + sizeof("ISM_SEMANTIC_OCTREE_V2") + 1 + 16 + 4;
+  std::uint32_t first_id = 0, name_length = 0;
+  std::memcpy(&first_id, &twice[table_at], 4);
+  std::memcpy(&name_length, &twice[table_at + 7], 4);
+  std::memcpy(&twice[table_at + 11 + name_length], &first_id, 4);  // the second entry's id
+  EXPECT_NE(refusal(write("twice.ot", twice), testConfig()).find("listed twice"),
+            std::string::npos);
+
+  // The integrity record announcing 64 GB in a file of a few hundred bytes: refused as
+  // truncated, without reserving the memory first.
+  std::string huge = bytes.substr(0, bytes.size() - 17 * session.tree().size());
+  const std::uint64_t nodes = (std::uint64_t{1} << 36) / 17, length = nodes * 17;
+  const std::size_t record_at = huge.size() - 24;
+  std::memcpy(&huge[record_at], &nodes, 8);
+  std::memcpy(&huge[record_at + 8], &length, 8);
+  huge = huge.substr(0, size_at) + std::to_string(nodes) + huge.substr(size_end);
+  EXPECT_NE(refusal(write("huge.ot", huge + std::string(1000, '\0')), testConfig())
+                .find("truncated node data"),
+            std::string::npos);
+
+  // One leaf at the root: 2^48 voxels for the grid or the PLY writer to expand.
+  std::string root_leaf = "# Octomap OcTree file\nid SemanticOcTree\nsize 1\nres 0.1\ndata\n";
+  root_leaf += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
+  root_leaf += '\0';  // bayes
+  const double probability = 0.8, prior = 0.5;
+  root_leaf.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
+  root_leaf.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
+  root_leaf.append(4, '\0');    // no classes
+  const float occupied = 2.0f;  // log-odds
+  root_leaf.append(reinterpret_cast<const char*>(&occupied), sizeof(occupied));
+  root_leaf.append(4, '\xff');  // no classes in the slots
+  root_leaf.append(8, '\0');    // counts
+  root_leaf += '\0';            // no child
+  EXPECT_NE(refusal(write("root_leaf.ot", root_leaf), testConfig()).find("voxels a side"),
+            std::string::npos);
+
+  // A map of another class set: its stored class indices would stand for other label ids.
+  SemanticMappingConfig kitti_classes = testConfig();
+  kitti_classes.class_set = MapClassSet::kSemanticKitti;
+  const std::string why = refusal(good, kitti_classes);
+  EXPECT_NE(why.find("not the configured class set"), std::string::npos) << why;
+  // An empty map keeps its class table too (its header says size 0).
+  SemanticMappingSession empty(kitti_classes);
+  empty.save(dir + "/empty.ot", MapFormat::kSemanticOt);
+  EXPECT_NE(refusal(dir + "/empty.ot", testConfig()).find("not the configured class set"),
+            std::string::npos);
+  SemanticMappingSession empty_again(kitti_classes);
+  empty_again.load(dir + "/empty.ot");
+  EXPECT_EQ(empty_again.tree().size(), 0u);
+  // The intact file still loads.
+  EXPECT_EQ(refusal(good, testConfig()), "loaded");
   std::filesystem::remove_all(dir);
 }
 

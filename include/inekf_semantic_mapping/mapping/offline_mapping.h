@@ -28,7 +28,7 @@ struct OfflineSequence {
   std::string labels_dir;  // per-point labels; empty: none
   std::string poses_path;
   std::string calib_path;
-  int max_scans = -1;                  // < 0: all
+  int max_scans = -1;                  // < 0: all (0 is refused)
   std::uint32_t ignored_label_id = 0;  // per-point label "unlabeled": occupancy only
   // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
   std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
@@ -43,8 +43,14 @@ struct OwnedLabelImage {
 // Fills `out` with the label image of the scan named `stem` (e.g. "000042"); false: none.
 using CameraLabelSource = std::function<bool(const std::string& stem, OwnedLabelImage* out)>;
 
-// The scans of a sequence directory in frame order (NNNNNN.bin), at most max_scans (< 0: all).
-std::vector<std::string> listScanFiles(const std::string& scans_dir, int max_scans);
+struct ScanFile {
+  std::string path;
+  std::size_t frame = 0;  // the number its name is
+};
+// The scans of a sequence directory in frame order (NNNNNN.bin, the name a number), at most
+// max_scans (< 0: all; 0 is refused). Throws on a name that is not a number and on two files of
+// one frame (1.bin and 000001.bin).
+std::vector<ScanFile> listScanFiles(const std::string& scans_dir, int max_scans);
 
 // The left colour camera (P2) of an odometry calib.txt, for images of width x height.
 CameraModel odometryColorCamera(const std::string& calib_path, int width, int height);
@@ -57,7 +63,7 @@ struct OfflineRawDrive {
   std::string poses_path;  // IMU poses in the map frame, one 3x4 per frame (inekf_offline
                            // --output-kitti); "" = the OXTS RTK/INS solution
   int camera_index = 2;
-  int max_scans = -1;  // < 0: all
+  int max_scans = -1;  // < 0: all (0 is refused)
   // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
   std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
 };

@@ -41,6 +41,7 @@ struct ClassInfo {
 class ClassSet {
  public:
   ClassSet() = default;
+  // Throws std::invalid_argument when a label id is listed twice.
   explicit ClassSet(std::vector<ClassInfo> classes);
 
   // The 34 Cityscapes labelIds with their official palette (the package's default id space).

@@ -175,8 +175,12 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
  protected:
   bool fail(std::istream& s, const std::string& why);
   std::istream& refuse(std::istream& s, const std::string& why);
+  // The coarsest leaf a file may hold (levels above the finest) and the most voxels its leaves
+  // may stand for (what the grid and the PLY writer expand them to).
+  static constexpr unsigned int kMaxLeafSpanLevels = 8;
+  static constexpr std::uint64_t kMaxMapVoxels = std::uint64_t{1} << 32;
   bool readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
-                        std::uint64_t max_nodes, std::uint64_t* nodes_read);
+                        std::uint64_t max_nodes, std::uint64_t* nodes_read, std::uint64_t* voxels);
   void updateInnerOccupancyRecurs(SemanticOcTreeNode* node, unsigned int depth);
   // One voxel update of a batch: Morton code of its key; class evidence for a hit, null for a
   // miss.
