@@ -76,6 +76,19 @@ std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
 // Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
 // over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
 // channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
+// The network input's valid region (the image without its padding) in the pixels of an output
+// of width x height, rounded to the nearest output pixel edges and at least one pixel.
+cv::Rect validRegionInOutput(const cv::Rect& valid, const cv::Size& input, int width, int height) {
+  const auto scale = [](int at, int output, int input_size) {
+    return static_cast<int>((static_cast<long long>(at) * output + input_size / 2) / input_size);
+  };
+  const int x0 = std::clamp(scale(valid.x, width, input.width), 0, width - 1);
+  const int y0 = std::clamp(scale(valid.y, height, input.height), 0, height - 1);
+  const int x1 = std::clamp(scale(valid.x + valid.width, width, input.width), x0 + 1, width);
+  const int y1 = std::clamp(scale(valid.y + valid.height, height, input.height), y0 + 1, height);
+  return cv::Rect(x0, y0, x1 - x0, y1 - y0);
+}
+
 void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
                 const std::vector<float>& column_weight, const std::vector<float>& row_weight,
                 std::vector<cv::Mat>* sum) {
@@ -438,8 +451,10 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
     cv::Mat label_ids;
     cv::LUT(best_index, network_->label_lut, label_ids);
 
-    // Back to the input image: crop the padding, nearest-neighbour to the input size.
-    const cv::Rect valid = prepared.valid_region & cv::Rect(0, 0, width, height);
+    // Back to the input image: crop the padding (in the output's pixels: a network with an
+    // output stride labels a coarser grid than its input), nearest-neighbour to the input size.
+    const cv::Rect valid =
+        validRegionInOutput(prepared.valid_region, prepared.network_image.size(), width, height);
     label_ids = label_ids(valid);
     confidence = confidence(valid);
     if (label_ids.size() != bgr.size()) {

@@ -218,6 +218,66 @@ TEST(Segmenter, UnknownModelFormatAndMissingFileAreClearErrors) {
   fs::remove_all(dir);
 }
 
+// A one-operator ONNX model, written byte by byte (protobuf wire format): AveragePool with a
+// k x k kernel and stride k over a 3-channel image of any size, so its output is k times coarser
+// than its input; with a 1/255 scale its three "scores" are the pixel's B, G, R.
+std::string averagePoolOnnx(int k) {
+  const auto varint = [](std::uint64_t n) {
+    std::string out;
+    do {
+      const std::uint8_t low = n & 0x7f;
+      n >>= 7;
+      out += static_cast<char>(n ? (low | 0x80) : low);
+    } while (n);
+    return out;
+  };
+  const auto key = [&](int field, int wire) { return varint((field << 3) | wire); };
+  const auto integer = [&](int field, std::uint64_t n) { return key(field, 0) + varint(n); };
+  const auto bytes = [&](int field, const std::string& b) {
+    return key(field, 2) + varint(b.size()) + b;
+  };
+  const auto ints = [&](const std::string& name, int a, int b) {  // AttributeProto INTS
+    return bytes(1, name) + integer(20, 7) + integer(8, a) + integer(8, b);
+  };
+  const auto value_info = [&](const std::string& name, const std::string& h, const std::string& w) {
+    const std::string shape = bytes(1, integer(1, 1)) + bytes(1, integer(1, 3)) +
+                              bytes(1, bytes(2, h)) + bytes(1, bytes(2, w));
+    return bytes(1, name) + bytes(2, bytes(1, integer(1, 1) + bytes(2, shape)));
+  };
+  const std::string node = bytes(1, "x") + bytes(2, "y") + bytes(3, "pool") +
+                           bytes(4, "AveragePool") + bytes(5, ints("kernel_shape", k, k)) +
+                           bytes(5, ints("strides", k, k));
+  const std::string graph = bytes(1, node) + bytes(2, "g") + bytes(11, value_info("x", "h", "w")) +
+                            bytes(12, value_info("y", "h2", "w2"));
+  return integer(1, 7) + bytes(8, bytes(1, "") + integer(2, 11)) + bytes(7, graph);
+}
+
+// A network with an output stride: its labels must land where the image is, in every resize
+// policy (the single pass cropped the padding in input pixels from the coarser output: the
+// labels came out shifted, or an empty crop threw from OpenCV).
+TEST(Segmenter, ACoarserOutputThanInputLabelsTheImageInPlace) {
+  const std::string dir = makeTempDir("coarse_output");
+  const std::string model = dir + "/pool4.onnx";
+  std::ofstream(model, std::ios::binary) << averagePoolOnnx(4);
+  cv::Mat image(400, 1200, CV_8UC3, cv::Scalar(255, 0, 0));         // blue: "sky"
+  image(cv::Rect(0, 200, 1200, 200)).setTo(cv::Scalar(0, 0, 255));  // red below: "car"
+  const std::string common =
+      "mean: [0, 0, 0]\nscale: 0.00392156862745098\nswap_rb: false\n"
+      "num_output_channels: 3\noutput_label_ids: [23, 21, 26]\n";
+  for (const std::string policy :
+       {"input: {width: 0, height: 0}\nresize_policy: pad_to_multiple\npad_multiple: 64\n",
+        "input: {width: 512, height: 512}\nresize_policy: letterbox\n",
+        "input: {width: 512, height: 512}\nresize_policy: letterbox\nflip_average: true\n"}) {
+    const ModelCard card = loadModelCard(writeFile(dir, "card.yaml", common + policy));
+    Segmenter segmenter(model, card, 1);
+    const Segmentation result = segmenter.segment(image);
+    ASSERT_EQ(result.label_ids.size(), image.size()) << policy;
+    EXPECT_EQ(cv::countNonZero(result.label_ids(cv::Rect(0, 0, 1200, 196)) != 23), 0) << policy;
+    EXPECT_EQ(cv::countNonZero(result.label_ids(cv::Rect(0, 204, 1200, 196)) != 26), 0) << policy;
+  }
+  fs::remove_all(dir);
+}
+
 TEST(Palette, ColorsAndTrainIdsFollowCityscapesTable) {
   cv::Mat labels(1, 3, CV_8UC1);
   labels.at<std::uint8_t>(0) = cityscapes::kRoad;
