@@ -129,7 +129,8 @@ void markBeyondCurbLine(const PointMatrixRef& points, const std::vector<Eigen::V
   for (Eigen::Index i = 0; i < points.cols(); ++i) {
     const float x = points(0, i);
     if (!(x >= x_min && x <= x_max)) continue;
-    if (std::abs(points(2, i) - curb_height) >= options.line_height_tolerance_m) continue;
+    // Written so that a NaN height fails it too.
+    if (!(std::abs(points(2, i) - curb_height) < options.line_height_tolerance_m)) continue;
     if ((points(1, i) - (line(0) + line(1) * x)) * side > options.line_margin_m)
       (*beyond)[static_cast<std::size_t>(i)] = 1;
   }
@@ -147,17 +148,31 @@ int markPointsBeyondCurbs(const PointMatrixRef& points, const CurbOptions& optio
   // forward. A lidar spinning the other way does all of it mirrored.
   constexpr float kPi = 3.14159265f;
   constexpr float kRingJump = kPi / 4;
+  // Points without a finite coordinate (an organized cloud's no-returns) take no part: compared
+  // with the last finite point's azimuth, so that they hide no ring's end.
+  std::vector<std::uint8_t> finite(static_cast<std::size_t>(n));
   std::vector<float> azimuth(static_cast<std::size_t>(n));
-  for (Eigen::Index i = 0; i < n; ++i) azimuth[i] = std::atan2(points(1, i), points(0, i));
+  for (Eigen::Index i = 0; i < n; ++i) {
+    finite[i] = points.col(i).allFinite();
+    azimuth[i] = finite[i] ? std::atan2(points(1, i), points(0, i)) : 0.0f;
+  }
   Eigen::Index rising = 0, falling = 0;
-  for (Eigen::Index i = 1; i < n; ++i) {
-    const float change = azimuth[i] - azimuth[i - 1];
-    if (std::abs(change) < 0.01f) (change > 0.0f ? rising : falling) += 1;
+  for (Eigen::Index i = 0, last = -1; i < n; ++i) {
+    if (!finite[i]) continue;
+    if (last >= 0) {
+      const float change = azimuth[i] - azimuth[last];
+      if (std::abs(change) < 0.01f) (change > 0.0f ? rising : falling) += 1;
+    }
+    last = i;
   }
   const float direction = rising >= falling ? 1.0f : -1.0f;
   std::vector<Eigen::Index> ring_starts{0};
-  for (Eigen::Index i = 1; i < n; ++i) {
-    if ((azimuth[i] - azimuth[i - 1]) * direction < -kRingJump) ring_starts.push_back(i);
+  for (Eigen::Index i = 0, last = -1; i < n; ++i) {
+    if (!finite[i]) continue;
+    if (last >= 0 && (azimuth[i] - azimuth[last]) * direction < -kRingJump) {
+      ring_starts.push_back(i);
+    }
+    last = i;
   }
   ring_starts.push_back(n);
   constexpr std::size_t kMinRings = 16;
@@ -172,7 +187,7 @@ int markPointsBeyondCurbs(const PointMatrixRef& points, const CurbOptions& optio
     ranges.clear();
     heights.clear();
     for (Eigen::Index i = ring_starts[r]; i < ring_starts[r + 1]; ++i) {
-      if (std::abs(azimuth[i]) >= kPi / 2 || !std::isfinite(points(2, i))) continue;
+      if (!finite[i] || std::abs(azimuth[i]) >= kPi / 2) continue;
       forward.push_back(i);
       ranges.push_back(std::hypot(points(0, i), points(1, i)));
       heights.push_back(points(2, i));

@@ -451,6 +451,51 @@ TEST(CurbTest, SidewalksBeyondBothKerbsAreFoundAndNoRoadPoint) {
   EXPECT_EQ(countFlags(high_scan, beyond).road_flagged, 0);
 }
 
+// An organized cloud's no-returns (NaN coordinates, any of the three) among the points: the same
+// points are marked as without them (a NaN beside a ring's end hid the end and merged two
+// rings; a NaN x or y passed the forward-half filter and upset the ring's medians).
+TEST(CurbTest, PointsWithoutFiniteCoordinatesChangeNothing) {
+  const Eigen::Matrix3Xf scan = ringOrderedScan(KerbWorld());
+  std::vector<std::uint8_t> clean;
+  const int rings = markPointsBeyondCurbs(scan, CurbOptions(), &clean);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // Every 7th point followed by a NaN one (x, y, z or all in turn), and one after each point
+  // where the azimuth jumps back (a ring's end).
+  std::vector<Eigen::Index> original;
+  std::vector<Eigen::Vector3f> columns;
+  for (Eigen::Index i = 0; i < scan.cols(); ++i) {
+    columns.push_back(scan.col(i));
+    original.push_back(i);
+    const bool ring_end = i + 1 < scan.cols() && std::atan2(scan(1, i + 1), scan(0, i + 1)) <
+                                                     std::atan2(scan(1, i), scan(0, i)) - 0.5f;
+    if (i % 7 == 0 || ring_end) {
+      Eigen::Vector3f bad = scan.col(i);
+      const int which = static_cast<int>(i % 4);
+      if (which == 3) {
+        bad.setConstant(nan);
+      } else {
+        bad[which] = nan;
+      }
+      columns.push_back(bad);
+      original.push_back(-1);
+    }
+  }
+  Eigen::Matrix3Xf holey(3, static_cast<Eigen::Index>(columns.size()));
+  for (std::size_t i = 0; i < columns.size(); ++i)
+    holey.col(static_cast<Eigen::Index>(i)) = columns[i];
+  std::vector<std::uint8_t> marked;
+  EXPECT_EQ(markPointsBeyondCurbs(holey, CurbOptions(), &marked), rings);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < original.size(); ++i) {
+    if (original[i] < 0) {
+      EXPECT_EQ(marked[i], 0) << "a NaN point marked";
+    } else {
+      differ += marked[i] != clean[static_cast<std::size_t>(original[i])];
+    }
+  }
+  EXPECT_EQ(differ, 0u);
+}
+
 TEST(CurbTest, AParkedCarStopsItsRingsAndTheKerbLineStillMarksTheSidewalk) {
   KerbWorld world;
   world.parked_car = true;
