@@ -62,10 +62,19 @@ void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail) {
   if (card.resize_policy != ResizePolicy::kPadToMultiple &&
       (card.input_width == 0 || card.input_height == 0))
     fail("input", "needs width and height > 0 for resize, letterbox and tiles");
-  if (card.pad_multiple < 1) fail("pad_multiple", "must be >= 1");
+  // Network strides are up to 64; a larger multiple pads the image into a canvas OpenCV cannot
+  // allocate (1e9 asked for 3e18 bytes).
+  if (card.pad_multiple < 1 || card.pad_multiple > 1024)
+    fail("pad_multiple", "must be in [1, 1024]");
   if (!(card.resize_factor > 0.0 && card.resize_factor <= 8.0))
     fail("resize_factor", "must be in (0, 8]");
-  if (!(card.scale > 0.0)) fail("scale", "must be > 0");
+  // (pixel - mean) * scale is computed in float: beyond these it overflows to inf and every
+  // pixel becomes one class with full confidence.
+  constexpr double kMaxPixelStatistic = 1e6;
+  if (!(card.scale > 0.0 && card.scale <= kMaxPixelStatistic)) fail("scale", "must be in (0, 1e6]");
+  for (double value : card.mean) {
+    if (!(std::abs(value) <= kMaxPixelStatistic)) fail("mean", "values must be in [-1e6, 1e6]");
+  }
   if (!(card.tile_scale >= 0.0 && card.tile_scale <= 8.0))
     fail("tile_scale", "must be in [0, 8] (0: fit one tile)");
   if (!(card.network_focal_px >= 0.0)) fail("network_focal_px", "must be >= 0 (0: unknown)");
@@ -82,7 +91,8 @@ void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail) {
   if (!(card.gamma >= ModelCard::kMinGamma && card.gamma <= ModelCard::kMaxGamma))
     fail("gamma", "must be in [0.2, 5] (1: no tone curve)");
   for (double value : card.color_std) {
-    if (!(value > 0.0)) fail("color_std", "values must be > 0");
+    if (!(value > 0.0 && value <= kMaxPixelStatistic))
+      fail("color_std", "values must be in (0, 1e6]");
   }
   const LabelFilterOptions& filter = card.label_filter;
   if (!(filter.min_confidence >= 0 && filter.min_confidence < 1))
@@ -90,7 +100,8 @@ void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail) {
   if (filter.boundary_radius_px < 0 || filter.boundary_radius_px > 50)
     fail("label_filter.boundary_radius_px", "must be in [0, 50]");
   for (double value : card.color_mean) {
-    if (!std::isfinite(value)) fail("color_mean", "values must be finite");
+    if (!(std::abs(value) <= kMaxPixelStatistic))
+      fail("color_mean", "values must be in [-1e6, 1e6]");
   }
 }
 

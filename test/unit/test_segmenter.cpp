@@ -177,7 +177,19 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
                 .find("label_filter.min_conf"),
             std::string::npos);
   EXPECT_NE(cardError("input: {width: 10, height: 10}\nmean: [.nan, 0, 0]\noutput_label_ids: [7]\n")
-                .find("finite"),
+                .find("mean"),
+            std::string::npos);
+  // Found by review: a mean beyond float range made every pixel one class at full confidence,
+  // and a pad_multiple of 1e9 an allocation of 3e18 bytes that named neither card nor key.
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nmean: [1e39, 0, 0]\noutput_label_ids: [7]\n")
+                .find("mean"),
+            std::string::npos);
+  EXPECT_NE(cardError("resize_policy: pad_to_multiple\npad_multiple: 1000000000\n"
+                      "output_label_ids: [7]\n")
+                .find("pad_multiple"),
+            std::string::npos);
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\nscale: 1e300\noutput_label_ids: [7]\n")
+                .find("scale"),
             std::string::npos);
   EXPECT_EQ(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7]\n"
                       "validation_miou: 0.9\n"),
