@@ -43,10 +43,10 @@ void PointProjector::project(const PointMatrixRef& points, ProjectedPoints* out)
   const float width = static_cast<float>(width_);
   const float height = static_cast<float>(height_);
   for (Eigen::Index i = 0; i < n; ++i) {
-    const float u = out->u[i];
-    const float v = out->v[i];
-    out->valid[i] = out->depth[i] > min_depth_m_ && u >= 0.f && u < width && v >= 0.f &&
-                    v < height;  // NaN compares false: never valid
+    const float col = nearestPixel(out->u[i]);
+    const float row = nearestPixel(out->v[i]);
+    out->valid[i] = out->depth[i] > min_depth_m_ && col >= 0.f && col < width && row >= 0.f &&
+                    row < height;  // NaN compares false: never valid
   }
 }
 
@@ -57,8 +57,8 @@ void labelPointsFromImage(const ProjectedPoints& projected, const std::uint8_t* 
   labels->assign(n, unknown_label);
   for (std::size_t i = 0; i < n; ++i) {
     if (!projected.valid[i]) continue;
-    const int col = std::min(static_cast<int>(std::lround(projected.u[i])), width - 1);
-    const int row = std::min(static_cast<int>(std::lround(projected.v[i])), height - 1);
+    const int col = std::min(static_cast<int>(nearestPixel(projected.u[i])), width - 1);
+    const int row = std::min(static_cast<int>(nearestPixel(projected.v[i])), height - 1);
     (*labels)[i] = label_image[static_cast<std::size_t>(row) * row_stride_bytes + col];
   }
 }
@@ -81,8 +81,8 @@ std::size_t rasterizePointLabels(const ProjectedPoints& projected,
   std::size_t written = 0;
   for (std::size_t i = 0; i < projected.size(); ++i) {
     if (!projected.valid[i] || labels[i] == skip_label) continue;
-    const int col = std::min(static_cast<int>(std::lround(projected.u[i])), width - 1);
-    const int row = std::min(static_cast<int>(std::lround(projected.v[i])), height - 1);
+    const int col = std::min(static_cast<int>(nearestPixel(projected.u[i])), width - 1);
+    const int row = std::min(static_cast<int>(nearestPixel(projected.v[i])), height - 1);
     const std::size_t pixel = static_cast<std::size_t>(row) * width + col;
     if (!(projected.depth[i] < nearest[pixel])) continue;
     if (nearest[pixel] == std::numeric_limits<float>::infinity()) ++written;
@@ -111,10 +111,11 @@ void rejectOccludedPoints(const ProjectedPoints& projected, int width, int heigh
   const float kFar = std::numeric_limits<float>::infinity();
   std::vector<float> nearest(static_cast<std::size_t>(grid_width) * grid_height, kFar);
   const auto cellOf = [&](std::size_t i) {
-    const int col =
-        std::clamp(static_cast<int>(projected.u[i]) / options.cell_width_px, 0, grid_width - 1);
+    const int col = std::clamp(
+        static_cast<int>(nearestPixel(projected.u[i])) / options.cell_width_px, 0, grid_width - 1);
     const int row =
-        std::clamp(static_cast<int>(projected.v[i]) / options.cell_height_px, 0, grid_height - 1);
+        std::clamp(static_cast<int>(nearestPixel(projected.v[i])) / options.cell_height_px, 0,
+                   grid_height - 1);
     return static_cast<std::size_t>(row) * grid_width + col;
   };
   const std::size_t n = projected.size();

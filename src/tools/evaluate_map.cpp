@@ -132,7 +132,8 @@ int run(const ism::common::CommandLine& cli) {
     const Eigen::Vector3d h = camera.projectHomogeneous(point_velo.cast<double>());
     if (!(h.z() > 0)) return false;
     const double u = h.x() / h.z(), v = h.y() / h.z();
-    return u >= 0 && v >= 0 && u < camera.width && v < camera.height;
+    // Pixel k covers [k - 0.5, k + 0.5), as in the mapping's projection (nearestPixel).
+    return u >= -0.5 && v >= -0.5 && u < camera.width - 0.5 && v < camera.height - 0.5;
   };
 
   ism::evaluation::PointLabelScore score;

@@ -61,7 +61,8 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
     EXPECT_NEAR(u, projected.u[index], 2e-3);
     EXPECT_NEAR(v, projected.v[index], 2e-3);
     EXPECT_GT(depth, 0.0);
-    EXPECT_TRUE(u >= 0 && u < 1224 && v >= 0 && v < 370) << line;
+    // In the image: pixel k covers [k - 0.5, k + 0.5) (the CSV rounds to 1e-3).
+    EXPECT_TRUE(u >= -0.5005 && u < 1223.5005 && v >= -0.5005 && v < 369.5005) << line;
     ++rows;
   }
   EXPECT_EQ(rows, projected.validCount());

@@ -24,20 +24,36 @@ TEST(Projection, ImageBoundsAndNonFiniteInput) {
   P.leftCols<3>() << 100, 0, 50, 0, 100, 25, 0, 0, 1;  // 100x50 image, camera = lidar frame
   const PointProjector projector(P, Eigen::Matrix3d::Identity(), Eigen::Isometry3d::Identity(), 100,
                                  50);
-  Eigen::Matrix3Xf points(3, 6);
+  // Pixel centres at integers: pixel k covers [k - 0.5, k + 0.5), so the image spans
+  // [-0.5, 99.5) x [-0.5, 49.5). (0 <= u < 100 turned points away from pixel 0's left half and
+  // clamped points beyond the last pixel onto it.)
+  Eigen::Matrix3Xf points(3, 9);
   points.col(0) << 0.f, 0.f, 2.f;            // principal point
-  points.col(1) << -0.5f, -0.25f, 1.f;       // exactly the top-left corner (0, 0)
-  points.col(2) << 0.5f, 0.f, 1.f;           // u = 100: just outside
+  points.col(1) << -0.5f, -0.25f, 1.f;       // (0, 0): the centre of the first pixel
+  points.col(2) << 0.5f, 0.f, 1.f;           // u = 100: outside
   points.col(3) << 0.f, 0.f, 0.05f;          // closer than the minimum depth
   points.col(4) << std::nanf(""), 0.f, 1.f;  // NaN never valid
   points.col(5) << 0.49f, 0.24f, 1.f;        // u = 99, v = 49: last pixel
+  points.col(6) << -0.503f, -0.253f, 1.f;    // (-0.3, -0.3): inside pixel (0, 0)
+  points.col(7) << 0.497f, 0.f, 1.f;         // u = 99.7: beyond the last pixel
+  points.col(8) << 0.f, 0.247f, 1.f;         // v = 49.7: below the last row
   ProjectedPoints projected;
   projector.project(points, &projected);
   EXPECT_NEAR(projected.u[0], 50.f, 1e-4);
   EXPECT_NEAR(projected.v[0], 25.f, 1e-4);
-  const std::vector<std::uint8_t> expected_valid = {1, 1, 0, 0, 0, 1};
+  const std::vector<std::uint8_t> expected_valid = {1, 1, 0, 0, 0, 1, 1, 0, 0};
   EXPECT_EQ(projected.valid, expected_valid);
-  EXPECT_EQ(projected.validCount(), 3u);
+  EXPECT_EQ(projected.validCount(), 4u);
+  // The label looked up is the pixel the point falls in.
+  std::vector<std::uint8_t> image(100 * 50, 0);
+  image[0] = 7;
+  image[49 * 100 + 99] = 9;
+  std::vector<std::uint32_t> labels;
+  labelPointsFromImage(projected, image.data(), 100, 50, 100, 255, &labels);
+  EXPECT_EQ(labels[1], 7u);
+  EXPECT_EQ(labels[5], 9u);
+  EXPECT_EQ(labels[6], 7u);
+  EXPECT_EQ(labels[7], 255u);
 
   // Columns of an interleaved x y z intensity buffer project without a copy.
   std::vector<float> xyzi = {0.f, 0.f, 2.f, 0.7f, 0.5f, 0.f, 1.f, 0.1f};

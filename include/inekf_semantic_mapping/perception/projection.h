@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -14,12 +15,17 @@ namespace perception {
 // 3 x N points with any column stride (e.g. the x y z rows of a 4 x N x y z intensity buffer).
 using PointMatrixRef = Eigen::Ref<const Eigen::Matrix3Xf, 0, Eigen::OuterStride<>>;
 
+// The pixel a coordinate falls in: pixel centres at integers (OpenCV's convention), so pixel k
+// covers [k - 0.5, k + 0.5). NaN stays NaN (it compares false with any bound).
+inline float nearestPixel(float coordinate) { return std::floor(coordinate + 0.5f); }
+
 struct ProjectedPoints {
   Eigen::VectorXf u;      // pixel column (OpenCV convention: pixel centers at integers)
   Eigen::VectorXf v;      // pixel row
   Eigen::VectorXf depth;  // metres along the optical axis of the projection's camera
-  // 1 where the point is in front of the camera (depth > min depth) and 0 <= u < width,
-  // 0 <= v < height; 0 otherwise.
+  // 1 where the point is in front of the camera (depth > min depth) and its pixel
+  // (nearestPixel of u and v) is in the image: -0.5 <= u < width - 0.5, the same for v; 0
+  // otherwise.
   std::vector<std::uint8_t> valid;
   std::size_t size() const { return valid.size(); }
   std::size_t validCount() const;
