@@ -64,8 +64,15 @@ class SegmentationNodeCore::Impl {
     diagnostics_.add("segmentation", [this, model](auto& status) { fillStatus(model, &status); });
     labels_publisher_ = transport_.advertise(topics::kSegmentationLabels, 1);
     overlay_publisher_ = transport_.advertise(topics::kSegmentationOverlay, 1);
+    // The transport (~image_transport) from this node's own namespace: image_transport's default
+    // hints read the process's, which in a nodelet manager is the manager's.
+    image_subscriber_ =
+        transport_.subscribe(image_topic, 1, &Impl::imageCallback, this,
+                             image_transport::TransportHints("raw", ros::TransportHints(), pnh));
+    // Started last: a subscription that throws (a bad topic name, a transport not installed)
+    // must not leave a running thread behind (its destructor would terminate the process, a
+    // nodelet manager with it).
     worker_ = std::thread([this] { inferenceLoop(); });
-    image_subscriber_ = transport_.subscribe(image_topic, 1, &Impl::imageCallback, this);
     ROS_INFO_STREAM("segmentation_node: listening on " << image_subscriber_.getTopic());
   }
 

@@ -129,6 +129,21 @@ class SegmentationNodeTest(unittest.TestCase):
         self.assertIn("overlay_alhpa", output)
         self.assertIn("misspelt_parameter_segmentation", output)
 
+    def test_5_a_subscription_that_cannot_be_made_stops_the_node_with_the_reason(self):
+        # Found by review: the inference thread was already running, and the exception ended
+        # the process in std::terminate (no message; in a nodelet manager, the manager too).
+        from strict_parameters import run_with_parameters
+        for name, parameters, expected in [
+                ("bad_topic_segmentation", {"image_topic": "camera/image raw"},
+                 "camera/image raw"),
+                ("bad_transport_segmentation", {"image_transport": "no_such_transport"},
+                 "no_such_transport")]:
+            parameters["model"] = rospy.get_param("~model")
+            code, output = run_with_parameters("segmentation_node", name, parameters)
+            self.assertEqual(code, 1, output)
+            self.assertIn(expected, output)
+            self.assertNotIn("terminate called", output)
+
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "segmentation_node_test", SegmentationNodeTest, sys.argv)
