@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 #include <utility>
 
 namespace inekf_semantic_mapping {
@@ -107,10 +109,17 @@ void PlaybackMonitor::fill(double wall_s, double requested_rate,
   for (const auto& [name, n] : counts_) status->add(name, n);
 }
 
-NodeDiagnostics::NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh, double period_s)
+NodeDiagnostics::NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     // The private namespace names the node, also for a nodelet (whose process is the manager).
     : updater_(nh, private_nh, private_nh.getNamespace()) {
   updater_.setHardwareID(private_nh.getNamespace());
+  // The period is the updater's own ~diagnostic_period (1 s unless set), which it read above.
+  const double period_s = updater_.getPeriod();
+  if (!(period_s > 0.0) || !std::isfinite(period_s)) {
+    throw std::invalid_argument(private_nh.resolveName("diagnostic_period") +
+                                " must be a positive number of seconds, got " +
+                                std::to_string(period_s));
+  }
   timer_ = nh.createWallTimer(ros::WallDuration(period_s),
                               [this](const ros::WallTimerEvent&) { updater_.force_update(); });
 }

@@ -61,6 +61,10 @@ class InekfNodeDiagnostics(unittest.TestCase):
         self.assertLess(levels.index(DiagnosticStatus.WARN), levels.index(DiagnosticStatus.ERROR))
         error_message = [m for _, l, m, _ in record if l == DiagnosticStatus.ERROR][0]
         self.assertIn("no accepted GPS fix", error_message)
+        # ~diagnostic_period 0.25 s (was ignored: always 1 s).
+        intervals = sorted(b[0] - a[0] for a, b in zip(record, record[1:]))
+        self.assertGreaterEqual(len(intervals), 3, record)
+        self.assertLess(intervals[len(intervals) // 2], 0.6, intervals)
 
 
 if __name__ == "__main__":

@@ -77,12 +77,15 @@ class PlaybackMonitor {
   std::map<std::string, std::size_t> counts_;
 };
 
-// diagnostic_updater::Updater published at 1 Hz on the wall clock. The statuses' prefix and the
-// hardware id are the node's name (its private namespace: a nodelet's own name, not its manager's).
+// diagnostic_updater::Updater published on the wall clock (~diagnostic_period, 1 s by default). The
+// statuses' prefix and the hardware id are the node's name (its private namespace: a nodelet's own
+// name, not its manager's).
 class NodeDiagnostics {
  public:
   using Task = std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)>;
-  NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh, double period_s = 1.0);
+  // Published every ~diagnostic_period seconds (diagnostic_updater's parameter, default 1 s);
+  // throws std::invalid_argument when it is not positive.
+  NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh);
   void add(const std::string& name, Task task);
   void forceUpdate() { updater_.force_update(); }
 
