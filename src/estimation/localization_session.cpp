@@ -127,25 +127,47 @@ void LocalizationSession::reset(const std::string& why, Update* update) {
   update->note = why;
 }
 
-void LocalizationSession::checkStamp(double stamp_s, const char* source, Update* update) {
-  if (!std::isfinite(stamp_s)) return;
+bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update* update) {
+  if (!std::isfinite(stamp_s)) return true;
+  if (after_clock_jump_ && newest_clock_s_) {
+    if (stamp_s > *newest_clock_s_ + config_.time_jump_back_s) {
+      std::ostringstream why;
+      why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s
+          << " s is ahead of the clock (" << *newest_clock_s_
+          << " s) after it jumped back: a message of the previous time line, dropped";
+      update->note = why.str();
+      return false;
+    }
+    after_clock_jump_ = false;
+  }
   if (newest_stamp_s_ && stamp_s + config_.time_jump_back_s < *newest_stamp_s_) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
         << stamp_s << " s, newest " << *newest_stamp_s_ << " s)";
     reset(why.str(), update);
+    stamps_jumped_back_ = true;
   }
   newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
+  return true;
 }
 
 LocalizationSession::Update LocalizationSession::addClock(double now_s) {
   Update update;
   if (!std::isfinite(now_s)) return update;
   if (newest_clock_s_ && now_s + config_.time_jump_back_s < *newest_clock_s_) {
-    std::ostringstream why;
-    why << std::fixed << std::setprecision(3) << "time jumped back (clock " << now_s
-        << " s, newest " << *newest_clock_s_ << " s)";
-    reset(why.str(), &update);
+    // The stamps may have shown the jump first (a message of the new time line before the
+    // clock's): then the session already follows the new clock, and a second reset would lose
+    // what it has begun again.
+    const bool stamps_restarted = stamps_jumped_back_ && newest_stamp_s_ &&
+                                  *newest_stamp_s_ <= now_s + config_.time_jump_back_s;
+    stamps_jumped_back_ = false;
+    if (!stamps_restarted) {
+      std::ostringstream why;
+      why << std::fixed << std::setprecision(3) << "time jumped back (clock " << now_s
+          << " s, newest " << *newest_clock_s_ << " s)";
+      reset(why.str(), &update);
+      after_clock_jump_ = true;
+    }
     newest_clock_s_ = now_s;
   } else if (!newest_clock_s_ || now_s > *newest_clock_s_) {
     newest_clock_s_ = now_s;
@@ -168,7 +190,7 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
   Update update;
   ++statistics_.imu_samples;
   const ImuSample& sample = event.sample;
-  checkStamp(sample.stamp_s, "IMU", &update);
+  if (!checkStamp(sample.stamp_s, "IMU", &update)) return update;
   if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
       !sample.specific_force.allFinite()) {
     ++statistics_.imu_invalid;
@@ -223,7 +245,7 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
 LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& event) {
   Update update;
   ++statistics_.fixes_received;
-  checkStamp(event.stamp_s, "GPS fix", &update);
+  if (!checkStamp(event.stamp_s, "GPS fix", &update)) return update;
   if (!event.has_solution || !std::isfinite(event.stamp_s)) {
     ++statistics_.fixes_ignored;
     return update;
@@ -308,7 +330,7 @@ void LocalizationSession::releaseWaitingFixes(Update* update) {
 LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
   Update update;
   // Checked like the others: after a bag loop the velocity may be the first message back.
-  checkStamp(event.stamp_s, "GPS velocity", &update);
+  if (!checkStamp(event.stamp_s, "GPS velocity", &update)) return update;
   if (started()) return update;  // only the start uses it
   lazy_start_.offerVelocity(event.stamp_s, event.velocity, event.in_body_frame);
   tryStart(event.stamp_s, &update);

@@ -236,6 +236,53 @@ TEST(LocalizationSession, AClockJumpingBackResets) {
   EXPECT_EQ(session.statistics().resets, 1);
 }
 
+// A bag loop shows twice, in the clock and in the stamps, in either order: one reset, and the new
+// loop's start is kept. Found by review: a new-loop IMU sample reset the session, the clock's
+// jump reset it again and lost that sample; or a queued old-loop message after the clock's reset
+// became the newest stamp and the new loop reset it a second time (2-3 resets a loop, the pose
+// missing for a GPS period).
+TEST(LocalizationSession, ABagLoopIsOneResetWhicheverShowsItFirst) {
+  const auto firstPass = [](LocalizationSession* session) {
+    for (int k = 0; k <= 20; ++k) {
+      const double t = 100.0 + 0.1 * k;
+      session->addClock(t);
+      session->addImu(restingImu(t));
+      if (k % 10 == 0) {
+        session->addGpsVelocity(stillAt(t));
+        session->addFix(fixAt(t));
+      }
+    }
+    ASSERT_TRUE(session->started());
+    ASSERT_EQ(session->statistics().resets, 0);
+  };
+  {  // The stamps first: a new-loop sample, then the clock.
+    LocalizationSession session(originConfig());
+    firstPass(&session);
+    EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
+    session.addGpsVelocity(stillAt(100.0));
+    EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
+    EXPECT_FALSE(session.addClock(100.05).reset);  // the same jump, already followed
+    EXPECT_TRUE(session.started());
+    EXPECT_TRUE(session.addImu(restingImu(100.1)).new_estimate);
+    EXPECT_EQ(session.statistics().resets, 1);
+  }
+  {  // The clock first, then a message of the old loop still queued, then the new loop.
+    LocalizationSession session(originConfig());
+    firstPass(&session);
+    EXPECT_TRUE(session.addClock(100.0).reset);
+    const LocalizationSession::Update stale = session.addImu(restingImu(102.0));
+    EXPECT_FALSE(stale.reset);
+    EXPECT_NE(stale.note.find("previous time line"), std::string::npos) << stale.note;
+    EXPECT_FALSE(session.addFix(fixAt(102.0)).started);
+    EXPECT_FALSE(session.addImu(restingImu(100.0)).reset);
+    session.addGpsVelocity(stillAt(100.0));
+    EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
+    EXPECT_EQ(session.statistics().resets, 1);
+    // Later messages ahead of a clock that has not moved are the new loop's: taken.
+    EXPECT_TRUE(session.addImu(restingImu(101.5)).new_estimate);
+  }
+}
+
 // Found by review: a clock jumping an hour forward was bridged in one propagation; the covariance
 // lost its positive definiteness (variances below zero) and every later fix was rejected. A gap
 // longer than restart_after_imu_gap_s starts over instead; a shorter one is still bridged.

@@ -19,7 +19,10 @@
 //    does not depend on which of the two messages of one instant a node receives first;
 //  - the time-jump reset: a stamp or a clock time_jump_back_s earlier than the newest one means a
 //    bag loop or a restarted player: the state is meaningless in the new time line, start over
-//    (the map origin is kept: the same place keeps the same coordinates);
+//    (the map origin is kept: the same place keeps the same coordinates). One jump is one reset,
+//    whichever shows it first: the clock's jump is not a second one when the stamps already
+//    restarted near the new clock, and a message stamped ahead of the new clock (one of the old
+//    loop still in a queue) is dropped, not taken as the newest stamp;
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -171,8 +174,10 @@ class LocalizationSession {
   const LocalizationSessionConfig& config() const { return config_; }
 
  private:
-  // Resets when stamp_s is time_jump_back_s older than the newest stamp; records stamp_s.
-  void checkStamp(double stamp_s, const char* source, Update* update);
+  // Resets when stamp_s is time_jump_back_s older than the newest stamp; records stamp_s. False
+  // (the message is to be dropped, the note says why) for a message of the old time line after
+  // the clock jumped back: stamped more than time_jump_back_s ahead of the new clock.
+  bool checkStamp(double stamp_s, const char* source, Update* update);
   void reset(const std::string& why, Update* update);
   void tryStart(double now_s, Update* update);
   // Gives a fix to the started filter and records the result (and why it was not used).
@@ -189,6 +194,10 @@ class LocalizationSession {
   std::optional<kitti::MercatorProjection> projection_;
   std::vector<PositionFix> waiting_fixes_;  // sorted by stamp
   std::optional<double> newest_stamp_s_, newest_clock_s_;
+  // Set when the clock jumped back, until a message stamped within reach of the new clock comes.
+  bool after_clock_jump_ = false;
+  // Set when the stamps jumped back, until the clock does (the same jump: one reset).
+  bool stamps_jumped_back_ = false;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
