@@ -680,87 +680,29 @@ TEST(SemanticMappingSessionTest, ReleasingTheGridKeepsTheMapAndHoldsItOnce) {
   EXPECT_EQ(labelAt(released, -1.05, 0.55, 11.05), 7u);
 }
 
-// The hardened .ot reader: corruption anywhere in the node data, truncation, other tree types and
-// crafted depth bombs are refused with a reason; the map in memory is untouched.
-TEST(SemanticMapFileTest, CorruptOrCraftedMapsAreRefusedWithAReason) {
-  SemanticMappingSession session(testConfig());
-  const std::vector<std::uint8_t> pixels = testLabels();
-  const LabelImageView view{pixels.data(), 100, 100, 100};
-  const CameraModel camera = testCamera();
-  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
-  const std::string dir = test::makeTempDir("map_file");
-  const std::string good = dir + "/map.ot";
-  session.save(good, MapFormat::kSemanticOt);
-  std::ifstream in(good, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto write = [&](const std::string& name, const std::string& content) {
-    std::ofstream(dir + "/" + name, std::ios::binary) << content;
-    return dir + "/" + name;
-  };
-  const auto refusal = [&](const std::string& path) {
-    SemanticMappingSession target(testConfig());
-    try {
-      target.load(path);
-    } catch (const MapIoError& e) {
-      return std::string(e.what());
-    }
-    return std::string("loaded");
-  };
-  // Ten single-byte corruptions spread over the node data (the last 40 % of the file).
-  for (int k = 0; k < 10; ++k) {
-    std::string corrupt = bytes;
-    const std::size_t at = bytes.size() - 1 - k * (bytes.size() * 2 / 5) / 10;
-    corrupt[at] = static_cast<char>(corrupt[at] ^ 0x5A);
-    const std::string why = refusal(write("corrupt.ot", corrupt));
-    EXPECT_NE(why, "loaded") << "byte " << at;
-    EXPECT_NE(why.find("corrupt.ot"), std::string::npos) << why;
+// A map saved from one labelled scan, its bytes, and what loading a crafted file gives.
+class SemanticMapFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::vector<std::uint8_t> pixels = testLabels();
+    const LabelImageView view{pixels.data(), 100, 100, 100};
+    const CameraModel camera = testCamera();
+    session_.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
+    dir_ = test::makeTempDir("map_file");
+    good_ = dir_ + "/map.ot";
+    session_.save(good_, MapFormat::kSemanticOt);
+    std::ifstream in(good_, std::ios::binary);
+    bytes_.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   }
-  EXPECT_NE(refusal(write("truncated.ot", bytes.substr(0, bytes.size() - 100))).find("truncated"),
-            std::string::npos);
-  EXPECT_NE(refusal(write("other.ot", "# Octomap OcTree file\nid OcTree\nsize 1\nres 0.1\ndata\n"))
-                .find("not a SemanticOcTree"),
-            std::string::npos);
-  EXPECT_NE(refusal(dir).find("directory"), std::string::npos);
-  // A V1 file (no integrity record) whose nodes each claim one child, 40 levels deep.
-  std::string bomb = "# Octomap OcTree file\nid SemanticOcTree\nsize 40\nres 0.1\ndata\n";
-  bomb += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
-  bomb += '\0';  // bayes
-  const double probability = 0.8, prior = 0.5;
-  bomb.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
-  bomb.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
-  bomb.append(4, '\0');  // no classes
-  for (int level = 0; level < 40; ++level) {
-    bomb.append(4, '\0');             // log-odds 0
-    bomb.append(4, '\xff');           // no classes in the slots
-    bomb.append(8, '\0');             // counts
-    bomb += static_cast<char>(0x01);  // one child
-  }
-  EXPECT_NE(refusal(write("bomb.ot", bomb)).find("finest level"), std::string::npos);
-  // The intact file still loads, and equals the map it came from.
-  SemanticMappingSession loaded(testConfig());
-  loaded.load(good);
-  EXPECT_EQ(serialized(loaded), serialized(session));
-  std::filesystem::remove_all(dir);
-}
+  void TearDown() override { std::filesystem::remove_all(dir_); }
 
-// What the octomap header, the class table and the leaves say must be what the reader builds
-// from: each case here loaded before as another map (or ran out of memory).
-TEST(SemanticMapFileTest, HeaderClassTableAndLeavesCannotStandForAnotherMap) {
-  SemanticMappingSession session(testConfig());
-  const std::vector<std::uint8_t> pixels = testLabels();
-  const LabelImageView view{pixels.data(), 100, 100, 100};
-  const CameraModel camera = testCamera();
-  session.insertScan(testScan(), Eigen::Isometry3d::Identity(), &view, &camera);
-  const std::string dir = test::makeTempDir("map_header");
-  const std::string good = dir + "/map.ot";
-  session.save(good, MapFormat::kSemanticOt);
-  std::ifstream in(good, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto write = [&](const std::string& name, const std::string& content) {
-    std::ofstream(dir + "/" + name, std::ios::binary) << content;
-    return dir + "/" + name;
-  };
-  const auto refusal = [&](const std::string& path, const SemanticMappingConfig& config) {
+  std::string write(const std::string& name, const std::string& content) const {
+    std::ofstream(dir_ + "/" + name, std::ios::binary) << content;
+    return dir_ + "/" + name;
+  }
+  // The load's error message, or "loaded".
+  static std::string refusal(const std::string& path,
+                             const SemanticMappingConfig& config = testConfig()) {
     SemanticMappingSession target(config);
     try {
       target.load(path);
@@ -768,74 +710,110 @@ TEST(SemanticMapFileTest, HeaderClassTableAndLeavesCannotStandForAnotherMap) {
       return std::string(e.what());
     }
     return std::string("loaded");
-  };
-  const std::size_t size_at = bytes.find("\nsize ") + 6;
-  const std::size_t size_end = bytes.find('\n', size_at);
-  const std::size_t data_at = bytes.find("\ndata\n") + 6;
-  ASSERT_NE(bytes.find("\nsize "), std::string::npos);
+  }
+  // An octomap header and a V1 semantic header (no integrity record, no classes) for `nodes`.
+  static std::string v1Header(int nodes) {
+    std::string header = "# Octomap OcTree file\nid SemanticOcTree\nsize " + std::to_string(nodes) +
+                         "\nres 0.1\ndata\n";
+    header += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
+    header += '\0';  // bayes
+    const double probability = 0.8, prior = 0.5;
+    header.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
+    header.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
+    header.append(4, '\0');  // no classes
+    return header;
+  }
+  // One node of the file format: log-odds, no classes in its slots, no counts, child bits.
+  static std::string node(float log_odds, char children) {
+    std::string bytes(reinterpret_cast<const char*>(&log_odds), sizeof(log_odds));
+    bytes.append(4, '\xff');
+    bytes.append(8, '\0');
+    return bytes + children;
+  }
+
+  SemanticMappingSession session_{testConfig()};
+  std::string dir_, good_, bytes_;
+};
+
+// The hardened .ot reader: corruption anywhere in the node data, truncation, other tree types and
+// crafted depth bombs are refused with a reason; the map in memory is untouched.
+TEST_F(SemanticMapFileTest, CorruptOrCraftedMapsAreRefusedWithAReason) {
+  // Ten single-byte corruptions spread over the node data (the last 40 % of the file).
+  for (int k = 0; k < 10; ++k) {
+    std::string corrupt = bytes_;
+    const std::size_t at = bytes_.size() - 1 - k * (bytes_.size() * 2 / 5) / 10;
+    corrupt[at] = static_cast<char>(corrupt[at] ^ 0x5A);
+    const std::string why = refusal(write("corrupt.ot", corrupt));
+    EXPECT_NE(why, "loaded") << "byte " << at;
+    EXPECT_NE(why.find("corrupt.ot"), std::string::npos) << why;
+  }
+  EXPECT_NE(refusal(write("truncated.ot", bytes_.substr(0, bytes_.size() - 100))).find("truncated"),
+            std::string::npos);
+  EXPECT_NE(refusal(write("other.ot", "# Octomap OcTree file\nid OcTree\nsize 1\nres 0.1\ndata\n"))
+                .find("not a SemanticOcTree"),
+            std::string::npos);
+  EXPECT_NE(refusal(dir_).find("directory"), std::string::npos);
+  // A V1 file (no integrity record) whose nodes each claim one child, 40 levels deep.
+  std::string bomb = v1Header(40);
+  for (int level = 0; level < 40; ++level) bomb += node(0.0f, 0x01);
+  EXPECT_NE(refusal(write("bomb.ot", bomb)).find("finest level"), std::string::npos);
+  // The intact file still loads, and equals the map it came from.
+  SemanticMappingSession loaded(testConfig());
+  loaded.load(good_);
+  EXPECT_EQ(serialized(loaded), serialized(session_));
+}
+
+// What the octomap header, the class table and the leaves say must be what the reader builds
+// from: each case here loaded before as another map (or ran out of memory).
+TEST_F(SemanticMapFileTest, HeaderClassTableAndLeavesCannotStandForAnotherMap) {
+  const std::size_t size_at = bytes_.find("\nsize ") + 6;
+  const std::size_t size_end = bytes_.find('\n', size_at);
+  const std::size_t data_at = bytes_.find("\ndata\n") + 6;
+  ASSERT_NE(bytes_.find("\nsize "), std::string::npos);
 
   // A header saying size 0 made octomap skip the node data and every check of it.
-  const std::string size0 = bytes.substr(0, size_at) + "0" + bytes.substr(size_end);
-  EXPECT_NE(refusal(write("size0.ot", size0), testConfig()).find("header says size 0"),
-            std::string::npos);
-  EXPECT_NE(
-      refusal(write("size0_cut.ot", size0.substr(0, size0.find("\ndata\n") + 46)), testConfig()),
-      "loaded");
+  const std::string size0 = bytes_.substr(0, size_at) + "0" + bytes_.substr(size_end);
+  EXPECT_NE(refusal(write("size0.ot", size0)).find("header says size 0"), std::string::npos);
+  EXPECT_NE(refusal(write("size0_cut.ot", size0.substr(0, size0.find("\ndata\n") + 46))), "loaded");
 
   // The class table: a label id listed twice would have shifted every later class.
-  std::string twice = bytes;
+  std::string twice = bytes_;
   const std::size_t table_at = data_at + sizeof("ISM_SEMANTIC_OCTREE_V2") + 1 + 16 + 4;
   std::uint32_t first_id = 0, name_length = 0;
   std::memcpy(&first_id, &twice[table_at], 4);
   std::memcpy(&name_length, &twice[table_at + 7], 4);
   std::memcpy(&twice[table_at + 11 + name_length], &first_id, 4);  // the second entry's id
-  EXPECT_NE(refusal(write("twice.ot", twice), testConfig()).find("listed twice"),
-            std::string::npos);
+  EXPECT_NE(refusal(write("twice.ot", twice)).find("listed twice"), std::string::npos);
 
   // The integrity record announcing 64 GB in a file of a few hundred bytes: refused as
   // truncated, without reserving the memory first.
-  std::string huge = bytes.substr(0, bytes.size() - 17 * session.tree().size());
+  std::string huge = bytes_.substr(0, bytes_.size() - 17 * session_.tree().size());
   const std::uint64_t nodes = (std::uint64_t{1} << 36) / 17, length = nodes * 17;
   const std::size_t record_at = huge.size() - 24;
   std::memcpy(&huge[record_at], &nodes, 8);
   std::memcpy(&huge[record_at + 8], &length, 8);
   huge = huge.substr(0, size_at) + std::to_string(nodes) + huge.substr(size_end);
-  EXPECT_NE(refusal(write("huge.ot", huge + std::string(1000, '\0')), testConfig())
-                .find("truncated node data"),
+  EXPECT_NE(refusal(write("huge.ot", huge + std::string(1000, '\0'))).find("truncated node data"),
             std::string::npos);
 
-  // One leaf at the root: 2^48 voxels for the grid or the PLY writer to expand.
-  std::string root_leaf = "# Octomap OcTree file\nid SemanticOcTree\nsize 1\nres 0.1\ndata\n";
-  root_leaf += std::string("ISM_SEMANTIC_OCTREE_V1") + '\0';
-  root_leaf += '\0';  // bayes
-  const double probability = 0.8, prior = 0.5;
-  root_leaf.append(reinterpret_cast<const char*>(&probability), sizeof(probability));
-  root_leaf.append(reinterpret_cast<const char*>(&prior), sizeof(prior));
-  root_leaf.append(4, '\0');    // no classes
-  const float occupied = 2.0f;  // log-odds
-  root_leaf.append(reinterpret_cast<const char*>(&occupied), sizeof(occupied));
-  root_leaf.append(4, '\xff');  // no classes in the slots
-  root_leaf.append(8, '\0');    // counts
-  root_leaf += '\0';            // no child
-  EXPECT_NE(refusal(write("root_leaf.ot", root_leaf), testConfig()).find("voxels a side"),
+  // One occupied leaf at the root: 2^48 voxels for the grid or the PLY writer to expand.
+  EXPECT_NE(refusal(write("root_leaf.ot", v1Header(1) + node(2.0f, 0))).find("voxels a side"),
             std::string::npos);
 
   // A map of another class set: its stored class indices would stand for other label ids.
   SemanticMappingConfig kitti_classes = testConfig();
   kitti_classes.class_set = MapClassSet::kSemanticKitti;
-  const std::string why = refusal(good, kitti_classes);
+  const std::string why = refusal(good_, kitti_classes);
   EXPECT_NE(why.find("not the configured class set"), std::string::npos) << why;
   // An empty map keeps its class table too (its header says size 0).
   SemanticMappingSession empty(kitti_classes);
-  empty.save(dir + "/empty.ot", MapFormat::kSemanticOt);
-  EXPECT_NE(refusal(dir + "/empty.ot", testConfig()).find("not the configured class set"),
-            std::string::npos);
+  empty.save(dir_ + "/empty.ot", MapFormat::kSemanticOt);
+  EXPECT_NE(refusal(dir_ + "/empty.ot").find("not the configured class set"), std::string::npos);
   SemanticMappingSession empty_again(kitti_classes);
-  empty_again.load(dir + "/empty.ot");
+  empty_again.load(dir_ + "/empty.ot");
   EXPECT_EQ(empty_again.tree().size(), 0u);
   // The intact file still loads.
-  EXPECT_EQ(refusal(good, testConfig()), "loaded");
-  std::filesystem::remove_all(dir);
+  EXPECT_EQ(refusal(good_), "loaded");
 }
 
 }  // namespace
