@@ -33,9 +33,14 @@ namespace {
 // V1: class table, then octomap's node data. V2 adds an integrity record before the node data:
 // node count, byte length and an FNV-1a checksum, so a corrupt file is refused, never loaded as
 // a silently different map.
+// V1: no integrity record. V2: an integrity record whose checksum covers the node data. V3 (what
+// is written): the checksum covers the fusion model and the class table too (a flipped bit in a
+// label id loaded as a map of another class).
 constexpr char kSemanticHeaderMagicV1[] = "ISM_SEMANTIC_OCTREE_V1";
 constexpr char kSemanticHeaderMagicV2[] = "ISM_SEMANTIC_OCTREE_V2";
-static_assert(sizeof(kSemanticHeaderMagicV1) == sizeof(kSemanticHeaderMagicV2));
+constexpr char kSemanticHeaderMagicV3[] = "ISM_SEMANTIC_OCTREE_V3";
+static_assert(sizeof(kSemanticHeaderMagicV1) == sizeof(kSemanticHeaderMagicV2) &&
+              sizeof(kSemanticHeaderMagicV2) == sizeof(kSemanticHeaderMagicV3));
 // Bytes of one node in octomap's full format: value, class slots, counts, child bits.
 constexpr std::size_t kSerializedNodeBytes =
     sizeof(float) + SemanticOcTreeNode::kSlots * (sizeof(ClassIndex) + sizeof(std::uint16_t)) + 1;
@@ -66,10 +71,21 @@ class Fnv1a {
   std::uint64_t hash_ = 1469598103934665603ull;
 };
 
-std::uint64_t fnv1a(const std::string& bytes) {
-  Fnv1a hash;
-  hash.add(bytes.data(), bytes.size());
-  return hash.value();
+// The fusion model and the class table as they are stored after the magic (written, and hashed
+// again from what was read).
+std::string fusionAndClassBytes(const FusionModel& fusion, const ClassSet& classes) {
+  std::ostringstream s;
+  writePod(s, static_cast<std::uint8_t>(fusion.rule));
+  writePod(s, fusion.correct_probability);
+  writePod(s, fusion.dirichlet_prior);
+  writePod(s, static_cast<std::uint32_t>(classes.size()));
+  for (const ClassInfo& info : classes.classes()) {
+    writePod(s, info.label_id);
+    s.write(reinterpret_cast<const char*>(info.rgb.data()), 3);
+    writePod(s, static_cast<std::uint32_t>(info.name.size()));
+    s.write(info.name.data(), static_cast<std::streamsize>(info.name.size()));
+  }
+  return s.str();
 }
 
 // The node data in octomap's full format, byte for byte what OcTreeBaseImpl::writeNodesRecurs
@@ -127,17 +143,9 @@ static_assert(sizeof(ClassSlotIndices) == sizeof(ClassIndex) * SemanticOcTreeNod
 // The class table and fusion model go before octomap's node data, so a loaded map knows which
 // label id each stored class index stands for.
 std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
-  s.write(kSemanticHeaderMagicV2, sizeof(kSemanticHeaderMagicV2));
-  writePod(s, static_cast<std::uint8_t>(fusion_.rule));
-  writePod(s, fusion_.correct_probability);
-  writePod(s, fusion_.dirichlet_prior);
-  writePod(s, static_cast<std::uint32_t>(classes_.size()));
-  for (const ClassInfo& info : classes_.classes()) {
-    writePod(s, info.label_id);
-    s.write(reinterpret_cast<const char*>(info.rgb.data()), 3);
-    writePod(s, static_cast<std::uint32_t>(info.name.size()));
-    s.write(info.name.data(), static_cast<std::streamsize>(info.name.size()));
-  }
+  s.write(kSemanticHeaderMagicV3, sizeof(kSemanticHeaderMagicV3));
+  const std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+  s.write(fusion_and_classes.data(), static_cast<std::streamsize>(fusion_and_classes.size()));
   // The integrity record goes before the node data. Its length follows from the node count;
   // the checksum is patched in after one pass over the tree where the stream can seek (files),
   // else learnt in a first pass (no copy of the node data in memory either way).
@@ -146,6 +154,7 @@ std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
   writePod(s, node_count * kSerializedNodeBytes);
   const std::streampos checksum_at = s.tellp();
   Fnv1a hash;
+  hash.add(fusion_and_classes.data(), fusion_and_classes.size());
   if (checksum_at != std::streampos(-1)) {
     writePod(s, std::uint64_t{0});
     NodeDataWriter(*this, [&](const char* bytes, std::size_t n) {
@@ -181,12 +190,14 @@ std::istream& SemanticOcTree::refuse(std::istream& s, const std::string& why) {
 
 std::istream& SemanticOcTree::readData(std::istream& s) {
   read_error_.clear();
-  char magic[sizeof(kSemanticHeaderMagicV2)] = {};
+  char magic[sizeof(kSemanticHeaderMagicV3)] = {};
   if (!s.read(magic, sizeof(magic))) return refuse(s, "truncated header");
+  const bool v3 = std::memcmp(magic, kSemanticHeaderMagicV3, sizeof(magic)) == 0;
   const bool v2 = std::memcmp(magic, kSemanticHeaderMagicV2, sizeof(magic)) == 0;
-  if (!v2 && std::memcmp(magic, kSemanticHeaderMagicV1, sizeof(magic)) != 0) {
+  if (!v3 && !v2 && std::memcmp(magic, kSemanticHeaderMagicV1, sizeof(magic)) != 0) {
     return refuse(s, "not a semantic octree (bad magic)");
   }
+  const bool has_integrity_record = v2 || v3;
   std::uint8_t rule = 0;
   std::uint32_t num_classes = 0;
   FusionModel fusion;
@@ -221,7 +232,7 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
 
   std::string bytes;
   std::uint64_t node_count = 0;
-  if (v2) {
+  if (has_integrity_record) {
     std::uint64_t length = 0, checksum = 0;
     if (!(readPod(s, &node_count) && readPod(s, &length) && readPod(s, &checksum))) {
       return refuse(s, "truncated integrity record");
@@ -243,7 +254,16 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
                              " there)");
       }
     }
-    if (fnv1a(bytes) != checksum) return refuse(s, "checksum mismatch: the node data is corrupt");
+    Fnv1a hash;
+    if (v3) {
+      const std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+      hash.add(fusion_and_classes.data(), fusion_and_classes.size());
+    }
+    hash.add(bytes.data(), bytes.size());
+    if (hash.value() != checksum) {
+      return refuse(s, v3 ? "checksum mismatch: the class table or the node data is corrupt"
+                          : "checksum mismatch: the node data is corrupt");
+    }
   } else {
     // V1 files carry no length: the rest of the stream is node data.
     bytes.assign(std::istreambuf_iterator<char>(s), std::istreambuf_iterator<char>());
@@ -262,7 +282,7 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
     clear();
     return refuse(s, read_error_);
   }
-  if (v2 && nodes_read != node_count) {
+  if (has_integrity_record && nodes_read != node_count) {
     clear();
     return refuse(s, "node count " + std::to_string(nodes_read) + " differs from the recorded " +
                          std::to_string(node_count));

@@ -329,7 +329,8 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
   EXPECT_EQ(buffer.str(), seekable);  // the checksum patched in, or learnt in a first pass
   ASSERT_GE(seekable.size(), expected_nodes.size());
   EXPECT_EQ(seekable.substr(seekable.size() - expected_nodes.size()), expected_nodes);
-  // The integrity record before the nodes: count, length, FNV-1a of exactly those bytes.
+  // The integrity record before the nodes: count, length, and the FNV-1a of the fusion model and
+  // class table (between the magic and the record) followed by exactly those node bytes.
   const std::size_t record = seekable.size() - expected_nodes.size() - 24;
   std::uint64_t count = 0, length = 0, checksum = 0;
   std::memcpy(&count, seekable.data() + record, 8);
@@ -337,12 +338,37 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
   std::memcpy(&checksum, seekable.data() + record + 16, 8);
   EXPECT_EQ(count, tree.size());
   EXPECT_EQ(length, expected_nodes.size());
-  std::uint64_t fnv = 1469598103934665603ull;
-  for (const char c : expected_nodes) {
-    fnv ^= static_cast<std::uint8_t>(c);
-    fnv *= 1099511628211ull;
-  }
-  EXPECT_EQ(checksum, fnv);
+  const auto fnv1a = [](const std::string& bytes) {
+    std::uint64_t fnv = 1469598103934665603ull;
+    for (const char c : bytes) {
+      fnv ^= static_cast<std::uint8_t>(c);
+      fnv *= 1099511628211ull;
+    }
+    return fnv;
+  };
+  const std::size_t magic_at = seekable.find("\ndata\n") + 6;
+  const std::size_t table_at = magic_at + sizeof("ISM_SEMANTIC_OCTREE_V3");
+  ASSERT_EQ(seekable.substr(magic_at, 22), "ISM_SEMANTIC_OCTREE_V3");
+  const std::string table = seekable.substr(table_at, record - table_at);
+  EXPECT_EQ(checksum, fnv1a(table + expected_nodes));
+  // A bit flipped in a class's name (as well in a label id): refused, the table is checked too.
+  std::string renamed = seekable;
+  renamed[record - 1] = static_cast<char>(renamed[record - 1] ^ 0x20);
+  std::istringstream renamed_file(renamed);
+  std::unique_ptr<octomap::AbstractOcTree> refused(octomap::AbstractOcTree::read(renamed_file));
+  ASSERT_NE(dynamic_cast<SemanticOcTree*>(refused.get()), nullptr);
+  EXPECT_NE(dynamic_cast<SemanticOcTree*>(refused.get())->readError().find("class table"),
+            std::string::npos);
+  // A file of the previous format (V2: the checksum of the node data alone) still loads.
+  std::string v2 = seekable;
+  v2.replace(magic_at, 22, "ISM_SEMANTIC_OCTREE_V2");
+  const std::uint64_t nodes_only = fnv1a(expected_nodes);
+  std::memcpy(&v2[record + 16], &nodes_only, 8);
+  std::istringstream v2_file(v2);
+  std::unique_ptr<octomap::AbstractOcTree> old_format(octomap::AbstractOcTree::read(v2_file));
+  ASSERT_NE(dynamic_cast<SemanticOcTree*>(old_format.get()), nullptr);
+  EXPECT_EQ(dynamic_cast<SemanticOcTree*>(old_format.get())->readError(), "");
+  EXPECT_EQ(old_format->size(), tree.size());
   // An empty tree: an empty record, and it loads back empty.
   SemanticOcTree empty(0.2);
   std::stringstream empty_file;
