@@ -114,6 +114,10 @@ std::string LocalizationSession::summary() const {
          << " re-opened; ";
   }
   line << s.resets << " resets";
+  if (s.messages_of_previous_time_line > 0) {
+    line << " (" << s.messages_of_previous_time_line
+         << " messages of the time line before a jump dropped)";
+  }
   return line.str();
 }
 
@@ -129,50 +133,33 @@ void LocalizationSession::reset(const std::string& why, Update* update) {
 
 bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update* update) {
   if (!std::isfinite(stamp_s)) return true;
-  if (after_clock_jump_ && newest_clock_s_) {
-    if (stamp_s > *newest_clock_s_ + config_.time_jump_back_s) {
-      std::ostringstream why;
-      why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s
-          << " s is ahead of the clock (" << *newest_clock_s_
-          << " s) after it jumped back: a message of the previous time line, dropped";
-      update->note = why.str();
-      return false;
-    }
-    after_clock_jump_ = false;
+  const double tolerance = config_.time_jump_back_s;
+  // After a jump back, a message stamped in the old time line's span and ahead of the new one is
+  // one of the old time line still in a queue (IMU, fixes and velocities travel on separate
+  // connections): taken, it would become the newest stamp and the new time line's next message
+  // a second jump.
+  if (old_timeline_end_s_ && newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance &&
+      stamp_s <= *old_timeline_end_s_ + tolerance) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s
+        << " s is of the time line before the jump back (now " << *newest_stamp_s_
+        << " s): dropped";
+    update->note = why.str();
+    ++statistics_.messages_of_previous_time_line;
+    return false;
   }
-  if (newest_stamp_s_ && stamp_s + config_.time_jump_back_s < *newest_stamp_s_) {
+  if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
         << stamp_s << " s, newest " << *newest_stamp_s_ << " s)";
+    const double old_end = *newest_stamp_s_;
     reset(why.str(), update);
-    stamps_jumped_back_ = true;
+    old_timeline_end_s_ = old_end;
   }
   newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
+  // Past the old time line's end its messages can no longer be told from the new one's.
+  if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
   return true;
-}
-
-LocalizationSession::Update LocalizationSession::addClock(double now_s) {
-  Update update;
-  if (!std::isfinite(now_s)) return update;
-  if (newest_clock_s_ && now_s + config_.time_jump_back_s < *newest_clock_s_) {
-    // The stamps may have shown the jump first (a message of the new time line before the
-    // clock's): then the session already follows the new clock, and a second reset would lose
-    // what it has begun again.
-    const bool stamps_restarted = stamps_jumped_back_ && newest_stamp_s_ &&
-                                  *newest_stamp_s_ <= now_s + config_.time_jump_back_s;
-    stamps_jumped_back_ = false;
-    if (!stamps_restarted) {
-      std::ostringstream why;
-      why << std::fixed << std::setprecision(3) << "time jumped back (clock " << now_s
-          << " s, newest " << *newest_clock_s_ << " s)";
-      reset(why.str(), &update);
-      after_clock_jump_ = true;
-    }
-    newest_clock_s_ = now_s;
-  } else if (!newest_clock_s_ || now_s > *newest_clock_s_) {
-    newest_clock_s_ = now_s;
-  }
-  return update;
 }
 
 void LocalizationSession::guardSound(Update* update) {

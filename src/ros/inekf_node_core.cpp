@@ -91,8 +91,6 @@ class InekfNodeCore::Impl {
     try {
       ScopedTimer timer(stage);
       session_.setGpsVelocityExpected(velocity_subscriber_.getNumPublishers() > 0);
-      const ros::Time now = ros::Time::now();
-      if (!now.isZero()) report(session_.addClock(now.toSec()));
       const LocalizationSession::Update update = event();
       report(update);
       // The start's pose at the first fix's stamp, whichever message completed the start: a scan

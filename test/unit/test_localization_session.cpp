@@ -221,66 +221,38 @@ TEST(LocalizationSession, BadSamplesAreCountedAndTheFilterKeepsGoing) {
   EXPECT_TRUE(session.state().position_map.allFinite());
 }
 
-TEST(LocalizationSession, AClockJumpingBackResets) {
+// A bag loop: one reset, and what is still queued of the old loop (IMU, fixes and velocities come
+// on separate connections) is dropped rather than taken as the newest stamp. Found by review: an
+// old-loop message after the first new-loop one became the newest stamp and the next new-loop
+// message reset the session again (2-3 resets a loop with the clock also resetting; the new
+// loop's start lost for a GPS period).
+TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   LocalizationSession session(originConfig());
-  EXPECT_FALSE(session.addClock(100.0).reset);
-  session.addImu(restingImu(10.0));
-  session.addGpsVelocity(stillAt(10.0));
-  session.addFix(fixAt(10.0));
-  ASSERT_TRUE(session.started());
-  EXPECT_FALSE(session.addClock(99.5).reset);  // within time_jump_back_s
-  const LocalizationSession::Update update = session.addClock(50.0);
-  EXPECT_TRUE(update.reset);
-  EXPECT_NE(update.note.find("clock"), std::string::npos) << update.note;
-  EXPECT_FALSE(session.started());
-  EXPECT_EQ(session.statistics().resets, 1);
-}
-
-// A bag loop shows twice, in the clock and in the stamps, in either order: one reset, and the new
-// loop's start is kept. Found by review: a new-loop IMU sample reset the session, the clock's
-// jump reset it again and lost that sample; or a queued old-loop message after the clock's reset
-// became the newest stamp and the new loop reset it a second time (2-3 resets a loop, the pose
-// missing for a GPS period).
-TEST(LocalizationSession, ABagLoopIsOneResetWhicheverShowsItFirst) {
-  const auto firstPass = [](LocalizationSession* session) {
-    for (int k = 0; k <= 20; ++k) {
-      const double t = 100.0 + 0.1 * k;
-      session->addClock(t);
-      session->addImu(restingImu(t));
-      if (k % 10 == 0) {
-        session->addGpsVelocity(stillAt(t));
-        session->addFix(fixAt(t));
-      }
+  for (int k = 0; k <= 20; ++k) {
+    const double t = 100.0 + 0.1 * k;
+    session.addImu(restingImu(t));
+    if (k % 10 == 0) {
+      session.addGpsVelocity(stillAt(t));
+      session.addFix(fixAt(t));
     }
-    ASSERT_TRUE(session->started());
-    ASSERT_EQ(session->statistics().resets, 0);
-  };
-  {  // The stamps first: a new-loop sample, then the clock.
-    LocalizationSession session(originConfig());
-    firstPass(&session);
-    EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
-    session.addGpsVelocity(stillAt(100.0));
-    EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
-    EXPECT_FALSE(session.addClock(100.05).reset);  // the same jump, already followed
-    EXPECT_TRUE(session.started());
-    EXPECT_TRUE(session.addImu(restingImu(100.1)).new_estimate);
-    EXPECT_EQ(session.statistics().resets, 1);
   }
-  {  // The clock first, then a message of the old loop still queued, then the new loop.
-    LocalizationSession session(originConfig());
-    firstPass(&session);
-    EXPECT_TRUE(session.addClock(100.0).reset);
-    const LocalizationSession::Update stale = session.addImu(restingImu(102.0));
-    EXPECT_FALSE(stale.reset);
-    EXPECT_NE(stale.note.find("previous time line"), std::string::npos) << stale.note;
-    EXPECT_FALSE(session.addFix(fixAt(102.0)).started);
-    EXPECT_FALSE(session.addImu(restingImu(100.0)).reset);
-    session.addGpsVelocity(stillAt(100.0));
-    EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
-    EXPECT_EQ(session.statistics().resets, 1);
-    // Later messages ahead of a clock that has not moved are the new loop's: taken.
-    EXPECT_TRUE(session.addImu(restingImu(101.5)).new_estimate);
+  ASSERT_TRUE(session.started());
+  EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
+  const LocalizationSession::Update stale = session.addFix(fixAt(102.0));
+  EXPECT_FALSE(stale.reset);
+  EXPECT_FALSE(stale.started);
+  EXPECT_NE(stale.note.find("before the jump back"), std::string::npos) << stale.note;
+  EXPECT_FALSE(session.addImu(restingImu(101.9)).reset);  // dropped too
+  session.addGpsVelocity(stillAt(100.0));
+  EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
+  EXPECT_EQ(session.statistics().resets, 1);
+  EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
+  // The new loop goes on past the old one's end: nothing of it is dropped.
+  for (int k = 1; k <= 40; ++k) {
+    EXPECT_TRUE(session.addImu(restingImu(100.0 + 0.1 * k)).new_estimate) << k;
   }
+  EXPECT_EQ(session.statistics().resets, 1);
+  EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
 }
 
 // Found by review: a clock jumping an hour forward was bridged in one propagation; the covariance
@@ -426,7 +398,8 @@ TEST(LocalizationSession, AFixWhoseImuNeverComesIsAppliedAfterTheWait) {
   // A time jump back (a bag loop) clears what waits: the fix of 100.5 s waiting in the old time
   // line is not applied when the replayed one reaches 100.5 s again.
   ASSERT_FALSE(session.addFix(fixAt(100.6, 0.1)).correction);
-  EXPECT_TRUE(session.addImu(restingImu(50.0)).reset);
+  EXPECT_TRUE(session.addImu(restingImu(99.0)).reset);
+  session.addImu(restingImu(99.5));
   session.addImu(restingImu(100.0));
   session.addGpsVelocity(stillAt(100.0));
   ASSERT_TRUE(session.addFix(fixAt(100.0)).started);

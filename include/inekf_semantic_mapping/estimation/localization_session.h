@@ -1,6 +1,6 @@
 // LocalizationSession: the whole streaming localization behind inekf_node and inekf_offline (one
-// pipeline, two faces). It takes timestamped events (IMU samples, geodetic fixes, GPS velocities,
-// the clock) in arrival order and owns every policy between them and the Localizer:
+// pipeline, two faces). It takes timestamped events (IMU samples, geodetic fixes, GPS velocities)
+// in arrival order and owns every policy between them and the Localizer:
 //  - the start: at the newest usable fix, with the orientation of the latest IMU sample that has
 //    one (and only with the covariance it states; the configured initial sigmas where it states
 //    zeros) and the GPS velocity of the fix's instant, once they have arrived or a message
@@ -17,12 +17,13 @@
 //  - fixes newer than the filter (their IMU sample has not arrived: IMU and GPS travel on
 //    separate connections) wait for it, up to fix_wait_for_imu_s of data time, so the estimate
 //    does not depend on which of the two messages of one instant a node receives first;
-//  - the time-jump reset: a stamp or a clock time_jump_back_s earlier than the newest one means a
-//    bag loop or a restarted player: the state is meaningless in the new time line, start over
-//    (the map origin is kept: the same place keeps the same coordinates). One jump is one reset,
-//    whichever shows it first: the clock's jump is not a second one when the stamps already
-//    restarted near the new clock, and a message stamped ahead of the new clock (one of the old
-//    loop still in a queue) is dropped, not taken as the newest stamp;
+//  - the time-jump reset: a stamp time_jump_back_s earlier than the newest one means a bag loop
+//    or a restarted player: the state is meaningless in the new time line, start over (the map
+//    origin is kept: the same place keeps the same coordinates). The stamps decide, not the
+//    clock: a loop shows in both on separate connections, in either order (each reset once a
+//    loop 2-3 times), and stamps may run ahead of the clock (GPS time). After the jump, a message
+//    of the old time line still in a queue (stamped in its span, ahead of the new one) is
+//    dropped, not taken as the newest stamp;
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -114,6 +115,8 @@ class LocalizationSession {
     std::int64_t fixes_imu_never_came = 0;  // ... and were applied after fix_wait_for_imu_s
     std::int64_t starts = 0;
     std::int64_t resets = 0;  // time jumps back and non-finite states
+    // Dropped after a time jump back: stamped in the old time line's span, ahead of the new one.
+    std::int64_t messages_of_previous_time_line = 0;
   };
 
   // A state and its pose covariance, e.g. the start's.
@@ -145,8 +148,6 @@ class LocalizationSession {
   Update addImu(const ImuEvent& event);
   Update addFix(const GeodeticFixEvent& event);
   Update addGpsVelocity(const GpsVelocityEvent& event);
-  // The receiving side's clock (e.g. /clock): a jump back resets like a stamp jumping back.
-  Update addClock(double now_s);
   // Whether a GPS velocity source exists (default true): without one the start does not wait.
   void setGpsVelocityExpected(bool expected) { gps_velocity_expected_ = expected; }
 
@@ -175,8 +176,8 @@ class LocalizationSession {
 
  private:
   // Resets when stamp_s is time_jump_back_s older than the newest stamp; records stamp_s. False
-  // (the message is to be dropped, the note says why) for a message of the old time line after
-  // the clock jumped back: stamped more than time_jump_back_s ahead of the new clock.
+  // (the message is to be dropped, the note says why) for a message of the old time line after a
+  // jump back: stamped in its span, more than time_jump_back_s ahead of the new one.
   bool checkStamp(double stamp_s, const char* source, Update* update);
   void reset(const std::string& why, Update* update);
   void tryStart(double now_s, Update* update);
@@ -193,11 +194,9 @@ class LocalizationSession {
   LazyStart lazy_start_;
   std::optional<kitti::MercatorProjection> projection_;
   std::vector<PositionFix> waiting_fixes_;  // sorted by stamp
-  std::optional<double> newest_stamp_s_, newest_clock_s_;
-  // Set when the clock jumped back, until a message stamped within reach of the new clock comes.
-  bool after_clock_jump_ = false;
-  // Set when the stamps jumped back, until the clock does (the same jump: one reset).
-  bool stamps_jumped_back_ = false;
+  std::optional<double> newest_stamp_s_;
+  // After a jump back: the newest stamp of the time line before it, until the new one passes it.
+  std::optional<double> old_timeline_end_s_;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
