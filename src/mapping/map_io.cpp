@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
@@ -230,16 +232,23 @@ std::unique_ptr<SemanticOcTree> loadSemanticOcTree(const std::string& path) {
   // octomap reads the node data only when the header's size is above 0: a file claiming 0
   // would load as an empty map whatever follows, unchecked. Its class table and integrity
   // record are read here, and must say 0 nodes too.
-  const bool header_says_empty = size_text == "0";
+  std::uint64_t header_size = 0;
+  std::istringstream size_reader(size_text);
+  if (!(size_reader >> header_size)) {
+    throw MapIoError("cannot read map '" + path + "': its header's size '" + size_text +
+                     "' is not a number");
+  }
+  const bool header_says_empty = header_size == 0;
   if (header_says_empty && !in.fail()) semantic->readData(in);
   if (in.fail() || !semantic->readError().empty()) {
     throw MapIoError(
         "cannot read map '" + path + "': " +
         (semantic->readError().empty() ? "truncated or corrupt data" : semantic->readError()));
   }
-  if (std::to_string(semantic->size()) != size_text) {
-    throw MapIoError("cannot read map '" + path + "': its header says size " + size_text +
-                     ", its data holds " + std::to_string(semantic->size()) + " nodes");
+  if (semantic->size() != header_size) {
+    throw MapIoError("cannot read map '" + path + "': its header says size " +
+                     std::to_string(header_size) + ", its data holds " +
+                     std::to_string(semantic->size()) + " nodes");
   }
   tree.release();
   return std::unique_ptr<SemanticOcTree>(semantic);

@@ -48,9 +48,12 @@ std::vector<ScanFile> listScanFiles(const std::string& scans_dir, int max_scans)
     if (entry.path().extension() != ".bin") continue;
     const std::string stem = entry.path().stem().string();
     // The whole name, digits only: "000001_copy.bin" was mapped as frame 1 a second time.
-    if (stem.empty() || stem.size() > 9 || !std::all_of(stem.begin(), stem.end(), [](char c) {
-          return std::isdigit(static_cast<unsigned char>(c));
-        })) {
+    // Leading zeros are any number (KITTI raw names have 10 digits, odometry ones 6).
+    const bool digits_only = !stem.empty() && std::all_of(stem.begin(), stem.end(), [](char c) {
+      return std::isdigit(static_cast<unsigned char>(c));
+    });
+    const std::size_t first_digit = std::min(stem.find_first_not_of('0'), stem.size() - 1);
+    if (!digits_only || stem.size() - first_digit > 9) {
       throw std::runtime_error(entry.path().string() + ": scan name is not a frame number");
     }
     scans.push_back({entry.path().string(), static_cast<std::size_t>(std::stoul(stem))});

@@ -296,7 +296,8 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
 // node count by the file, and every stored class index and count is checked. A leaf stands for
 // 8^(tree depth - its depth) voxels, which the grid and the PLY writer expand: a leaf coarser
 // than kMaxLeafSpanLevels (256 voxels a side: no lidar sees such a block all free or all
-// occupied) or more than kMaxMapVoxels in all are refused (a 237-byte file held 2^48).
+// occupied) or more than kMaxMapVoxels in all (2^36: known free space included, some 8 times a
+// 0.05 m map of a 4 km drive) are refused (a 237-byte file held 2^48).
 bool SemanticOcTree::readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
                                       std::uint64_t max_nodes, std::uint64_t* nodes_read,
                                       std::uint64_t* voxels) {

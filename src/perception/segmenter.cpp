@@ -73,9 +73,6 @@ std::vector<float> featherWeights(int start, int length, int extent, int ramp) {
   return weights;
 }
 
-// Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
-// over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
-// channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
 // The network input's valid region (the image without its padding) in the pixels of an output
 // of width x height, rounded to the nearest output pixel edges and at least one pixel.
 cv::Rect validRegionInOutput(const cv::Rect& valid, const cv::Size& input, int width, int height) {
@@ -89,6 +86,9 @@ cv::Rect validRegionInOutput(const cv::Rect& valid, const cv::Size& input, int w
   return cv::Rect(x0, y0, x1 - x0, y1 - y0);
 }
 
+// Softmax over the channels of a 1 x C x h x w score blob, added into the C planes of `sum`
+// over `tile`; flipped: the scores are of the mirrored tile. Row by row, so that the row's
+// channels stay in cache (a tile's full planes are 40 MB of temporaries otherwise).
 void addSoftmax(const cv::Mat& scores, bool flipped, const cv::Rect& tile,
                 const std::vector<float>& column_weight, const std::vector<float>& row_weight,
                 std::vector<cv::Mat>* sum) {

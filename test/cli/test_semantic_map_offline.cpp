@@ -144,7 +144,7 @@ TEST_F(OfflineMappingTest, ScanNamesAreWholeFrameNumbersAndADriveNeedsScans) {
 TEST_F(OfflineMappingTest, ScansAreInFrameOrderOncePerFrame) {
   const std::string names_dir = dir_ + "/names";
   std::filesystem::create_directories(names_dir);
-  for (const char* name : {"10.bin", "2.bin", "000003.bin", "notes.txt"}) {
+  for (const char* name : {"10.bin", "2.bin", "0000000003.bin", "notes.txt"}) {
     std::ofstream(names_dir + "/" + name);
   }
   const std::vector<ScanFile> scans = listScanFiles(names_dir, -1);

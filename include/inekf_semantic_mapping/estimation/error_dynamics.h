@@ -37,7 +37,8 @@ Matrix15d leftErrorTransition(const Eigen::Vector3d& angular_velocity,
 Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
                            const Eigen::Vector3d& specific_force, const ImuNoise& noise,
                            double gyro_noise_scale, double accel_noise_scale, double dt);
-// Same, reusing Phi(dt) = leftErrorTransition(angular_velocity, specific_force, dt).
+// Same, reusing Phi(dt) = leftErrorTransition(angular_velocity, specific_force, dt) (a step that
+// is split composes its sub-steps' own instead).
 Matrix15d leftProcessNoise(const Eigen::Vector3d& angular_velocity,
                            const Eigen::Vector3d& specific_force, const ImuNoise& noise,
                            double gyro_noise_scale, double accel_noise_scale, double dt,

@@ -178,7 +178,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   // The coarsest leaf a file may hold (levels above the finest) and the most voxels its leaves
   // may stand for (what the grid and the PLY writer expand them to).
   static constexpr unsigned int kMaxLeafSpanLevels = 8;
-  static constexpr std::uint64_t kMaxMapVoxels = std::uint64_t{1} << 32;
+  static constexpr std::uint64_t kMaxMapVoxels = std::uint64_t{1} << 36;
   bool readNodesChecked(SemanticOcTreeNode* node, std::istream& s, unsigned int depth,
                         std::uint64_t max_nodes, std::uint64_t* nodes_read, std::uint64_t* voxels);
   void updateInnerOccupancyRecurs(SemanticOcTreeNode* node, unsigned int depth);
