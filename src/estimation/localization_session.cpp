@@ -137,17 +137,25 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
   // After a jump back, a message stamped in the old time line's span and ahead of the new one is
   // one of the old time line still in a queue (IMU, fixes and velocities travel on separate
   // connections): taken, it would become the newest stamp and the new time line's next message
-  // a second jump.
+  // a second jump. Such leftovers are the last of the old line, within a moment of each other:
+  // once the dropped stamps span more than 2 time_jump_back_s, the stream has really moved there
+  // (a seek forward) and is followed.
   if (old_timeline_end_s_ && newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance &&
       stamp_s <= *old_timeline_end_s_ + tolerance) {
-    std::ostringstream why;
-    why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s
-        << " s is of the time line before the jump back (now " << *newest_stamp_s_
-        << " s): dropped";
-    update->note = why.str();
-    ++statistics_.messages_of_previous_time_line;
-    return false;
+    if (!first_dropped_stamp_s_) first_dropped_stamp_s_ = stamp_s;
+    first_dropped_stamp_s_ = std::min(*first_dropped_stamp_s_, stamp_s);
+    if (stamp_s - *first_dropped_stamp_s_ <= 2.0 * tolerance) {
+      std::ostringstream why;
+      why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s
+          << " s is of the time line before the jump back (now " << *newest_stamp_s_
+          << " s): dropped";
+      update->note = why.str();
+      ++statistics_.messages_of_previous_time_line;
+      return false;
+    }
+    old_timeline_end_s_.reset();
   }
+  first_dropped_stamp_s_.reset();
   if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "

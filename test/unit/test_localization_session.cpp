@@ -255,6 +255,19 @@ TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
 }
 
+// A jump back, then a seek forward into the old time line's span (a player restarted further on):
+// its first 2 s of stamps are taken for leftovers, then the stream is followed; it must not stay
+// dropped for good.
+TEST(LocalizationSession, ASeekForwardAfterAJumpBackIsFollowed) {
+  LocalizationSession session(originConfig());
+  for (int k = 0; k <= 100; ++k) session.addImu(restingImu(100.0 + 0.1 * k));
+  EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
+  for (int k = 0; k <= 30; ++k) session.addImu(restingImu(105.0 + 0.1 * k));
+  EXPECT_EQ(session.statistics().messages_of_previous_time_line, 21);  // 105.0 .. 107.0
+  session.addGpsVelocity(stillAt(108.1));
+  EXPECT_TRUE(session.addFix(fixAt(108.1)).started);
+}
+
 // Found by review: a clock jumping an hour forward was bridged in one propagation; the covariance
 // lost its positive definiteness (variances below zero) and every later fix was rejected. A gap
 // longer than restart_after_imu_gap_s starts over instead; a shorter one is still bridged.

@@ -197,6 +197,8 @@ class LocalizationSession {
   std::optional<double> newest_stamp_s_;
   // After a jump back: the newest stamp of the time line before it, until the new one passes it.
   std::optional<double> old_timeline_end_s_;
+  // The lowest stamp of the messages dropped in a row as the old time line's.
+  std::optional<double> first_dropped_stamp_s_;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
