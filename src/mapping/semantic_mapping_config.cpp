@@ -25,6 +25,10 @@ const char* mapClassSetName(MapClassSet set) {
   return set == MapClassSet::kCityscapes ? "cityscapes" : "semantickitti";
 }
 
+ClassSet classSetOf(MapClassSet set) {
+  return set == MapClassSet::kCityscapes ? ClassSet::cityscapes() : ClassSet::semanticKitti();
+}
+
 InsertionStructure parseInsertionStructure(const std::string& name) {
   if (name == "hashed_grid") return InsertionStructure::kHashedGrid;
   if (name == "octree") return InsertionStructure::kOctree;
@@ -49,9 +53,7 @@ void SemanticMappingConfig::validate() const {
           "sensor_model.clamping_min/clamping_max", "must satisfy 0 < min < max < 1");
   // The Bayes rule multiplies an observed class by c and every other by (1 - c) / (N - 1): at or
   // below 1/N an observation counts against its own class.
-  const int classes =
-      (class_set == MapClassSet::kCityscapes ? ClassSet::cityscapes() : ClassSet::semanticKitti())
-          .size();
+  const int classes = classSetOf(class_set).size();
   require(fusion.correct_probability > 1.0 / classes && fusion.correct_probability < 1,
           "confusion_probability",
           "must be in (1/N, 1) = (" + std::to_string(1.0 / classes) + ", 1) for the " +

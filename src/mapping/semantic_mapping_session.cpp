@@ -31,14 +31,9 @@ SemanticMappingSession::SemanticMappingSession(const SemanticMappingConfig& conf
   }
 }
 
-ClassSet SemanticMappingSession::configuredClassSet() const {
-  return config_.class_set == MapClassSet::kCityscapes ? ClassSet::cityscapes()
-                                                       : ClassSet::semanticKitti();
-}
-
 std::unique_ptr<SemanticOcTree> SemanticMappingSession::makeTree() const {
-  auto tree =
-      std::make_unique<SemanticOcTree>(config_.resolution_m, configuredClassSet(), config_.fusion);
+  auto tree = std::make_unique<SemanticOcTree>(config_.resolution_m, classSetOf(config_.class_set),
+                                               config_.fusion);
   tree->setOccupancyModel(config_.occupancy);
   tree->setRayCastingThreads(config_.ray_casting_threads);
   tree->setGrazingRayTruncation(config_.grazing_ray_truncation_voxels);
@@ -485,7 +480,7 @@ void SemanticMappingSession::load(const std::string& path) {
   // are in the configured set's: the configured set must be where the map's table begins (the
   // map may have added ids it met since, never reordered). A SemanticKITTI map loaded into a
   // Cityscapes session would have turned each new camera label into another class.
-  const ClassSet expected = configuredClassSet();
+  const ClassSet expected = classSetOf(config_.class_set);
   const ClassSet& found = loaded->classSet();
   bool same_ids = found.size() >= expected.size();
   for (int i = 0; same_ids && i < expected.size(); ++i) {

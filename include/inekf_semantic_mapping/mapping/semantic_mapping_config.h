@@ -24,6 +24,8 @@ enum class MapClassSet { kCityscapes, kSemanticKitti };
 // "cityscapes" | "semantickitti"; throws std::invalid_argument naming the choices otherwise.
 MapClassSet parseMapClassSet(const std::string& name);
 const char* mapClassSetName(MapClassSet set);
+// The classes (label ids and names) a map of that set starts with.
+ClassSet classSetOf(MapClassSet set);
 
 // Where scans are inserted: a HashedVoxelGrid, synced into the tree when the tree is asked for
 // (save, publish), or the SemanticOcTree itself (insertLabeledScan). The same map

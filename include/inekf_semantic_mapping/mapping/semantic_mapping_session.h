@@ -154,7 +154,6 @@ class SemanticMappingSession {
   void reset();
 
  private:
-  ClassSet configuredClassSet() const;
   std::unique_ptr<SemanticOcTree> makeTree() const;
   std::unique_ptr<HashedVoxelGrid> makeGrid() const;
   void syncTree() const;
