@@ -40,13 +40,9 @@ void PointProjector::project(const PointMatrixRef& points, ProjectedPoints* out)
   out->u = (homogeneous.row(0).array() / homogeneous.row(2).array()).transpose();
   out->v = (homogeneous.row(1).array() / homogeneous.row(2).array()).transpose();
   out->valid.resize(static_cast<std::size_t>(n));
-  const float width = static_cast<float>(width_);
-  const float height = static_cast<float>(height_);
   for (Eigen::Index i = 0; i < n; ++i) {
-    const float col = nearestPixel(out->u[i]);
-    const float row = nearestPixel(out->v[i]);
-    out->valid[i] = out->depth[i] > min_depth_m_ && col >= 0.f && col < width && row >= 0.f &&
-                    row < height;  // NaN compares false: never valid
+    out->valid[i] =  // NaN compares false: never valid
+        out->depth[i] > min_depth_m_ && pixelInImage(out->u[i], out->v[i], width_, height_);
   }
 }
 

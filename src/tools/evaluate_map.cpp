@@ -29,6 +29,7 @@
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
+#include "inekf_semantic_mapping/perception/projection.h"
 #include "inekf_semantic_mapping/perception/semantickitti_to_cityscapes.h"
 
 namespace fs = std::filesystem;
@@ -131,9 +132,10 @@ int run(const ism::common::CommandLine& cli) {
     if (all_points) return true;
     const Eigen::Vector3d h = camera.projectHomogeneous(point_velo.cast<double>());
     if (!(h.z() > 0)) return false;
-    const double u = h.x() / h.z(), v = h.y() / h.z();
-    // Pixel k covers [k - 0.5, k + 0.5), as in the mapping's projection (nearestPixel).
-    return u >= -0.5 && v >= -0.5 && u < camera.width - 0.5 && v < camera.height - 0.5;
+    // The mapping's own rule: pixel k covers [k - 0.5, k + 0.5).
+    return ism::perception::pixelInImage(static_cast<float>(h.x() / h.z()),
+                                         static_cast<float>(h.y() / h.z()), camera.width,
+                                         camera.height);
   };
 
   ism::evaluation::PointLabelScore score;

@@ -44,6 +44,13 @@ TEST(Projection, ImageBoundsAndNonFiniteInput) {
   const std::vector<std::uint8_t> expected_valid = {1, 1, 0, 0, 0, 1, 1, 0, 0};
   EXPECT_EQ(projected.valid, expected_valid);
   EXPECT_EQ(projected.validCount(), 4u);
+  // The same rule by itself (evaluate_map's camera view uses it).
+  EXPECT_TRUE(pixelInImage(-0.5f, -0.5f, 100, 50));
+  EXPECT_TRUE(pixelInImage(99.49f, 49.49f, 100, 50));
+  EXPECT_FALSE(pixelInImage(99.5f, 0.f, 100, 50));
+  EXPECT_FALSE(pixelInImage(0.f, 49.5f, 100, 50));
+  EXPECT_FALSE(pixelInImage(-0.51f, 0.f, 100, 50));
+  EXPECT_FALSE(pixelInImage(0.f, std::nanf(""), 100, 50));
   // The label looked up is the pixel the point falls in.
   std::vector<std::uint8_t> image(100 * 50, 0);
   image[0] = 7;

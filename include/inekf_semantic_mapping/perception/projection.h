@@ -19,6 +19,14 @@ using PointMatrixRef = Eigen::Ref<const Eigen::Matrix3Xf, 0, Eigen::OuterStride<
 // covers [k - 0.5, k + 0.5). NaN stays NaN (it compares false with any bound).
 inline float nearestPixel(float coordinate) { return std::floor(coordinate + 0.5f); }
 
+// Whether (u, v)'s pixel is in a width x height image: -0.5 <= u < width - 0.5, the same for v.
+// False for NaN.
+inline bool pixelInImage(float u, float v, int width, int height) {
+  const float col = nearestPixel(u), row = nearestPixel(v);
+  return col >= 0.f && col < static_cast<float>(width) && row >= 0.f &&
+         row < static_cast<float>(height);
+}
+
 struct ProjectedPoints {
   Eigen::VectorXf u;      // pixel column (OpenCV convention: pixel centers at integers)
   Eigen::VectorXf v;      // pixel row
