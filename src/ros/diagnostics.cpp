@@ -120,8 +120,27 @@ NodeDiagnostics::NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_n
                                 " must be a positive number of seconds, got " +
                                 std::to_string(period_s));
   }
+  timer_period_s_ = period_s;
   timer_ = nh.createWallTimer(ros::WallDuration(period_s),
-                              [this](const ros::WallTimerEvent&) { updater_.force_update(); });
+                              [this](const ros::WallTimerEvent&) { publish(); });
+}
+
+void NodeDiagnostics::publish() {
+  // force_update re-reads ~diagnostic_period (cached: rosparam set reaches it), so a period set
+  // while running is followed from the next tick on. A bad one keeps the period there was.
+  updater_.force_update();
+  const double period_s = updater_.getPeriod();
+  if (period_s == timer_period_s_) return;
+  if (!(period_s > 0.0) || !std::isfinite(period_s)) {
+    ROS_WARN_STREAM_THROTTLE(60.0,
+                             "diagnostics: ~diagnostic_period must be a positive number of "
+                             "seconds, got "
+                                 << period_s << ": keeping " << timer_period_s_ << " s");
+    return;
+  }
+  ROS_INFO_STREAM("diagnostics: now published every " << period_s << " s (~diagnostic_period)");
+  timer_period_s_ = period_s;
+  timer_.setPeriod(ros::WallDuration(period_s));
 }
 
 void NodeDiagnostics::add(const std::string& name, Task task) {

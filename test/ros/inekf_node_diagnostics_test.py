@@ -66,6 +66,24 @@ class InekfNodeDiagnostics(unittest.TestCase):
         self.assertGreaterEqual(len(intervals), 3, record)
         self.assertLess(intervals[len(intervals) // 2], 0.6, intervals)
 
+        # A period set while running is followed (it was read once, at the start).
+        rospy.set_param("/inekf_node/diagnostic_period", 1.5)
+        time.sleep(1.0)  # the old period's tick reads the new value
+        with lock:
+            del seen[:]
+        start = time.time()
+        while time.time() - start < 6.5:
+            message.header.stamp = stamp
+            imu.publish(message)
+            stamp += rospy.Duration(0.1)
+            time.sleep(0.1)
+        with lock:
+            stamps = [t for t, _, _, _ in seen]
+        intervals = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+        sys.stderr.write("after ~diagnostic_period 1.5: intervals %s\n" % intervals)
+        self.assertGreaterEqual(len(intervals), 2, stamps)
+        self.assertGreater(intervals[len(intervals) // 2], 1.2, intervals)
+
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "inekf_node_diagnostics_test", InekfNodeDiagnostics, sys.argv)

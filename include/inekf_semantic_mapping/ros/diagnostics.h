@@ -83,15 +83,19 @@ class PlaybackMonitor {
 class NodeDiagnostics {
  public:
   using Task = std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)>;
-  // Published every ~diagnostic_period seconds (diagnostic_updater's parameter, default 1 s);
-  // throws std::invalid_argument when it is not positive.
+  // Published every ~diagnostic_period seconds (diagnostic_updater's parameter, default 1 s, also
+  // followed when set while running); throws std::invalid_argument when it is not positive at
+  // the start.
   NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& private_nh);
   void add(const std::string& name, Task task);
   void forceUpdate() { updater_.force_update(); }
 
  private:
+  void publish();
+
   diagnostic_updater::Updater updater_;
   ros::WallTimer timer_;
+  double timer_period_s_ = 1.0;
 };
 
 }  // namespace ros_conversions
