@@ -280,7 +280,24 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
         run.fixes.push_back(fix);
       }
     }
-    if (!session.started()) continue;
+    if (!session.started()) {
+      if (run.states.empty()) continue;
+      // Reset after the start and not yet restarted: the frame keeps its place (every later
+      // state stays at its own frame) with the last estimate, and is left out of the scores.
+      run.held_frames.push_back(static_cast<int>(k));
+      run.states.push_back(run.states.back());
+      run.pose_covariances.push_back(run.pose_covariances.back());
+      pass.filtered.push_back(pass.filtered.back());
+      pass.filtered_yaw_sigma_rad.push_back(std::numeric_limits<double>::infinity());
+      pass.gyro_bias_z_sigma_radps.push_back(std::numeric_limits<double>::infinity());
+      if (options.smooth) {  // no step: a segment of its own, the smoother keeps it as it is
+        ForwardEpoch held;
+        held.filtered = epochs.back().filtered;
+        held.filtered_covariance = epochs.back().filtered_covariance;
+        epochs.push_back(held);
+      }
+      continue;
+    }
     if (run.states.empty()) {
       // Frames before the start have no estimate of their own: they repeat the start's.
       run.first_estimated_frame = static_cast<int>(k);
@@ -339,6 +356,7 @@ TrajectoryErrors compareWithTruth(const OxtsRunResult& run, int first, int last)
   TrajectoryErrors errors;
   int count = 0;
   for (int k = std::max(first, run.first_estimated_frame); k < end; ++k) {
+    if (std::binary_search(run.held_frames.begin(), run.held_frames.end(), k)) continue;
     const NavState& s = run.states[k];
     const Eigen::Isometry3d& truth = run.truth[k];
     errors.ate_m += (s.position_map - truth.translation()).squaredNorm();

@@ -386,6 +386,12 @@ int main(int argc, char** argv) {
       std::printf("inekf_offline: no fix before frame %d: the filter started there\n",
                   run.first_estimated_frame);
     }
+    if (!run.held_frames.empty()) {
+      std::printf(
+          "inekf_offline: %zu frames (first %d) between a reset and the next start repeat the "
+          "last estimate and are not scored\n",
+          run.held_frames.size(), run.held_frames.front());
+    }
     return 0;
   });
 }
