@@ -44,11 +44,12 @@ OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_er
           std::string("field ") + kFieldNames[i] + " is not finite: '" + tokens[i] + "'");
     }
   }
-  // A latitude beyond the poles would make every Mercator pose NaN downstream.
-  if (std::fabs(values[0]) > 90.0 || std::fabs(values[1]) > 180.0 ||
+  // A latitude at or beyond a pole would make the Mercator poses infinite or NaN downstream (the
+  // projection's own range, isGeodeticInRange).
+  if (!(std::fabs(values[0]) < 90.0) || std::fabs(values[1]) > 180.0 ||
       std::fabs(values[2]) > 100000.0) {
     throw KittiFormatError(file_for_errors, line_number,
-                           "lat/lon/alt out of range (|lat| <= 90, |lon| <= 180, |alt| <= 1e5): '" +
+                           "lat/lon/alt out of range (|lat| < 90, |lon| <= 180, |alt| <= 1e5): '" +
                                tokens[0] + " " + tokens[1] + " " + tokens[2] + "'");
   }
   int flags[5];

@@ -46,6 +46,11 @@ TEST(InputValidation, OxtsLatitudeBeyondThePoles) {
   EXPECT_NO_THROW(kitti::parseOxtsLine(oxtsLine("49.0"), "f.txt", 1));
   expectMentions(errorOf([] { kitti::parseOxtsLine(oxtsLine("270"), "f.txt", 3); }),
                  {"f.txt:3", "lat"});
+  // At a pole the Mercator y is infinite (-90: log(tan(0))): refused as well.
+  expectMentions(errorOf([] { kitti::parseOxtsLine(oxtsLine("-90"), "f.txt", 4); }),
+                 {"f.txt:4", "lat"});
+  expectMentions(errorOf([] { kitti::parseOxtsLine(oxtsLine("90.0"), "f.txt", 5); }),
+                 {"f.txt:5", "lat"});
 }
 
 TEST(InputValidation, TimestampsMustBeRealCalendarDates) {
