@@ -107,14 +107,19 @@ std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stam
   std::size_t more = 0;
   for (std::size_t i = 1; i < stamps_ns.size(); ++i) {
     const double step_s = secondsBetween(stamps_ns[i - 1], stamps_ns[i]);
-    if (step_s >= 0.0 && step_s <= max_gap_s) continue;
+    // A repeated stamp is a message the consumers drop as out of order: worth a line too.
+    if (stamps_ns[i] > stamps_ns[i - 1] && step_s <= max_gap_s) continue;
     if (warnings.size() == max_messages) {
       ++more;
       continue;
     }
     char text[96];
-    std::snprintf(text, sizeof(text), ":%zu: %.3f s %s the line above", i + 1, std::abs(step_s),
-                  step_s < 0.0 ? "before" : "after");
+    if (stamps_ns[i] == stamps_ns[i - 1]) {
+      std::snprintf(text, sizeof(text), ":%zu: the same stamp as the line above", i + 1);
+    } else {
+      std::snprintf(text, sizeof(text), ":%zu: %.3f s %s the line above", i + 1, std::abs(step_s),
+                    step_s < 0.0 ? "before" : "after");
+    }
     warnings.push_back(path + text);
   }
   if (more > 0) {

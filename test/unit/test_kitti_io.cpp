@@ -69,6 +69,8 @@ TEST(KittiTimestamps, WarningsNameTheLinesThatGoBackOrJump) {
   ASSERT_EQ(warnings.size(), 2u);
   EXPECT_EQ(warnings[0], "t.txt:3: 4.100 s before the line above");
   EXPECT_EQ(warnings[1], "t.txt:4: 3604.100 s after the line above");
+  EXPECT_EQ(timestampWarnings({0, s / 10, s / 10, 3 * s / 10}, "d.txt"),
+            std::vector<std::string>{"d.txt:3: the same stamp as the line above"});
   std::vector<std::int64_t> zigzag;
   for (int i = 0; i < 20; ++i) zigzag.push_back(i % 2 == 0 ? 0 : 5 * s);
   const std::vector<std::string> capped = timestampWarnings(zigzag, "z.txt", 1.0, 5);

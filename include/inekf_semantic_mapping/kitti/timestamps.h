@@ -22,8 +22,9 @@ std::vector<std::int64_t> readTimestampsFile(const std::string& path);
 
 // The steps of a timestamps file that a recording should not have, one message each:
 // "<path>:<line>: 4251.276 s before the line above" (time goes back) or "... after the line
-// above" (a jump of more than max_gap_s). Lines are counted as stamps (KITTI writes no blank
-// lines). At most max_messages, then one saying how many more. Empty for a clean file.
+// above" (a jump of more than max_gap_s), "... the same stamp as the line above" (a repeated
+// stamp: consumers drop its message as out of order). Lines are counted as stamps (KITTI writes no
+// blank lines). At most max_messages, then one saying how many more. Empty for a clean file.
 std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stamps_ns,
                                            const std::string& path, double max_gap_s = 1.0,
                                            std::size_t max_messages = 5);
