@@ -4,6 +4,7 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include <cmath>
 #include <ctime>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
@@ -159,6 +160,7 @@ sensor_msgs::PointCloud2 toPointCloudMessage(const kitti::VelodyneScan& scan,
   modifier.resize(scan.size());
   msg.height = 1;
   msg.width = static_cast<std::uint32_t>(scan.size());
+  // Dense means every point is finite (PCL then skips its own checks): said only when true.
   msg.is_dense = true;
   const std::vector<std::uint16_t> rings = kitti::computeRings(scan);
   sensor_msgs::PointCloud2Iterator<float> x(msg, "x"), y(msg, "y"), z(msg, "z"),
@@ -171,6 +173,7 @@ sensor_msgs::PointCloud2 toPointCloudMessage(const kitti::VelodyneScan& scan,
     *z = p[2];
     *intensity = p[3];
     *ring = rings[i];
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) msg.is_dense = false;
   }
   return msg;
 }

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 
@@ -138,6 +139,10 @@ TEST(KittiConversions, PointCloudHasFieldsAndRings) {
     EXPECT_EQ(*intensity, scan.point(i)[3]);
     EXPECT_EQ(*ring, i / 36) << i;
   }
+  EXPECT_TRUE(cloud.is_dense);
+  // A point without finite coordinates is published as it is, and the cloud is not dense.
+  scan.xyzi[4 * 5 + 1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(toPointCloudMessage(scan, ros::Time(2, 0)).is_dense);
 }
 
 TEST(KittiConversions, CameraFrameAndInfoReproduceTheDevkitProjection) {
