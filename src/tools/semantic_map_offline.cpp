@@ -56,9 +56,10 @@ constexpr char kUsage[] =
     "     both [--config semantic_mapping.yaml] [--resolution R] [--max-range M]\n"
     "         [--confusion P] [--fusion bayes|dirichlet] [--classes semantickitti|cityscapes]\n"
     "         [--prob-hit P] [--prob-miss P] [--grazing-truncation VOXELS (1; 0: plain octomap)]\n"
-    "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot] [--threads N]\n"
+    "         [--max-scans N] [--export-ply MAP.ply] [--color-ot MAP_COLOR.ot]\n"
     "         [--grid STEM] [--insertion octree|hashed_grid] [--early-termination N]\n"
     "         [--octomap-reference]\n"
+    "       with --model: [--model-card CARD.yaml] [--threads N (2: the network's)]\n"
     "       with --drive: [--label-images DIR [--label-min-probability P (0)]]\n"
     "  --labels   per-point labels DIR/NNNNNN.label (SemanticKITTI ids; default classes\n"
     "             semantickitti)\n"
@@ -233,6 +234,25 @@ int main(int argc, char** argv) {
     }
     if (!raw_drive && cli.has("--images") != cli.has("--model")) {
       throw UsageError("--images and --model go together");
+    }
+    // A flag of the other input's form would be ignored without a word (--labels with --drive
+    // even changed the class set and then read no label).
+    const std::vector<std::string> other_form =
+        raw_drive ? std::vector<std::string>{"--labels", "--images", "--calib"}
+                  : std::vector<std::string>{"--calib-dir", "--camera"};
+    for (const std::string& flag : other_form) {
+      if (cli.has(flag)) {
+        throw UsageError(flag + " goes with " + (raw_drive ? "--scans" : "--drive") + ", not " +
+                         (raw_drive ? "--drive" : "--scans"));
+      }
+    }
+    for (const char* flag : {"--model-card", "--threads"}) {
+      if (cli.has(flag) && !cli.has("--model")) {
+        throw UsageError(std::string(flag) + " goes with --model");
+      }
+    }
+    if (cli.has("--threads") && cli.getInt("--threads", 1) < 1) {
+      throw UsageError("--threads must be at least 1");
     }
     const std::string output = cli.require("--output");
     if (cli.has("--label-images") && !raw_drive) throw UsageError("--label-images needs --drive");

@@ -102,6 +102,32 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   }
 }
 
+// A flag of the other input form, or one that needs --model, is refused before the run (each was
+// ignored without a word: --labels with --drive even switched the class set).
+TEST_F(OfflineMappingTest, FlagsOfTheOtherInputFormAreRefused) {
+  const std::string tool = SEMANTIC_MAP_OFFLINE_PATH;
+  const std::string scans = " --scans " + dir_ + "/velodyne --labels " + dir_ + "/labels --poses " +
+                            dir_ + "/poses.txt --calib " + dir_ + "/calib.txt --output " + dir_ +
+                            "/f.ot";
+  const std::string drive =
+      " --drive " + dir_ + "/2011_01_01/2011_01_01_drive_0001_sync --output " + dir_ + "/f.ot";
+  const std::pair<std::string, std::string> cases[] = {
+      {drive + " --labels " + dir_ + "/labels", "--labels goes with --scans, not --drive"},
+      {drive + " --images " + dir_ + "/images", "--images goes with --scans, not --drive"},
+      {drive + " --calib " + dir_ + "/calib.txt", "--calib goes with --scans, not --drive"},
+      {scans + " --camera 3", "--camera goes with --drive, not --scans"},
+      {scans + " --calib-dir " + dir_, "--calib-dir goes with --drive, not --scans"},
+      {scans + " --threads 4", "--threads goes with --model"},
+      {scans + " --model-card card.yaml", "--model-card goes with --model"},
+  };
+  for (const auto& [flags, message] : cases) {
+    const auto [status, output] = test::runCommand(tool + flags);
+    EXPECT_NE(status, 0) << flags;
+    EXPECT_NE(output.find(message), std::string::npos) << flags << "\n" << output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/f.ot"));
+}
+
 // Found by review: a copy named 000001_copy.bin went in as frame 1 a second time (the frame
 // number was read from the leading digits), and a drive without scans was written out as an
 // empty map. Both are errors naming the file or folder.
