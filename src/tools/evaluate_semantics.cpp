@@ -165,7 +165,7 @@ std::vector<Variant> makeVariants(const ism::common::CommandLine& cli) {
   raw.options.check_geometry = false;
   raw.options.check_curbs = false;
   variants.push_back(raw);
-  const bool curbs = cli.getInt("--curbs", 1) != 0;
+  const bool curbs = cli.getBool("--curbs", true);
   for (double confidence : confidences) {
     for (int radius : radii) {
       for (const std::string& occlusion : occlusions) {
@@ -212,8 +212,9 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   }
   if (cli.has("--input")) {
     const std::string size = cli.get("--input");
-    if (std::sscanf(size.c_str(), "%dx%d", &card.input_width, &card.input_height) != 2 ||
-        card.input_width <= 0 || card.input_height <= 0)
+    int used = 0;
+    if (std::sscanf(size.c_str(), "%dx%d%n", &card.input_width, &card.input_height, &used) != 2 ||
+        used != static_cast<int>(size.size()) || card.input_width <= 0 || card.input_height <= 0)
       throw UsageError("--input expects WxH, got '" + size + "'");
   }
   card.tile_scale = cli.getDouble("--tile-scale", card.tile_scale);
@@ -221,13 +222,12 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
   card.tile_overlap = cli.getInt("--tile-overlap", card.tile_overlap);
   card.tile_max_width = cli.getInt("--tile-max-width", card.tile_max_width);
   card.tile_bottom_margin = cli.getInt("--bottom-margin", card.tile_bottom_margin);
-  card.flip_average = cli.getInt("--flip", card.flip_average ? 1 : 0) != 0;
+  card.flip_average = cli.getBool("--flip", card.flip_average);
   card.gamma = cli.getDouble("--gamma", card.gamma);
   if (!(card.gamma >= perception::ModelCard::kMinGamma &&
         card.gamma <= perception::ModelCard::kMaxGamma))
     throw UsageError("--gamma must be in [0.2, 5]");
-  card.suppress_unlabeled =
-      cli.getInt("--suppress-unlabeled", card.suppress_unlabeled ? 1 : 0) != 0;
+  card.suppress_unlabeled = cli.getBool("--suppress-unlabeled", card.suppress_unlabeled);
   if (cli.has("--color")) {
     const std::string color = cli.get("--color");
     if (color == "none") {
@@ -364,8 +364,7 @@ int main(int argc, char** argv) {
     ism::mapping::SemanticMappingConfig map_config =
         cli.has("--map-config") ? ism::mapping::loadSemanticMappingConfig(cli.get("--map-config"))
                                 : ism::mapping::SemanticMappingConfig();
-    map_config.label_geometry_curbs =
-        cli.getInt("--curbs", map_config.label_geometry_curbs ? 1 : 0) != 0;
+    map_config.label_geometry_curbs = cli.getBool("--curbs", map_config.label_geometry_curbs);
     if (!cli.has("--no-map")) {
       std::printf(
           "maps: label_geometry %s (max flat %.2f m, min raised %.2f m, high terrain is "

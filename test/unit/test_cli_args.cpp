@@ -13,7 +13,7 @@ using namespace inekf_semantic_mapping::common;  // NOLINT: test
 
 namespace {
 
-const std::vector<std::string> kValues = {"--input", "--rate", "--count", "--seed"};
+const std::vector<std::string> kValues = {"--input", "--rate", "--count", "--seed", "--flip"};
 const std::vector<std::string> kSwitches = {"--quiet", "--no-lidar"};
 const std::vector<std::string> kRepeatable = {"--outage"};
 
@@ -94,6 +94,13 @@ TEST(CliArgs, BadNumbersAreRejected) {
   EXPECT_NE(usageError({"--seed", "3x"}, seed), "");
   EXPECT_NE(usageError({"--seed", "99999999999999999999"}, seed), "");  // beyond 64 bits
   EXPECT_THROW(CommandLine::parseDouble("--x", "1.0.0"), UsageError);
+  // On/off flags: 0 or 1 only (--flip 7 was taken as on).
+  auto flip = [](const CommandLine& c) { c.getBool("--flip", false); };
+  EXPECT_TRUE(parse({"--flip", "1"}).getBool("--flip", false));
+  EXPECT_FALSE(parse({"--flip", "0"}).getBool("--flip", true));
+  EXPECT_TRUE(parse({}).getBool("--flip", true));
+  EXPECT_EQ(usageError({"--flip", "7"}, flip), "--flip expects 0 or 1, got '7'");
+  EXPECT_NE(usageError({"--flip", "yes"}, flip), "");
 }
 
 TEST(CliArgs, Switches) {

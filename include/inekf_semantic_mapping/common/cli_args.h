@@ -104,6 +104,13 @@ class CommandLine {
   std::uint64_t getUint64(const std::string& flag, std::uint64_t fallback) const {
     return has(flag) ? parseUint64(flag, get(flag)) : fallback;
   }
+  // An on/off flag written 0 or 1: "--flip expects 0 or 1, got '7'".
+  bool getBool(const std::string& flag, bool fallback) const {
+    if (!has(flag)) return fallback;
+    const std::string text = get(flag);
+    if (text != "0" && text != "1") throw UsageError(flag + " expects 0 or 1, got '" + text + "'");
+    return text == "1";
+  }
 
   // A finite number, the whole text (no trailing characters): "--rate expects a number, got
   // 'abc'".
