@@ -106,6 +106,8 @@ int run(const ism::common::CommandLine& cli) {
   const int scan_step = cli.getInt("--scan-step", 2);
   if (scan_step < 1) throw UsageError("--scan-step must be >= 1");
   const double max_range = cli.getDouble("--max-range", 0.0);
+  if (max_range < 0) throw UsageError("--max-range must be >= 0 (0: every point)");
+  if (cli.has("--json")) ism::common::checkOutputPath(cli.get("--json"));  // before the run
 
   const std::unique_ptr<ism::mapping::SemanticOcTree> tree =
       ism::mapping::loadSemanticOcTree(map_path);

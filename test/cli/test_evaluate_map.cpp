@@ -190,6 +190,19 @@ TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
       ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --drive " + drive_);
   EXPECT_NE(usage_status, 0);
   EXPECT_NE(usage_output.find("--map"), std::string::npos) << usage_output;
+  // A --json in a folder that is not there and a negative --max-range fail before the map is
+  // read (the JSON's folder was found missing after the whole evaluation, -5 meant every point).
+  const auto [json_status, json_output] =
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + dir_ +
+                            "/missing.ot --drive " + drive_ + " --json " + dir_ + "/no_dir/x.json");
+  EXPECT_NE(json_status, 0);
+  EXPECT_NE(json_output.find(dir_ + "/no_dir/x.json"), std::string::npos) << json_output;
+  EXPECT_EQ(json_output.find("missing.ot"), std::string::npos) << json_output;
+  const auto [range_status, range_output] =
+      ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + dir_ +
+                            "/missing.ot --drive " + drive_ + " --max-range -5");
+  EXPECT_NE(range_status, 0);
+  EXPECT_NE(range_output.find("--max-range must be >= 0"), std::string::npos) << range_output;
 }
 
 TEST(SemanticKittiListing, NamesTheScansWithoutTheirLabelOrImage) {
