@@ -116,6 +116,15 @@ void YamlReader::read(const std::string& key, double* out) {
   *out = value;
 }
 
+void YamlReader::readInRange(const std::string& key, double* out, double min, double max,
+                             bool min_exclusive) {
+  read(key, out);
+  if ((min_exclusive ? *out > min : *out >= min) && *out <= max) return;
+  std::ostringstream range;
+  range << "must be in " << (min_exclusive ? "(" : "[") << min << ", " << max << "], got " << *out;
+  fail(key, range.str());
+}
+
 void YamlReader::read(const std::string& key, int* out) {
   double value = 0.0;
   const YAML::Node node = lookup(key);

@@ -41,8 +41,7 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   config.localizer = LocalizerConfig::fromYaml(&reader);
   reader.allow("node.*");
   const auto positive = [&reader](const std::string& key, double* out) {
-    reader.read(key, out);
-    if (!(*out > 0.0)) reader.fail(key, "must be a positive number");
+    reader.readInRange(key, out, 0.0, 1e6, true);
   };
   positive("session.start_max_wait_s", &config.start_max_wait_s);
   positive("session.start_max_velocity_age_s", &config.start_max_velocity_age_s);

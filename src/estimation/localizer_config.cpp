@@ -21,13 +21,17 @@ LocalizerConfig LocalizerConfig::fromYamlFile(const std::string& path) {
 
 LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   LocalizerConfig config;
+  // Up to 1e6: the filter squares these (and sums them over steps); 1e200 passed as finite and
+  // made every state non-finite. Angles of a heading or a rotation: beyond 180 deg they mean
+  // nothing more.
   const auto positive = [reader](const std::string& key, double* out) {
-    reader->read(key, out);
-    if (!(*out > 0.0)) reader->fail(key, "must be a positive number");
+    reader->readInRange(key, out, 0.0, 1e6, true);
   };
   const auto non_negative = [reader](const std::string& key, double* out) {
-    reader->read(key, out);
-    if (!(*out >= 0.0)) reader->fail(key, "must be >= 0");
+    reader->readInRange(key, out, 0.0, 1e6);
+  };
+  const auto angle = [reader](const std::string& key, double* out, bool zero_allowed) {
+    reader->readInRange(key, out, 0.0, 180.0, !zero_allowed);
   };
   reader->readChoice("filter", filterTypeFromString, &config.filter_type);
   ImuNoise& n = config.imu_noise;
@@ -36,14 +40,14 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   non_negative("imu_noise.gyro_bias_random_walk", &n.gyro_bias_random_walk);
   non_negative("imu_noise.accel_bias_random_walk", &n.accel_bias_random_walk);
   positive("imu_noise.gravity_mps2", &n.gravity_mps2);
-  positive("initial_sigma.rotation_deg", &config.initial_rotation_sigma_deg);
-  positive("initial_sigma.yaw_deg", &config.initial_yaw_sigma_deg);
+  angle("initial_sigma.rotation_deg", &config.initial_rotation_sigma_deg, false);
+  angle("initial_sigma.yaw_deg", &config.initial_yaw_sigma_deg, false);
   positive("initial_sigma.velocity_mps", &config.initial_velocity_sigma_mps);
   positive("initial_sigma.unknown_velocity_horizontal_mps",
            &config.unknown_velocity_sigma_horizontal_mps);
   positive("initial_sigma.unknown_velocity_vertical_mps",
            &config.unknown_velocity_sigma_vertical_mps);
-  positive("initial_sigma.unknown_yaw_deg", &config.unknown_yaw_sigma_deg);
+  angle("initial_sigma.unknown_yaw_deg", &config.unknown_yaw_sigma_deg, false);
   positive("initial_sigma.position_m", &config.initial_position_sigma_m);
   positive("initial_sigma.gyro_bias_radps", &config.initial_gyro_bias_sigma_radps);
   positive("initial_sigma.accel_bias_mps2", &config.initial_accel_bias_sigma_mps2);
@@ -68,7 +72,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("nonholonomic.lateral_sigma_mps", &config.nonholonomic_lateral_sigma_mps);
   positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
   positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
-  positive("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg);
+  angle("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg, false);
   // A mounting error, not another axis convention: an IMU turned further needs its data rotated
   // (imu_link in tf), not a constraint that bends.
   const auto mounting_angle = [&](const char* key, double* out) {
@@ -83,9 +87,9 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("heading.track_min_speed_mps", &config.heading_track_min_speed_mps);
   non_negative("heading.track_min_chord_m", &config.heading_track_min_chord_m);
   positive("heading.track_max_chord_s", &config.heading_track_max_chord_s);
-  positive("heading.track_max_turn_deg", &config.heading_track_max_turn_deg);
+  angle("heading.track_max_turn_deg", &config.heading_track_max_turn_deg, false);
   non_negative("heading.track_turn_weight", &config.heading_track_turn_weight);
-  non_negative("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg);
+  angle("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg, true);
   const auto count = [reader](const std::string& key, int* out, int min) {
     reader->read(key, out);
     if (*out < min || *out > 1000000) {
@@ -93,14 +97,23 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
     }
   };
   count("heading.track_min_chords", &config.heading_track_min_chords, 1);
-  positive("heading.align_above_sigma_deg", &config.heading_align_above_sigma_deg);
-  positive("heading.align_max_sigma_deg", &config.heading_align_max_sigma_deg);
+  angle("heading.align_above_sigma_deg", &config.heading_align_above_sigma_deg, false);
+  angle("heading.align_max_sigma_deg", &config.heading_align_max_sigma_deg, false);
   positive("heading.check_sigmas", &config.heading_check_sigmas);
-  non_negative("heading.check_min_deg", &config.heading_check_min_deg);
+  angle("heading.check_min_deg", &config.heading_check_min_deg, true);
   count("heading.reopen_after_rejected_fixes", &config.heading_reopen_after_rejected_fixes, 0);
   count("heading.nis_window_fixes", &config.heading_nis_window_fixes, 0);
   positive("heading.nis_window_max", &config.heading_nis_window_max);
   reader->read("heading.hold_unknown_yaw", &config.heading_hold_unknown_yaw);
+  // A start without a heading has the unknown yaw's sigma: at or below the alignment's threshold
+  // it would never be aligned to the track.
+  if (config.heading_from_track &&
+      !(config.heading_align_above_sigma_deg < config.unknown_yaw_sigma_deg)) {
+    reader->fail("heading.align_above_sigma_deg",
+                 "must be below initial_sigma.unknown_yaw_deg (" +
+                     std::to_string(config.unknown_yaw_sigma_deg) +
+                     "): a start without a heading would never be aligned to the GPS track");
+  }
   return config;
 }
 

@@ -41,10 +41,13 @@ estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlRe
   reader->readChoice("filter", estimation::filterTypeFromString, &config.localizer.filter_type);
   estimation::LocalizerConfig& localizer = config.localizer;
   reader->read("init_orientation_from_imu", &localizer.init_orientation_from_reference);
-  reader->read("min_fix_sigma_m", &localizer.min_gps_sigma_m);
-  reader->read("default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
-  reader->read("default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
-  reader->read("time_jump_back_s", &config.time_jump_back_s);
+  // The file's checks for the same values (its gps.min_sigma_m and session.* keys).
+  reader->readInRange("min_fix_sigma_m", &localizer.min_gps_sigma_m, 0.0, 1e6);
+  reader->readInRange("default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m, 0.0,
+                      1e6, true);
+  reader->readInRange("default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m, 0.0,
+                      1e6, true);
+  reader->readInRange("time_jump_back_s", &config.time_jump_back_s, 0.0, 1e6, true);
   estimation::GeodeticOrigin origin;
   const int origin_parts =
       reader->has("origin_lat") + reader->has("origin_lon") + reader->has("origin_alt");

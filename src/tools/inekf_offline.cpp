@@ -169,8 +169,8 @@ int main(int argc, char** argv) {
       }
       double& yaw_sigma_deg = options.config.localizer.initial_yaw_sigma_deg;
       yaw_sigma_deg = cli.getDouble("--init-yaw-sigma-deg", yaw_sigma_deg);
-      if (cli.has("--init-yaw-sigma-deg") && !(yaw_sigma_deg > 0)) {
-        throw UsageError("--init-yaw-sigma-deg must be positive");
+      if (cli.has("--init-yaw-sigma-deg") && !(yaw_sigma_deg > 0 && yaw_sigma_deg <= 180)) {
+        throw UsageError("--init-yaw-sigma-deg must be in (0, 180]");
       }
       options.init_yaw_error_deg =
           cli.getDouble("--init-yaw-error-deg", options.init_yaw_error_deg);

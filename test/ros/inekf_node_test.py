@@ -258,6 +258,12 @@ class InekfNodeTest(unittest.TestCase):
                                            {"filter_type": "left", "filter": "right"})
         self.assertNotEqual(code, 0, output)
         self.assertIn("renamed to 'filter', which is set too", output)
+        # The parameters that override the file's keys get the file's checks (they were taken
+        # as they came: a negative sigma started the node).
+        code, output = run_with_parameters("inekf_node", "negative_sigma_inekf_node",
+                                           {"default_fix_sigma_horizontal_m": -1})
+        self.assertNotEqual(code, 0, output)
+        self.assertIn("'default_fix_sigma_horizontal_m' must be in (0, ", output)
 
     def test_localizes_a_real_drive(self):
         if rospy.get_param("~source", "self") == "kitti_player":

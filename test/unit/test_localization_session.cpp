@@ -489,6 +489,30 @@ TEST(LocalizationSession, ConfigReadsTheSessionSectionStrictly) {
     EXPECT_NE(std::string(error.what()).find("session.restart_after_imu_gap_s"), std::string::npos)
         << error.what();
   }
+  // Finite but absurd values are refused with their key: the filter squares them (1e200 made
+  // every state non-finite), and a heading sigma beyond 180 deg, or an alignment threshold at the
+  // unknown yaw's sigma, left a start without a heading never aligned.
+  const std::pair<const char*, const char*> absurd[] = {
+      {"initial_sigma:\n  rotation_deg: 1.0e200\n",
+       "initial_sigma.rotation_deg' must be in (0, 180]"},
+      {"imu_noise:\n  gyro_noise_density: 1.0e200\n",
+       "imu_noise.gyro_noise_density' must be in (0, 1e+06]"},
+      {"heading:\n  align_above_sigma_deg: 200\n", "heading.align_above_sigma_deg' must be in"},
+      {"initial_sigma:\n  unknown_yaw_deg: 90\nheading:\n  align_above_sigma_deg: 90\n",
+       "heading.align_above_sigma_deg' must be below initial_sigma.unknown_yaw_deg"},
+      {"session:\n  time_jump_back_s: -2\n", "session.time_jump_back_s' must be in (0, 1e+06]"},
+  };
+  for (const auto& [yaml, message] : absurd) {
+    std::ofstream(path) << yaml;
+    try {
+      LocalizationSessionConfig::fromYamlFile(path);
+      ADD_FAILURE() << "accepted: " << yaml;
+    } catch (const std::exception& error) {
+      EXPECT_NE(std::string(error.what()).find(message), std::string::npos) << error.what();
+    }
+  }
+  std::ofstream(path) << "heading:\n  from_track: false\n  align_above_sigma_deg: 180\n";
+  EXPECT_NO_THROW(LocalizationSessionConfig::fromYamlFile(path));  // no alignment: no conflict
 }
 
 // The start's yaw sigma about the map z axis (deg).

@@ -50,6 +50,10 @@ class YamlReader {
   void read(const std::string& key, std::vector<std::string>* out);  // a list of strings
   void read(const std::string& key, std::vector<double>* out);       // finite numbers
   void read(const std::string& key, std::vector<int>* out);          // integers that fit an int
+  // read(), then the value (read or kept) must lie in [min, max], or in (min, max] where
+  // min_exclusive; otherwise fails naming the key and the range.
+  void readInRange(const std::string& key, double* out, double min, double max,
+                   bool min_exclusive = false);
   // A name from a set of choices, converted once by `parse` (which throws std::invalid_argument
   // for a name it does not know, saying which it knows): the error names the key. Leaves *out
   // where the key is absent or empty.
