@@ -77,14 +77,18 @@ void SemanticMappingConfig::validate() const {
 }
 
 const std::vector<std::string>& semanticMappingNodeKeys() {
-  // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does. marker_rate is
-  // marker_rate_hz's old name, which the node still accepts (with a warning). diagnostic_period
+  // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does. marker_rate,
+  // autosave_period and log_period are old names the node still accepts (with a warning; it
+  // reads them, not this reader). diagnostic_period
   // is diagnostic_updater's own, read from every node's private namespace.
-  static const std::vector<std::string> keys = {
-      "map_frame",     "marker_rate_hz",    "marker_rate",  "max_display_cpu_fraction",
-      "marker_depth",  "calib_dir",         "camera_index", "map_file",
-      "autosave_path", "autosave_period_s", "log_period_s", "grid.*",
-      "diagnostics.*", "diagnostic_period"};
+  static const std::vector<std::string> keys = {"map_frame",     "marker_rate_hz",
+                                                "marker_rate",   "max_display_cpu_fraction",
+                                                "marker_depth",  "calib_dir",
+                                                "camera_index",  "map_file",
+                                                "autosave_path", "autosave_period_s",
+                                                "log_period_s",  "autosave_period",
+                                                "log_period",    "grid.*",
+                                                "diagnostics.*", "diagnostic_period"};
   return keys;
 }
 
@@ -96,9 +100,7 @@ const std::vector<std::pair<std::string, std::string>>& renamedSemanticMappingKe
       {"label_geometry.min_raised_height", "label_geometry.min_raised_height_m"},
       {"label_stamp_tolerance", "label_stamp_tolerance_s"},
       {"label_wait", "label_wait_s"},
-      {"pose_wait", "pose_wait_s"},
-      {"autosave_period", "autosave_period_s"},
-      {"log_period", "log_period_s"}};
+      {"pose_wait", "pose_wait_s"}};
   return keys;
 }
 

@@ -48,17 +48,29 @@ class SemanticOctomapNodeCore::Impl {
     const YAML::Node parameters = privateParametersAsYaml(pnh_);
     const std::string source = parameterSource(pnh_);
     common::YamlReader reader(source, parameters);
-    reader.read("map_frame", &options_.display.map_frame);
+    // The node's own keys, renamed ones under their old names too (the session's reader only
+    // lets them through), each checked as the session's keys are.
     reader.renamed("marker_rate", "marker_rate_hz");
-    reader.read("marker_rate_hz", &options_.marker_rate_hz);
-    reader.read("max_display_cpu_fraction", &options_.display.max_display_cpu_fraction);
-    reader.read("marker_depth", &options_.display.marker_depth);
+    reader.renamed("autosave_period", "autosave_period_s");
+    reader.renamed("log_period", "log_period_s");
+    reader.read("map_frame", &options_.display.map_frame);
+    reader.readInRange("marker_rate_hz", &options_.marker_rate_hz, 0.0, 1000.0);  // 0: off
+    reader.readInRange("max_display_cpu_fraction", &options_.display.max_display_cpu_fraction, 0.0,
+                       1.0);
+    const auto integer_in = [&reader](const std::string& key, int* out, int min, int max) {
+      reader.read(key, out);
+      if (*out < min || *out > max) {
+        reader.fail(key, "must be an integer in [" + std::to_string(min) + ", " +
+                             std::to_string(max) + "], got " + std::to_string(*out));
+      }
+    };
+    integer_in("marker_depth", &options_.display.marker_depth, 1, 16);
     reader.read("calib_dir", &options_.calib_dir);
-    reader.read("camera_index", &options_.camera_index);
+    integer_in("camera_index", &options_.camera_index, 0, 3);
     reader.read("map_file", &options_.map_file);
     reader.read("autosave_path", &options_.autosave_path);
-    reader.read("autosave_period_s", &options_.autosave_period_s);
-    reader.read("log_period_s", &options_.log_period_s);
+    reader.read("autosave_period_s", &options_.autosave_period_s);  // <= 0: at shutdown only
+    reader.readInRange("log_period_s", &options_.log_period_s, 0.0, 1e6, true);
     const YAML::Node& all = parameters;  // const: operator[] must not add the key
     common::YamlReader diagnostics_reader(source + ", diagnostics", all["diagnostics"]);
     readMappingDiagnosticsOptions(&diagnostics_reader, &options_.diagnostics);
