@@ -16,6 +16,27 @@ while (($#)); do
   esac
   shift
 done
+# Writes the JUnit case: write_junit SECONDS NAME [FAILURE_MESSAGE].
+write_junit() {
+  [[ -n $junit ]] || return 0
+  local failure=""
+  [[ -n ${3:-} ]] && failure="<failure message=\"$3\"/>"
+  mkdir -p "$(dirname "$junit")"
+  cat >"$junit" <<XML
+<?xml version="1.0" encoding="UTF-8"?>
+<testsuite name="format" tests="1" failures="$([[ -n $failure ]] && echo 1 || echo 0)" errors="0" time="$1">
+  <testcase classname="format" name="$2" time="$1">$failure</testcase>
+</testsuite>
+XML
+}
+# Without clang-format-14 (or git) nothing would be checked: fail instead of passing silently.
+for tool in clang-format-14 git; do
+  if ! command -v "$tool" >/dev/null; then
+    echo "[format] ERROR: $tool not found; scripts/install_deps.sh installs it" >&2
+    write_junit 0.000 clang_format_14 "$tool not found (scripts/install_deps.sh installs it)"
+    exit 1
+  fi
+done
 mapfile -t files < <(git ls-files -- 'include/*.h' 'include/*.hpp' 'src/*.cpp' 'src/*.h' \
   'test/*.cpp' 'test/*.h' 'bench/*.cpp' 'bench/*.h')
 if ((fix)); then
@@ -34,15 +55,7 @@ if ((${#bad[@]})); then
 else
   echo "[format] ${#files[@]} files as clang-format-14 formats them"
 fi
-if [[ -n $junit ]]; then
-  mkdir -p "$(dirname "$junit")"
-  failure=""
-  ((${#bad[@]})) && failure="<failure message=\"${#bad[@]} files differ from clang-format-14: ${bad[*]}\"/>"
-  cat >"$junit" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="format" tests="1" failures="$((${#bad[@]} ? 1 : 0))" errors="0" time="$elapsed">
-  <testcase classname="format" name="clang_format_14 (${#files[@]} files)" time="$elapsed">$failure</testcase>
-</testsuite>
-XML
-fi
+failure=""
+((${#bad[@]})) && failure="${#bad[@]} files differ from clang-format-14: ${bad[*]}"
+write_junit "$elapsed" "clang_format_14 (${#files[@]} files)" "$failure"
 ((${#bad[@]} == 0))

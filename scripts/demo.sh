@@ -22,7 +22,8 @@
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 start=$(date +%s)
-usage() { sed -n '2,20p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+# The header comment: line 2 up to the first line that is not a comment.
+usage() { sed -n '2,/^[^#]/{/^#/p}' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
 drive=""
 model=${ISM_DEMO_MODEL:-}
 while (($#)); do
@@ -159,10 +160,27 @@ log "running kitti_bag.launch (bag ${bag_duration} s at rate $rate, master port 
 roslaunch -p "$port" inekf_semantic_mapping kitti_bag.launch bag:="$out/drive.bag" rate:="$rate" model:="$model" \
   rviz:=false play_delay:=5 origin_lat:="$origin_lat" origin_lon:="$origin_lon" origin_alt:="$origin_alt" gps_sigma_h:=1.5 gps_sigma_v:=3 gps_every:=10 >"$out/launch.log" 2>&1 &
 launch_pid=$!
-until rosnode list 2>/dev/null | grep -q /semantic_octomap_node; do sleep 0.5; done
+# Waits up to 120 s for NODE to register; stops the demo (the EXIT trap cleans up) when roslaunch
+# dies or the time runs out.
+wait_for_node() {
+  local node=$1 i
+  for ((i = 0; i < 240; i++)); do
+    rosnode list 2>/dev/null | grep -q "$node" && return 0
+    if ! kill -0 "$launch_pid" 2>/dev/null; then
+      echo "[demo] roslaunch exited before $node started; the end of $out/launch.log:" >&2
+      tail -n 30 "$out/launch.log" >&2
+      exit 1
+    fi
+    sleep 0.5
+  done
+  echo "[demo] $node did not start within 120 s; the end of $out/launch.log:" >&2
+  tail -n 30 "$out/launch.log" >&2
+  exit 1
+}
+wait_for_node /semantic_octomap_node
 "$ISM_ROOT/scripts/pipeline_monitor.py" _output_dir:="$out" >"$out/monitor.log" 2>&1 &
 monitor_pid=$!
-until rosnode list 2>/dev/null | grep -q /rosbag_play; do sleep 0.5; done
+wait_for_node /rosbag_play
 play_start=$(date +%s)
 sleep 2
 nodes=(/inekf_node /semantic_octomap_node)

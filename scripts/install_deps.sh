@@ -39,6 +39,8 @@ PACKAGES=(
   iproute2
   # fuzz harnesses (libFuzzer with clang) run by scripts/fuzz.sh
   clang-14 libfuzzer-14-dev
+  # scripts/check_format.sh (clang-format-14 over the files git tracks)
+  clang-format-14 git
   # the camera adaptation (training/) and its test: PyTorch, ONNX (the export's input size and
   # checks), OpenCV's Python binding
   python3-torch python3-onnx python3-opencv
