@@ -10,8 +10,6 @@
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 [[ ${ISM_SKIP_DEPS:-0} == 1 ]] || "$ISM_ROOT/scripts/install_deps.sh"
-args=("$@")
-has_output=0
-for a in "$@"; do [[ $a == --output ]] && has_output=1; done
-((has_output)) || args+=(--output "$ISM_ROOT/output/models/kitti")
-exec /usr/bin/python3 -u "$ISM_ROOT/training/adapt_segmentation.py" "${args[@]}"
+# The default --output (the repository's output/models/kitti) is adapt_segmentation.py's own, so
+# that --output DIR, --output=DIR and its abbreviations all replace it.
+exec /usr/bin/python3 -u "$ISM_ROOT/training/adapt_segmentation.py" "$@"

@@ -53,11 +53,20 @@ def log(message):
     print(f"[adapt_segmentation] {message}", flush=True)
 
 
+# The repository's output/models/kitti, wherever the command runs from (scripts/env.sh's
+# ISM_ROOT/output/models/kitti for scripts/adapt_segmentation.sh).
+DEFAULT_OUTPUT = os.path.join(os.path.dirname(HERE), "output", "models", "kitti")
+
+# --distill-labelled-weight when not given: soft distillation also teaches at the human-labelled
+# pixels at this weight; hard distillation (a label of its own) only where no human label is.
+DEFAULT_SOFT_LABELLED_WEIGHT = 0.3
+
+
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--shared", required=True, help="the shared data folder (../shared)")
-    p.add_argument("--output", default="output/models/kitti", help="output folder")
+    p.add_argument("--output", default=DEFAULT_OUTPUT, help="output folder")
     p.add_argument("--base", default="espnetv2_s2", choices=base_networks.names(),
                    help="the Cityscapes network to start from")
     p.add_argument("--minutes", type=float, default=40.0,
@@ -84,15 +93,19 @@ def parse_args(argv=None):
     p.add_argument("--distill", default="soft", choices=["soft", "hard"],
                    help="soft: the base network's whole class distribution (KL at --temperature) "
                         "at every pixel of the zone; hard: its confident argmax as a label")
-    p.add_argument("--temperature", type=float, default=2.0, help="soft distillation temperature")
+    p.add_argument("--temperature", type=float, default=2.0,
+                   help="soft distillation temperature (> 0)")
     p.add_argument("--distill-weight", type=float, default=1.0)
     p.add_argument("--distill-zone", default="unlabelled", choices=["outside-lidar", "unlabelled"],
                    help="where the base network teaches in the sparse images: above the lidar's "
                         "top beam only, or at every pixel without a human label")
-    p.add_argument("--distill-labelled-weight", type=float, default=0.3,
+    p.add_argument("--distill-labelled-weight", type=float, default=argparse.SUPPRESS,
                    help="soft distillation also at the human-labelled pixels, at this weight "
                         "against 1 in the zone (0: only in the zone); the base network's view "
-                        "of the classes the KITTI labels rarely show keeps pulling there too")
+                        "of the classes the KITTI labels rarely show keeps pulling there too. "
+                        f"Default {DEFAULT_SOFT_LABELLED_WEIGHT:g} with --distill soft, 0 with "
+                        "--distill hard (which teaches only in the zone: a weight above 0 needs "
+                        "--distill soft)")
     p.add_argument("--rare-repeat", type=float, default=0.3,
                    help="repeat-factor sampling (Gupta et al. 2019): an image is drawn "
                         "max(1, sqrt(t / f)) times per epoch, f the share of training images "
@@ -144,9 +157,10 @@ def parse_args(argv=None):
                    help="SemanticKITTI's parking points in the sparse training labels: road (as "
                         "the evaluation scores them) or unlabelled (left to the distillation)")
     p.add_argument("--val-sequence", default="06",
-                   help="the sequence of --sparse-root held out for validation")
+                   help="the sequence of --sparse-root held out for validation (not one of "
+                        "--sparse-sequences; '': the dense frames' held-out ones alone)")
     p.add_argument("--dense-val-every", type=int, default=7,
-                   help="every N-th dense frame is held out for validation")
+                   help="every N-th dense frame is held out for validation (1 or more)")
     p.add_argument("--camvid", type=int, default=0, help="CamVid frames to add (0: none)")
     p.add_argument("--pseudo-labels", default="",
                    help="the fused map's labels of a drive nobody labelled (semantic_map_offline "
@@ -182,7 +196,93 @@ def parse_args(argv=None):
     p.add_argument("--gamma", type=float, default=0.7, help="the card's tone curve")
     p.add_argument("--no-standardize", action="store_true",
                    help="no per-image colour standardisation in the card")
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    if not hasattr(args, "distill_labelled_weight"):
+        args.distill_labelled_weight = (DEFAULT_SOFT_LABELLED_WEIGHT if args.distill == "soft"
+                                        else 0.0)
+    return args
+
+
+def check_sequences(args):
+    """--sparse-sequences and --val-sequence: neither names SemanticKITTI 05 or 08, however it is
+    spelt (datasets.sequence_id), and the validation sequence is not trained on."""
+    val_sequence = [args.val_sequence] if args.val_sequence else []
+    sparse_train = [s for s in args.sparse_sequences.split(",") if s]
+    for option, sequences in (("--sparse-sequences", sparse_train),
+                              ("--val-sequence", val_sequence)):
+        for seq in sequences:
+            if datasets.is_evaluation_sequence(seq):
+                raise SystemExit(f"{option} {seq}: SemanticKITTI {datasets.sequence_id(seq):02d} "
+                                 "is an evaluation sequence: never trained or validated on")
+    trained = {datasets.sequence_id(s) for s in sparse_train}
+    if val_sequence and datasets.sequence_id(args.val_sequence) in trained:
+        raise SystemExit(f"--val-sequence {args.val_sequence} is also in --sparse-sequences "
+                         f"{args.sparse_sequences}: the validation (and the logit calibration) "
+                         "would score frames the network trained on; name another validation "
+                         "sequence or leave it out of --sparse-sequences")
+
+
+def check_options(args):
+    """The option checks that need no data and no PyTorch, right after parsing: each error
+    names the option and what is wrong with it."""
+    if args.dense_val_every < 1:
+        raise SystemExit(f"--dense-val-every {args.dense_val_every}: must be 1 or more (every "
+                         "N-th dense frame is held out for validation)")
+    if not args.temperature > 0:
+        raise SystemExit(f"--temperature {args.temperature}: must be above 0")
+    if args.max_images < 0:
+        raise SystemExit(f"--max-images {args.max_images}: must be 0 (all images) or more")
+    if not args.distill_labelled_weight >= 0:
+        raise SystemExit(f"--distill-labelled-weight {args.distill_labelled_weight}: must be 0 "
+                         "or more")
+    if args.distill_labelled_weight > 0 and args.distill != "soft":
+        raise SystemExit(f"--distill-labelled-weight {args.distill_labelled_weight:g} needs "
+                         "--distill soft (hard distillation teaches only where no human label "
+                         "is): leave the option out or give 0 with --distill hard")
+    if args.pseudo_labels and not args.pseudo_images:
+        raise SystemExit("--pseudo-labels needs --pseudo-images (the drive's image_02/data)")
+    if not args.semantickitti:  # --semantickitti chooses the sequences itself
+        check_sequences(args)
+    if not args.val_sequence and args.max_images and args.max_images < args.dense_val_every:
+        raise SystemExit(empty_validation_message(args))
+
+
+def empty_validation_message(args, dense_frames=None):
+    loaded = (f" over the {dense_frames} dense frames loaded" if dense_frames is not None
+              else "")
+    return (f"no validation images: --val-sequence '{args.val_sequence}' and --dense-val-every "
+            f"{args.dense_val_every}{loaded} (--max-images {args.max_images}) hold nothing out: "
+            "name a --val-sequence, or give a --dense-val-every no larger than the number of "
+            "dense frames (or a larger --max-images)")
+
+
+def load_init(path, model, base_name, torch):
+    """The --init weights, read and checked against the model's tensors (names and shapes) before
+    any data is loaded; None without --init. Each error names the option and the file."""
+    if not path:
+        return None
+    if not os.path.isfile(path):
+        raise SystemExit(f"--init {path}: no such file")
+    try:
+        state = torch.load(path, map_location="cpu")
+    except Exception as e:  # torch raises pickle, zip and runtime errors for a foreign file
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        raise SystemExit(f"--init {path}: not a PyTorch weights file ({type(e).__name__}"
+                         + (f": {first})" if first else ")"))
+    expected = model.state_dict()
+    if not isinstance(state, dict) or not all(hasattr(v, "shape") for v in state.values()):
+        raise SystemExit(f"--init {path}: not a state dict of tensors (a best.pt of an earlier "
+                         "round is one)")
+    missing = [k for k in expected if k not in state]
+    unexpected = [k for k in state if k not in expected]
+    wrong = [k for k in expected
+             if k in state and tuple(state[k].shape) != tuple(expected[k].shape)]
+    if missing or unexpected or wrong:
+        detail = "; ".join(f"{what} {len(keys)} tensors (e.g. {keys[0]})" for what, keys in
+                           (("missing", missing), ("unexpected", unexpected),
+                            ("wrong shape of", wrong)) if keys)
+        raise SystemExit(f"--init {path}: not weights of --base {base_name} ({detail})")
+    return state
 
 
 def interpolation_factors(text):
@@ -330,6 +430,20 @@ def epoch_order(factors, rng):
     return list(rng.permutation(np.repeat(np.arange(len(factors)), counts)))
 
 
+def same_size_batches(images, batch):
+    """(start, end) index ranges of consecutive images, at most batch long, each of one image
+    size (CamVid's 4:3 frames and KITTI's cannot share a tensor): a run of equal sizes is cut
+    every batch images as before, and a change of size starts a new batch."""
+    start = 0
+    while start < len(images):
+        end = start + 1
+        while (end < len(images) and end - start < batch
+               and images[end].shape == images[start].shape):
+            end += 1
+        yield start, end
+        start = end
+
+
 def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft, batch=2,
                     labelled_weight=0.0, store=None):
     """What the base network teaches in its zone. Hard: its labels where its softmax confidence
@@ -341,13 +455,13 @@ def teacher_targets(samples, model, torch, confidence, outside_lidar_only, soft,
     model.eval()
     start = last_line = time.time()
     with torch.no_grad():
-        for i in range(0, len(samples), batch):
+        for i, end in same_size_batches([s.image for s in samples], batch):
             if time.time() - last_line >= 30:  # hundreds of images take minutes
                 last_line = time.time()
                 rate = i / (last_line - start)
                 log(f"teacher: {i} of {len(samples)} images, {(len(samples) - i) / rate:.0f} s "
                     "left")
-            chunk = samples[i:i + batch]
+            chunk = samples[i:end]
             x = preprocess.to_tensor_rgb01(np.stack([s.image for s in chunk]))
             logits = model(x)
             if soft:
@@ -451,13 +565,14 @@ def class_weights(samples, power):
 
 
 def batched_logits(model, torch, images, batch=2):
-    """The model's logits for the images, a batch at a time on the model's device, with the
-    background channel never winning (as the card's suppress_unlabeled)."""
+    """The model's logits for the images, a batch of one image size at a time
+    (same_size_batches) on the model's device, with the background channel never winning (as
+    the card's suppress_unlabeled)."""
     model.eval()
     device = next(model.parameters()).device  # validation runs where training does
     with torch.no_grad():
-        for i in range(0, len(images), batch):
-            logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:i + batch])).to(device))
+        for i, end in same_size_batches(images, batch):
+            logits = model(preprocess.to_tensor_rgb01(np.stack(images[i:end])).to(device))
             logits[:, labels.BACKGROUND_CHANNEL] = -1e9
             yield logits
 
@@ -558,7 +673,19 @@ def calibrate_offsets(model, torch, val):
             "pixels": int(len(truth))}
 
 
-def write_card(path, base, width, height, gamma, standardize, summary):
+def remove_files(*paths):
+    for path in paths:
+        if os.path.exists(path):
+            os.remove(path)
+
+
+# The share of pixels whose argmax the ONNX graph (OpenCV dnn) and PyTorch must agree on.
+PARITY_MIN_AGREEMENT = 0.995
+
+
+def write_card(path, base, width, height, gamma, standardize, summary, write_to=None):
+    """The model card of path[:-5].onnx, written as path (or as write_to: the caller renames it
+    into place)."""
     lines = [
         f"# Model card for {os.path.basename(path)[:-5]}.onnx, written by",
         "# training/adapt_segmentation.py (scripts/adapt_segmentation.sh). The network was",
@@ -599,10 +726,11 @@ def write_card(path, base, width, height, gamma, standardize, summary):
             ", ".join(str(v) for v in labels.train_id_to_label_id())),
         f"validation_miou: {summary['validation_at_export_size']['miou']:.4f}",
     ]
-    tmp = path + ".tmp"
+    target = write_to or path
+    tmp = target + ".tmp"
     with open(tmp, "w") as f:
         f.write("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    os.replace(tmp, target)
 
 
 def plot_history(history, path):
@@ -663,6 +791,7 @@ def load_samples(args, shared, width, height, standardize, limit):
     the dense frames (every dense_val_every-th held out), the sparse sequences, the validation
     sequence, CamVid and the map's pseudo-labels as the arguments ask. Returns (train, val,
     counts per source). Raises datasets.DatasetError naming a missing or malformed file."""
+    check_sequences(args)  # main checked them already; other callers too
     val_sequence = [args.val_sequence] if args.val_sequence else []
     sparse_train = [s for s in args.sparse_sequences.split(",") if s]
     sparse_root = args.sparse_root or os.path.join(shared, "data", "semantickitti_train")
@@ -683,12 +812,24 @@ def load_samples(args, shared, width, height, standardize, limit):
         pseudo = datasets.load_pseudo(args.pseudo_labels, args.pseudo_images, width, height,
                                       args.gamma, standardize, limit)
     train, val = datasets.split_validation(dense, args.dense_val_every)
-    counts = {"sparse": len(sparse), "pseudo": len(pseudo), "camvid": len(camvid)}
+    counts = {"dense": len(dense), "sparse": len(sparse), "pseudo": len(pseudo),
+              "camvid": len(camvid)}
     return train + sparse + pseudo + camvid, val + sparse_val, counts
+
+
+def build_base(base, shared):
+    """The base network with its Cityscapes weights from the shared folder (an error naming the
+    file where they are missing)."""
+    path = os.path.join(shared, base.weights)
+    if not os.path.isfile(path):
+        raise SystemExit(f"--base {base.name}: its weights {path} are missing (--shared "
+                         f"{shared}: ../shared, read its README)")
+    return base.build(path)
 
 
 def main(argv=None):
     args = parse_args(argv)
+    check_options(args)
     import torch
     import torch.nn.functional as F
 
@@ -717,20 +858,20 @@ def main(argv=None):
     if not 0.0 <= args.average_weights < 1.0:
         raise SystemExit(f"--average-weights {args.average_weights}: a fraction of the budget "
                          "in [0, 1)")
-    os.makedirs(args.output, exist_ok=True)
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
     shared = os.path.abspath(args.shared)
     limit = args.max_images or None
+    # Built before the data is loaded, which draws no random numbers: --init is checked against
+    # it before minutes of loading.
+    model = build_base(base, shared)
+    init_state = load_init(args.init, model, base.name, torch)
+    os.makedirs(args.output, exist_ok=True)
 
     if args.semantickitti:
         use_semantickitti_download(args)
+        check_sequences(args)
     t0 = time.time()
-    val_sequence = [args.val_sequence] if args.val_sequence else []
-    sparse_train = [s for s in args.sparse_sequences.split(",") if s]
-    for seq in sparse_train + val_sequence:
-        if seq in datasets.EVALUATION_SEQUENCES:
-            raise SystemExit(f"SemanticKITTI {seq} is an evaluation sequence: never trained on")
     try:
         train, val, counts = load_samples(args, shared, width, height, standardize, limit)
     except datasets.DatasetError as e:
@@ -739,15 +880,15 @@ def main(argv=None):
         f"{counts['sparse']} sparse, {counts['pseudo']} map pseudo-labels, "
         f"{counts['camvid']} CamVid), "
         f"{len(val)} validation images, at {width}x{height}, loaded in {time.time() - t0:.0f} s")
+    if not val:
+        raise SystemExit("[adapt_segmentation] " + empty_validation_message(
+            args, counts["dense"]))
 
-    model = base.build(os.path.join(shared, base.weights))
     teacher_t0 = time.time()
     # --minutes 0 without --max-steps: the base network exported with the card, untrained (the
     # starting point, measured by the same tools as the adapted one).
     train_at_all = args.max_steps > 0 or args.minutes > 0
     soft = args.distill == "soft"
-    if args.distill_labelled_weight > 0 and not soft:
-        raise SystemExit("--distill-labelled-weight needs --distill soft")
     store = teacher_store.TeacherStore(args.teacher_store,
                                        os.path.join(args.output, "teacher_cache"), len(train),
                                        teacher_store.available_memory_bytes())
@@ -760,8 +901,8 @@ def main(argv=None):
         log(f"{teacher_name}'s labels for distillation in {time.time() - teacher_t0:.0f} s "
             f"({store.describe()})")
         del teacher
-    if args.init:
-        model.load_state_dict(torch.load(args.init, map_location="cpu"))
+    if init_state is not None:
+        model.load_state_dict(init_state)
         log(f"starting from {args.init}")
     before = validate(model, torch, val)
     log("before fine-tuning: " + ", ".join(f"{k} {v:.4f}" for k, v in before.items()))
@@ -894,7 +1035,7 @@ def main(argv=None):
                   if resized_export else val)
     interpolation, chosen = None, None
     if interpolate_at != [1.0]:
-        base_state = base.build(os.path.join(shared, base.weights)).state_dict()
+        base_state = build_base(base, shared).state_dict()
         chosen, scored = choose_interpolation(model, torch, base_state, val_export,
                                               interpolate_at)
         interpolation = {"factors": scored, "chosen": chosen["alpha"]}
@@ -909,13 +1050,21 @@ def main(argv=None):
         calibration = calibrate_offsets(model, torch, val_export)
         if calibration["kept"]:
             exported = logit_calibration.with_offsets(model, calibration["offsets"], torch)
-    onnx_export.export_onnx(exported, stem + ".onnx", export_width, export_height)
-    parity = onnx_export.check_onnx_against_torch(exported, stem + ".onnx",
-                                                  [s.image for s in val_export], export_width,
-                                                  export_height, args.threads)
-    log(f"ONNX through OpenCV dnn against PyTorch on {len(val)} validation images: argmax "
-        f"agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
+    # The model and its card are written under other names and take theirs (where the tools and
+    # tests look) only once the ONNX graph agrees with PyTorch.
+    partial = stem + ".partial"
+    atexit.register(remove_files, partial + ".onnx", partial + ".yaml")
+    onnx_export.export_onnx(exported, partial + ".onnx", export_width, export_height)
+    try:
+        parity = onnx_export.check_onnx_against_torch(exported, partial + ".onnx",
+                                                      [s.image for s in val_export],
+                                                      export_width, export_height, args.threads)
+    except ValueError as e:
+        raise SystemExit(f"[adapt_segmentation] the ONNX check of {stem}.onnx: {e}")
+    log(f"ONNX through OpenCV dnn against PyTorch on {parity['n_images']} validation images: "
+        f"argmax agreement {parity['argmax_agreement']:.5f}, max |logit difference| "
         f"{parity['max_abs_diff']:.2e}")
+    parity_passed = parity["argmax_agreement"] >= PARITY_MIN_AGREEMENT
     at_export_size = best
     if exported is not model:
         at_export_size = dict(step=best["step"], **validate(exported, torch, val_export))
@@ -952,8 +1101,9 @@ def main(argv=None):
         "logit_offsets": calibration,
         "args": vars(args),
     }
-    write_card(stem + ".yaml", base, export_width, export_height, args.gamma, standardize,
-               summary)
+    if parity_passed:
+        write_card(stem + ".yaml", base, export_width, export_height, args.gamma, standardize,
+                   summary, write_to=partial + ".yaml")
     with open(os.path.join(args.output, "history.csv"), "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["step", "loss", "label_loss", "distill_loss", "lr"])
@@ -962,10 +1112,20 @@ def main(argv=None):
     with open(os.path.join(args.output, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
     plot_history(history, os.path.join(args.output, "training.png"))
-    log(f"wrote {stem}.onnx, {stem}.yaml, training.png, summary.json in {args.output}")
-    if parity["argmax_agreement"] < 0.995:
+    if not parity_passed:
+        # No model where the tools look: this run's is set aside, an earlier run's removed (its
+        # best.pt and exported.pt are gone already).
+        os.replace(partial + ".onnx", stem + ".rejected.onnx")
+        remove_files(stem + ".onnx", stem + ".yaml")
         raise SystemExit("[adapt_segmentation] the ONNX export disagrees with PyTorch on "
-                         f"{1 - parity['argmax_agreement']:.2%} of the validation pixels")
+                         f"{1 - parity['argmax_agreement']:.2%} of the validation pixels (below "
+                         f"{1 - PARITY_MIN_AGREEMENT:.1%} needed): left as {stem}.rejected.onnx, "
+                         f"no {stem}.onnx / .yaml written (history.csv, summary.json, "
+                         "training.png say how the run went)")
+    os.replace(partial + ".yaml", stem + ".yaml")
+    os.replace(partial + ".onnx", stem + ".onnx")
+    remove_files(stem + ".rejected.onnx")  # an earlier run's
+    log(f"wrote {stem}.onnx, {stem}.yaml, training.png, summary.json in {args.output}")
     return summary
 
 

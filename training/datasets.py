@@ -21,6 +21,20 @@ class DatasetError(RuntimeError):
     pass
 
 
+def sequence_id(seq):
+    """The sequence a --sparse-sequences / --val-sequence entry names, however it is spelt:
+    the last component of the normalised path ("05/", "./05" and "x/../05" are 05) as an integer
+    when it is one (5 and "005" are 05 too), else that component."""
+    name = os.path.basename(os.path.normpath(str(seq).strip()))
+    return int(name) if name.isdigit() else name
+
+
+def is_evaluation_sequence(seq):
+    """Whether seq names SemanticKITTI 05 or 08 (sequence_id), the frames the result is scored
+    on."""
+    return sequence_id(seq) in {int(s) for s in EVALUATION_SEQUENCES}
+
+
 @dataclass
 class Sample:
     name: str
@@ -122,11 +136,12 @@ def load_sparse(root, sequences, width, height, gamma, standardize, limit=None,
         lut[SEMANTICKITTI_PARKING] = labels.IGNORE
     samples = []
     for seq in sequences:
-        if seq in EVALUATION_SEQUENCES:
+        if is_evaluation_sequence(seq):
             raise DatasetError(f"SemanticKITTI {seq} is an evaluation sequence: never trained on")
         seq_dir = os.path.join(root, "sequences", seq)
         if not os.path.isdir(seq_dir):
             raise DatasetError(f"{seq_dir}: no such sequence folder")
+        found = len(samples)
         for cam in ("2", "3"):
             for label_path in sorted(glob.glob(os.path.join(seq_dir, f"labels_{cam}", "*.png"))):
                 stem = os.path.splitext(os.path.basename(label_path))[0]
@@ -136,6 +151,10 @@ def load_sparse(root, sequences, width, height, gamma, standardize, limit=None,
                 samples.append(_sparse_sample(
                     f"semantickitti_train/{seq}/image_{cam}/{stem}", image_path, label_path,
                     np.uint16, lut, width, height, gamma, standardize))
+        if len(samples) == found:
+            raise DatasetError(f"{seq_dir}: no label images in labels_2/ or labels_3/ (the "
+                               "camera-label layout: image_{2,3}/ with labels_{2,3}/*.png, what "
+                               "make_camera_labels writes from a SemanticKITTI sequence)")
     if limit is not None:
         samples = samples[:limit]
     return samples
@@ -202,6 +221,8 @@ def load_camvid(root, width, height, gamma, standardize, limit=None):
 def split_validation(samples, every):
     """Every `every`-th dense frame and every sample of the held-out sparse sequence go to
     validation (the caller passes which); returns (train, val)."""
+    if every < 1:
+        raise DatasetError(f"--dense-val-every {every}: must be 1 or more")
     train, val = [], []
     dense_index = 0
     for s in samples:

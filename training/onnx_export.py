@@ -62,6 +62,7 @@ def check_onnx_against_torch(model: nn.Module, onnx_path: str, images: Iterable,
     blobFromImage(img, 1/255, (width, height), swapRB=True) and fed unchanged to both.  ``width``/``height``
     default to the ONNX input size.  Returns max_abs_diff (over all logits), mean_abs_diff, argmax_agreement
     (fraction of pixels with the same arg-max over all images), min_image_agreement, n_images, pixels.
+    Raises ValueError when no pixel was compared (no image given): an empty check proves nothing.
     """
     import cv2
     if width is None or height is None:
@@ -97,6 +98,9 @@ def check_onnx_against_torch(model: nn.Module, onnx_path: str, images: Iterable,
             n_img += 1
     finally:
         model.train(was_training)
+    if n_pix == 0:
+        raise ValueError(f"no image to compare {onnx_path} with PyTorch on ({n_img} images, "
+                         "0 pixels): the parity check needs at least one")
     return {
         "max_abs_diff": max_abs,
         "mean_abs_diff": sum_abs / max(n_vals, 1),

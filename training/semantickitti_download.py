@@ -29,7 +29,7 @@ def trainable_sequences(root):
     found = []
     for name in sorted(os.listdir(folder)):
         path = os.path.join(folder, name)
-        if name in datasets.EVALUATION_SEQUENCES or not os.path.isdir(path):
+        if datasets.is_evaluation_sequence(name) or not os.path.isdir(path):
             continue
         if all(os.path.isdir(os.path.join(path, d)) for d in ("velodyne", "labels", "image_2")):
             found.append(name)
@@ -45,7 +45,9 @@ def split_validation(sequences, wanted):
     single sequence, no validation sequence ('': the dense frames' held-out ones remain)."""
     if len(sequences) < 2:
         return list(sequences), ""
-    val = wanted if wanted in sequences else sequences[-1]
+    same = [s for s in sequences
+            if wanted and datasets.sequence_id(s) == datasets.sequence_id(wanted)]
+    val = same[0] if same else sequences[-1]
     return [s for s in sequences if s != val], val
 
 

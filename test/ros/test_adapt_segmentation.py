@@ -1214,6 +1214,263 @@ class SemanticKittiDownload(unittest.TestCase):
         self.assertEqual(download.split_validation(["00"], "06"), (["00"], ""))
 
 
+def write_tiny_dense_root(root, frames, size=(64, 32)):
+    """A KITTI semantics layout (image_2/, semantic/) of `frames` frames: road below, sky above."""
+    import cv2
+
+    for sub in ("image_2", "semantic"):
+        os.makedirs(os.path.join(root, sub))
+    w, h = size
+    for i in range(frames):
+        image = np.full((h, w, 3), 60 + 20 * i, np.uint8)
+        image[h // 2:] = 120
+        label = np.full((h, w), 23, np.uint8)  # sky
+        label[h // 2:] = 7  # road
+        cv2.imwrite(os.path.join(root, "image_2", f"{i:06d}_10.png"), image)
+        cv2.imwrite(os.path.join(root, "semantic", f"{i:06d}_10.png"), label)
+
+
+def require_base_weights(test):
+    """The shared folder, skipping the test (loudly) without espnetv2_s2's weights."""
+    shared = shared_dir()
+    if not os.path.exists(os.path.join(shared, base_networks.get("espnetv2_s2").weights)):
+        skip_loudly(test, "shared espnetv2_s2 weights not found")
+    return shared
+
+
+class OptionChecks(unittest.TestCase):
+    """Options refused right after parsing (before any data is read: --shared does not even
+    exist here), each error naming the option."""
+
+    def refused(self, *options):
+        import adapt_segmentation as adapt
+
+        with self.assertRaises(SystemExit) as e:
+            adapt.main(["--shared", "/nonexistent", "--output", "/nonexistent/out", *options])
+        return str(e.exception)
+
+    def test_numbers_out_of_range_name_their_option(self):
+        self.assertIn("--dense-val-every 0: must be 1 or more", self.refused("--dense-val-every",
+                                                                             "0"))
+        self.assertIn("--temperature 0.0: must be above 0", self.refused("--temperature", "0"))
+        self.assertIn("--temperature -2.0", self.refused("--temperature", "-2"))
+        self.assertIn("--max-images -1: must be 0 (all images) or more",
+                      self.refused("--max-images", "-1"))
+        self.assertIn("--distill-labelled-weight -1.0",
+                      self.refused("--distill-labelled-weight", "-1"))
+
+    def test_the_labelled_weight_defaults_to_soft_distillation_only(self):
+        import adapt_segmentation as adapt
+
+        shared = ["--shared", "/nonexistent"]
+        self.assertEqual(adapt.parse_args(shared).distill_labelled_weight, 0.3)
+        self.assertEqual(adapt.parse_args(shared + ["--distill", "hard"]).distill_labelled_weight,
+                         0.0)
+        self.assertEqual(adapt.parse_args(shared + ["--distill-labelled-weight", "0.5"])
+                         .distill_labelled_weight, 0.5)
+        message = self.refused("--distill", "hard", "--distill-labelled-weight", "0.3")
+        self.assertIn("--distill-labelled-weight 0.3 needs --distill soft", message)
+
+    def test_evaluation_sequences_are_refused_however_they_are_spelt(self):
+        for spelling in ("05", "05/", "./05", "x/../05", "5", "008"):
+            self.assertTrue(datasets.is_evaluation_sequence(spelling), spelling)
+            self.assertIn("is an evaluation sequence",
+                          self.refused("--sparse-sequences", "01," + spelling))
+            self.assertIn(f"--val-sequence {spelling}: SemanticKITTI",
+                          self.refused("--val-sequence", spelling))
+        for other in ("06", "06/", "15", "050", "seq05"):
+            self.assertFalse(datasets.is_evaluation_sequence(other), other)
+        with tempfile.TemporaryDirectory() as tmp:
+            for seq in ("./05", "05/"):
+                with self.assertRaisesRegex(datasets.DatasetError, "is an evaluation sequence"):
+                    datasets.load_sparse(tmp, [seq], 64, 32, 0.7, True)
+
+    def test_the_validation_sequence_is_not_trained_on(self):
+        message = self.refused("--sparse-sequences", "01,06", "--val-sequence", "./06")
+        self.assertIn("--val-sequence ./06 is also in --sparse-sequences 01,06", message)
+        import semantickitti_download as download
+
+        self.assertEqual(download.split_validation(["00", "06", "07"], "06/"),
+                         (["00", "07"], "06"))
+
+    def test_an_empty_validation_set_is_refused_before_loading_when_certain(self):
+        message = self.refused("--val-sequence", "", "--max-images", "3")
+        for option in ("--val-sequence", "--dense-val-every 7", "--max-images 3"):
+            self.assertIn(option, message)
+
+    def test_init_weights_are_checked_before_the_data_is_loaded(self):
+        require_torch(self)
+        import torch
+        import adapt_segmentation as adapt
+
+        model = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1))
+        with tempfile.TemporaryDirectory() as tmp:
+            good, other, text = (os.path.join(tmp, n) for n in ("good.pt", "other.pt", "t.pt"))
+            torch.save(model.state_dict(), good)
+            torch.save(torch.nn.Sequential(torch.nn.Conv2d(3, 5, 1)).state_dict(), other)
+            with open(text, "w") as f:
+                f.write("not weights\n")
+            self.assertEqual(set(adapt.load_init(good, model, "net", torch)), {"0.weight",
+                                                                               "0.bias"})
+            self.assertIsNone(adapt.load_init("", model, "net", torch))
+            with self.assertRaisesRegex(SystemExit, "--init .*missing.pt: no such file"):
+                adapt.load_init(os.path.join(tmp, "missing.pt"), model, "net", torch)
+            with self.assertRaisesRegex(SystemExit, "--init .*t.pt: not a PyTorch weights file"):
+                adapt.load_init(text, model, "net", torch)
+            with self.assertRaisesRegex(SystemExit, r"--init .*other.pt: not weights of --base "
+                                                    r"net \(wrong shape of 2 tensors"):
+                adapt.load_init(other, model, "net", torch)
+            # Through main: refused before the (missing) dense frames would be read.
+            shared = require_base_weights(self)
+            with self.assertRaises(SystemExit) as e:
+                adapt.main(["--shared", shared, "--output", os.path.join(tmp, "out"),
+                            "--dense-root", os.path.join(tmp, "no_dense"), "--init", other])
+            self.assertIn(f"--init {other}: not weights of --base espnetv2_s2", str(e.exception))
+
+
+class SparseSequenceFolders(unittest.TestCase):
+    def test_a_named_sequence_without_label_images_names_its_folder(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            seq = os.path.join(tmp, "sequences", "01")
+            os.makedirs(os.path.join(seq, "image_2"))  # the raw SemanticKITTI layout: no labels_2
+            with self.assertRaisesRegex(datasets.DatasetError,
+                                        f"{seq}: no label images in labels_2/ or labels_3/"):
+                datasets.load_sparse(tmp, ["01"], 64, 32, 0.7, True)
+
+
+class MixedImageSizes(unittest.TestCase):
+    """CamVid's 4:3 frames beside KITTI's: the teacher and the validation batch by image size."""
+
+    def test_batches_hold_one_image_size(self):
+        import adapt_segmentation as adapt
+
+        images = [np.zeros(s) for s in ((32, 64, 3),) * 3 + ((32, 32, 3),) * 2]
+        self.assertEqual(list(adapt.same_size_batches(images, 2)), [(0, 2), (2, 3), (3, 5)])
+        self.assertEqual(list(adapt.same_size_batches(images[:4], 2)), [(0, 2), (2, 3), (3, 4)])
+        self.assertEqual(list(adapt.same_size_batches(images[:3], 2)), [(0, 2), (2, 3)])
+        self.assertEqual(list(adapt.same_size_batches([], 2)), [])
+
+    def test_an_odd_kitti_count_before_camvid_frames_is_taught(self):
+        require_torch(self)
+        import torch
+        import adapt_segmentation as adapt
+
+        torch.manual_seed(0)
+        model = torch.nn.Conv2d(3, labels.NUM_CLASSES, 1)
+        samples = []
+        for i, (h, w) in enumerate([(32, 64)] * 3 + [(32, 32)] * 2):
+            target = np.full((h, w), labels.IGNORE, np.uint8)
+            target[h // 2:] = 0
+            samples.append(datasets.Sample(f"s{i}", "dense" if w == 64 else "camvid",
+                                           np.full((h, w, 3), 40 * i, np.uint8), target))
+        for soft in (False, True):
+            adapt.teacher_targets(samples, model, torch, 0.0, False, soft, labelled_weight=0.3)
+            for s in samples:
+                self.assertEqual(s.teacher.shape[:2], s.target.shape)
+        # A frame batched with its kind is taught as it would be alone.
+        alone = datasets.Sample("x", "camvid", samples[3].image, samples[3].target)
+        adapt.teacher_targets([alone], model, torch, 0.0, False, True, labelled_weight=0.3)
+        np.testing.assert_allclose(alone.teacher.astype(np.float32),
+                                   samples[3].teacher.astype(np.float32), atol=1e-3)
+        logits = list(adapt.batched_logits(model, torch, [s.image for s in samples]))
+        self.assertEqual([tuple(l.shape[-2:]) for l in logits], [(32, 64), (32, 64), (32, 32)])
+
+
+class OnnxParityGate(unittest.TestCase):
+    """The exported model takes its name only once it agrees with PyTorch."""
+
+    def test_an_empty_check_is_an_error_not_a_disagreement(self):
+        require_torch(self)
+        import torch
+        import onnx_export
+
+        model = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 1))
+        with tempfile.TemporaryDirectory() as tmp:
+            path = onnx_export.export_onnx(model, os.path.join(tmp, "m.onnx"), 32, 32)
+            with self.assertRaisesRegex(ValueError, "m.onnx.*0 pixels"):
+                onnx_export.check_onnx_against_torch(model, path, [], 32, 32, 1)
+            agreed = onnx_export.check_onnx_against_torch(
+                model, path, [np.full((32, 32, 3), 90, np.uint8)], 32, 32, 1)
+            self.assertEqual(agreed["pixels"], 32 * 32)
+
+    def test_a_failed_check_leaves_no_model_where_the_tools_look(self):
+        require_torch(self)
+        shared = require_base_weights(self)
+        from unittest import mock
+        import adapt_segmentation as adapt
+        import onnx_export
+
+        with tempfile.TemporaryDirectory() as tmp:
+            dense = os.path.join(tmp, "dense")
+            write_tiny_dense_root(dense, 2)
+            out = os.path.join(tmp, "out")
+            command = ["--shared", shared, "--output", out, "--dense-root", dense,
+                       "--sparse-sequences", "", "--val-sequence", "", "--dense-val-every", "2",
+                       "--input", "64x32", "--export-input", "same", "--crop", "32x64",
+                       "--batch", "1", "--max-steps", "1", "--threads", "1",
+                       "--calibrate-offsets", "off", "--paste-rare", "0", "--rare-repeat", "0",
+                       "--teacher-store", "memory"]
+            os.makedirs(out)
+            for stale in ("kitti_adapted.onnx", "kitti_adapted.yaml"):  # an earlier run's
+                with open(os.path.join(out, stale), "w") as f:
+                    f.write("stale\n")
+            real = onnx_export.check_onnx_against_torch
+
+            def disagreeing(*a, **k):
+                return dict(real(*a, **k), argmax_agreement=0.5)
+
+            with mock.patch.object(onnx_export, "check_onnx_against_torch", disagreeing):
+                with self.assertRaises(SystemExit) as e:
+                    adapt.main(command)
+            self.assertIn("disagrees with PyTorch on 50.00%", str(e.exception))
+            self.assertEqual(sorted(f for f in os.listdir(out) if "kitti_adapted" in f),
+                             ["kitti_adapted.rejected.onnx"])
+            self.assertTrue(os.path.exists(os.path.join(out, "summary.json")))
+
+            summary = adapt.main(command)  # agreeing: both take their names, the rejected goes
+            self.assertEqual(sorted(f for f in os.listdir(out) if "kitti_adapted" in f),
+                             ["kitti_adapted.onnx", "kitti_adapted.yaml"])
+            self.assertEqual(summary["val_images"], 1)
+            with open(os.path.join(out, "kitti_adapted.yaml")) as f:
+                self.assertIn("kitti_adapted.onnx, written by", f.read())
+
+    def test_an_empty_validation_set_is_refused_after_loading(self):
+        require_torch(self)
+        shared = require_base_weights(self)
+        import adapt_segmentation as adapt
+
+        with tempfile.TemporaryDirectory() as tmp:
+            dense = os.path.join(tmp, "dense")
+            write_tiny_dense_root(dense, 2)
+            with self.assertRaises(SystemExit) as e:
+                adapt.main(["--shared", shared, "--output", os.path.join(tmp, "out"),
+                            "--dense-root", dense, "--sparse-sequences", "",
+                            "--val-sequence", "", "--dense-val-every", "3", "--input", "64x32",
+                            "--max-steps", "1", "--threads", "1"])
+            self.assertIn("no validation images: --val-sequence '' and --dense-val-every 3 over "
+                          "the 2 dense frames loaded", str(e.exception))
+            self.assertFalse(os.path.exists(os.path.join(tmp, "out", "best.pt")))
+
+
+class OutputDefault(unittest.TestCase):
+    """scripts/adapt_segmentation.sh leaves the default --output to the Python parser, so that
+    every spelling of the option replaces it."""
+
+    def test_every_spelling_of_output_is_the_one_used(self):
+        import adapt_segmentation as adapt
+
+        self.assertEqual(adapt.parse_args(["--shared", "s"]).output,
+                         os.path.join(REPO_ROOT, "output", "models", "kitti"))
+        for spelling in (["--output", "/tmp/x"], ["--output=/tmp/x"], ["--out", "/tmp/x"]):
+            self.assertEqual(adapt.parse_args(["--shared", "s"] + spelling).output, "/tmp/x")
+        with open(os.path.join(REPO_ROOT, "scripts", "adapt_segmentation.sh")) as f:
+            script = f.read()
+        # The arguments pass through as given: nothing appended after the user's own.
+        self.assertTrue(script.rstrip().endswith(
+            '/usr/bin/python3 -u "$ISM_ROOT/training/adapt_segmentation.py" "$@"'), script)
+        self.assertNotIn("args+=", script)
+
+
 class TinyPipeline(unittest.TestCase):
     """The whole command on a tiny budget: the export loads in C++ and agrees with PyTorch."""
 
