@@ -117,6 +117,9 @@ std::string LocalizationSession::summary() const {
     line << " (" << s.messages_of_previous_time_line
          << " messages of the time line before a jump dropped)";
   }
+  if (s.messages_far_ahead > 0) {
+    line << " (" << s.messages_far_ahead << " messages far ahead of the newest stamp dropped)";
+  }
   return line.str();
 }
 
@@ -125,6 +128,7 @@ void LocalizationSession::reset(const std::string& why, Update* update) {
   lazy_start_.reset();
   waiting_fixes_.clear();
   newest_stamp_s_.reset();
+  far_ahead_stamp_s_.reset();
   ++statistics_.resets;
   update->reset = true;
   update->note = why;
@@ -139,6 +143,7 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
   // a second jump. Such leftovers are the last of the old line, within a moment of each other:
   // once the dropped stamps span more than 2 time_jump_back_s, the stream has really moved there
   // (a seek forward) and is followed.
+  bool moved_forward = false;  // confirmed by the old time line's dropped messages
   if (old_timeline_end_s_ && newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance &&
       stamp_s <= *old_timeline_end_s_ + tolerance) {
     if (!first_dropped_stamp_s_) first_dropped_stamp_s_ = stamp_s;
@@ -153,8 +158,21 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
       return false;
     }
     old_timeline_end_s_.reset();
+    moved_forward = true;
   }
   first_dropped_stamp_s_.reset();
+  // A jump forward: taken once a second message shows it (see the header).
+  if (!moved_forward && newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance &&
+      !(far_ahead_stamp_s_ && stamp_s >= *far_ahead_stamp_s_ - tolerance)) {
+    far_ahead_stamp_s_ = stamp_s;
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s << " s is "
+        << stamp_s - *newest_stamp_s_ << " s ahead of the newest (" << *newest_stamp_s_
+        << " s): dropped until another message confirms the jump";
+    update->note = why.str();
+    ++statistics_.messages_far_ahead;
+    return false;
+  }
   if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
@@ -166,6 +184,10 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
   newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
   // Past the old time line's end its messages can no longer be told from the new one's.
   if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
+  // Reached (the jump confirmed, or time caught up): a later jump needs its own second message.
+  if (far_ahead_stamp_s_ && *newest_stamp_s_ >= *far_ahead_stamp_s_ - tolerance) {
+    far_ahead_stamp_s_.reset();
+  }
   return true;
 }
 

@@ -283,7 +283,8 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
     if (!session.started()) {
       if (run.states.empty()) continue;
       // Reset after the start and not yet restarted: the frame keeps its place (every later
-      // state stays at its own frame) with the last estimate, and is left out of the scores.
+      // state stays at its own frame) with the last estimate, and is left out of the scores
+      // (held).
       run.held_frames.push_back(static_cast<int>(k));
       run.states.push_back(run.states.back());
       run.pose_covariances.push_back(run.pose_covariances.back());
@@ -306,6 +307,11 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
       pass.filtered.assign(k, session.state());
       pass.filtered_yaw_sigma_rad.assign(k, std::numeric_limits<double>::infinity());
       pass.gyro_bias_z_sigma_radps.assign(k, std::numeric_limits<double>::infinity());
+    }
+    // A frame whose IMU sample the session dropped (the first of a jump forward) keeps the last
+    // estimate: not its own, so not scored either.
+    if (std::abs(session.state().stamp_s - stamp_s) > 1e-3) {
+      run.held_frames.push_back(static_cast<int>(k));
     }
     run.states.push_back(session.state());
     run.pose_covariances.push_back(session.poseCovariance());

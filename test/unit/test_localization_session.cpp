@@ -255,6 +255,38 @@ TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
 }
 
+// Found by review: one fix stamped 1000 s ahead (a receiver's glitch) became the newest stamp,
+// and the next ordinary IMU sample a jump back that reset a healthy filter. A message far ahead
+// is dropped until a second one confirms the jump.
+TEST(LocalizationSession, OneMessageFarAheadDoesNotResetAHealthyFilter) {
+  LocalizationSession session(originConfig());
+  for (int k = 0; k <= 20; ++k) {
+    const double t = 100.0 + 0.1 * k;
+    session.addImu(restingImu(t));
+    if (k % 10 == 0) {
+      session.addGpsVelocity(stillAt(t));
+      session.addFix(fixAt(t));
+    }
+  }
+  ASSERT_TRUE(session.started());
+  const LocalizationSession::Update glitch = session.addFix(fixAt(1102.0, 500.0));
+  EXPECT_FALSE(glitch.reset);
+  EXPECT_NE(glitch.note.find("ahead of the newest"), std::string::npos) << glitch.note;
+  for (int k = 1; k <= 20; ++k) {
+    const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
+    EXPECT_FALSE(next.reset) << next.note;
+    EXPECT_TRUE(next.new_estimate) << k;
+  }
+  EXPECT_EQ(session.statistics().resets, 0);
+  EXPECT_EQ(session.statistics().messages_far_ahead, 1);
+  EXPECT_LT(session.state().position_map.norm(), 1.0);  // the glitch's 500 m never applied
+  // A real jump forward (a player seeking on) shows in a second message and is followed.
+  EXPECT_FALSE(session.addImu(restingImu(500.0)).new_estimate);
+  const LocalizationSession::Update followed = session.addImu(restingImu(500.1));
+  EXPECT_TRUE(followed.reset) << followed.note;  // an IMU silence beyond the restart limit
+  EXPECT_EQ(session.statistics().messages_far_ahead, 2);
+}
+
 // A jump back, then a seek forward into the old time line's span (a player restarted further on):
 // its first 2 s of stamps are taken for leftovers, then the stream is followed; it must not stay
 // dropped for good.
@@ -279,11 +311,15 @@ TEST(LocalizationSession, AnImuGapLongerThanTheRestartLimitStartsOverAtTheNextFi
     if (i % 10 == 0) session.addFix(fixAt(10.0 + 0.1 * i));
   }
   ASSERT_TRUE(session.started());
-  const LocalizationSession::Update bridged = session.addImu(restingImu(17.0));  // 5 s gap
+  // A jump forward is taken at its second message (the first is dropped: one bad stamp alone
+  // must not move the session's time).
+  EXPECT_FALSE(session.addImu(restingImu(17.0)).new_estimate);  // 5 s gap
+  const LocalizationSession::Update bridged = session.addImu(restingImu(17.1));
   EXPECT_FALSE(bridged.reset) << bridged.note;
   EXPECT_EQ(bridged.imu_status, Localizer::ImuStatus::kGap);
 
-  const LocalizationSession::Update jumped = session.addImu(restingImu(17.0 + 3600.0));
+  EXPECT_FALSE(session.addImu(restingImu(17.0 + 3600.0)).reset);
+  const LocalizationSession::Update jumped = session.addImu(restingImu(17.1 + 3600.0));
   EXPECT_TRUE(jumped.reset);
   EXPECT_FALSE(jumped.new_estimate);
   EXPECT_NE(jumped.note.find("IMU silent"), std::string::npos) << jumped.note;
@@ -446,7 +482,8 @@ TEST(LocalizationSession, AfterALoopTheVelocityArrivingFirstStillServesTheStart)
   session.addImu(restingImu(100.0));
   session.addGpsVelocity(stillAt(100.0));
   session.addFix(fixAt(100.0));
-  session.addImu(restingImu(110.0));
+  session.addImu(restingImu(109.0));  // a jump forward, taken at its second message
+  session.addImu(restingImu(109.1));
   ASSERT_TRUE(session.started());
   GpsVelocityEvent moving = stillAt(100.0);
   moving.velocity = Eigen::Vector3d(3.0, 0.0, 0.0);

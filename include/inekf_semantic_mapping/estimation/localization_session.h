@@ -24,6 +24,10 @@
 //    loop 2-3 times), and stamps may run ahead of the clock (GPS time). After the jump, a message
 //    of the old time line still in a queue (stamped in its span, ahead of the new one) is
 //    dropped, not taken as the newest stamp;
+//  - a jump forward is taken on the second message that shows it: a message stamped more than
+//    time_jump_back_s ahead of the newest stamp is dropped until another one at or beyond it
+//    (less time_jump_back_s) arrives, on any stream. Alone, one bad stamp (a receiver's glitch)
+//    became the newest, and the next ordinary message a jump back that reset a healthy filter;
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -117,6 +121,8 @@ class LocalizationSession {
     std::int64_t resets = 0;  // time jumps back and non-finite states
     // Dropped after a time jump back: stamped in the old time line's span, ahead of the new one.
     std::int64_t messages_of_previous_time_line = 0;
+    // Dropped as the first message of a jump forward that no other message had confirmed yet.
+    std::int64_t messages_far_ahead = 0;
   };
 
   // A state and its pose covariance, e.g. the start's.
@@ -199,6 +205,8 @@ class LocalizationSession {
   std::optional<double> old_timeline_end_s_;
   // The lowest stamp of the messages dropped in a row as the old time line's.
   std::optional<double> first_dropped_stamp_s_;
+  // The stamp of the last message dropped as far ahead, until another confirms the jump.
+  std::optional<double> far_ahead_stamp_s_;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;

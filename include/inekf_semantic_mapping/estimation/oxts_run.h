@@ -56,9 +56,10 @@ struct OxtsRunResult {
   // The frame the filter started at (its first fix); earlier frames repeat the start's state
   // and are left out of compareWithTruth. states.size() when it never started.
   int first_estimated_frame = 0;
-  // Frames after the start at which the filter had been reset (an IMU gap, a non-finite state)
-  // and not yet restarted, ascending: they repeat the last estimate and are left out of
-  // compareWithTruth.
+  // Frames after the start without an estimate at their own stamp, ascending: the filter had
+  // been reset (an IMU gap, a non-finite state) and not yet restarted, or the session dropped
+  // the frame's IMU sample (the first of a jump forward). They repeat the last estimate and are
+  // left out of compareWithTruth.
   std::vector<int> held_frames;
   bool smoothed = false;    // the states are the smoother's
   int smoother_breaks = 0;  // IMU steps the smoother could not reproduce (segments restarted)
