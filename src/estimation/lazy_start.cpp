@@ -25,24 +25,31 @@ std::optional<Eigen::Vector3d> LazyStart::velocityForPendingFix() const {
     return std::nullopt;
   }
   if (!velocity_in_body_frame_) return velocity_;
-  if (!orientation_) return std::nullopt;
+  // A body-frame velocity needs the orientation the start is made with.
+  if (!config_.use_reference || !orientation_) return std::nullopt;
   return Eigen::Vector3d(*orientation_ * velocity_);
+}
+
+bool LazyStart::velocityArrivedForPendingFix() const {
+  return pending_fix_ && velocity_stamp_s_ &&
+         std::abs(*velocity_stamp_s_ - pending_fix_->stamp_s) <= config_.max_velocity_age_s;
 }
 
 std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_source_exists) {
   if (!pending_fix_) return std::nullopt;
-  std::optional<Eigen::Vector3d> velocity = velocityForPendingFix();
-  if (config_.use_reference && now_s - pending_fix_->stamp_s <= config_.max_wait_s) {
-    if (!orientation_) return std::nullopt;                        // its IMU message
-    if (!velocity && velocity_source_exists) return std::nullopt;  // its velocity
+  if (now_s - pending_fix_->stamp_s <= config_.max_wait_s) {
+    if (config_.use_reference && !orientation_) return std::nullopt;  // its IMU message
+    // Its velocity: a map-frame one serves a start levelled from gravity too (it needs no
+    // orientation; it was dropped there and the start took zero at 15 m/s).
+    if (velocity_source_exists && !velocityArrivedForPendingFix()) return std::nullopt;
   }
   Start start;
   start.fix = *pending_fix_;
+  start.velocity_map = velocityForPendingFix();
   pending_fix_.reset();
   if (config_.use_reference && orientation_) {
     start.orientation = orientation_;
     start.orientation_covariance = orientation_covariance_;
-    start.velocity_map = velocity;
   }
   return start;
 }

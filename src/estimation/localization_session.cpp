@@ -360,6 +360,8 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
   if (start->orientation) {
     localizer_.setInitialReference(*start->orientation, start->velocity_map,
                                    start->orientation_covariance);
+  } else {
+    localizer_.setInitialVelocity(start->velocity_map);
   }
   update->correction = localizer_.addPositionFix(start->fix);
   last_mahalanobis_squared_ = update->correction->mahalanobis_squared;

@@ -191,6 +191,11 @@ void Localizer::setInitialReference(const Eigen::Matrix3d& rotation,
   }
 }
 
+void Localizer::setInitialVelocity(const std::optional<Eigen::Vector3d>& velocity_map) {
+  reference_velocity_.reset();
+  if (velocity_map && velocity_map->allFinite()) reference_velocity_ = *velocity_map;
+}
+
 Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
       !sample.specific_force.allFinite() ||
@@ -268,12 +273,12 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
     initial.stamp_s = fix.stamp_s;
     initial.position_map = fix.position_map;
     bool velocity_known = false;
+    if (reference_velocity_) {
+      initial.velocity_map = *reference_velocity_;
+      velocity_known = true;
+    }
     if (config_.init_orientation_from_reference && reference_rotation_) {
       initial.rotation = *reference_rotation_;
-      if (reference_velocity_) {
-        initial.velocity_map = *reference_velocity_;
-        velocity_known = true;
-      }
     } else if (last_imu_->specific_force.norm() > 1.0) {
       // Level from the specific force (gravity reaction), yaw 0.
       const Eigen::Vector3d f = last_imu_->specific_force.normalized();

@@ -83,7 +83,15 @@ TEST(LazyStart, LevelledStartsAtTheFixWithoutReference) {
   const auto start = gate.poll(10.0, true);
   ASSERT_TRUE(start);
   EXPECT_FALSE(start->orientation);  // the Localizer levels from gravity
-  EXPECT_FALSE(start->velocity_map);
+  // A map-frame GPS velocity needs no orientation: it is the start's (it was dropped).
+  ASSERT_TRUE(start->velocity_map);
+  EXPECT_EQ(*start->velocity_map, Eigen::Vector3d(1.0, 0.0, 0.0));
+  // A body-frame one would need the orientation this start does not use.
+  gate.offerVelocity(10.0, Eigen::Vector3d(1.0, 0.0, 0.0), true);
+  gate.offerFix(fixAt(10.0));
+  const auto body = gate.poll(10.0, true);
+  ASSERT_TRUE(body);
+  EXPECT_FALSE(body->velocity_map);
 }
 
 TEST(LazyStart, ResetForgetsTheFixAndTheReferences) {

@@ -692,6 +692,38 @@ CurveRun runCurve(double seconds, bool with_orientation, double yaw_error_deg, d
   return run;
 }
 
+// Found by review: an IMU without an orientation (no INS) beside a receiver publishing a
+// map-frame velocity: the start (levelled from gravity after session.start_max_wait_s) dropped
+// the velocity and took zero at 15 m/s. A map-frame velocity needs no orientation; a body-frame
+// one does, and without one the start takes zero, not knowing it.
+TEST(LocalizationSession, AMapFrameVelocityServesAStartLevelledFromGravity) {
+  for (const bool in_body_frame : {false, true}) {
+    SCOPED_TRACE(in_body_frame ? "body frame" : "map frame");
+    LocalizationSession session(originConfig());
+    GpsVelocityEvent moving = stillAt(100.0);
+    moving.velocity = Eigen::Vector3d(10.0, 0.0, 0.0);
+    moving.in_body_frame = in_body_frame;
+    session.addImu(restingImu(100.0, false));
+    session.addFix(fixAt(100.0));
+    session.addGpsVelocity(moving);
+    session.addImu(restingImu(100.1, false));
+    EXPECT_FALSE(session.started());  // its orientation may still come, within 0.2 s
+    const LocalizationSession::Update update = session.addImu(restingImu(100.3, false));
+    ASSERT_TRUE(update.started) << update.note;
+    EXPECT_NE(update.note.find("levelled from gravity"), std::string::npos) << update.note;
+    if (in_body_frame) {
+      EXPECT_EQ(session.statistics().filter.starts_without_velocity, 1);
+      EXPECT_LT(session.state().velocity_map.norm(), 1e-6);
+    } else {
+      EXPECT_EQ(session.statistics().filter.starts_without_velocity, 0);
+      EXPECT_NE(update.note.find("velocity from the GPS velocity"), std::string::npos)
+          << update.note;
+      // Carried on at rest on the IMU: the velocity stays what the GPS said.
+      EXPECT_LT((session.state().velocity_map - moving.velocity).norm(), 1e-6);
+    }
+  }
+}
+
 TEST(LocalizationSession, WithoutAnOrientationTheHeadingIsAlignedFromTheGpsTrack) {
   const CurveRun run = runCurve(60.0, false, 0.0, 30.0);
   EXPECT_TRUE(run.finite);

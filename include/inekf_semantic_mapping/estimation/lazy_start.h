@@ -23,13 +23,16 @@ class LazyStart {
     bool use_reference = true;        // false: start levelled at the fix, nothing to wait for
   };
 
-  // What to start the Localizer with (Localizer::setInitialReference, then addPositionFix).
+  // What to start the Localizer with (Localizer::setInitialReference with an orientation, else
+  // setInitialVelocity; then addPositionFix).
   struct Start {
     PositionFix fix;
     std::optional<Eigen::Matrix3d> orientation;  // body -> map
     // The orientation's stated covariance (rad^2, small angles about the map axes, as
     // sensor_msgs/Imu); nullopt or all zeros: not stated (the Localizer's configured sigmas).
     std::optional<Eigen::Matrix3d> orientation_covariance;
+    // The GPS velocity of the fix's instant: a map-frame one with or without an orientation, a
+    // body-frame one only with the orientation (rotated by it).
     std::optional<Eigen::Vector3d> velocity_map;
   };
 
@@ -57,6 +60,7 @@ class LazyStart {
 
  private:
   std::optional<Eigen::Vector3d> velocityForPendingFix() const;
+  bool velocityArrivedForPendingFix() const;
 
   Config config_;
   std::optional<PositionFix> pending_fix_;

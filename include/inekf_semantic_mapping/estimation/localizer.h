@@ -115,17 +115,21 @@ class Localizer {
   // Lazy initialization: while not initialized, IMU samples are only remembered (kNotInitialized)
   // and the first valid fix initializes the state at the fix (rotation and velocity from the
   // reference when one was given and init_orientation_from_reference, else roll/pitch levelled
-  // from the latest specific force, yaw 0 with unknown_yaw_sigma_deg). Without a reference
-  // velocity the state starts at zero velocity with the unknown_velocity_sigma_* uncertainty.
-  // A fix before any IMU sample and any reference does not start the filter (attitude unknown):
-  // it is counted in gps_before_start and the next fix starts it. A later call replaces the
-  // reference; velocity_map = nullopt means "not known".
-  // rotation_covariance: rad^2 about the map axes (sensor_msgs/Imu); nullopt or zero diagonal
-  // entries: the configured initial sigmas. One that is not a covariance (its symmetric part
-  // not positive semi-definite, or a variance above pi^2) is not taken.
+  // from the latest specific force, yaw 0 with unknown_yaw_sigma_deg). Without a reference or
+  // initial velocity the state starts at zero velocity with the unknown_velocity_sigma_*
+  // uncertainty. A fix before any IMU sample and any reference does not start the filter (attitude
+  // unknown): it is counted in gps_before_start and the next fix starts it. A later call replaces
+  // the reference; velocity_map = nullopt means "not known". rotation_covariance: rad^2 about the
+  // map axes (sensor_msgs/Imu); nullopt or zero diagonal entries: the configured initial sigmas.
+  // One that is not a covariance (its symmetric part not positive semi-definite, or a variance
+  // above pi^2) is not taken.
   void setInitialReference(
       const Eigen::Matrix3d& rotation, const std::optional<Eigen::Vector3d>& velocity_map,
       const std::optional<Eigen::Matrix3d>& rotation_covariance = std::nullopt);
+  // The velocity (map frame) of a start without a reference rotation (levelled from gravity): a
+  // GPS velocity needs no orientation. nullopt (or not finite): not known. setInitialReference
+  // replaces it.
+  void setInitialVelocity(const std::optional<Eigen::Vector3d>& velocity_map);
   // The stated rotation covariance the reference holds (symmetrized), nullopt when none was
   // given or it was not taken.
   const std::optional<Eigen::Matrix3d>& referenceRotationCovariance() const {
