@@ -246,12 +246,15 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
   if (started()) releaseWaitingFixes(&update);
   update.imu_status = status;
   const bool dropped = status == Localizer::ImuStatus::kDroppedDuplicate ||
-                       status == Localizer::ImuStatus::kDroppedOutOfOrder;
+                       status == Localizer::ImuStatus::kDroppedOutOfOrder ||
+                       status == Localizer::ImuStatus::kRefused;
   if ((dropped || status == Localizer::ImuStatus::kGap) && update.note.empty()) {
     std::ostringstream note;
     note << std::fixed << std::setprecision(3) << "IMU sample at " << sample.stamp_s << " s "
-         << (status == Localizer::ImuStatus::kGap ? "after a gap: bridged with inflated noise"
-                                                  : "duplicate or out of order: dropped");
+         << (status == Localizer::ImuStatus::kGap       ? "after a gap: bridged with inflated noise"
+             : status == Localizer::ImuStatus::kRefused ? "refused by the filter (its propagation "
+                                                          "would not be finite): dropped"
+                                                        : "duplicate or out of order: dropped");
     update.note = note.str();
   }
   guardSound(&update);

@@ -75,10 +75,14 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   recordStep(ImuStep());  // the initial state: dt 0, nothing to replay
 }
 
-void Localizer::propagate(const ImuStep& step) {
+bool Localizer::propagate(const ImuStep& step) {
+  const double stamp_before = filter_->state().stamp_s;
   filter_->setProcessNoiseScale(step.gyro_noise_scale, step.accel_noise_scale);
   filter_->propagate(step.sample, step.dt);
   filter_->setProcessNoiseScale(1.0, 1.0);
+  // A propagation the filter refused (it would have left non-finite values) leaves the state
+  // where it was, stamp included.
+  if (step.dt > 0.0 && filter_->state().stamp_s == stamp_before) return false;
   // The smoother needs the pure prediction; the constraint is a measurement of this epoch. Here,
   // not in addImu, so that a late fix's replay of the history applies it again.
   predicted_state_ = filter_->state();
@@ -87,12 +91,12 @@ void Localizer::propagate(const ImuStep& step) {
     const double heading_sigma_rad = std::sqrt(filter_->poseCovariance()(5, 5));
     if (!(heading_sigma_rad <= config_.nonholonomic_max_heading_sigma_deg * kDegToRad)) {
       ++statistics_.nonholonomic_skipped;
-      return;
+      return true;
     }
     if (consecutive_rejected_fixes_ > 0) {
       // The fixes reject this heading: the constraint would only hold it.
       ++statistics_.nonholonomic_suspended;
-      return;
+      return true;
     }
     const double heading_before = headingOf(filter_->state().rotation);
     const CorrectionResult result = filter_->correctNonholonomic(
@@ -100,6 +104,7 @@ void Localizer::propagate(const ImuStep& step) {
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
     if (result.accepted) noteHeadingChange(heading_before);
   }
+  return true;
 }
 
 void Localizer::recordStep(const ImuStep& step) {
@@ -233,7 +238,12 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
     interpolated_run_start_s_ = -1.0;
   }
   const ImuStep step{sample, dt, gyro_scale, accel_scale};
-  propagate(step);
+  if (!propagate(step)) {
+    // Not an estimate at this stamp: reported as such (it was kUsed, and the node published the
+    // old state under the new stamp).
+    ++statistics_.imu_dropped;
+    return ImuStatus::kRefused;
+  }
   recordStep(step);
   last_imu_ = sample;
   ++statistics_.imu_used;

@@ -56,6 +56,21 @@ TEST(Localizer, DropsDuplicateAndOutOfOrderSamplesAndCountsThem) {
   EXPECT_LT(localizer.state().position_map.norm(), 1e-9);
 }
 
+// Found by review: a propagation the filter refuses (its covariance would overflow: here a step
+// of 1e200 s) left the state at its stamp but was reported kUsed, and the node published the
+// old state under the new stamp.
+TEST(Localizer, APropagationTheFilterRefusesIsNotReportedUsed) {
+  Localizer localizer{LocalizerConfig()};
+  localizer.initialize(startState(100.0));
+  ASSERT_EQ(localizer.addImu(restingSample(100.1)), Localizer::ImuStatus::kUsed);
+  EXPECT_EQ(localizer.addImu(restingSample(1e200)), Localizer::ImuStatus::kRefused);
+  EXPECT_NEAR(localizer.state().stamp_s, 100.1, 1e-12);
+  EXPECT_TRUE(localizer.filter().covariance().allFinite());
+  EXPECT_EQ(localizer.statistics().imu_dropped, 1);
+  EXPECT_EQ(localizer.statistics().imu_used, 1);
+  EXPECT_EQ(localizer.addImu(restingSample(100.2)), Localizer::ImuStatus::kUsed);  // goes on
+}
+
 TEST(Localizer, BridgesAGapWithInflatedNoise) {
   LocalizerConfig config;
   config.max_imu_gap_s = 0.5;

@@ -78,7 +78,16 @@ namespace estimation {
 
 class Localizer {
  public:
-  enum class ImuStatus { kUsed, kDroppedOutOfOrder, kDroppedDuplicate, kGap, kNotInitialized };
+  // kRefused: the filter refused the propagation (it would have left non-finite values); the
+  // state stays at its stamp and the sample counts with the drops.
+  enum class ImuStatus {
+    kUsed,
+    kDroppedOutOfOrder,
+    kDroppedDuplicate,
+    kGap,
+    kNotInitialized,
+    kRefused
+  };
   // Stamps closer than this are the same instant (a duplicate sample, a fix at a sample).
   static constexpr double kDuplicateStampS = 1e-6;
 
@@ -192,8 +201,9 @@ class Localizer {
     int chords = 0;
   };
 
-  // The filter over one step (the same path for live and replayed samples).
-  void propagate(const ImuStep& step);
+  // The filter over one step (the same path for live and replayed samples); false when the
+  // filter refused it (the state unchanged).
+  bool propagate(const ImuStep& step);
   void recordStep(const ImuStep& step);
   void clearHistory();
   // The history step to rewind to for a fix stamped stamp_s (the last step at or before it), or
