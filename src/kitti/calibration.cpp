@@ -168,12 +168,16 @@ CameraProjection RawCalibration::projection(int camera_index) const {
   return projection;
 }
 
-bool hasRawCalibration(const std::string& dir) {
-  namespace fs = std::filesystem;
-  return fs::is_regular_file(dir + "/calib_cam_to_cam.txt") &&
-         fs::is_regular_file(dir + "/calib_imu_to_velo.txt") &&
-         fs::is_regular_file(dir + "/calib_velo_to_cam.txt");
+std::vector<std::string> missingRawCalibrationFiles(const std::string& dir) {
+  std::vector<std::string> missing;
+  for (const char* name :
+       {"calib_cam_to_cam.txt", "calib_imu_to_velo.txt", "calib_velo_to_cam.txt"}) {
+    if (!std::filesystem::is_regular_file(dir + "/" + name)) missing.emplace_back(name);
+  }
+  return missing;
 }
+
+bool hasRawCalibration(const std::string& dir) { return missingRawCalibrationFiles(dir).empty(); }
 
 RawCalibration readRawCalibration(const std::string& date_dir) {
   RawCalibration calib;

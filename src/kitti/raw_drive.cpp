@@ -134,7 +134,16 @@ std::vector<std::string> RawDrive::missingParts() const {
     if (!camera.present) missing.push_back(camera.name);
   }
   if (!hasCalibration()) {
-    missing.push_back("calibration (no calib_*.txt in " + calibration_search_dir_ + ")");
+    // Which of the three files, where some are there (a drive written without one had been
+    // reported as having none).
+    const std::vector<std::string> files = missingRawCalibrationFiles(calibration_search_dir_);
+    std::string which = "no calib_*.txt";
+    if (files.size() < 3) {
+      which.clear();
+      for (const std::string& file : files)
+        which += (which.empty() ? "" : ", ") + file + " missing";
+    }
+    missing.push_back("calibration (" + which + " in " + calibration_search_dir_ + ")");
   }
   return missing;
 }

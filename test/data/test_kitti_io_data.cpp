@@ -190,6 +190,13 @@ TEST(KittiRawDrive, DriveWithoutCalibrationAndMissingFolder) {
   EXPECT_THROW(drive.readCalibration(), KittiFormatError);
   const auto missing = drive.missingParts();
   EXPECT_NE(missing.back().find("calibration (no calib_*.txt in"), std::string::npos);
+  // Where some files are there, the warning names the ones that are not.
+  const std::string partial = makeTempDir("partial_calibration");
+  for (const char* name : {"calib_cam_to_cam.txt", "calib_imu_to_velo.txt"}) {
+    fs::copy_file(sharedPath(kDate0926) + "/" + name, partial + "/" + name);
+  }
+  const auto partly = RawDrive(sharedPath(kDrive0001), partial).missingParts();
+  EXPECT_EQ(partly.back(), "calibration (calib_velo_to_cam.txt missing in " + partial + ")");
   // An explicit calibration folder without the files is not fatal either.
   EXPECT_FALSE(RawDrive(sharedPath("data/kitti_raw/2011_09_29/2011_09_29_drive_0071_sync"),
                         sharedPath("data/kitti_raw/2011_09_29"))

@@ -11,6 +11,7 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <string>
+#include <vector>
 
 namespace inekf_semantic_mapping {
 namespace kitti {
@@ -65,6 +66,9 @@ RawCalibration readRawCalibration(const std::string& date_dir);
 
 // True when all three raw calibration files exist in dir.
 bool hasRawCalibration(const std::string& dir);
+// The raw calibration files (calib_cam_to_cam.txt, calib_imu_to_velo.txt,
+// calib_velo_to_cam.txt) that dir lacks.
+std::vector<std::string> missingRawCalibrationFiles(const std::string& dir);
 
 // Object benchmark calib/%06d.txt (P0..P3, R0_rect, Tr_velo_to_cam, Tr_imu_to_velo) or the
 // odometry/SemanticKITTI calib.txt (P0..P3, Tr = velo -> cam0, no R0_rect -> identity).
