@@ -30,6 +30,8 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->read("gps_every_n_frames", &gps.every_n_frames);
   int seed = 0;
   reader->read("gps_seed", &seed);
+  // kitti2bag --seed takes no negative seed: -1 here would be a seed it cannot give.
+  if (seed < 0) reader->fail("gps_seed", "must be >= 0, got " + std::to_string(seed));
   gps.seed = static_cast<std::uint64_t>(seed);
   std::vector<std::string> outages;  // ["START:DURATION", ...] seconds since the first frame
   reader->read("gps_outages", &outages);

@@ -107,6 +107,11 @@ class KittiPlayerTest(unittest.TestCase):
         self.assertNotEqual(code, 0, output)
         self.assertIn("rtae", output)
         self.assertIn("misspelt_parameter_player", output)
+        # A seed kitti2bag cannot take either (it was cast to a 64-bit one of its own).
+        code, output = run_with_parameters("kitti_player", "negative_seed_player",
+                                           {"drive_dir": "/nonexistent", "gps_seed": -1})
+        self.assertNotEqual(code, 0, output)
+        self.assertIn("'gps_seed' must be >= 0", output)
 
     def test_synthetic_drive_with_lidar_and_camera(self):
         """Needs no ../shared: a second player on a drive the test writes, topics remapped."""
