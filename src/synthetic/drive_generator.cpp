@@ -420,6 +420,9 @@ DriveSummary generateInto(const DriveOptions& options) {
 
 DriveSummary generateSyntheticDrive(const DriveOptions& options) {
   if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");
+  if (fs::exists(options.output_dir) && !fs::is_directory(options.output_dir)) {
+    throw std::invalid_argument("--output " + options.output_dir + ": not a folder");
+  }
   // Written into a hidden staging folder beside the result and moved in when complete: a full
   // disk or any failure half way leaves no half drive that a reader would take for a whole one.
   const fs::path date_dir = fs::path(options.output_dir) / options.date;

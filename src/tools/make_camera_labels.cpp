@@ -60,7 +60,10 @@ std::vector<int> parseCameras(const std::string& text) {
     if (std::find(cameras.begin(), cameras.end(), camera) == cameras.end())
       cameras.push_back(camera);
   }
-  if (cameras.empty()) throw UsageError("--cameras: expected 2, 3 or 2,3, got '" + text + "'");
+  // getline drops a trailing empty item: "2," is refused as ",2" is.
+  if (cameras.empty() || text.back() == ',') {
+    throw UsageError("--cameras: expected 2, 3 or 2,3, got '" + text + "'");
+  }
   return cameras;
 }
 

@@ -143,6 +143,10 @@ TEST_F(MakeCameraLabelsTest, BadInputIsNamed) {
   const auto [usage_status, usage] = makeLabels("--cameras 4");
   EXPECT_EQ(usage_status, 2) << usage;
   EXPECT_NE(usage.find("--cameras"), std::string::npos) << usage;
+  for (const char* list : {"2,", ",2", "2,,3"}) {  // "2," was taken as 2
+    const auto [comma_status, comma] = makeLabels(std::string("--cameras ") + list);
+    EXPECT_EQ(comma_status, 2) << list << ": " << comma;
+  }
 
   fs::remove(seq_ / "calib.txt");
   const auto [calib_status, calib] = makeLabels("");

@@ -388,7 +388,19 @@ TEST(SyntheticDriveOptions, RejectsBadOptionsWithAClearMessage) {
   options.date = "2011_09_26";
   options.duration_s = -1;
   EXPECT_THROW(generateSyntheticDrive(options), std::invalid_argument);
-  fs::remove_all(options.output_dir);
+  // An output that is a file: named, not a filesystem error from deep inside.
+  options.duration_s = 0.3;
+  const std::string file = options.output_dir + "/a_file";
+  std::ofstream(file) << "x";
+  const std::string folder = options.output_dir;
+  options.output_dir = file;
+  try {
+    generateSyntheticDrive(options);
+    ADD_FAILURE() << "a file was taken for the output folder";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_EQ(std::string(error.what()), "--output " + file + ": not a folder");
+  }
+  fs::remove_all(folder);
 }
 
 // A full disk half way (simulated in a child process with a file size limit) leaves neither a
