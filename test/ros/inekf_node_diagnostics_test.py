@@ -38,20 +38,27 @@ class InekfNodeDiagnostics(unittest.TestCase):
         message.header.frame_id = "imu_link"
         message.orientation.w = 1.0
         message.linear_acceleration.z = 9.81
-        stamp = rospy.Time.now()  # 10 Hz of data time, paced by the wall clock
-        start = time.time()
-        levels = []
-        while time.time() - start < 15:
-            message.header.stamp = stamp
-            imu.publish(message)
-            stamp += rospy.Duration(0.1)
-            time.sleep(0.1)
+        stamp = [rospy.Time.now()]
+
+        def play(seconds, until=lambda: False):
+            """IMU at 10 Hz of data time, paced by the wall clock, for `seconds` or until
+            `until()`."""
+            began = time.time()
+            while time.time() - began < seconds and not until():
+                message.header.stamp = stamp[0]
+                imu.publish(message)
+                stamp[0] += rospy.Duration(0.1)
+                time.sleep(0.1)
+
+        def error_seen():
             with lock:
-                levels = [level for _, level, _, _ in seen]
-            if DiagnosticStatus.ERROR in levels:
-                break
+                return any(level == DiagnosticStatus.ERROR for _, level, _, _ in seen)
+
+        start = time.time()
+        play(15, until=error_seen)
         with lock:
             record = list(seen)
+        levels = [level for _, level, _, _ in record]
         sys.stderr.write("inekf_node diagnostics: %s\n" % [(round(t - start, 1), l, m)
                                                           for t, l, m, _ in record])
         self.assertTrue(record, "no %s status on /diagnostics" % STATUS)
@@ -71,12 +78,7 @@ class InekfNodeDiagnostics(unittest.TestCase):
         time.sleep(1.0)  # the old period's tick reads the new value
         with lock:
             del seen[:]
-        start = time.time()
-        while time.time() - start < 6.5:
-            message.header.stamp = stamp
-            imu.publish(message)
-            stamp += rospy.Duration(0.1)
-            time.sleep(0.1)
+        play(6.5)
         with lock:
             stamps = [t for t, _, _, _ in seen]
         intervals = sorted(b - a for a, b in zip(stamps, stamps[1:]))

@@ -55,6 +55,18 @@ GpsVelocityEvent stillAt(double stamp_s) {
   return velocity;
 }
 
+// A car at rest from t0 for duration_s: IMU at 10 Hz, a GPS velocity and a fix every second.
+void standStill(LocalizationSession* session, double t0, double duration_s) {
+  for (int k = 0; 0.1 * k <= duration_s + 1e-9; ++k) {
+    const double t = t0 + 0.1 * k;
+    session->addImu(restingImu(t));
+    if (k % 10 == 0) {
+      session->addGpsVelocity(stillAt(t));
+      session->addFix(fixAt(t));
+    }
+  }
+}
+
 LocalizationSessionConfig originConfig() {
   LocalizationSessionConfig config;
   config.origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
@@ -228,14 +240,7 @@ TEST(LocalizationSession, BadSamplesAreCountedAndTheFilterKeepsGoing) {
 // loop's start lost for a GPS period).
 TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   LocalizationSession session(originConfig());
-  for (int k = 0; k <= 20; ++k) {
-    const double t = 100.0 + 0.1 * k;
-    session.addImu(restingImu(t));
-    if (k % 10 == 0) {
-      session.addGpsVelocity(stillAt(t));
-      session.addFix(fixAt(t));
-    }
-  }
+  standStill(&session, 100.0, 2.0);
   ASSERT_TRUE(session.started());
   EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
   const LocalizationSession::Update stale = session.addFix(fixAt(102.0));
@@ -260,14 +265,7 @@ TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
 // is dropped until a second one confirms the jump.
 TEST(LocalizationSession, OneMessageFarAheadDoesNotResetAHealthyFilter) {
   LocalizationSession session(originConfig());
-  for (int k = 0; k <= 20; ++k) {
-    const double t = 100.0 + 0.1 * k;
-    session.addImu(restingImu(t));
-    if (k % 10 == 0) {
-      session.addGpsVelocity(stillAt(t));
-      session.addFix(fixAt(t));
-    }
-  }
+  standStill(&session, 100.0, 2.0);
   ASSERT_TRUE(session.started());
   const LocalizationSession::Update glitch = session.addFix(fixAt(1102.0, 500.0));
   EXPECT_FALSE(glitch.reset);
