@@ -162,9 +162,11 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
   }
   first_dropped_stamp_s_.reset();
   // A jump forward: taken once a second message shows it (see the header).
-  if (!moved_forward && newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance &&
+  const bool far_ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
+  if (!moved_forward && far_ahead &&
       !(far_ahead_stamp_s_ && stamp_s >= *far_ahead_stamp_s_ - tolerance)) {
     far_ahead_stamp_s_ = stamp_s;
+    far_ahead_newest_s_ = *newest_stamp_s_;
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s << " s is "
         << stamp_s - *newest_stamp_s_ << " s ahead of the newest (" << *newest_stamp_s_
@@ -172,6 +174,18 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
     update->note = why.str();
     ++statistics_.messages_far_ahead;
     return false;
+  }
+  // A jump forward confirmed, beyond what the IMU may be bridged over: the session starts over
+  // here, so that this message (a fix, a velocity) already serves the new start. At the next IMU
+  // sample the restart would have dropped the fix of the jump's instant with the queue.
+  if (far_ahead && started() && config_.restart_after_imu_gap_s > 0.0 &&
+      stamp_s - state().stamp_s > config_.restart_after_imu_gap_s) {
+    std::ostringstream why;
+    why << std::fixed << std::setprecision(3) << "time jumped forward (" << source << " stamp "
+        << stamp_s << " s, the filter at " << state().stamp_s
+        << " s: more than session.restart_after_imu_gap_s): the filter starts again at the next "
+           "fix";
+    reset(why.str(), update);
   }
   if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
     std::ostringstream why;
@@ -184,8 +198,10 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
   newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
   // Past the old time line's end its messages can no longer be told from the new one's.
   if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
-  // Reached (the jump confirmed, or time caught up): a later jump needs its own second message.
-  if (far_ahead_stamp_s_ && *newest_stamp_s_ >= *far_ahead_stamp_s_ - tolerance) {
+  // Reached (the jump confirmed, or time caught up), or not confirmed while the data went on
+  // (a glitch): a later jump needs its own second message.
+  if (far_ahead_stamp_s_ && (*newest_stamp_s_ >= *far_ahead_stamp_s_ - tolerance ||
+                             *newest_stamp_s_ > far_ahead_newest_s_ + tolerance)) {
     far_ahead_stamp_s_.reset();
   }
   return true;

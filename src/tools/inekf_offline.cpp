@@ -386,10 +386,17 @@ int main(int argc, char** argv) {
       std::printf("inekf_offline: no fix before frame %d: the filter started there\n",
                   run.first_estimated_frame);
     }
+    if (run.statistics.messages_far_ahead > 0) {
+      std::printf(
+          "inekf_offline: %lld messages stamped far ahead of the newest were dropped, each the "
+          "first of a jump forward or one alone\n",
+          static_cast<long long>(run.statistics.messages_far_ahead));
+    }
     if (!run.held_frames.empty()) {
       std::printf(
-          "inekf_offline: %zu frames (first %d) between a reset and the next start repeat the "
-          "last estimate and are not scored\n",
+          "inekf_offline: %zu frames (first %d) without an estimate of their own (after a reset "
+          "until the next start, or their IMU sample dropped) repeat the last estimate and are "
+          "not scored\n",
           run.held_frames.size(), run.held_frames.front());
     }
     return 0;
