@@ -125,6 +125,13 @@ void YamlReader::readInRange(const std::string& key, double* out, double min, do
   fail(key, range.str());
 }
 
+void YamlReader::readInRange(const std::string& key, int* out, int min, int max) {
+  read(key, out);
+  if (*out >= min && *out <= max) return;
+  fail(key, "must be an integer in [" + std::to_string(min) + ", " + std::to_string(max) +
+                "], got " + std::to_string(*out));
+}
+
 void YamlReader::read(const std::string& key, int* out) {
   double value = 0.0;
   const YAML::Node node = lookup(key);

@@ -55,11 +55,8 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   non_negative("gps.min_sigma_m", &config.min_gps_sigma_m);
   non_negative("gps.max_fix_age_s", &config.max_fix_age_s);
   non_negative("gps.fix_history_s", &config.fix_history_s);
-  reader->read("gps.max_consecutive_rejected_fixes", &config.max_consecutive_rejected_fixes);
-  if (config.max_consecutive_rejected_fixes < 0 ||
-      config.max_consecutive_rejected_fixes > 1000000) {
-    reader->fail("gps.max_consecutive_rejected_fixes", "must be an integer in [0, 1000000]");
-  }
+  reader->readInRange("gps.max_consecutive_rejected_fixes", &config.max_consecutive_rejected_fixes,
+                      0, 1000000);
   positive("gps.max_reacquisition_speed_mps", &config.max_reacquisition_speed_mps);
   positive("imu.max_angular_rate_radps", &config.max_angular_rate_radps);
   positive("imu.max_specific_force_mps2", &config.max_specific_force_mps2);
@@ -91,10 +88,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   non_negative("heading.track_turn_weight", &config.heading_track_turn_weight);
   angle("heading.track_chord_floor_deg", &config.heading_track_chord_floor_deg, true);
   const auto count = [reader](const std::string& key, int* out, int min) {
-    reader->read(key, out);
-    if (*out < min || *out > 1000000) {
-      reader->fail(key, "must be an integer in [" + std::to_string(min) + ", 1000000]");
-    }
+    reader->readInRange(key, out, min, 1000000);
   };
   count("heading.track_min_chords", &config.heading_track_min_chords, 1);
   angle("heading.align_above_sigma_deg", &config.heading_align_above_sigma_deg, false);
@@ -105,15 +99,6 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   count("heading.nis_window_fixes", &config.heading_nis_window_fixes, 0);
   positive("heading.nis_window_max", &config.heading_nis_window_max);
   reader->read("heading.hold_unknown_yaw", &config.heading_hold_unknown_yaw);
-  // A start without a heading has the unknown yaw's sigma: at or below the alignment's threshold
-  // it would never be aligned to the track.
-  if (config.heading_from_track &&
-      !(config.heading_align_above_sigma_deg < config.unknown_yaw_sigma_deg)) {
-    reader->fail("heading.align_above_sigma_deg",
-                 "must be below initial_sigma.unknown_yaw_deg (" +
-                     std::to_string(config.unknown_yaw_sigma_deg) +
-                     "): a start without a heading would never be aligned to the GPS track");
-  }
   return config;
 }
 

@@ -57,16 +57,9 @@ class SemanticOctomapNodeCore::Impl {
     reader.readInRange("marker_rate_hz", &options_.marker_rate_hz, 0.0, 1000.0);  // 0: off
     reader.readInRange("max_display_cpu_fraction", &options_.display.max_display_cpu_fraction, 0.0,
                        1.0);
-    const auto integer_in = [&reader](const std::string& key, int* out, int min, int max) {
-      reader.read(key, out);
-      if (*out < min || *out > max) {
-        reader.fail(key, "must be an integer in [" + std::to_string(min) + ", " +
-                             std::to_string(max) + "], got " + std::to_string(*out));
-      }
-    };
-    integer_in("marker_depth", &options_.display.marker_depth, 1, 16);
+    reader.readInRange("marker_depth", &options_.display.marker_depth, 1, 16);
     reader.read("calib_dir", &options_.calib_dir);
-    integer_in("camera_index", &options_.camera_index, 0, 3);
+    reader.readInRange("camera_index", &options_.camera_index, 0, 3);
     reader.read("map_file", &options_.map_file);
     reader.read("autosave_path", &options_.autosave_path);
     reader.read("autosave_period_s", &options_.autosave_period_s);  // <= 0: at shutdown only

@@ -54,6 +54,8 @@ class YamlReader {
   // min_exclusive; otherwise fails naming the key and the range.
   void readInRange(const std::string& key, double* out, double min, double max,
                    bool min_exclusive = false);
+  // The same for an integer in [min, max].
+  void readInRange(const std::string& key, int* out, int min, int max);
   // A name from a set of choices, converted once by `parse` (which throws std::invalid_argument
   // for a name it does not know, saying which it knows): the error names the key. Leaves *out
   // where the key is absent or empty.

@@ -20,7 +20,9 @@ class LazyStart {
   struct Config {
     double max_wait_s = 0.2;          // data time a start waits for its IMU and velocity
     double max_velocity_age_s = 0.2;  // a velocity further than this from the fix is not its own
-    bool use_reference = true;        // false: start levelled at the fix, nothing to wait for
+    // false: start levelled from gravity, not waiting for an orientation (only for the GPS
+    // velocity of the fix's instant where one is published).
+    bool use_reference = true;
   };
 
   // What to start the Localizer with (Localizer::setInitialReference with an orientation, else

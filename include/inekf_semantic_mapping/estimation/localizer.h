@@ -122,9 +122,10 @@ class Localizer {
   bool initialized() const { return initialized_; }
 
   // Lazy initialization: while not initialized, IMU samples are only remembered (kNotInitialized)
-  // and the first valid fix initializes the state at the fix (rotation and velocity from the
-  // reference when one was given and init_orientation_from_reference, else roll/pitch levelled
-  // from the latest specific force, yaw 0 with unknown_yaw_sigma_deg). Without a reference or
+  // and the first valid fix initializes the state at the fix (rotation from the reference when
+  // one was given and init_orientation_from_reference, else roll/pitch levelled from the latest
+  // specific force, yaw 0 with unknown_yaw_sigma_deg; velocity from the reference's or
+  // setInitialVelocity's, either way). Without a reference or
   // initial velocity the state starts at zero velocity with the unknown_velocity_sigma_*
   // uncertainty. A fix before any IMU sample and any reference does not start the filter (attitude
   // unknown): it is counted in gps_before_start and the next fix starts it. A later call replaces
