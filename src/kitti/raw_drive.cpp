@@ -128,11 +128,18 @@ RawCalibration RawDrive::readCalibration() const {
 
 std::vector<std::string> RawDrive::missingParts() const {
   std::vector<std::string> missing;
-  if (!oxts_.present) missing.push_back("oxts");
-  if (!velodyne_.present) missing.push_back("velodyne_points");
-  for (const auto& camera : cameras_) {
-    if (!camera.present) missing.push_back(camera.name);
-  }
+  // A folder with data/ and timestamps.txt but no frame is as good as missing (a bag without IMU
+  // was written without a word).
+  const auto check = [&missing](const SensorStream& stream) {
+    if (!stream.present) {
+      missing.push_back(stream.name);
+    } else if (stream.size() == 0) {
+      missing.push_back(stream.name + " (no frames in " + stream.dir + ")");
+    }
+  };
+  check(oxts_);
+  check(velodyne_);
+  for (const auto& camera : cameras_) check(camera);
   if (!hasCalibration()) {
     // Which of the three files, where some are there (a drive written without one had been
     // reported as having none).

@@ -282,6 +282,14 @@ TEST(KittiRawDrive, VelodyneCountMismatchNamesTheSensorFolder) {
     EXPECT_EQ(drive.velodyne().start_stamps_ns.size(), 1u);
     EXPECT_TRUE(drive.velodyne().end_stamps_ns.empty());
     EXPECT_EQ(drive.velodyne().extension, ".bin");
+    // An oxts/ with its folders but no frame is named as missing (a bag without IMU was written
+    // without a word).
+    fs::create_directories(dir + "/oxts/data");
+    writeFile(dir + "/oxts/timestamps.txt", "");
+    const std::vector<std::string> missing = RawDrive(dir).missingParts();
+    EXPECT_NE(std::find(missing.begin(), missing.end(), "oxts (no frames in " + dir + "/oxts)"),
+              missing.end());
+    fs::remove_all(dir + "/oxts");
   }
   writeFile(dir + "/velodyne_points/data/0000000001.bin", std::string(16, '\0'));
   expectFormatError([&] { RawDrive drive(dir); }, {dir + "/velodyne_points", "2 files"});

@@ -56,7 +56,8 @@ class RawDrive {
   bool hasCalibration() const { return !calibration_dir_.empty(); }
   RawCalibration readCalibration() const;  // throws when !hasCalibration()
 
-  // Human-readable names of what is absent ("velodyne_points", "image_02",
+  // Human-readable names of what is absent ("velodyne_points", "image_02", "oxts (no frames in
+  // DIR)",
   // "calibration (no calib_*.txt in DIR)"),
   // for one warning that tells the user what will not be published.
   std::vector<std::string> missingParts() const;
