@@ -57,9 +57,8 @@ class RawDrive {
   RawCalibration readCalibration() const;  // throws when !hasCalibration()
 
   // Human-readable names of what is absent ("velodyne_points", "image_02", "oxts (no frames in
-  // DIR)",
-  // "calibration (no calib_*.txt in DIR)"),
-  // for one warning that tells the user what will not be published.
+  // DIR)", "calibration (no calib_*.txt in DIR)"), for one warning that tells the user what will
+  // not be published.
   std::vector<std::string> missingParts() const;
   // Every present sensor's timestamps.txt steps that go back or jump ahead by more than a second
   // (timestampWarnings): played or converted in stamp order, such frames land out of place.
