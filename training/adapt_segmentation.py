@@ -791,7 +791,7 @@ def load_samples(args, shared, width, height, standardize, limit):
     the dense frames (every dense_val_every-th held out), the sparse sequences, the validation
     sequence, CamVid and the map's pseudo-labels as the arguments ask. Returns (train, val,
     counts per source). Raises datasets.DatasetError naming a missing or malformed file."""
-    check_sequences(args)  # main checked them already; other callers too
+    check_sequences(args)  # check_options did unless --semantickitti chose them; other callers
     val_sequence = [args.val_sequence] if args.val_sequence else []
     sparse_train = [s for s in args.sparse_sequences.split(",") if s]
     sparse_root = args.sparse_root or os.path.join(shared, "data", "semantickitti_train")
@@ -869,8 +869,7 @@ def main(argv=None):
     os.makedirs(args.output, exist_ok=True)
 
     if args.semantickitti:
-        use_semantickitti_download(args)
-        check_sequences(args)
+        use_semantickitti_download(args)  # its sequences are checked by load_samples
     t0 = time.time()
     try:
         train, val, counts = load_samples(args, shared, width, height, standardize, limit)
