@@ -161,12 +161,22 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
     moved_forward = true;
   }
   first_dropped_stamp_s_.reset();
-  // A jump forward: taken once a second message shows it (see the header).
+  // A jump forward: taken once a second message shows it (see the header). The second must be
+  // near the first, and from the other sensor or later: a receiver stamps a fix and its velocity
+  // alike, one glitch on both is still one.
   const bool far_ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
-  if (!moved_forward && far_ahead &&
-      !(far_ahead_stamp_s_ && stamp_s >= *far_ahead_stamp_s_ - tolerance)) {
-    far_ahead_stamp_s_ = stamp_s;
-    far_ahead_newest_s_ = *newest_stamp_s_;
+  const bool from_gps = std::string(source) != "IMU";
+  const bool confirms = far_ahead_stamp_s_ &&
+                        std::abs(stamp_s - *far_ahead_stamp_s_) <= tolerance &&
+                        (from_gps != far_ahead_from_gps_ ||
+                         stamp_s > *far_ahead_stamp_s_ + Localizer::kDuplicateStampS);
+  if (!moved_forward && far_ahead && !confirms) {
+    // A first far-ahead message, or one more of the same sensor and instant: held back.
+    if (!(far_ahead_stamp_s_ && std::abs(stamp_s - *far_ahead_stamp_s_) <= tolerance)) {
+      far_ahead_stamp_s_ = stamp_s;
+      far_ahead_newest_s_ = *newest_stamp_s_;
+      far_ahead_from_gps_ = from_gps;
+    }
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s << " s is "
         << stamp_s - *newest_stamp_s_ << " s ahead of the newest (" << *newest_stamp_s_
@@ -186,6 +196,12 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
         << " s: more than session.restart_after_imu_gap_s): the filter starts again at the next "
            "fix";
     reset(why.str(), update);
+  } else if (far_ahead && !started() && config_.restart_after_imu_gap_s > 0.0 &&
+             stamp_s - *newest_stamp_s_ > config_.restart_after_imu_gap_s) {
+    // Before the start: a fix (and orientation, velocity) waiting from before the jump would
+    // start the filter there and bridge the whole gap.
+    lazy_start_.reset();
+    waiting_fixes_.clear();
   }
   if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
     std::ostringstream why;

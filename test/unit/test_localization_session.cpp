@@ -295,6 +295,37 @@ TEST(LocalizationSession, OneMessageFarAheadDoesNotResetAHealthyFilter) {
   EXPECT_EQ(session.statistics().messages_far_ahead, 3);
 }
 
+// Found by review: one receiver glitch stamps the fix and its velocity alike; the velocity was
+// taken for the jump's confirmation and the next IMU sample reset the filter. Before the start, a
+// fix waiting from before a jump of an hour started the filter there and bridged the hour.
+TEST(LocalizationSession, AGlitchOnAFixAndItsVelocityIsOneMessage) {
+  LocalizationSession session(originConfig());
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  for (const double ahead_s : {5.0, 1000.0}) {
+    EXPECT_FALSE(session.addFix(fixAt(session.state().stamp_s + ahead_s, 500.0)).reset);
+    GpsVelocityEvent glitch = stillAt(session.state().stamp_s + ahead_s);
+    EXPECT_FALSE(session.addGpsVelocity(glitch).reset);
+    const double t = session.state().stamp_s;
+    for (int k = 1; k <= 15; ++k) {
+      const LocalizationSession::Update next = session.addImu(restingImu(t + 0.1 * k));
+      EXPECT_FALSE(next.reset) << ahead_s << ": " << next.note;
+    }
+  }
+  EXPECT_EQ(session.statistics().resets, 0);
+  EXPECT_EQ(session.statistics().messages_far_ahead, 4);
+
+  LocalizationSession waiting(originConfig());
+  waiting.addFix(fixAt(100.0));
+  waiting.addGpsVelocity(stillAt(100.0));
+  for (int k = 0; k <= 5; ++k) waiting.addImu(restingImu(3700.0 + 0.1 * k));
+  EXPECT_FALSE(waiting.started());  // not from the fix of an hour before
+  waiting.addFix(fixAt(3700.5, 3.0));
+  ASSERT_TRUE(waiting.addGpsVelocity(stillAt(3700.5)).started);
+  EXPECT_NEAR(waiting.state().stamp_s, 3700.5, 1e-9);
+  EXPECT_GE(waiting.errorCovariance().diagonal().minCoeff(), 0.0);
+}
+
 // A jump beyond the restart limit that lands on a fix's instant: the IMU sample goes first and is
 // dropped, the GPS velocity confirms the jump and restarts the session, and the fix of that
 // instant starts it (the restart used to come at the next IMU sample and drop the queued fix

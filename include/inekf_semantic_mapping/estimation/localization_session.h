@@ -25,11 +25,13 @@
 //    of the old time line still in a queue (stamped in its span, ahead of the new one) is
 //    dropped, not taken as the newest stamp;
 //  - a jump forward is taken on the second message that shows it: a message stamped more than
-//    time_jump_back_s ahead of the newest stamp is dropped until another one at or beyond it
-//    (less time_jump_back_s) arrives, on any stream, before the data goes on by more than
-//    time_jump_back_s. Alone, one bad stamp (a receiver's glitch) became the newest, and the next
-//    ordinary message a jump back that reset a healthy filter. A confirmed jump beyond
-//    restart_after_imu_gap_s starts the session over at the confirming message;
+//    time_jump_back_s ahead of the newest stamp is dropped until another one within
+//    time_jump_back_s of it arrives from the other sensor, or later from the same one, before the
+//    data goes on by more than time_jump_back_s (a fix and its velocity, stamped alike by the
+//    receiver, are one sensor). Alone, one bad stamp (a receiver's glitch) became the newest, and
+//    the next ordinary message a jump back that reset a healthy filter. A confirmed jump beyond
+//    restart_after_imu_gap_s starts the session over at the confirming message (before the
+//    start: forgets the fix waiting from before the jump);
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -211,6 +213,7 @@ class LocalizationSession {
   // data goes on more than time_jump_back_s past far_ahead_newest_s_ (the newest stamp then).
   std::optional<double> far_ahead_stamp_s_;
   double far_ahead_newest_s_ = 0.0;
+  bool far_ahead_from_gps_ = false;  // its sensor: the receiver (fix, velocity) or the IMU
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
