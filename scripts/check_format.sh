@@ -16,18 +16,9 @@ while (($#)); do
   esac
   shift
 done
-# Writes the JUnit case: write_junit SECONDS NAME [FAILURE_MESSAGE].
+# The JUnit case (with --junit): write_junit SECONDS NAME [FAILURE_MESSAGE].
 write_junit() {
-  [[ -n $junit ]] || return 0
-  local failure=""
-  [[ -n ${3:-} ]] && failure="<failure message=\"$3\"/>"
-  mkdir -p "$(dirname "$junit")"
-  cat >"$junit" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="format" tests="1" failures="$([[ -n $failure ]] && echo 1 || echo 0)" errors="0" time="$1">
-  <testcase classname="format" name="$2" time="$1">$failure</testcase>
-</testsuite>
-XML
+  [[ -z $junit ]] || ism_junit_case "$junit" format format "$2" "$1" "${3:-}"
 }
 # Without clang-format-14 (or git) nothing would be checked: fail instead of passing silently.
 for tool in clang-format-14 git; do

@@ -16,13 +16,22 @@ ism_source_workspace() {
     set -u
   fi
 }
-# Writes a JUnit file with one failed case, where catkin_test_results counts it:
-# ism_junit_failure FILE SUITE CASE MESSAGE (for a step that fails before it can report itself).
-ism_junit_failure() {
+# Writes a JUnit file with one case, where catkin_test_results counts it:
+# ism_junit_case FILE SUITE CLASS CASE SECONDS [FAILURE_MESSAGE] (no message: the case passed).
+ism_junit_case() {
+  local failure="" failures=0
+  if [[ -n ${6:-} ]]; then
+    failure="<failure message=\"$6\"/>"
+    failures=1
+  fi
+  mkdir -p "$(dirname "$1")"
   cat >"$1" <<XML
 <?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="$2" tests="1" failures="1" errors="0">
-  <testcase classname="$2" name="$3"><failure message="$4"/></testcase>
+<testsuite name="$2" tests="1" failures="$failures" errors="0" time="$5">
+  <testcase classname="$3" name="$4" time="$5">$failure</testcase>
 </testsuite>
 XML
 }
+# ism_junit_failure FILE SUITE CASE MESSAGE: one failed case (for a step that fails before it
+# can report itself).
+ism_junit_failure() { ism_junit_case "$1" "$2" "$2" "$3" 0 "$4"; }

@@ -48,13 +48,9 @@ for harness in oxts calibration velodyne poses semantic_ot configs command_line;
     failed=$((failed + 1))
     echo "[fuzz] $harness: FINDING (exit $rc), log $log; inputs in $findings"
     grep -aE 'ERROR|runtime error|SUMMARY' "$log" | head -n 5 || true
-    failure="<failure message=\"libFuzzer exit $rc: see $log\"/>"
+    failure="libFuzzer exit $rc: see $log"
   fi
-  cat >"$results/fuzz-$harness.xml" <<XML
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="fuzz_$harness" tests="1" failures="$((rc == 0 ? 0 : 1))" errors="0" time="$elapsed">
-  <testcase classname="fuzz" name="$harness ($runs inputs)" time="$elapsed">$failure</testcase>
-</testsuite>
-XML
+  ism_junit_case "$results/fuzz-$harness.xml" "fuzz_$harness" fuzz "$harness ($runs inputs)" \
+    "$elapsed" "$failure"
 done
 ((failed == 0))
