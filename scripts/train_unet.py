@@ -264,7 +264,7 @@ def load_frame(image_path, label_path, resize_factor):
     if resize_factor != 1.0:
         size = (round(image.shape[1] * resize_factor), round(image.shape[0] * resize_factor))
         image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-        label = cv2.resize(label, size, interpolation=cv2.INTER_NEAREST)
+        label = cv2.resize(label, size, interpolation=cv2.INTER_NEAREST_EXACT)
     # RGB: the C++ Segmenter feeds RGB (card swap_rb: true).
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB), label
 
@@ -304,7 +304,7 @@ def random_batch(frames, batch, crop_h, crop_w, rng, augment=False, strong_color
         label = label[top:top + src_h, left:left + src_w]
         if (src_h, src_w) != (crop_h, crop_w):
             image = cv2.resize(image, (crop_w, crop_h), interpolation=cv2.INTER_LINEAR)
-            label = cv2.resize(label, (crop_w, crop_h), interpolation=cv2.INTER_NEAREST)
+            label = cv2.resize(label, (crop_w, crop_h), interpolation=cv2.INTER_NEAREST_EXACT)
         if augment:
             gain = np.array([rng.uniform(0.9, 1.1) for _ in range(3)], np.float32)
             contrast, brightness = rng.uniform(0.7, 1.3), rng.uniform(-30, 30)

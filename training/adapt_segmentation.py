@@ -614,7 +614,7 @@ def cityscapes_sample_accuracy(model, torch, shared, gamma, standardize):
                               interpolation=cv2.INTER_LINEAR)
         predicted = predict(model, torch, [prepared])[0]
         predicted = cv2.resize(predicted, (truth.shape[1], truth.shape[0]),
-                               interpolation=cv2.INTER_NEAREST)
+                               interpolation=cv2.INTER_NEAREST_EXACT)
         scorer.add(truth, predicted)
     return scorer.accuracy()
 

@@ -16,7 +16,7 @@ def _resize_labels(target, width, height, sparse):
         import datasets
 
         return datasets.scatter_sparse(target, width, height)
-    return cv2.resize(target, (width, height), interpolation=cv2.INTER_NEAREST)
+    return cv2.resize(target, (width, height), interpolation=cv2.INTER_NEAREST_EXACT)
 
 
 def _pad_teacher(teacher, pad_h, pad_w):
@@ -30,15 +30,17 @@ def _pad_teacher(teacher, pad_h, pad_w):
 
 def nearest_window(source, height, width, y, x, crop_h, crop_w):
     """The crop [y, y + crop_h) x [x, x + crop_w) of source resized to height x width by
-    cv2.INTER_NEAREST, without resizing the rest: the source rows and columns that OpenCV's
-    nearest-neighbour resize reads (floor(i / scale), scale = new size / old size, in double as
-    cv::resize computes it), picked directly. A soft teacher is 20+ channels: converting and
-    resizing it whole for every crop took a third of a crop's time, and a teacher kept on disk
+    cv2.INTER_NEAREST_EXACT, without resizing the rest: the source rows and columns that OpenCV's
+    resize reads, picked directly. A soft teacher is 20+ channels: converting and resizing it
+    whole for every crop took a third of a crop's time, and a teacher kept on disk
     (teacher_store) is read only where the crop lies."""
     def picks(old, new, start, count):
-        inverse = 1.0 / (float(new) / old)
-        index = np.floor(np.arange(start, start + count, dtype=np.float64) * inverse)
-        return np.minimum(index.astype(np.int64), old - 1)
+        # OpenCV's 16-bit fixed point for the source pixel under each output pixel's centre,
+        # (i + 1/2) * old / new (plain INTER_NEAREST reads at i * old / new: labels half an
+        # output pixel up and left of the image that INTER_AREA / INTER_LINEAR resize).
+        step = ((old << 16) + new // 2) // new
+        index = (step // 2 - 1 + np.arange(start, start + count, dtype=np.int64) * step) >> 16
+        return np.clip(index, 0, old - 1)
 
     rows = picks(source.shape[0], height, y, crop_h)
     cols = picks(source.shape[1], width, x, crop_w)
@@ -143,7 +145,7 @@ def paste_objects(image, target, teacher, objects, rng, count, scale_range=(0.8,
         if h > height or w > width:
             continue
         patch = cv2.resize(obj.image, (w, h), interpolation=cv2.INTER_LINEAR)
-        patch_labels = cv2.resize(obj.target, (w, h), interpolation=cv2.INTER_NEAREST)
+        patch_labels = cv2.resize(obj.target, (w, h), interpolation=cv2.INTER_NEAREST_EXACT)
         if rng.random() < 0.5:
             patch, patch_labels = patch[:, ::-1], patch_labels[:, ::-1]
         y = rng.integers(0, height - h + 1)

@@ -126,7 +126,7 @@ def labels_from_logits(logits: np.ndarray, valid: Tuple[int, int],
     train = (logits[0, 1:].argmax(0)).astype(np.uint8)
     train = train[:valid[1], :valid[0]]
     if (train.shape[1], train.shape[0]) != image_size:
-        train = cv2.resize(train, image_size, interpolation=cv2.INTER_NEAREST)
+        train = cv2.resize(train, image_size, interpolation=cv2.INTER_NEAREST_EXACT)
     return train
 
 

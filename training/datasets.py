@@ -112,7 +112,7 @@ def load_dense(root, width, height, gamma, standardize, limit=None):
         image = _read_image(image_path)
         label = _read_label(label_path, cv2.IMREAD_GRAYSCALE)
         _check_same_size(image, label, image_path, label_path)
-        target = cv2.resize(lut[label], (width, height), interpolation=cv2.INTER_NEAREST)
+        target = cv2.resize(lut[label], (width, height), interpolation=cv2.INTER_NEAREST_EXACT)
         samples.append(Sample(f"kitti_semantics/{stem}", "dense",
                               _prepare(image, width, height, gamma, standardize), target))
     if not samples:
@@ -213,7 +213,7 @@ def load_camvid(root, width, height, gamma, standardize, limit=None):
         w = max(32, int(round(image.shape[1] * h / image.shape[0] / 32.0)) * 32)
         prepared = preprocess.resize_to_input(preprocess.card_colors(image, gamma, standardize),
                                               w, h)
-        target = cv2.resize(lut[label], (w, h), interpolation=cv2.INTER_NEAREST)
+        target = cv2.resize(lut[label], (w, h), interpolation=cv2.INTER_NEAREST_EXACT)
         samples.append(Sample(f"camvid/{stem}", "camvid", prepared, target))
     return samples
 

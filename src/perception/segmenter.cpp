@@ -372,8 +372,8 @@ Segmentation Segmenter::labelsFromProbabilitySums(const std::vector<cv::Mat>& su
   cv::divide(best_sum, weight(valid), confidence);
   cv::Mat label_ids;
   cv::LUT(best_index, network_->label_lut, label_ids);
-  if (scaled != image_size) {
-    cv::resize(label_ids, result.label_ids, image_size, 0, 0, cv::INTER_NEAREST);
+  if (scaled != image_size) {  // at pixel centres, as below
+    cv::resize(label_ids, result.label_ids, image_size, 0, 0, cv::INTER_NEAREST_EXACT);
     cv::resize(confidence, result.confidence, image_size, 0, 0, cv::INTER_LINEAR);
   } else {
     result.label_ids = label_ids;
@@ -452,14 +452,16 @@ Segmentation Segmenter::segment(const cv::Mat& image, double camera_focal_px) {
     cv::LUT(best_index, network_->label_lut, label_ids);
 
     // Back to the input image: crop the padding (in the output's pixels: a network with an
-    // output stride labels a coarser grid than its input), nearest-neighbour to the input size.
+    // output stride labels a coarser grid than its input), nearest-neighbour to the input size
+    // at pixel centres (plain INTER_NEAREST reads pixel i at i * scale: labels half an image
+    // pixel up and left of what they label).
     const cv::Rect valid =
         validRegionInOutput(prepared.valid_region, prepared.network_image.size(), width, height);
     label_ids = label_ids(valid);
     confidence = confidence(valid);
     if (label_ids.size() != bgr.size()) {
-      cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST);
-      cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_NEAREST);
+      cv::resize(label_ids, result.label_ids, bgr.size(), 0, 0, cv::INTER_NEAREST_EXACT);
+      cv::resize(confidence, result.confidence, bgr.size(), 0, 0, cv::INTER_NEAREST_EXACT);
     } else {
       result.label_ids = label_ids.clone();
       result.confidence = confidence.clone();

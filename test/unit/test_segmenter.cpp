@@ -290,6 +290,39 @@ TEST(Segmenter, ACoarserOutputThanInputLabelsTheImageInPlace) {
   fs::remove_all(dir);
 }
 
+// Labels back at the image's size must sit where the image is: a mirror-symmetric image gives
+// mirror-symmetric labels when every resize works on pixel centres. Plain nearest-neighbour
+// reads pixel i at i * scale, half an image pixel up and left: at a ratio that is not a whole
+// number (here 224x72 network labels to 1024x256) the red block's labels came out shifted, its
+// edges a column or row off on one side only. (The ratios 7/32 and 9/32 put no image pixel's
+// centre on a network pixel's edge, where no rule could be symmetric.)
+TEST(Segmenter, LabelsOfAMirrorSymmetricImageAreMirrorSymmetric) {
+  const std::string dir = makeTempDir("symmetric_labels");
+  const std::string model = dir + "/pool4.onnx";
+  std::ofstream(model, std::ios::binary) << averagePoolOnnx(4);
+  cv::Mat image(256, 1024, CV_8UC3, cv::Scalar(255, 0, 0));        // blue: "sky"
+  image(cv::Rect(360, 80, 304, 96)).setTo(cv::Scalar(0, 0, 255));  // red: "car"
+  image(cv::Rect(0, 0, 1024, 24)).setTo(cv::Scalar(0, 255, 0));    // green bands on top
+  image(cv::Rect(0, 232, 1024, 24)).setTo(cv::Scalar(0, 255, 0));  // and at the bottom
+  const std::string common =
+      "mean: [0, 0, 0]\nscale: 0.00392156862745098\nswap_rb: false\n"
+      "num_output_channels: 3\noutput_label_ids: [23, 21, 26]\n"
+      "input: {width: 896, height: 288}\nresize_policy: pad_to_multiple\n";
+  for (const std::string extra : {"", "flip_average: true\n"}) {
+    const ModelCard card = loadModelCard(writeFile(dir, "card.yaml", common + extra));
+    Segmenter segmenter(model, card, 1);
+    const Segmentation result = segmenter.segment(image);
+    ASSERT_EQ(result.label_ids.size(), image.size()) << extra;
+    ASSERT_GT(cv::countNonZero(result.label_ids == 26), 290 * 90) << extra;  // the block found
+    cv::Mat mirrored;
+    for (const int axis : {0, 1}) {  // about the horizontal, the vertical axis
+      cv::flip(result.label_ids, mirrored, axis);
+      EXPECT_EQ(cv::countNonZero(result.label_ids != mirrored), 0) << extra << " axis " << axis;
+    }
+  }
+  fs::remove_all(dir);
+}
+
 TEST(Palette, ColorsAndTrainIdsFollowCityscapesTable) {
   cv::Mat labels(1, 3, CV_8UC1);
   labels.at<std::uint8_t>(0) = cityscapes::kRoad;
