@@ -117,8 +117,9 @@ std::string LocalizationSession::summary() const {
     line << " (" << s.messages_of_previous_time_line
          << " messages of the time line before a jump dropped)";
   }
-  if (s.messages_far_ahead > 0) {
-    line << " (" << s.messages_far_ahead << " messages far ahead of the newest stamp dropped)";
+  if (s.messages_off_the_time_line > 0) {
+    line << " (" << s.messages_off_the_time_line
+         << " messages off the time line dropped: no second message confirmed their jump)";
   }
   return line.str();
 }
@@ -128,14 +129,44 @@ void LocalizationSession::reset(const std::string& why, Update* update) {
   lazy_start_.reset();
   waiting_fixes_.clear();
   newest_stamp_s_.reset();
-  far_ahead_stamp_s_.reset();
+  if (held_jump_) dropHeldJump();
   ++statistics_.resets;
   update->reset = true;
   update->note = why;
 }
 
-bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update* update) {
+void LocalizationSession::dropHeldJump() {
+  statistics_.messages_off_the_time_line += static_cast<std::int64_t>(held_jump_->events.size());
+  held_jump_.reset();
+}
+
+namespace {
+
+const char* sourceName(const std::variant<ImuEvent, GeodeticFixEvent, GpsVelocityEvent>& event) {
+  if (std::holds_alternative<ImuEvent>(event)) return "IMU";
+  return std::holds_alternative<GeodeticFixEvent>(event) ? "GPS fix" : "GPS velocity";
+}
+
+// What a later event of the same message did, added to what came before it.
+void fold(const LocalizationSession::Update& later, LocalizationSession::Update* update) {
+  update->new_estimate = update->new_estimate || later.new_estimate;
+  update->started = update->started || later.started;
+  if (later.start_estimate) update->start_estimate = later.start_estimate;
+  update->reset = update->reset || later.reset;
+  if (later.imu_status) update->imu_status = later.imu_status;
+  if (later.correction) update->correction = later.correction;
+  update->heading_event = update->heading_event || later.heading_event;
+  if (!later.note.empty()) {
+    update->note = update->note.empty() ? later.note : update->note + "; " + later.note;
+  }
+}
+
+}  // namespace
+
+bool LocalizationSession::admit(double stamp_s, const Event& event, Update* update,
+                                std::vector<Event>* before, std::vector<Event>* after) {
   if (!std::isfinite(stamp_s)) return true;
+  const char* source = sourceName(event);
   const double tolerance = config_.time_jump_back_s;
   // After a jump back, a message stamped in the old time line's span and ahead of the new one is
   // one of the old time line still in a queue (IMU, fixes and velocities travel on separate
@@ -161,49 +192,56 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
     moved_forward = true;
   }
   first_dropped_stamp_s_.reset();
-  // A jump forward: taken once a second message shows it (see the header). The second must be
-  // near the first, and from the other sensor or later: a receiver stamps a fix and its velocity
+  // A time jump: taken once a second message shows it (see the header). The second must be near
+  // the first, and from the other sensor or later: a receiver stamps a fix and its velocity
   // alike, one glitch on both is still one.
-  const bool far_ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
-  const bool from_gps = std::string(source) != "IMU";
-  const bool confirms = far_ahead_stamp_s_ &&
-                        std::abs(stamp_s - *far_ahead_stamp_s_) <= tolerance &&
-                        (from_gps != far_ahead_from_gps_ ||
-                         stamp_s > *far_ahead_stamp_s_ + Localizer::kDuplicateStampS);
-  if (!moved_forward && far_ahead && !confirms) {
-    // A first far-ahead message, or one more of the same sensor and instant: held back.
-    if (!(far_ahead_stamp_s_ && std::abs(stamp_s - *far_ahead_stamp_s_) <= tolerance)) {
-      far_ahead_stamp_s_ = stamp_s;
-      far_ahead_newest_s_ = *newest_stamp_s_;
-      far_ahead_from_gps_ = from_gps;
+  const bool ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
+  const bool behind = newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_;
+  const bool from_gps = !std::holds_alternative<ImuEvent>(event);
+  const bool near_held = held_jump_ && std::abs(stamp_s - held_jump_->stamp_s) <= tolerance;
+  const bool confirms = near_held && (from_gps != held_jump_->from_gps ||
+                                      stamp_s > held_jump_->stamp_s + Localizer::kDuplicateStampS);
+  if (((ahead && !moved_forward) || behind) && !confirms) {
+    // A first message off the time line, or one more of the same sensor and instant: held back.
+    if (!near_held) {
+      if (held_jump_) dropHeldJump();
+      held_jump_ = HeldJump{stamp_s, *newest_stamp_s_, from_gps, {}};
     }
+    held_jump_->events.push_back(event);
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s << " s is "
-        << stamp_s - *newest_stamp_s_ << " s ahead of the newest (" << *newest_stamp_s_
-        << " s): dropped until another message confirms the jump";
+        << std::abs(stamp_s - *newest_stamp_s_) << " s " << (ahead ? "ahead of" : "behind")
+        << " the newest (" << *newest_stamp_s_
+        << " s): held until another message confirms the time jump";
     update->note = why.str();
-    ++statistics_.messages_far_ahead;
     return false;
   }
-  // A jump forward confirmed, beyond what the IMU may be bridged over: the session starts over
-  // here, so that this message (a fix, a velocity) already serves the new start. At the next IMU
-  // sample the restart would have dropped the fix of the jump's instant with the queue.
-  if (far_ahead && started() && config_.restart_after_imu_gap_s > 0.0 &&
-      stamp_s - state().stamp_s > config_.restart_after_imu_gap_s) {
+  // The jump's first stamp: the held message's when this one confirms it.
+  double jump_s = stamp_s;
+  if ((ahead || behind) && confirms) {
+    jump_s = std::min(stamp_s, held_jump_->stamp_s);
+    *before = std::move(held_jump_->events);
+    statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(before->size());
+    held_jump_.reset();
+  }
+  if (ahead && started() && config_.restart_after_imu_gap_s > 0.0 &&
+      jump_s - state().stamp_s > config_.restart_after_imu_gap_s) {
+    // Beyond what the IMU may be bridged over: the session starts over before the jump's first
+    // message, so that a fix of the jump's instant already serves the new start.
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped forward (" << source << " stamp "
         << stamp_s << " s, the filter at " << state().stamp_s
         << " s: more than session.restart_after_imu_gap_s): the filter starts again at the next "
            "fix";
     reset(why.str(), update);
-  } else if (far_ahead && !started() && config_.restart_after_imu_gap_s > 0.0 &&
-             stamp_s - *newest_stamp_s_ > config_.restart_after_imu_gap_s) {
+  } else if (ahead && !started() && config_.restart_after_imu_gap_s > 0.0 &&
+             jump_s - *newest_stamp_s_ > config_.restart_after_imu_gap_s) {
     // Before the start: a fix (and orientation, velocity) waiting from before the jump would
     // start the filter there and bridge the whole gap.
     lazy_start_.reset();
     waiting_fixes_.clear();
   }
-  if (newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_) {
+  if (behind) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
         << stamp_s << " s, newest " << *newest_stamp_s_ << " s)";
@@ -211,16 +249,56 @@ bool LocalizationSession::checkStamp(double stamp_s, const char* source, Update*
     reset(why.str(), update);
     old_timeline_end_s_ = old_end;
   }
-  newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, stamp_s) : stamp_s;
+  const double newest = std::max(stamp_s, jump_s);
+  newest_stamp_s_ = newest_stamp_s_ ? std::max(*newest_stamp_s_, newest) : newest;
   // Past the old time line's end its messages can no longer be told from the new one's.
   if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
-  // Reached (the jump confirmed, or time caught up), or not confirmed while the data went on
-  // (a glitch): a later jump needs its own second message.
-  if (far_ahead_stamp_s_ && (*newest_stamp_s_ >= *far_ahead_stamp_s_ - tolerance ||
-                             *newest_stamp_s_ > far_ahead_newest_s_ + tolerance)) {
-    far_ahead_stamp_s_.reset();
+  if (held_jump_) {
+    if (std::abs(held_jump_->stamp_s - *newest_stamp_s_) <= tolerance) {
+      // Caught up with (a late-stamped message, data with jitter): in line now, it goes through.
+      *after = std::move(held_jump_->events);
+      statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(after->size());
+      held_jump_.reset();
+    } else if (*newest_stamp_s_ > held_jump_->newest_s + tolerance) {
+      dropHeldJump();  // not confirmed while the data went on: a glitch
+    }
   }
   return true;
+}
+
+LocalizationSession::Update LocalizationSession::process(double stamp_s, const Event& event) {
+  Update update;
+  std::vector<Event> before, after;
+  if (!admit(stamp_s, event, &update, &before, &after)) return update;
+  // A held message's estimate is at its own stamp: published from held_estimates. This
+  // message's own is new_estimate, unless held messages after it move the state on.
+  const auto run = [this, &update](const Event& next, bool own) {
+    Update part;
+    handle(next, &part);
+    if (part.new_estimate && !own) {
+      update.held_estimates.push_back(Estimate{state(), poseCovariance()});
+      part.new_estimate = false;
+    }
+    fold(part, &update);
+  };
+  for (const Event& held : before) run(held, false);
+  run(event, true);
+  if (!after.empty() && update.new_estimate) {
+    update.held_estimates.push_back(Estimate{state(), poseCovariance()});
+    update.new_estimate = false;
+  }
+  for (const Event& held : after) run(held, false);
+  return update;
+}
+
+void LocalizationSession::handle(const Event& event, Update* update) {
+  if (const auto* imu = std::get_if<ImuEvent>(&event)) {
+    handleImu(*imu, update);
+  } else if (const auto* fix = std::get_if<GeodeticFixEvent>(&event)) {
+    handleFix(*fix, update);
+  } else {
+    handleGpsVelocity(std::get<GpsVelocityEvent>(event), update);
+  }
 }
 
 void LocalizationSession::guardSound(Update* update) {
@@ -235,14 +313,27 @@ void LocalizationSession::guardSound(Update* update) {
 }
 
 LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
-  Update update;
   ++statistics_.imu_samples;
+  return process(event.sample.stamp_s, event);
+}
+
+LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& event) {
+  ++statistics_.fixes_received;
+  return process(event.stamp_s, event);
+}
+
+LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
+  // Checked like the others: after a bag loop the velocity may be the first message back.
+  return process(event.stamp_s, event);
+}
+
+void LocalizationSession::handleImu(const ImuEvent& event, Update* out) {
+  Update& update = *out;
   const ImuSample& sample = event.sample;
-  if (!checkStamp(sample.stamp_s, "IMU", &update)) return update;
   if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
       !sample.specific_force.allFinite()) {
     ++statistics_.imu_invalid;
-    return update;
+    return;
   }
   if (started() && config_.restart_after_imu_gap_s > 0.0 &&
       sample.stamp_s - state().stamp_s > config_.restart_after_imu_gap_s) {
@@ -259,7 +350,7 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
   Localizer::ImuStatus status = localizer_.addImu(sample);
   if (status == Localizer::ImuStatus::kNotInitialized) {
     tryStart(sample.stamp_s, &update);
-    if (!started()) return update;
+    if (!started()) return;
     // The start is at the waiting fix's stamp: a later sample carries the state on to its own.
     const double ahead_s = sample.stamp_s - state().stamp_s;
     if (ahead_s >= Localizer::kDuplicateStampS) status = localizer_.addImu(sample);
@@ -290,16 +381,13 @@ LocalizationSession::Update LocalizationSession::addImu(const ImuEvent& event) {
     update.note = note.str();
   }
   guardSound(&update);
-  return update;
 }
 
-LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& event) {
-  Update update;
-  ++statistics_.fixes_received;
-  if (!checkStamp(event.stamp_s, "GPS fix", &update)) return update;
+void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) {
+  Update& update = *out;
   if (!event.has_solution || !std::isfinite(event.stamp_s)) {
     ++statistics_.fixes_ignored;
-    return update;
+    return;
   }
   if (!kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
     ++statistics_.fixes_ignored;
@@ -308,7 +396,7 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
          << ", longitude " << event.lon_deg << ", altitude " << event.alt_m
          << " (latitude must be in (-90, 90) deg, longitude in [-180, 180] deg)";
     update.note = note.str();
-    return update;
+    return;
   }
   if (!projection_) projection_.emplace(event.lat_deg, event.lon_deg, event.alt_m);
   PositionFix fix;
@@ -328,7 +416,7 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
     // The newest fix waits (briefly) for its instant's IMU orientation and GPS velocity.
     lazy_start_.offerFix(fix);
     tryStart(event.stamp_s, &update);
-    return update;
+    return;
   }
   if (config_.fix_wait_for_imu_s > 0.0 &&
       fix.stamp_s > state().stamp_s + Localizer::kDuplicateStampS) {
@@ -342,7 +430,6 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
   }
   releaseWaitingFixes(&update);
   guardSound(&update);
-  return update;
 }
 
 void LocalizationSession::correct(const PositionFix& fix, Update* update) {
@@ -378,14 +465,10 @@ void LocalizationSession::releaseWaitingFixes(Update* update) {
   }
 }
 
-LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
-  Update update;
-  // Checked like the others: after a bag loop the velocity may be the first message back.
-  if (!checkStamp(event.stamp_s, "GPS velocity", &update)) return update;
-  if (started()) return update;  // only the start uses it
+void LocalizationSession::handleGpsVelocity(const GpsVelocityEvent& event, Update* update) {
+  if (started()) return;  // only the start uses it
   lazy_start_.offerVelocity(event.stamp_s, event.velocity, event.in_body_frame);
-  tryStart(event.stamp_s, &update);
-  return update;
+  tryStart(event.stamp_s, update);
 }
 
 void LocalizationSession::tryStart(double now_s, Update* update) {

@@ -100,8 +100,16 @@ class InekfNodeCore::Impl {
         output_.publish(startStamp(start->state.stamp_s), start->state, start->pose_covariance,
                         session_.latestAngularVelocity());
       }
+      // IMU samples held back as the first of a time jump, used once it was confirmed.
+      for (const LocalizationSession::Estimate& held : update.held_estimates) {
+        output_.publish(ros::Time(held.state.stamp_s), held.state, held.pose_covariance,
+                        session_.latestAngularVelocity());
+      }
       if (update.new_estimate) publishState(stamp);
-      if (update.new_estimate || update.correction || update.started) publishStatus(stamp);
+      if (update.new_estimate || update.correction || update.started ||
+          !update.held_estimates.empty()) {
+        publishStatus(stamp);
+      }
     } catch (const std::exception& error) {
       ROS_ERROR_STREAM_THROTTLE(
           5.0, "inekf_node: " << stage << " message at " << stamp << " failed: " << error.what());

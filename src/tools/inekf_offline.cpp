@@ -386,11 +386,11 @@ int main(int argc, char** argv) {
       std::printf("inekf_offline: no fix before frame %d: the filter started there\n",
                   run.first_estimated_frame);
     }
-    if (run.statistics.messages_far_ahead > 0) {
+    if (run.statistics.messages_off_the_time_line > 0) {
       std::printf(
-          "inekf_offline: %lld messages stamped far ahead of the newest were dropped, each the "
-          "first of a jump forward or one alone\n",
-          static_cast<long long>(run.statistics.messages_far_ahead));
+          "inekf_offline: %lld messages stamped more than session.time_jump_back_s off the newest "
+          "were dropped: no second message confirmed their time jump\n",
+          static_cast<long long>(run.statistics.messages_off_the_time_line));
     }
     if (!run.held_frames.empty()) {
       std::printf(

@@ -242,18 +242,25 @@ TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   LocalizationSession session(originConfig());
   standStill(&session, 100.0, 2.0);
   ASSERT_TRUE(session.started());
-  EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
+  // The loop's first message is held back (one stamp alone may be a glitch); its second confirms
+  // the jump back and resets, and the first then goes through.
+  const LocalizationSession::Update first = session.addImu(restingImu(100.0));
+  EXPECT_FALSE(first.reset);
+  EXPECT_NE(first.note.find("behind the newest"), std::string::npos) << first.note;
+  EXPECT_TRUE(session.addImu(restingImu(100.1)).reset);
   const LocalizationSession::Update stale = session.addFix(fixAt(102.0));
   EXPECT_FALSE(stale.reset);
   EXPECT_FALSE(stale.started);
   EXPECT_NE(stale.note.find("before the jump back"), std::string::npos) << stale.note;
   EXPECT_FALSE(session.addImu(restingImu(101.9)).reset);  // dropped too
   session.addGpsVelocity(stillAt(100.0));
-  EXPECT_TRUE(session.addFix(fixAt(100.0)).started);
+  ASSERT_TRUE(session.addFix(fixAt(100.0)).started);
   EXPECT_EQ(session.statistics().resets, 1);
   EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
+  EXPECT_EQ(session.statistics().messages_held_for_a_jump, 1);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 0);
   // The new loop goes on past the old one's end: nothing of it is dropped.
-  for (int k = 1; k <= 40; ++k) {
+  for (int k = 2; k <= 40; ++k) {
     EXPECT_TRUE(session.addImu(restingImu(100.0 + 0.1 * k)).new_estimate) << k;
   }
   EXPECT_EQ(session.statistics().resets, 1);
@@ -276,23 +283,88 @@ TEST(LocalizationSession, OneMessageFarAheadDoesNotResetAHealthyFilter) {
     EXPECT_TRUE(next.new_estimate) << k;
   }
   EXPECT_EQ(session.statistics().resets, 0);
-  EXPECT_EQ(session.statistics().messages_far_ahead, 1);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 1);
   EXPECT_LT(session.state().position_map.norm(), 1.0);  // the glitch's 500 m never applied
   // A second glitch once the data has gone on is one of its own, not the first's confirmation
   // (the first one's stamp was kept for ever, and the second reset the filter).
   EXPECT_FALSE(session.addFix(fixAt(5000.0, 500.0)).reset);
-  for (int k = 1; k <= 5; ++k) {
+  for (int k = 1; k <= 15; ++k) {
     EXPECT_FALSE(session.addImu(restingImu(104.0 + 0.1 * k)).reset) << k;
   }
   EXPECT_EQ(session.statistics().resets, 0);
-  EXPECT_EQ(session.statistics().messages_far_ahead, 2);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 2);
   // A real jump forward (a player seeking on) shows in a second message and is followed; beyond
-  // session.restart_after_imu_gap_s it starts the session over there.
+  // session.restart_after_imu_gap_s it starts the session over there, its first message
+  // included.
   EXPECT_FALSE(session.addImu(restingImu(500.0)).new_estimate);
   const LocalizationSession::Update followed = session.addImu(restingImu(500.1));
   EXPECT_TRUE(followed.reset) << followed.note;
   EXPECT_NE(followed.note.find("time jumped forward"), std::string::npos) << followed.note;
-  EXPECT_EQ(session.statistics().messages_far_ahead, 3);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 2);
+  EXPECT_EQ(session.statistics().messages_held_for_a_jump, 1);
+}
+
+// A single stamp far behind (a driver's zero stamp, a fix from a stale buffer) reset a healthy
+// filter as a bag loop, and the next 2 s of data were then dropped as the old time line's. It is
+// held back like a jump forward, and dropped when no second message confirms it.
+TEST(LocalizationSession, OneStampFarBehindDoesNotResetAHealthyFilter) {
+  LocalizationSession session(originConfig());
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  const LocalizationSession::Update zero = session.addImu(restingImu(0.0));
+  EXPECT_FALSE(zero.reset);
+  EXPECT_NE(zero.note.find("behind the newest"), std::string::npos) << zero.note;
+  EXPECT_FALSE(session.addFix(fixAt(50.0, 500.0)).reset);  // another, far from the first
+  for (int k = 1; k <= 20; ++k) {
+    const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
+    EXPECT_FALSE(next.reset) << next.note;
+    EXPECT_TRUE(next.new_estimate) << k;
+  }
+  session.addFix(fixAt(104.0));
+  EXPECT_EQ(session.statistics().resets, 0);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 2);
+  EXPECT_EQ(session.statistics().messages_of_previous_time_line, 0);
+  EXPECT_EQ(session.statistics().filter.gps_used, 4);   // 100..102 s and 104 s: none dropped
+  EXPECT_LT(session.state().position_map.norm(), 1.0);  // the stale fix's 500 m never applied
+}
+
+// A jump beyond the restart limit whose fix (and GPS velocity) arrive before the IMU sample of
+// the same instant: they are held, the IMU sample confirms the jump, and they go through first,
+// so that the filter starts at that fix with that velocity. The fix used to be dropped with the
+// jump's first message, and the start waited for the next fix.
+TEST(LocalizationSession, AJumpWhoseFixComesFirstStartsAtThatFix) {
+  LocalizationSession session(originConfig());
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  EXPECT_FALSE(session.addFix(fixAt(120.0, 7.0)).reset);
+  GpsVelocityEvent moving = stillAt(120.0);
+  moving.velocity = Eigen::Vector3d(2.0, 0.0, 0.0);
+  EXPECT_FALSE(session.addGpsVelocity(moving).reset);  // the same sensor: not a confirmation
+  const LocalizationSession::Update confirmed = session.addImu(restingImu(120.0));
+  EXPECT_TRUE(confirmed.reset) << confirmed.note;
+  EXPECT_TRUE(confirmed.started) << confirmed.note;
+  ASSERT_TRUE(session.started());
+  EXPECT_NEAR(session.state().stamp_s, 120.0, 1e-9);
+  EXPECT_NEAR(session.state().position_map.x(), 7.0, 1e-6);
+  EXPECT_TRUE(session.state().velocity_map.isApprox(moving.velocity));
+  EXPECT_EQ(session.statistics().messages_held_for_a_jump, 2);
+  EXPECT_EQ(session.statistics().resets, 1);
+}
+
+// A fix stamped a little more than time_jump_back_s ahead (jitter, a receiver's latency) is held;
+// once the IMU catches up with it, it goes through and is applied at its instant.
+TEST(LocalizationSession, AHeldFixTheDataCatchesUpWithIsApplied) {
+  LocalizationSession session(originConfig());
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  const std::int64_t used = session.statistics().filter.gps_used;
+  EXPECT_NE(session.addFix(fixAt(103.05)).note.find("held until"), std::string::npos);
+  for (int k = 1; k <= 15; ++k) {
+    EXPECT_FALSE(session.addImu(restingImu(102.0 + 0.1 * k)).reset) << k;
+  }
+  EXPECT_EQ(session.statistics().filter.gps_used, used + 1);
+  EXPECT_EQ(session.statistics().messages_held_for_a_jump, 1);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 0);
 }
 
 // Found by review: one receiver glitch stamps the fix and its velocity alike; the velocity was
@@ -313,7 +385,7 @@ TEST(LocalizationSession, AGlitchOnAFixAndItsVelocityIsOneMessage) {
     }
   }
   EXPECT_EQ(session.statistics().resets, 0);
-  EXPECT_EQ(session.statistics().messages_far_ahead, 4);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 4);
 
   LocalizationSession waiting(originConfig());
   waiting.addFix(fixAt(100.0));
@@ -352,7 +424,8 @@ TEST(LocalizationSession, AJumpForwardLandingOnAFixRestartsAtThatFix) {
 TEST(LocalizationSession, ASeekForwardAfterAJumpBackIsFollowed) {
   LocalizationSession session(originConfig());
   for (int k = 0; k <= 100; ++k) session.addImu(restingImu(100.0 + 0.1 * k));
-  EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
+  EXPECT_FALSE(session.addImu(restingImu(100.0)).reset);  // held: the jump's first message
+  EXPECT_TRUE(session.addImu(restingImu(100.1)).reset);
   for (int k = 0; k <= 30; ++k) session.addImu(restingImu(105.0 + 0.1 * k));
   EXPECT_EQ(session.statistics().messages_of_previous_time_line, 21);  // 105.0 .. 107.0
   session.addGpsVelocity(stillAt(108.1));
@@ -375,7 +448,12 @@ TEST(LocalizationSession, AnImuGapLongerThanTheRestartLimitStartsOverAtTheNextFi
   EXPECT_FALSE(session.addImu(restingImu(17.0)).new_estimate);  // 5 s gap
   const LocalizationSession::Update bridged = session.addImu(restingImu(17.1));
   EXPECT_FALSE(bridged.reset) << bridged.note;
-  EXPECT_EQ(bridged.imu_status, Localizer::ImuStatus::kGap);
+  EXPECT_TRUE(bridged.new_estimate);
+  // The held first sample went through first, bridging the gap, with an estimate of its own.
+  EXPECT_NE(bridged.note.find("17.000 s after a gap: bridged"), std::string::npos) << bridged.note;
+  ASSERT_EQ(bridged.held_estimates.size(), 1u);
+  EXPECT_NEAR(bridged.held_estimates[0].state.stamp_s, 17.0, 1e-9);
+  EXPECT_NEAR(session.state().stamp_s, 17.1, 1e-9);
 
   EXPECT_FALSE(session.addImu(restingImu(17.0 + 3600.0)).reset);
   const LocalizationSession::Update jumped = session.addImu(restingImu(17.1 + 3600.0));
@@ -513,8 +591,8 @@ TEST(LocalizationSession, AFixWhoseImuNeverComesIsAppliedAfterTheWait) {
   // A time jump back (a bag loop) clears what waits: the fix of 100.5 s waiting in the old time
   // line is not applied when the replayed one reaches 100.5 s again.
   ASSERT_FALSE(session.addFix(fixAt(100.6, 0.1)).correction);
-  EXPECT_TRUE(session.addImu(restingImu(99.0)).reset);
-  session.addImu(restingImu(99.5));
+  EXPECT_FALSE(session.addImu(restingImu(99.0)).reset);  // held: the jump's first message
+  EXPECT_TRUE(session.addImu(restingImu(99.5)).reset);
   session.addImu(restingImu(100.0));
   session.addGpsVelocity(stillAt(100.0));
   ASSERT_TRUE(session.addFix(fixAt(100.0)).started);
@@ -537,8 +615,9 @@ TEST(LocalizationSession, ABagLoopResetsAndTheReplayLocalizesAsTheFirstPass) {
   for (std::size_t k = 0; k < second.size(); ++k) {
     EXPECT_LT((second[k].position_map - first[k].position_map).norm(), 1e-9) << k;
   }
-  // The reset is reported with its cause.
-  const LocalizationSession::Update loop = session.addImu(steps.front().imu);
+  // The reset is reported with its cause, at the loop's second message.
+  EXPECT_FALSE(session.addImu(steps[0].imu).reset);
+  const LocalizationSession::Update loop = session.addImu(steps[1].imu);
   EXPECT_TRUE(loop.reset);
   EXPECT_NE(loop.note.find("time jumped back"), std::string::npos) << loop.note;
 }
@@ -553,8 +632,10 @@ TEST(LocalizationSession, AfterALoopTheVelocityArrivingFirstStillServesTheStart)
   ASSERT_TRUE(session.started());
   GpsVelocityEvent moving = stillAt(100.0);
   moving.velocity = Eigen::Vector3d(3.0, 0.0, 0.0);
-  EXPECT_TRUE(session.addGpsVelocity(moving).reset);  // the loop shows on the velocity first
-  session.addImu(restingImu(100.0));
+  // The loop shows on the velocity first: held, it confirms the jump with the IMU and serves the
+  // start.
+  EXPECT_FALSE(session.addGpsVelocity(moving).reset);
+  EXPECT_TRUE(session.addImu(restingImu(100.0)).reset);
   ASSERT_TRUE(session.addFix(fixAt(100.0)).started);
   EXPECT_TRUE(session.state().velocity_map.isApprox(moving.velocity));
 }

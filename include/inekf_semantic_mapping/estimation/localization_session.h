@@ -17,21 +17,22 @@
 //  - fixes newer than the filter (their IMU sample has not arrived: IMU and GPS travel on
 //    separate connections) wait for it, up to fix_wait_for_imu_s of data time, so the estimate
 //    does not depend on which of the two messages of one instant a node receives first;
-//  - the time-jump reset: a stamp time_jump_back_s earlier than the newest one means a bag loop
-//    or a restarted player: the state is meaningless in the new time line, start over (the map
-//    origin is kept: the same place keeps the same coordinates). The stamps decide, not the
-//    clock: a loop shows in both on separate connections, in either order (each reset once a
-//    loop 2-3 times), and stamps may run ahead of the clock (GPS time). After the jump, a message
-//    of the old time line still in a queue (stamped in its span, ahead of the new one) is
-//    dropped, not taken as the newest stamp;
-//  - a jump forward is taken on the second message that shows it: a message stamped more than
-//    time_jump_back_s ahead of the newest stamp is dropped until another one within
-//    time_jump_back_s of it arrives from the other sensor, or later from the same one, before the
-//    data goes on by more than time_jump_back_s (a fix and its velocity, stamped alike by the
-//    receiver, are one sensor). Alone, one bad stamp (a receiver's glitch) became the newest, and
-//    the next ordinary message a jump back that reset a healthy filter. A confirmed jump beyond
-//    restart_after_imu_gap_s starts the session over at the confirming message (before the
-//    start: forgets the fix waiting from before the jump);
+//  - a time jump is taken on the second message that shows it: a message stamped more than
+//    time_jump_back_s off the newest stamp, behind or ahead, is held back until another one
+//    within time_jump_back_s of it arrives from the other sensor, or later from the same one (a
+//    fix and its velocity, stamped alike by the receiver, are one sensor), and then goes through
+//    first; it is dropped when the data goes on by more than time_jump_back_s without one (one
+//    bad stamp, a receiver's or a driver's glitch, would otherwise reset a healthy filter, or
+//    become the newest stamp and make the next ordinary message a jump back). A held message
+//    that the data catches up with goes through then;
+//  - a jump back means a bag loop or a restarted player: the state is meaningless in the new
+//    time line, start over (the map origin is kept: the same place keeps the same coordinates).
+//    The stamps decide, not the clock: a loop shows in both on separate connections, in either
+//    order (each reset once a loop 2-3 times), and stamps may run ahead of the clock (GPS time).
+//    After the jump, a message of the old time line still in a queue (stamped in its span, ahead
+//    of the new one) is dropped, not taken as the newest stamp;
+//  - a jump forward beyond restart_after_imu_gap_s starts the session over before its first
+//    message goes through (before the start: forgets the fix waiting from before the jump);
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -51,6 +52,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "inekf_semantic_mapping/estimation/lazy_start.h"
@@ -125,8 +127,11 @@ class LocalizationSession {
     std::int64_t resets = 0;  // time jumps back and non-finite states
     // Dropped after a time jump back: stamped in the old time line's span, ahead of the new one.
     std::int64_t messages_of_previous_time_line = 0;
-    // Dropped as the first message of a jump forward that no other message had confirmed yet.
-    std::int64_t messages_far_ahead = 0;
+    // Dropped: stamped more than time_jump_back_s off the newest stamp (behind or ahead), and no
+    // second message confirmed the jump before the data went on.
+    std::int64_t messages_off_the_time_line = 0;
+    // Held back as the first of a jump until a second message confirmed it, then used.
+    std::int64_t messages_held_for_a_jump = 0;
   };
 
   // A state and its pose covariance, e.g. the start's.
@@ -143,6 +148,10 @@ class LocalizationSession {
     // publish before new_estimate's. Absent when new_estimate is that very estimate (a start on
     // the IMU sample of the fix's stamp).
     std::optional<Estimate> start_estimate;
+    // Estimates at the stamps of IMU samples held back as the first of a time jump and used
+    // during this event (its second message confirmed the jump, or the data caught up with
+    // them), in stamp order: to publish, like start_estimate, with new_estimate's.
+    std::vector<Estimate> held_estimates;
     bool reset = false;                              // the session started over during this event
     std::optional<Localizer::ImuStatus> imu_status;  // IMU events that reached the filter
     std::optional<CorrectionResult> correction;      // fixes (and starts) that reached it
@@ -185,10 +194,30 @@ class LocalizationSession {
   const LocalizationSessionConfig& config() const { return config_; }
 
  private:
-  // Resets when stamp_s is time_jump_back_s older than the newest stamp; records stamp_s. False
-  // (the message is to be dropped, the note says why) for a message of the old time line after a
-  // jump back: stamped in its span, more than time_jump_back_s ahead of the new one.
-  bool checkStamp(double stamp_s, const char* source, Update* update);
+  using Event = std::variant<ImuEvent, GeodeticFixEvent, GpsVelocityEvent>;
+  // A message held back as the first of a time jump (more than time_jump_back_s off the newest
+  // stamp), with the messages of its sensor and instant after it, until a second confirms it.
+  struct HeldJump {
+    double stamp_s = 0.0;
+    double newest_s = 0.0;  // the newest stamp when it came
+    bool from_gps = false;  // its sensor: the receiver (fix, velocity) or the IMU
+    std::vector<Event> events;
+  };
+
+  // One message through the time checks (admit) and, where it passes, handle; messages held
+  // back for a time jump go through before it (the jump confirmed) or after it (caught up).
+  Update process(double stamp_s, const Event& event);
+  // The time checks: a confirmed jump back resets, one forward past the restart limit too. False
+  // when the message is held back or dropped (the note says why); `before` and `after` are the
+  // held messages to go through before and after this one.
+  bool admit(double stamp_s, const Event& event, Update* update, std::vector<Event>* before,
+             std::vector<Event>* after);
+  // Gives up a held jump: its messages are dropped.
+  void dropHeldJump();
+  void handle(const Event& event, Update* update);
+  void handleImu(const ImuEvent& event, Update* update);
+  void handleFix(const GeodeticFixEvent& event, Update* update);
+  void handleGpsVelocity(const GpsVelocityEvent& event, Update* update);
   void reset(const std::string& why, Update* update);
   void tryStart(double now_s, Update* update);
   // Gives a fix to the started filter and records the result (and why it was not used).
@@ -209,11 +238,9 @@ class LocalizationSession {
   std::optional<double> old_timeline_end_s_;
   // The lowest stamp of the messages dropped in a row as the old time line's.
   std::optional<double> first_dropped_stamp_s_;
-  // The stamp of the last message dropped as far ahead, until another confirms the jump or the
-  // data goes on more than time_jump_back_s past far_ahead_newest_s_ (the newest stamp then).
-  std::optional<double> far_ahead_stamp_s_;
-  double far_ahead_newest_s_ = 0.0;
-  bool far_ahead_from_gps_ = false;  // its sensor: the receiver (fix, velocity) or the IMU
+  // Until a second message confirms the jump, the data goes on more than time_jump_back_s past
+  // its newest_s, or catches up with it.
+  std::optional<HeldJump> held_jump_;
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
