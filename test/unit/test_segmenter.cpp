@@ -314,10 +314,13 @@ TEST(Segmenter, LabelsOfAMirrorSymmetricImageAreMirrorSymmetric) {
     const Segmentation result = segmenter.segment(image);
     ASSERT_EQ(result.label_ids.size(), image.size()) << extra;
     ASSERT_GT(cv::countNonZero(result.label_ids == 26), 290 * 90) << extra;  // the block found
-    cv::Mat mirrored;
+    cv::Mat mirrored, difference;
     for (const int axis : {0, 1}) {  // about the horizontal, the vertical axis
       cv::flip(result.label_ids, mirrored, axis);
       EXPECT_EQ(cv::countNonZero(result.label_ids != mirrored), 0) << extra << " axis " << axis;
+      cv::flip(result.confidence, mirrored, axis);  // and the confidence with them
+      cv::absdiff(result.confidence, mirrored, difference);
+      EXPECT_EQ(cv::countNonZero(difference > 1e-5), 0) << extra << " axis " << axis;
     }
   }
   fs::remove_all(dir);
