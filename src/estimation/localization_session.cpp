@@ -117,6 +117,10 @@ std::string LocalizationSession::summary() const {
     line << " (" << s.messages_of_previous_time_line
          << " messages of the time line before a jump dropped)";
   }
+  if (s.gps_messages_off_the_imu_clock > 0) {
+    line << " (" << s.gps_messages_off_the_imu_clock
+         << " GPS messages dropped: stamped on another clock than the IMU's)";
+  }
   if (s.messages_off_the_time_line > 0) {
     line << " (" << s.messages_off_the_time_line
          << " messages off the time line dropped: no second message confirmed their jump)";
@@ -164,7 +168,7 @@ void fold(const LocalizationSession::Update& later, LocalizationSession::Update*
 }  // namespace
 
 bool LocalizationSession::admit(double stamp_s, const Event& event, Update* update,
-                                std::vector<Event>* before, std::vector<Event>* after) {
+                                std::vector<Event>* held) {
   if (!std::isfinite(stamp_s)) return true;
   const char* source = sourceName(event);
   const double tolerance = config_.time_jump_back_s;
@@ -195,9 +199,12 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   // A time jump: taken once a second message shows it (see the header). The second must be near
   // the first, and from the other sensor or later: a receiver stamps a fix and its velocity
   // alike, one glitch on both is still one.
-  const bool ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
-  const bool behind = newest_stamp_s_ && stamp_s + tolerance < *newest_stamp_s_;
   const bool from_gps = !std::holds_alternative<ImuEvent>(event);
+  const bool ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
+  // A GPS message is late, not a jump, as long as the filter can still apply it at its own time
+  // (a receiver's latency, a stalled connection's backlog).
+  const bool behind =
+      newest_stamp_s_ && stamp_s + (from_gps ? lateGpsWindow() : tolerance) < *newest_stamp_s_;
   const bool near_held = held_jump_ && std::abs(stamp_s - held_jump_->stamp_s) <= tolerance;
   const bool confirms = near_held && (from_gps != held_jump_->from_gps ||
                                       stamp_s > held_jump_->stamp_s + Localizer::kDuplicateStampS);
@@ -207,7 +214,11 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
       if (held_jump_) dropHeldJump();
       held_jump_ = HeldJump{stamp_s, *newest_stamp_s_, from_gps, {}};
     }
-    held_jump_->events.push_back(event);
+    if (held_jump_->events.size() < kMaxHeldMessages) {
+      held_jump_->events.push_back(event);
+    } else {
+      ++statistics_.messages_off_the_time_line;  // a stream stuck at one stamp: kept bounded
+    }
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << source << " stamp " << stamp_s << " s is "
         << std::abs(stamp_s - *newest_stamp_s_) << " s " << (ahead ? "ahead of" : "behind")
@@ -220,8 +231,8 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   double jump_s = stamp_s;
   if ((ahead || behind) && confirms) {
     jump_s = std::min(stamp_s, held_jump_->stamp_s);
-    *before = std::move(held_jump_->events);
-    statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(before->size());
+    *held = std::move(held_jump_->events);
+    statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(held->size());
     held_jump_.reset();
   }
   if (ahead && started() && config_.restart_after_imu_gap_s > 0.0 &&
@@ -254,10 +265,14 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   // Past the old time line's end its messages can no longer be told from the new one's.
   if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
   if (held_jump_) {
-    if (std::abs(held_jump_->stamp_s - *newest_stamp_s_) <= tolerance) {
-      // Caught up with (a late-stamped message, data with jitter): in line now, it goes through.
-      *after = std::move(held_jump_->events);
-      statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(after->size());
+    const bool held_ahead = held_jump_->stamp_s > held_jump_->newest_s;
+    if (held_ahead && *newest_stamp_s_ + Localizer::kDuplicateStampS >= held_jump_->stamp_s) {
+      // Reached by the data (a message stamped early, data with jitter): in line now, it goes
+      // through before this message (an IMU glitch a second ahead, let through as soon as the
+      // data came within time_jump_back_s, made the filter bridge a second and drop the samples
+      // up to it).
+      *held = std::move(held_jump_->events);
+      statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(held->size());
       held_jump_.reset();
     } else if (*newest_stamp_s_ > held_jump_->newest_s + tolerance) {
       dropHeldJump();  // not confirmed while the data went on: a glitch
@@ -266,28 +281,71 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   return true;
 }
 
+double LocalizationSession::lateGpsWindow() const {
+  return std::max(config_.time_jump_back_s, config_.localizer.fix_history_s);
+}
+
+bool LocalizationSession::onTheImuClock(double stamp_s, bool is_fix, Update* update) {
+  const double tolerance = config_.time_jump_back_s;
+  if (!std::isfinite(stamp_s) || !latest_imu_stamp_s_) return true;
+  const double offset = stamp_s - *latest_imu_stamp_s_;
+  if (is_fix) {
+    // Late within what the filter applies at its own time: a latency, not another clock.
+    if (offset <= tolerance && -offset <= lateGpsWindow()) {
+      if (gps_clock_offset_s_) {
+        std::ostringstream note;
+        note << std::fixed << std::setprecision(3) << "GPS fix at " << stamp_s
+             << " s agrees with the IMU clock again: GPS used";
+        update->note = note.str();
+      }
+      offset_candidate_s_.reset();
+      gps_clock_offset_s_.reset();
+    } else if (imu_since_last_fix_) {  // both sensors sending: the offset is between clocks
+      if (!offset_candidate_s_ || std::abs(offset - *offset_candidate_s_) > tolerance) {
+        offset_candidate_s_ = offset;
+        offset_candidate_since_s_ = stamp_s;
+      } else if (stamp_s - offset_candidate_since_s_ >= kClockOffsetConfirmS) {
+        gps_clock_offset_s_ = offset;
+      }
+    }
+    imu_since_last_fix_ = false;
+  }
+  if (!gps_clock_offset_s_ || std::abs(offset - *gps_clock_offset_s_) > tolerance) return true;
+  ++statistics_.gps_messages_off_the_imu_clock;
+  std::ostringstream note;
+  note << std::fixed << std::setprecision(3) << "GPS stamps run " << std::abs(offset) << " s "
+       << (offset > 0.0 ? "ahead of" : "behind") << " the IMU's (GPS " << stamp_s << " s, IMU "
+       << *latest_imu_stamp_s_
+       << " s): the two are on different clocks (GPS time against UTC?); GPS messages dropped "
+          "until they agree";
+  update->note = note.str();
+  return false;
+}
+
 LocalizationSession::Update LocalizationSession::process(double stamp_s, const Event& event) {
   Update update;
-  std::vector<Event> before, after;
-  if (!admit(stamp_s, event, &update, &before, &after)) return update;
-  // A held message's estimate is at its own stamp: published from held_estimates. This
-  // message's own is new_estimate, unless held messages after it move the state on.
-  const auto run = [this, &update](const Event& next, bool own) {
+  if (std::holds_alternative<ImuEvent>(event)) {
+    if (std::isfinite(stamp_s)) latest_imu_stamp_s_ = stamp_s;
+    imu_since_last_fix_ = true;
+  } else if (!onTheImuClock(stamp_s, std::holds_alternative<GeodeticFixEvent>(event), &update)) {
+    return update;
+  }
+  std::vector<Event> held;
+  if (!admit(stamp_s, event, &update, &held)) return update;
+  // Held messages go through first; an estimate of theirs is at their own stamp: published from
+  // held_estimates, this message's own as new_estimate.
+  for (const Event& earlier : held) {
     Update part;
-    handle(next, &part);
-    if (part.new_estimate && !own) {
+    handle(earlier, &part);
+    if (part.new_estimate) {
       update.held_estimates.push_back(Estimate{state(), poseCovariance()});
       part.new_estimate = false;
     }
     fold(part, &update);
-  };
-  for (const Event& held : before) run(held, false);
-  run(event, true);
-  if (!after.empty() && update.new_estimate) {
-    update.held_estimates.push_back(Estimate{state(), poseCovariance()});
-    update.new_estimate = false;
   }
-  for (const Event& held : after) run(held, false);
+  Update own;
+  handle(event, &own);
+  fold(own, &update);
   return update;
 }
 

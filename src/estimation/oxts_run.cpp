@@ -241,12 +241,16 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
     session.setGpsVelocityExpected(has_attitude);
     const bool started_before = session.started();
     const std::int64_t resets_before = session.statistics().resets;
-    {
-      ScopedTimer timer("oxts_run.propagate");
-      const LocalizationSession::Update update = session.addImu(imu);
+    // Whichever of the frame's messages reset or started the session, or moved the heading (a
+    // time jump is confirmed, and reset, by the frame's second message).
+    const auto note = [&](const LocalizationSession::Update& update) {
       if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
       if (update.heading_event) pass.heading_event_frames.push_back(static_cast<int>(k));
       if (update.started) pass.started_without_attitude = !imu.orientation;
+    };
+    {
+      ScopedTimer timer("oxts_run.propagate");
+      note(session.addImu(imu));
     }
     ForwardEpoch epoch;
     if (options.smooth && started_before && session.started() && !epochs.empty() &&
@@ -259,7 +263,7 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
       GpsVelocityEvent velocity;
       velocity.stamp_s = stamp_s;
       velocity.velocity = Eigen::Vector3d(record.ve, record.vn, record.vu);
-      session.addGpsVelocity(velocity);
+      note(session.addGpsVelocity(velocity));
     }
     if (const std::optional<kitti::GeodeticFix> geodetic =
             degrader.degrade(k, stamp_s - t0, frames[k].record)) {
@@ -268,9 +272,7 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
       const GeodeticFixEvent event = fixEventFromDegraded(*geodetic, stamp_s);
       const bool was_started = session.started();
       const LocalizationSession::Update update = session.addFix(event);
-      if (update.heading_event || update.reset) run.heading_notes.push_back(update.note);
-      if (update.heading_event) pass.heading_event_frames.push_back(static_cast<int>(k));
-      if (update.started) pass.started_without_attitude = !imu.orientation;
+      note(update);
       if (was_started && (!update.correction || update.correction->accepted)) {
         OxtsRunResult::Fix fix;  // the session's conversion, for the loop closure's GPS factors
         fix.frame = static_cast<int>(k);

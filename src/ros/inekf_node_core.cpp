@@ -97,13 +97,13 @@ class InekfNodeCore::Impl {
       // between it and the next IMU sample has a pose (otherwise the first pose would come with
       // the next IMU sample, 0.1 s later on KITTI, and such scans would stay out of the map).
       if (const auto& start = update.start_estimate) {
-        output_.publish(startStamp(start->state.stamp_s), start->state, start->pose_covariance,
-                        session_.latestAngularVelocity());
+        output_.publish(exactStamp(recent_fix_stamps_, start->state.stamp_s), start->state,
+                        start->pose_covariance, session_.latestAngularVelocity());
       }
       // IMU samples held back as the first of a time jump, used once it was confirmed.
       for (const LocalizationSession::Estimate& held : update.held_estimates) {
-        output_.publish(ros::Time(held.state.stamp_s), held.state, held.pose_covariance,
-                        session_.latestAngularVelocity());
+        output_.publish(exactStamp(recent_imu_stamps_, held.state.stamp_s), held.state,
+                        held.pose_covariance, session_.latestAngularVelocity());
       }
       if (update.new_estimate) publishState(stamp);
       if (update.new_estimate || update.correction || update.started ||
@@ -132,6 +132,7 @@ class InekfNodeCore::Impl {
 
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
     output_.noteImuFrame(message->header.frame_id);
+    remember(message->header.stamp, &recent_imu_stamps_);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(imuEvent(*message)); });
     monitor_.noteImu(message->header.stamp.toSec(), wallNow(), session_);
@@ -149,8 +150,7 @@ class InekfNodeCore::Impl {
                       << session_.config().default_fix_sigma_vertical_m
                       << " m (session.default_fix_sigma_*)");
     }
-    recent_fix_stamps_.push_back(message->header.stamp);
-    while (recent_fix_stamps_.size() > kRecentFixStamps) recent_fix_stamps_.pop_front();
+    remember(message->header.stamp, &recent_fix_stamps_);
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(fixEvent(*message)); });
     monitor_.noteFix(message->header.stamp.toSec(), wallNow(), session_);
@@ -163,12 +163,18 @@ class InekfNodeCore::Impl {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
-  // The start fix's own message stamp (the start is at a fix's stamp): exact, as every other
-  // estimate's. ros::Time(stamp_s) only if that fix is not among the recent ones.
-  ros::Time startStamp(double stamp_s) const {
-    for (const ros::Time& fix_stamp : recent_fix_stamps_) {
-      if (std::abs(fix_stamp.toSec() - stamp_s) < estimation::Localizer::kDuplicateStampS) {
-        return fix_stamp;
+  static void remember(const ros::Time& stamp, std::deque<ros::Time>* recent) {
+    recent->push_back(stamp);
+    while (recent->size() > kRecentStamps) recent->pop_front();
+  }
+
+  // The own message stamp of an estimate made at another message than the current one (the
+  // start at its fix, an IMU sample held for a time jump): exact, as every other estimate's (a
+  // double loses the nanoseconds). ros::Time(stamp_s) only if it is not among the recent ones.
+  static ros::Time exactStamp(const std::deque<ros::Time>& recent, double stamp_s) {
+    for (const ros::Time& stamp : recent) {
+      if (std::abs(stamp.toSec() - stamp_s) < estimation::Localizer::kDuplicateStampS) {
+        return stamp;
       }
     }
     return ros::Time(stamp_s);
@@ -195,8 +201,9 @@ class InekfNodeCore::Impl {
   LocalizationSession session_;
   OdometryOutput output_;
   bool logged_unknown_fix_covariance_ = false;
-  static constexpr std::size_t kRecentFixStamps = 20;
-  std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received (startStamp)
+  static constexpr std::size_t kRecentStamps = 40;  // held messages are a few of the latest
+  std::deque<ros::Time> recent_fix_stamps_;         // of the latest fixes received
+  std::deque<ros::Time> recent_imu_stamps_;         // of the latest IMU samples received
   ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
   LocalizationMonitor monitor_;

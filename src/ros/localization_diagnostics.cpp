@@ -1,6 +1,8 @@
 #include "inekf_semantic_mapping/ros/localization_diagnostics.h"
 
 #include <cmath>
+#include <iomanip>
+#include <optional>
 #include <sstream>
 
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
@@ -114,6 +116,13 @@ void LocalizationMonitor::fill(const estimation::LocalizationSession& session, d
     raise(DiagnosticStatus::OK, "waiting for IMU");
   } else {
     if (!finite) raise(DiagnosticStatus::ERROR, "state or covariance not finite");
+    if (const std::optional<double> offset = session.gpsClockOffset()) {
+      std::ostringstream why;
+      why << "GPS stamps " << std::fixed << std::setprecision(1) << std::abs(*offset) << " s "
+          << (*offset > 0.0 ? "ahead of" : "behind")
+          << " the IMU's (another clock: GPS time against UTC?): GPS dropped";
+      raise(DiagnosticStatus::ERROR, why.str());
+    }
     if (since_fix_s > options_.fix_error_after_s) {
       raise(DiagnosticStatus::ERROR,
             "no accepted GPS fix for " + std::to_string(static_cast<int>(since_fix_s)) + " s");

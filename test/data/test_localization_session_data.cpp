@@ -59,6 +59,13 @@ TEST(LocalizationSession, FramesBetweenAResetAndTheRestartKeepTheirPlace) {
     ASSERT_EQ(run.first_estimated_frame, 0);
     ASSERT_EQ(run.states.size(), frames.size());
     EXPECT_EQ(run.statistics.resets, 1);
+    // The reset is noted whichever of the frame's messages confirmed the jump (its GPS velocity:
+    // that note was lost).
+    EXPECT_EQ(std::count_if(run.heading_notes.begin(), run.heading_notes.end(),
+                            [](const std::string& note) {
+                              return note.find("time jumped forward") != std::string::npos;
+                            }),
+              1);
     ASSERT_FALSE(run.held_frames.empty());
     EXPECT_EQ(run.held_frames.front(), kSilenceAfter);
     EXPECT_LT(run.held_frames.back(), 220);

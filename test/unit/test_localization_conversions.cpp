@@ -302,6 +302,27 @@ TEST(LocalizationMonitor, WithoutFixesTheStatusTurnsWarnThenError) {
   EXPECT_EQ(later.level, DiagnosticStatus::ERROR);
 }
 
+// A GPS on another clock than the IMU: the status says so (ERROR), not only that no fix came.
+TEST(LocalizationMonitor, AGpsOnAnotherClockIsAnErrorNamingIt) {
+  estimation::LocalizationSession session{estimation::LocalizationSessionConfig{}};
+  LocalizationMonitor monitor(LocalizationDiagnosticsOptions{});
+  for (double t = 100.0; t <= 104.0 + 1e-9; t += 0.1) {
+    session.addImu(stillImu(t));
+    monitor.noteImu(t, t, session);
+    estimation::GeodeticFixEvent fix;
+    fix.stamp_s = t - 18.0;  // the IMU on GPS time, the receiver on UTC
+    fix.lat_deg = 49.0;
+    fix.lon_deg = 8.4;
+    session.addFix(fix);
+  }
+  ASSERT_TRUE(session.gpsClockOffset().has_value());
+  diagnostic_updater::DiagnosticStatusWrapper status;
+  monitor.fill(session, 104.0, &status);
+  EXPECT_EQ(status.level, diagnostic_msgs::DiagnosticStatus::ERROR);
+  EXPECT_NE(status.message.find("GPS stamps 18.0 s behind the IMU's"), std::string::npos)
+      << status.message;
+}
+
 TEST(LocalizationMonitor, OptionsAreCheckedNamingTheKey) {
   LocalizationDiagnosticsOptions options;
   common::YamlReader reader("test", YAML::Load("diagnostics: {fix_warn_after_s: 9, "

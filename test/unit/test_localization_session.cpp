@@ -328,6 +328,105 @@ TEST(LocalizationSession, OneStampFarBehindDoesNotResetAHealthyFilter) {
   EXPECT_LT(session.state().position_map.norm(), 1.0);  // the stale fix's 500 m never applied
 }
 
+// Found by review: an IMU glitch stamped 1.05-2 s ahead was let through as soon as the data came
+// within time_jump_back_s of it, after the sample that brought it there: the filter bridged a
+// second to the glitch and dropped every real sample up to it. A held message goes through only
+// once the data reaches its stamp, before the sample that does; one the data passes by more
+// than time_jump_back_s first is dropped.
+TEST(LocalizationSession, AnImuStampAheadGoesThroughOnlyWhereTheDataReachesIt) {
+  for (const double ahead_s : {1.05, 1.55}) {
+    SCOPED_TRACE(ahead_s);
+    LocalizationSession session(originConfig());
+    standStill(&session, 100.0, 2.0);
+    ASSERT_TRUE(session.started());
+    EXPECT_FALSE(session.addImu(restingImu(102.0 + ahead_s)).new_estimate);
+    for (int k = 1; k <= 30; ++k) {
+      const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
+      EXPECT_TRUE(next.new_estimate) << k << ": " << next.note;
+      EXPECT_EQ(next.imu_status, Localizer::ImuStatus::kUsed) << k << ": " << next.note;
+      // 1.05 s: reached by 103.1 s, it goes through just before it.
+      EXPECT_EQ(next.held_estimates.size(), ahead_s < 1.1 && k == 11 ? 1u : 0u) << k;
+    }
+    EXPECT_EQ(session.statistics().filter.imu_dropped, 0);
+    EXPECT_EQ(session.statistics().filter.imu_gaps, 0);
+    EXPECT_EQ(session.statistics().messages_held_for_a_jump, ahead_s < 1.1 ? 1 : 0);
+    EXPECT_EQ(session.statistics().messages_off_the_time_line, ahead_s < 1.1 ? 0 : 1);
+  }
+}
+
+// Found by review: a GPS connection stalled for 1.5 s delivers its backlog, or runs 1.05 s late
+// for good; its second late fix confirmed a "jump back", and the filter reset (16 times in 20 s
+// of a steady 1.05 s latency) and dropped the IMU as the old time line's. A GPS message late by
+// up to gps.fix_history_s is late, not a jump: the filter applies it at its own time.
+TEST(LocalizationSession, AGpsStreamLateByLessThanTheFixHistoryIsNotAJump) {
+  for (const double latency_s : {1.05, 1.5}) {
+    SCOPED_TRACE(latency_s);
+    LocalizationSession session(originConfig());
+    standStill(&session, 100.0, 1.0);
+    ASSERT_TRUE(session.started());
+    for (int k = 11; k <= 200; ++k) {  // IMU at 10 Hz; fix and velocity latency_s late
+      const double t = 100.0 + 0.1 * k;
+      EXPECT_FALSE(session.addImu(restingImu(t)).reset) << t;
+      if (k % 5 == 0) {
+        session.addGpsVelocity(stillAt(t - latency_s));
+        const LocalizationSession::Update fix = session.addFix(fixAt(t - latency_s));
+        EXPECT_FALSE(fix.reset) << fix.note;
+      }
+    }
+    EXPECT_EQ(session.statistics().resets, 0);
+    EXPECT_EQ(session.statistics().messages_of_previous_time_line, 0);
+    EXPECT_EQ(session.statistics().messages_off_the_time_line, 0);
+    EXPECT_FALSE(session.gpsClockOffset().has_value());
+    EXPECT_GE(session.statistics().filter.gps_used, 30);
+  }
+}
+
+// A stream stuck at one stamp far behind (the IMU silent, the receiver repeating a stale fix):
+// what is held for the jump stays bounded, and is dropped once the data goes on.
+TEST(LocalizationSession, MessagesHeldForAJumpAreBounded) {
+  LocalizationSession session(originConfig());
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  for (int k = 0; k < 200; ++k) EXPECT_FALSE(session.addFix(fixAt(10.0, 500.0)).reset);
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 200 - 32);
+  for (int k = 1; k <= 15; ++k) session.addImu(restingImu(102.0 + 0.1 * k));
+  EXPECT_EQ(session.statistics().messages_off_the_time_line, 200);
+  EXPECT_EQ(session.statistics().resets, 0);
+}
+
+// A GPS stamped in GPS time and an IMU in UTC (18 s apart), interleaved as they arrive: each fix
+// was taken for a jump forward and the next IMU sample for a jump back, resetting the filter every
+// few seconds, and it never started. The steady offset is named and the GPS dropped until a fix
+// agrees with the IMU again; then the filter starts.
+TEST(LocalizationSession, AGpsOnAnotherClockIsNamedNotTakenForJumps) {
+  LocalizationSession session(originConfig());
+  std::string named;
+  for (int k = 0; k < 100; ++k) {  // 10 s: IMU at 10 Hz, a fix and a velocity at each sample
+    const double t = 100.0 + 0.1 * k;
+    session.addImu(restingImu(t));
+    session.addGpsVelocity(stillAt(t + 18.0));
+    const LocalizationSession::Update fix = session.addFix(fixAt(t + 18.0));
+    if (fix.note.find("different clocks") != std::string::npos) named = fix.note;
+  }
+  EXPECT_NE(named.find("18.000 s ahead of the IMU's"), std::string::npos) << named;
+  ASSERT_TRUE(session.gpsClockOffset().has_value());
+  EXPECT_NEAR(*session.gpsClockOffset(), 18.0, 0.2);
+  EXPECT_LE(session.statistics().resets, 2);  // before the offset was steady for 2 s
+  const std::int64_t resets = session.statistics().resets;
+  EXPECT_GT(session.statistics().gps_messages_off_the_imu_clock, 100);
+  EXPECT_FALSE(session.started());
+  // The receiver set to UTC: the first fix that agrees ends it, and the filter starts.
+  for (int k = 100; k < 110; ++k) {
+    const double t = 100.0 + 0.1 * k;
+    session.addImu(restingImu(t));
+    session.addGpsVelocity(stillAt(t));
+    session.addFix(fixAt(t));
+  }
+  EXPECT_FALSE(session.gpsClockOffset().has_value());
+  EXPECT_TRUE(session.started());
+  EXPECT_EQ(session.statistics().resets, resets);
+}
+
 // A jump beyond the restart limit whose fix (and GPS velocity) arrive before the IMU sample of
 // the same instant: they are held, the IMU sample confirms the jump, and they go through first,
 // so that the filter starts at that fix with that velocity. The fix used to be dropped with the

@@ -24,7 +24,8 @@
 //    first; it is dropped when the data goes on by more than time_jump_back_s without one (one
 //    bad stamp, a receiver's or a driver's glitch, would otherwise reset a healthy filter, or
 //    become the newest stamp and make the next ordinary message a jump back). A held message
-//    that the data catches up with goes through then;
+//    that the data reaches goes through then. A GPS message late by up to the filter's
+//    gps.fix_history_s is late, not a jump (the filter applies it at its own time);
 //  - a jump back means a bag loop or a restarted player: the state is meaningless in the new
 //    time line, start over (the map origin is kept: the same place keeps the same coordinates).
 //    The stamps decide, not the clock: a loop shows in both on separate connections, in either
@@ -33,6 +34,12 @@
 //    of the new one) is dropped, not taken as the newest stamp;
 //  - a jump forward beyond restart_after_imu_gap_s starts the session over before its first
 //    message goes through (before the start: forgets the fix waiting from before the jump);
+//  - the GPS on another clock: fixes stamped more than time_jump_back_s ahead of the IMU's latest
+//    stamp, or later than gps.fix_history_s behind it, by a steady offset (within time_jump_back_s)
+//    for kClockOffsetConfirmS of their stamps, with the IMU sending between them, are two clocks
+//    (GPS time against UTC: 18 s), not a time jump: GPS messages at that offset are dropped, the
+//    note names it (gpsClockOffset()), until a fix agrees with the IMU again. Taken for jumps, they
+//    reset the filter every few seconds and it never started;
 //  - a gap in the IMU stream longer than restart_after_imu_gap_s (the clock jumped forward, the
 //    IMU was silent) is not bridged: dead reckoning over it is a guess that only grows, and one
 //    over an hour broke the covariance; the session starts over at the next fix;
@@ -132,6 +139,9 @@ class LocalizationSession {
     std::int64_t messages_off_the_time_line = 0;
     // Held back as the first of a jump until a second message confirmed it, then used.
     std::int64_t messages_held_for_a_jump = 0;
+    // GPS messages (fixes, velocities) dropped while their stamps ran a steady offset from the
+    // IMU's (gps_clock_offset_s).
+    std::int64_t gps_messages_off_the_imu_clock = 0;
   };
 
   // A state and its pose covariance, e.g. the start's.
@@ -185,6 +195,9 @@ class LocalizationSession {
   // The map frame's origin; nullopt before the first usable fix (without a configured origin).
   const std::optional<kitti::MercatorProjection>& projection() const { return projection_; }
   Statistics statistics() const;
+  // The steady offset of the GPS stamps from the IMU's (s; GPS minus IMU) while they run on two
+  // clocks (e.g. GPS time against UTC: 18 s), nullopt while they agree.
+  std::optional<double> gpsClockOffset() const { return gps_clock_offset_s_; }
   // The latest finite IMU rate (body frame, not bias-corrected): the twist a node publishes.
   const Eigen::Vector3d& latestAngularVelocity() const { return latest_angular_velocity_; }
   // One line for a periodic log: time, position and its sigma, the statistics.
@@ -195,6 +208,9 @@ class LocalizationSession {
 
  private:
   using Event = std::variant<ImuEvent, GeodeticFixEvent, GpsVelocityEvent>;
+  // How long (s of fix stamps) a steady GPS-IMU offset must last to be taken for two clocks: a
+  // bag loop or a seek shows on both sensors within a message or two.
+  static constexpr double kClockOffsetConfirmS = 2.0;
   // A message held back as the first of a time jump (more than time_jump_back_s off the newest
   // stamp), with the messages of its sensor and instant after it, until a second confirms it.
   struct HeldJump {
@@ -204,16 +220,26 @@ class LocalizationSession {
     std::vector<Event> events;
   };
 
+  // At most this many messages held for one jump (a stream stuck at one stamp stays bounded).
+  static constexpr std::size_t kMaxHeldMessages = 32;
+
   // One message through the time checks (admit) and, where it passes, handle; messages held
-  // back for a time jump go through before it (the jump confirmed) or after it (caught up).
+  // back for a time jump go through before it (the jump confirmed, or reached by the data).
   Update process(double stamp_s, const Event& event);
   // The time checks: a confirmed jump back resets, one forward past the restart limit too. False
-  // when the message is held back or dropped (the note says why); `before` and `after` are the
-  // held messages to go through before and after this one.
-  bool admit(double stamp_s, const Event& event, Update* update, std::vector<Event>* before,
-             std::vector<Event>* after);
+  // when the message is held back or dropped (the note says why); `held` are the held messages
+  // to go through before this one.
+  bool admit(double stamp_s, const Event& event, Update* update, std::vector<Event>* held);
+  // How far behind the newest stamp a GPS message is late rather than a jump back:
+  // time_jump_back_s, or the filter's gps.fix_history_s where longer (it applies such a fix at
+  // its own time).
+  double lateGpsWindow() const;
   // Gives up a held jump: its messages are dropped.
   void dropHeldJump();
+  // The GPS on another clock than the IMU: false (the note says why) for a GPS message whose
+  // stamp runs the steady offset from the IMU's latest that the fixes have shown for
+  // kClockOffsetConfirmS.
+  bool onTheImuClock(double stamp_s, bool is_fix, Update* update);
   void handle(const Event& event, Update* update);
   void handleImu(const ImuEvent& event, Update* update);
   void handleFix(const GeodeticFixEvent& event, Update* update);
@@ -241,6 +267,13 @@ class LocalizationSession {
   // Until a second message confirms the jump, the data goes on more than time_jump_back_s past
   // its newest_s, or catches up with it.
   std::optional<HeldJump> held_jump_;
+  // The GPS against the IMU clock: the latest IMU stamp received, whether one came since the
+  // last fix, and the offset of the fixes from it (more than time_jump_back_s) since when.
+  std::optional<double> latest_imu_stamp_s_;
+  bool imu_since_last_fix_ = false;
+  std::optional<double> offset_candidate_s_;
+  double offset_candidate_since_s_ = 0.0;
+  std::optional<double> gps_clock_offset_s_;  // confirmed: GPS messages at it are dropped
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
