@@ -197,8 +197,9 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   }
   first_dropped_stamp_s_.reset();
   // A time jump: taken once a second message shows it (see the header). The second must be near
-  // the first, and from the other sensor or later: a receiver stamps a fix and its velocity
-  // alike, one glitch on both is still one.
+  // the first, and from the other sensor or a later IMU sample: a receiver stamps a fix and its
+  // velocity alike, one glitch on both is still one, and the IMU's stamps are the filter's time
+  // line (a GPS backlog, or the GPS's leftovers after a seek, confirmed jumps back alone).
   const bool from_gps = !std::holds_alternative<ImuEvent>(event);
   const bool ahead = newest_stamp_s_ && stamp_s > *newest_stamp_s_ + tolerance;
   // A GPS message is late, not a jump, as long as the filter can still apply it at its own time
@@ -206,8 +207,9 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   const bool behind =
       newest_stamp_s_ && stamp_s + (from_gps ? lateGpsWindow() : tolerance) < *newest_stamp_s_;
   const bool near_held = held_jump_ && std::abs(stamp_s - held_jump_->stamp_s) <= tolerance;
-  const bool confirms = near_held && (from_gps != held_jump_->from_gps ||
-                                      stamp_s > held_jump_->stamp_s + Localizer::kDuplicateStampS);
+  const bool confirms =
+      near_held && (from_gps != held_jump_->from_gps ||
+                    (!from_gps && stamp_s > held_jump_->stamp_s + Localizer::kDuplicateStampS));
   if (((ahead && !moved_forward) || behind) && !confirms) {
     // A first message off the time line, or one more of the same sensor and instant: held back.
     if (!near_held) {
@@ -265,8 +267,11 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   // Past the old time line's end its messages can no longer be told from the new one's.
   if (old_timeline_end_s_ && *newest_stamp_s_ > *old_timeline_end_s_) old_timeline_end_s_.reset();
   if (held_jump_) {
+    // An IMU sample only where the IMU reaches it (a fix arriving early must not let it before
+    // the samples up to it).
     const bool held_ahead = held_jump_->stamp_s > held_jump_->newest_s;
-    if (held_ahead && *newest_stamp_s_ + Localizer::kDuplicateStampS >= held_jump_->stamp_s) {
+    if (held_ahead && (held_jump_->from_gps || !from_gps) &&
+        *newest_stamp_s_ + Localizer::kDuplicateStampS >= held_jump_->stamp_s) {
       // Reached by the data (a message stamped early, data with jitter): in line now, it goes
       // through before this message (an IMU glitch a second ahead, let through as soon as the
       // data came within time_jump_back_s, made the filter bridge a second and drop the samples

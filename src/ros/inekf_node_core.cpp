@@ -132,7 +132,7 @@ class InekfNodeCore::Impl {
 
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
     output_.noteImuFrame(message->header.frame_id);
-    remember(message->header.stamp, &recent_imu_stamps_);
+    remember(message->header.stamp, kRecentImuStamps, &recent_imu_stamps_);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(imuEvent(*message)); });
     monitor_.noteImu(message->header.stamp.toSec(), wallNow(), session_);
@@ -150,7 +150,7 @@ class InekfNodeCore::Impl {
                       << session_.config().default_fix_sigma_vertical_m
                       << " m (session.default_fix_sigma_*)");
     }
-    remember(message->header.stamp, &recent_fix_stamps_);
+    remember(message->header.stamp, kRecentFixStamps, &recent_fix_stamps_);
     handle("inekf_node/gps", message->header.stamp,
            [&] { return session_.addFix(fixEvent(*message)); });
     monitor_.noteFix(message->header.stamp.toSec(), wallNow(), session_);
@@ -163,9 +163,9 @@ class InekfNodeCore::Impl {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
-  static void remember(const ros::Time& stamp, std::deque<ros::Time>* recent) {
+  static void remember(const ros::Time& stamp, std::size_t keep, std::deque<ros::Time>* recent) {
     recent->push_back(stamp);
-    while (recent->size() > kRecentStamps) recent->pop_front();
+    while (recent->size() > keep) recent->pop_front();
   }
 
   // The own message stamp of an estimate made at another message than the current one (the
@@ -201,9 +201,11 @@ class InekfNodeCore::Impl {
   LocalizationSession session_;
   OdometryOutput output_;
   bool logged_unknown_fix_covariance_ = false;
-  static constexpr std::size_t kRecentStamps = 40;  // held messages are a few of the latest
-  std::deque<ros::Time> recent_fix_stamps_;         // of the latest fixes received
-  std::deque<ros::Time> recent_imu_stamps_;         // of the latest IMU samples received
+  // The start fix is among the last few fixes; a held IMU sample goes through up to
+  // time_jump_back_s (1 s) of data later: 5 s at 100 Hz.
+  static constexpr std::size_t kRecentFixStamps = 40, kRecentImuStamps = 500;
+  std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received
+  std::deque<ros::Time> recent_imu_stamps_;  // of the latest IMU samples received
   ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
   LocalizationMonitor monitor_;

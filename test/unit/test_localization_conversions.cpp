@@ -306,7 +306,7 @@ TEST(LocalizationMonitor, WithoutFixesTheStatusTurnsWarnThenError) {
 TEST(LocalizationMonitor, AGpsOnAnotherClockIsAnErrorNamingIt) {
   estimation::LocalizationSession session{estimation::LocalizationSessionConfig{}};
   LocalizationMonitor monitor(LocalizationDiagnosticsOptions{});
-  for (double t = 100.0; t <= 104.0 + 1e-9; t += 0.1) {
+  for (double t = 100.0; t <= 107.0 + 1e-9; t += 0.1) {
     session.addImu(stillImu(t));
     monitor.noteImu(t, t, session);
     estimation::GeodeticFixEvent fix;
@@ -317,7 +317,7 @@ TEST(LocalizationMonitor, AGpsOnAnotherClockIsAnErrorNamingIt) {
   }
   ASSERT_TRUE(session.gpsClockOffset().has_value());
   diagnostic_updater::DiagnosticStatusWrapper status;
-  monitor.fill(session, 104.0, &status);
+  monitor.fill(session, 107.0, &status);
   EXPECT_EQ(status.level, diagnostic_msgs::DiagnosticStatus::ERROR);
   EXPECT_NE(status.message.find("GPS stamps 18.0 s behind the IMU's"), std::string::npos)
       << status.message;

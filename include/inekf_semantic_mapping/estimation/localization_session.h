@@ -19,8 +19,9 @@
 //    does not depend on which of the two messages of one instant a node receives first;
 //  - a time jump is taken on the second message that shows it: a message stamped more than
 //    time_jump_back_s off the newest stamp, behind or ahead, is held back until another one
-//    within time_jump_back_s of it arrives from the other sensor, or later from the same one (a
-//    fix and its velocity, stamped alike by the receiver, are one sensor), and then goes through
+//    within time_jump_back_s of it arrives from the other sensor, or a later IMU sample (a fix and
+//    its velocity, stamped alike by the receiver, are one sensor; the GPS alone never confirms a
+//    jump: a backlog or the leftovers after a seek reset the filter), and then goes through
 //    first; it is dropped when the data goes on by more than time_jump_back_s without one (one
 //    bad stamp, a receiver's or a driver's glitch, would otherwise reset a healthy filter, or
 //    become the newest stamp and make the next ordinary message a jump back). A held message
@@ -210,7 +211,7 @@ class LocalizationSession {
   using Event = std::variant<ImuEvent, GeodeticFixEvent, GpsVelocityEvent>;
   // How long (s of fix stamps) a steady GPS-IMU offset must last to be taken for two clocks: a
   // bag loop or a seek shows on both sensors within a message or two.
-  static constexpr double kClockOffsetConfirmS = 2.0;
+  static constexpr double kClockOffsetConfirmS = 5.0;
   // A message held back as the first of a time jump (more than time_jump_back_s off the newest
   // stamp), with the messages of its sensor and instant after it, until a second confirms it.
   struct HeldJump {
