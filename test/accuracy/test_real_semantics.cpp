@@ -143,14 +143,14 @@ TEST(RealSemantics, MapFromCameraLabelsOnSemanticKitti) {
   ISM_REQUIRE_SHARED(kSequences);
   const std::string model = test::sharedPath(kEnetModel);
   Segmenter segmenter(model, defaultModelCardFor(model));
-  // Measured (gamma 0.7, the kerb check): 05 map mIoU 0.384, accuracy 0.888, coverage 0.913; 08
-  // 0.532, 0.862, 0.853 (0.483, 0.771 without the kerb check); ceilings 0.966 / 0.964. Margins
-  // 0.04 on mIoU and accuracy, 0.05 on coverage.
+  // Measured (gamma 0.7, the kerb check, labels back at the image's size at pixel centres): 05
+  // map mIoU 0.403, accuracy 0.888, coverage 0.913; 08 0.540, 0.861, 0.853 (0.483, 0.771 without
+  // the kerb check); ceilings 0.966 / 0.964. Margins 0.04 on mIoU and accuracy, 0.05 on coverage.
   struct MapExpectation {
     const char* sequence;
     double min_miou, min_accuracy, min_coverage;
   };
-  const MapExpectation expectations[] = {{"05", 0.34, 0.85, 0.86}, {"08", 0.49, 0.82, 0.80}};
+  const MapExpectation expectations[] = {{"05", 0.36, 0.85, 0.86}, {"08", 0.50, 0.82, 0.80}};
   for (const MapExpectation& expected : expectations) {
     const SequenceMapScores maps =
         scoreSequenceMaps(test::sharedPath(kSequences) + "/" + expected.sequence, &segmenter);
