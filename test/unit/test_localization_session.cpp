@@ -67,6 +67,15 @@ void standStill(LocalizationSession* session, double t0, double duration_s) {
   }
 }
 
+// IMU samples every 0.1 s after t0_s: each one an estimate, none a reset.
+void expectEstimatesGoOn(LocalizationSession* session, double t0_s, int samples) {
+  for (int k = 1; k <= samples; ++k) {
+    const LocalizationSession::Update next = session->addImu(restingImu(t0_s + 0.1 * k));
+    EXPECT_FALSE(next.reset) << next.note;
+    EXPECT_TRUE(next.new_estimate) << t0_s + 0.1 * k;
+  }
+}
+
 LocalizationSessionConfig originConfig() {
   LocalizationSessionConfig config;
   config.origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
@@ -277,11 +286,7 @@ TEST(LocalizationSession, OneMessageFarAheadDoesNotResetAHealthyFilter) {
   const LocalizationSession::Update glitch = session.addFix(fixAt(1102.0, 500.0));
   EXPECT_FALSE(glitch.reset);
   EXPECT_NE(glitch.note.find("ahead of the newest"), std::string::npos) << glitch.note;
-  for (int k = 1; k <= 20; ++k) {
-    const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
-    EXPECT_FALSE(next.reset) << next.note;
-    EXPECT_TRUE(next.new_estimate) << k;
-  }
+  expectEstimatesGoOn(&session, 102.0, 20);
   EXPECT_EQ(session.statistics().resets, 0);
   EXPECT_EQ(session.statistics().messages_off_the_time_line, 1);
   EXPECT_LT(session.state().position_map.norm(), 1.0);  // the glitch's 500 m never applied
@@ -315,11 +320,7 @@ TEST(LocalizationSession, OneStampFarBehindDoesNotResetAHealthyFilter) {
   EXPECT_FALSE(zero.reset);
   EXPECT_NE(zero.note.find("behind the newest"), std::string::npos) << zero.note;
   EXPECT_FALSE(session.addFix(fixAt(50.0, 500.0)).reset);  // another, far from the first
-  for (int k = 1; k <= 20; ++k) {
-    const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
-    EXPECT_FALSE(next.reset) << next.note;
-    EXPECT_TRUE(next.new_estimate) << k;
-  }
+  expectEstimatesGoOn(&session, 102.0, 20);
   session.addFix(fixAt(104.0));
   EXPECT_EQ(session.statistics().resets, 0);
   EXPECT_EQ(session.statistics().messages_off_the_time_line, 2);
@@ -402,11 +403,7 @@ TEST(LocalizationSession, TheGpsAloneConfirmsNoJump) {
     session.addGpsVelocity(stillAt(late));
     EXPECT_FALSE(session.addFix(fixAt(late)).reset);
   }
-  for (int k = 1; k <= 20; ++k) {
-    const LocalizationSession::Update next = session.addImu(restingImu(102.0 + 0.1 * k));
-    EXPECT_FALSE(next.reset) << next.note;
-    EXPECT_TRUE(next.new_estimate) << k;
-  }
+  expectEstimatesGoOn(&session, 102.0, 20);
   // A seek forward by 5 s (bridged) with the GPS 0.3 s behind: its leftovers from before the
   // seek come after the first samples of the new place.
   for (int k = 0; k <= 5; ++k) session.addImu(restingImu(109.0 + 0.1 * k));
