@@ -144,6 +144,12 @@ void LocalizationSession::dropHeldJump() {
   held_jump_.reset();
 }
 
+void LocalizationSession::takeHeldJump(std::vector<Event>* held) {
+  *held = std::move(held_jump_->events);
+  statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(held->size());
+  held_jump_.reset();
+}
+
 namespace {
 
 const char* sourceName(const std::variant<ImuEvent, GeodeticFixEvent, GpsVelocityEvent>& event) {
@@ -233,9 +239,7 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   double jump_s = stamp_s;
   if ((ahead || behind) && confirms) {
     jump_s = std::min(stamp_s, held_jump_->stamp_s);
-    *held = std::move(held_jump_->events);
-    statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(held->size());
-    held_jump_.reset();
+    takeHeldJump(held);
   }
   if (ahead && started() && config_.restart_after_imu_gap_s > 0.0 &&
       jump_s - state().stamp_s > config_.restart_after_imu_gap_s) {
@@ -276,9 +280,7 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
       // through before this message (an IMU glitch a second ahead, let through as soon as the
       // data came within time_jump_back_s, made the filter bridge a second and drop the samples
       // up to it).
-      *held = std::move(held_jump_->events);
-      statistics_.messages_held_for_a_jump += static_cast<std::int64_t>(held->size());
-      held_jump_.reset();
+      takeHeldJump(held);
     } else if (*newest_stamp_s_ > held_jump_->newest_s + tolerance) {
       dropHeldJump();  // not confirmed while the data went on: a glitch
     }

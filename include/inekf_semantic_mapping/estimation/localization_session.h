@@ -237,6 +237,8 @@ class LocalizationSession {
   double lateGpsWindow() const;
   // Gives up a held jump: its messages are dropped.
   void dropHeldJump();
+  // Ends a held jump (confirmed, or reached by the data): its messages go through, into `held`.
+  void takeHeldJump(std::vector<Event>* held);
   // The GPS on another clock than the IMU: false (the note says why) for a GPS message whose
   // stamp runs the steady offset from the IMU's latest that the fixes have shown for
   // kClockOffsetConfirmS.
