@@ -59,6 +59,8 @@ ism_add_gtest(test_semantic_octree_offline
 ism_add_gtest(test_semantic_octree_offline_data
   SOURCES test/data/test_semantic_octree_offline_data.cpp
   LINK ${PROJECT_NAME}_mapping)
+ism_add_gtest(test_raw_drive_scans SOURCES test/unit/test_raw_drive_scans.cpp
+  LINK ${PROJECT_NAME}_mapping)
 ism_add_gtest(test_semantic_map_offline
   SOURCES test/cli/test_semantic_map_offline.cpp
   LINK ${PROJECT_NAME}_mapping

@@ -13,6 +13,7 @@ set(ISM_KITTI_SOURCES
   src/kitti/oxts.cpp
   src/kitti/poses.cpp
   src/kitti/raw_drive.cpp
+  src/kitti/sensor_stream.cpp
   src/kitti/timestamps.cpp
   src/kitti/velodyne.cpp)
 # lie, estimation: Lie groups; the filters, the Localizer, the smoother and the pose graph.

@@ -2,9 +2,9 @@
 
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/kitti/sensor_stream.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "text_parsing.h"
 
@@ -88,30 +88,32 @@ OxtsRecord readOxtsFile(const std::string& path) {
   throw KittiFormatError(path, "empty OXTS file");
 }
 
-std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir) {
-  namespace fs = std::filesystem;
-  const std::string timestamps_path = oxts_dir + "/timestamps.txt";
-  const std::vector<std::int64_t> stamps = readTimestampsFile(timestamps_path);
-  const fs::path data_dir = fs::path(oxts_dir) / "data";
-  if (!fs::is_directory(data_dir)) {
-    throw KittiFormatError(data_dir.string(), "OXTS data folder is missing");
+std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir,
+                                      std::vector<std::string>* warnings) {
+  const SensorStream stream = readSensorStream(oxts_dir, "oxts");
+  if (!stream.present) throw KittiFormatError(oxts_dir + "/data", "OXTS data folder is missing");
+  if (stream.size() == 0) {
+    throw KittiFormatError(oxts_dir,
+                           "no frames (timestamps.txt is empty or no data/ file fits it)");
   }
-  std::size_t file_count = 0;
-  for (const auto& entry : fs::directory_iterator(data_dir)) {
-    if (entry.path().extension() == ".txt") ++file_count;
+  if (stream.extension != ".txt") {
+    throw KittiFormatError(oxts_dir, "data/ holds " + stream.extension + " files, not .txt");
   }
-  if (file_count != stamps.size()) {
-    throw KittiFormatError(oxts_dir, "frame count mismatch: " + std::to_string(file_count) +
-                                         " files in data/ but " + std::to_string(stamps.size()) +
-                                         " lines in timestamps.txt");
+  if (warnings) {
+    warnings->insert(warnings->end(), stream.warnings.begin(), stream.warnings.end());
+    for (std::string& step : timestampWarnings(stream.stamps_ns, oxts_dir + "/timestamps.txt", 1.0,
+                                               5, stream.file_numbers)) {
+      warnings->push_back(std::move(step));
+    }
   }
-  if (stamps.empty()) throw KittiFormatError(oxts_dir, "no frames (timestamps.txt is empty)");
-  std::vector<OxtsFrame> frames(stamps.size());
-  char name[32];
-  for (std::size_t i = 0; i < stamps.size(); ++i) {
-    std::snprintf(name, sizeof(name), "%010zu.txt", i);
-    frames[i].stamp_ns = stamps[i];
-    frames[i].record = readOxtsFile((data_dir / name).string());
+  return readOxtsFrames(stream);
+}
+
+std::vector<OxtsFrame> readOxtsFrames(const SensorStream& stream) {
+  std::vector<OxtsFrame> frames(stream.size());
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    frames[i].stamp_ns = stream.stamps_ns[i];
+    frames[i].record = readOxtsFile(stream.framePath(i));
   }
   return frames;
 }

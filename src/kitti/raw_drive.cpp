@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <map>
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
@@ -12,12 +11,6 @@
 namespace inekf_semantic_mapping {
 namespace kitti {
 namespace fs = std::filesystem;
-
-std::string SensorStream::framePath(std::size_t frame) const {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%010zu", frame);
-  return dir + "/data/" + name + extension;
-}
 
 RawDrive::RawDrive(const std::string& drive_dir, const std::string& calib_dir) {
   fs::path path(drive_dir);
@@ -30,12 +23,12 @@ RawDrive::RawDrive(const std::string& drive_dir, const std::string& calib_dir) {
   is_extract_ =
       folder_name.size() >= 8 && folder_name.compare(folder_name.size() - 8, 8, "_extract") == 0;
 
-  oxts_ = openSensor("oxts");
-  velodyne_ = openSensor("velodyne_points");
+  oxts_ = readSensorStream(drive_dir_ + "/oxts", "oxts");
+  velodyne_ = readSensorStream(drive_dir_ + "/velodyne_points", "velodyne_points");
   for (int i = 0; i < kNumCameras; ++i) {
     char name[16];
     std::snprintf(name, sizeof(name), "image_%02d", i);
-    cameras_[i] = openSensor(name);
+    cameras_[i] = readSensorStream(drive_dir_ + "/" + name, name);
   }
   if (!oxts_.present && !velodyne_.present &&
       std::none_of(cameras_, cameras_ + kNumCameras,
@@ -52,56 +45,6 @@ RawDrive::RawDrive(const std::string& drive_dir, const std::string& calib_dir) {
   if (hasRawCalibration(calibration_search_dir_)) calibration_dir_ = calibration_search_dir_;
 }
 
-SensorStream RawDrive::openSensor(const std::string& name) const {
-  SensorStream stream;
-  stream.name = name;
-  stream.dir = drive_dir_ + "/" + name;
-  const fs::path data_dir = fs::path(stream.dir) / "data";
-  const fs::path timestamps = fs::path(stream.dir) / "timestamps.txt";
-  if (!fs::is_directory(data_dir)) return stream;
-  if (!fs::is_regular_file(timestamps)) {
-    throw KittiFormatError(stream.dir, "has data/ but no timestamps.txt");
-  }
-  stream.present = true;
-  stream.stamps_ns = readTimestampsFile(timestamps.string());
-
-  // Count the data files per extension; the most common one is the sensor's format.
-  std::map<std::string, std::size_t> count_by_extension;
-  for (const auto& entry : fs::directory_iterator(data_dir)) {
-    if (entry.is_regular_file()) ++count_by_extension[entry.path().extension().string()];
-  }
-  std::size_t file_count = 0;
-  for (const auto& [extension, count] : count_by_extension) {
-    if (count > file_count) {
-      file_count = count;
-      stream.extension = extension;
-    }
-  }
-  if (file_count != stream.stamps_ns.size()) {
-    throw KittiFormatError(
-        stream.dir, "frame count mismatch: " + std::to_string(file_count) + " files in data/ but " +
-                        std::to_string(stream.stamps_ns.size()) + " lines in timestamps.txt");
-  }
-  if (file_count > 0 && !fs::exists(stream.framePath(0))) {
-    throw KittiFormatError(stream.framePath(0),
-                           "first frame missing (data files must be "
-                           "numbered %010d from 0)");
-  }
-  for (const char* which : {"start", "end"}) {
-    const fs::path extra = fs::path(stream.dir) / (std::string("timestamps_") + which + ".txt");
-    if (!fs::is_regular_file(extra)) continue;
-    auto stamps = readTimestampsFile(extra.string());
-    if (stamps.size() != stream.stamps_ns.size()) {
-      throw KittiFormatError(extra.string(), "has " + std::to_string(stamps.size()) +
-                                                 " lines, timestamps.txt " +
-                                                 std::to_string(stream.stamps_ns.size()));
-    }
-    (std::string(which) == "start" ? stream.start_stamps_ns : stream.end_stamps_ns) =
-        std::move(stamps);
-  }
-  return stream;
-}
-
 const SensorStream& RawDrive::camera(int index) const {
   if (index < 0 || index >= kNumCameras) {
     throw std::out_of_range("RawDrive::camera: index " + std::to_string(index));
@@ -111,12 +54,7 @@ const SensorStream& RawDrive::camera(int index) const {
 
 std::vector<OxtsFrame> RawDrive::readOxts() const {
   if (!oxts_.present) throw KittiFormatError(drive_dir_, "drive has no oxts/ folder");
-  std::vector<OxtsFrame> frames(oxts_.size());
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    frames[i].stamp_ns = oxts_.stamps_ns[i];
-    frames[i].record = readOxtsFile(oxts_.framePath(i));
-  }
-  return frames;
+  return readOxtsFrames(oxts_);
 }
 
 RawCalibration RawDrive::readCalibration() const {
@@ -155,12 +93,21 @@ std::vector<std::string> RawDrive::missingParts() const {
   return missing;
 }
 
+std::vector<std::string> RawDrive::frameWarnings() const {
+  std::vector<std::string> warnings = oxts_.warnings;
+  warnings.insert(warnings.end(), velodyne_.warnings.begin(), velodyne_.warnings.end());
+  for (const SensorStream& camera : cameras_) {
+    warnings.insert(warnings.end(), camera.warnings.begin(), camera.warnings.end());
+  }
+  return warnings;
+}
+
 std::vector<std::string> RawDrive::stampWarnings() const {
   std::vector<std::string> warnings;
   const auto check = [&warnings](const SensorStream& stream) {
     if (!stream.present) return;
-    for (std::string& warning :
-         timestampWarnings(stream.stamps_ns, stream.dir + "/timestamps.txt")) {
+    for (std::string& warning : timestampWarnings(stream.stamps_ns, stream.dir + "/timestamps.txt",
+                                                  1.0, 5, stream.file_numbers)) {
       warnings.push_back(std::move(warning));
     }
   };

@@ -3,6 +3,8 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <stdexcept>
 #include <string>
 
 #include "inekf_semantic_mapping/kitti/errors.h"
@@ -102,7 +104,14 @@ std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
 
 std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stamps_ns,
                                            const std::string& path, double max_gap_s,
-                                           std::size_t max_messages) {
+                                           std::size_t max_messages,
+                                           const std::vector<std::size_t>& lines) {
+  if (!lines.empty() && lines.size() != stamps_ns.size()) {
+    throw std::invalid_argument("timestampWarnings: " + std::to_string(lines.size()) +
+                                " line numbers for " + std::to_string(stamps_ns.size()) +
+                                " stamps");
+  }
+  const auto line_of = [&lines](std::size_t i) { return (lines.empty() ? i : lines[i]) + 1; };
   std::vector<std::string> warnings;
   std::size_t more = 0;
   for (std::size_t i = 1; i < stamps_ns.size(); ++i) {
@@ -113,14 +122,17 @@ std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stam
       ++more;
       continue;
     }
+    const std::string earlier = line_of(i - 1) + 1 == line_of(i)
+                                    ? std::string("the line above")
+                                    : "line " + std::to_string(line_of(i - 1));
     char text[96];
     if (stamps_ns[i] == stamps_ns[i - 1]) {
-      std::snprintf(text, sizeof(text), ":%zu: the same stamp as the line above", i + 1);
+      std::snprintf(text, sizeof(text), ":%zu: the same stamp as ", line_of(i));
     } else {
-      std::snprintf(text, sizeof(text), ":%zu: %.3f s %s the line above", i + 1, std::abs(step_s),
+      std::snprintf(text, sizeof(text), ":%zu: %.3f s %s ", line_of(i), std::abs(step_s),
                     step_s < 0.0 ? "before" : "after");
     }
-    warnings.push_back(path + text);
+    warnings.push_back(path + text + earlier);
   }
   if (more > 0) {
     warnings.push_back(path + ": " + std::to_string(more) + " more such steps");
@@ -128,20 +140,24 @@ std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stam
   return warnings;
 }
 
-std::vector<std::int64_t> readTimestampsFile(const std::string& path) {
+std::vector<std::optional<std::int64_t>> readTimestampLines(const std::string& path) {
   std::ifstream stream = detail::openOrThrow(path);
-  std::vector<std::int64_t> stamps;
+  std::vector<std::optional<std::int64_t>> stamps;
   std::string line;
   int line_number = 0;
   while (std::getline(stream, line)) {
     ++line_number;
-    if (detail::trim(line).empty()) continue;
+    if (detail::trim(line).empty()) {
+      stamps.emplace_back();
+      continue;
+    }
     try {
-      stamps.push_back(parseKittiTimestampNs(line));
+      stamps.emplace_back(parseKittiTimestampNs(line));
     } catch (const KittiFormatError& error) {
       throw KittiFormatError(path, line_number, error.what());
     }
   }
+  while (!stamps.empty() && !stamps.back()) stamps.pop_back();
   return stamps;
 }
 

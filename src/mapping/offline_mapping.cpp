@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <ostream>
 #include <sstream>
 #include <stdexcept>
@@ -14,6 +15,7 @@
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
+#include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/kitti/velodyne.h"
 
 namespace inekf_semantic_mapping {
@@ -35,6 +37,64 @@ void finishRun(SemanticMappingSession* session, std::ostream* progress) {
   ScopedTimer timer("offline/update_inner");
   tree.updateInnerOccupancy();
 }
+
+// A sync drive's image is 5-15 ms after its scan; a frame the camera dropped leaves its scan
+// without labels rather than with the next frame's (100 ms away).
+constexpr std::int64_t kImageToScanMaxOffsetNs = 50'000'000;
+
+// Poses at their stamps (the OXTS frames'), with the pose at any stamp between them.
+class PoseTimeline {
+ public:
+  // Interpolating across a longer gap (frames the OXTS dropped) would bend a turn into a chord.
+  static constexpr std::int64_t kMaxGapNs = 500'000'000;
+  // A scan this close before the first pose or after the last takes that pose (a sync drive's
+  // first scan is up to 20 ms before its first OXTS frame).
+  static constexpr std::int64_t kEndToleranceNs = 50'000'000;
+
+  // Stamps out of order (a timestamps.txt that goes back) are used in their sorted order.
+  PoseTimeline(const std::vector<std::int64_t>& stamps_ns, std::vector<Eigen::Isometry3d> poses) {
+    std::vector<std::size_t> order(stamps_ns.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return stamps_ns[a] < stamps_ns[b]; });
+    for (const std::size_t i : order) {
+      stamps_ns_.push_back(stamps_ns[i]);
+      poses_.push_back(poses[i]);
+    }
+  }
+
+  // Between the two poses around stamp_ns: the translation linearly, the rotation by slerp.
+  // nullopt where no pose is near (beyond the ends, or inside a gap longer than kMaxGapNs).
+  std::optional<Eigen::Isometry3d> poseAt(std::int64_t stamp_ns) const {
+    if (stamps_ns_.empty()) return std::nullopt;
+    const std::size_t after = static_cast<std::size_t>(
+        std::lower_bound(stamps_ns_.begin(), stamps_ns_.end(), stamp_ns) - stamps_ns_.begin());
+    if (after == 0) {
+      if (stamps_ns_.front() - stamp_ns > kEndToleranceNs) return std::nullopt;
+      return poses_.front();
+    }
+    if (after == stamps_ns_.size()) {
+      if (stamp_ns - stamps_ns_.back() > kEndToleranceNs) return std::nullopt;
+      return poses_.back();
+    }
+    const std::int64_t gap_ns = stamps_ns_[after] - stamps_ns_[after - 1];
+    if (gap_ns > kMaxGapNs) return std::nullopt;
+    const double alpha = static_cast<double>(stamp_ns - stamps_ns_[after - 1]) /
+                         static_cast<double>(gap_ns);  // > 0: lower_bound put stamp_ns after it
+    const Eigen::Isometry3d& from = poses_[after - 1];
+    const Eigen::Isometry3d& to = poses_[after];
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = Eigen::Quaterniond(from.linear())
+                        .slerp(alpha, Eigen::Quaterniond(to.linear()))
+                        .toRotationMatrix();
+    pose.translation() = (1.0 - alpha) * from.translation() + alpha * to.translation();
+    return pose;
+  }
+
+ private:
+  std::vector<std::int64_t> stamps_ns_;
+  std::vector<Eigen::Isometry3d> poses_;
+};
 
 }  // namespace
 
@@ -164,7 +224,8 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   }
 }
 
-void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit) {
+void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
+                         std::ostream* warnings) {
   // An empty map written with exit status 0 would look like a map.
   if (drive.max_scans == 0) throw std::invalid_argument("max_scans 0: no scan to map");
   const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
@@ -172,73 +233,107 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
   if (!raw.hasCalibration()) {
     throw std::runtime_error(drive.drive_dir + ": no calibration (calib_*.txt) found");
   }
+  const kitti::SensorStream& velodyne = raw.velodyne();
+  std::size_t frames = velodyne.size();
+  // An empty drive would be written out as an empty map, with no word of why.
+  if (frames == 0) throw std::runtime_error(drive.drive_dir + "/velodyne_points: no scans");
+  if (drive.max_scans > 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  if (warnings) {
+    for (const std::string& warning : raw.frameWarnings()) {
+      *warnings << "[semantic_map_offline] warning: " << warning << "\n";
+    }
+  }
   const kitti::RawCalibration calibration = raw.readCalibration();
   const Eigen::Isometry3d T_imu_velo = calibration.T_velo_imu.inverse();
+  // The IMU's poses at the OXTS frames' stamps: each scan takes the pose at its own stamp (the
+  // OXTS frame beside a sync scan is up to 20 ms off it; an _extract drive's OXTS runs at 100 Hz).
+  if (!raw.hasOxts() || raw.oxts().size() == 0) {
+    throw std::runtime_error(drive.drive_dir + ": no oxts/ frames (their stamps place the " +
+                             (drive.poses_path.empty() ? "OXTS poses" : drive.poses_path) +
+                             " in time)");
+  }
   std::vector<Eigen::Isometry3d> T_map_imu;
   if (!drive.poses_path.empty()) {
     T_map_imu = kitti::readKittiPoses(drive.poses_path);
+    if (T_map_imu.size() != raw.oxts().size()) {
+      throw std::runtime_error(drive.poses_path + ": " + std::to_string(T_map_imu.size()) +
+                               " poses for the " + std::to_string(raw.oxts().size()) +
+                               " frames of " + raw.oxts().dir +
+                               " (one per OXTS frame, as inekf_offline --output-kitti writes)");
+    }
   } else {
     const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
-    if (oxts.empty()) throw std::runtime_error(drive.drive_dir + ": oxts/ has no frames");
     const auto projection = kitti::MercatorProjection::atFirstFix(oxts.front().record);
     for (const kitti::OxtsFrame& frame : oxts) {
       T_map_imu.push_back(projection.poseInMap(frame.record));
     }
   }
-  std::size_t frames = raw.velodyne().size();
-  // An empty drive would be written out as an empty map, with no word of why.
-  if (frames == 0) throw std::runtime_error(drive.drive_dir + "/velodyne_points: no scans");
-  if (drive.max_scans > 0) frames = std::min(frames, static_cast<std::size_t>(drive.max_scans));
+  const PoseTimeline timeline(raw.oxts().stamps_ns, std::move(T_map_imu));
   const std::string poses_source =
       drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path;
-  if (frames > T_map_imu.size()) {
-    throw std::runtime_error(poses_source + ": " + std::to_string(T_map_imu.size()) +
-                             " poses for " + std::to_string(frames) + " velodyne frames");
-  }
+  const kitti::SensorStream& images = raw.camera(drive.camera_index);
   const kitti::CameraProjection projection = calibration.projection(drive.camera_index);
   for (std::size_t frame = 0; frame < frames; ++frame) {
-    kitti::VelodyneScan velodyne;
+    const std::int64_t stamp_ns = velodyne.stamps_ns[frame];
+    const std::optional<Eigen::Isometry3d> T_map_imu_at_scan = timeline.poseAt(stamp_ns);
+    if (!T_map_imu_at_scan) {
+      if (warnings) {
+        *warnings << "[semantic_map_offline] warning: " << velodyne.framePath(frame)
+                  << ": no pose in " << poses_source << " at its stamp "
+                  << kitti::formatKittiTimestamp(stamp_ns) << ": scan left out\n";
+      }
+      continue;
+    }
+    kitti::VelodyneScan scan_data;
     {
       ScopedTimer timer("offline/read");
-      velodyne = kitti::readVelodyneBin(raw.velodyne().framePath(frame));
+      scan_data = kitti::readVelodyneScan(velodyne.framePath(frame));
     }
     const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
-        velodyne.xyzi.data(), 4, static_cast<Eigen::Index>(velodyne.size()));
-    char stem[24];
-    std::snprintf(stem, sizeof(stem), "%010zu", frame);
-    RawDriveScan scan{stem,      frame, frames, buffer.topRows<3>(), T_map_imu[frame] * T_imu_velo,
-                      projection};
+        scan_data.xyzi.data(), 4, static_cast<Eigen::Index>(scan_data.size()));
+    RawDriveScan scan{
+        velodyne.fileStem(frame),        "",        frame, frames, buffer.topRows<3>(),
+        *T_map_imu_at_scan * T_imu_velo, projection};
+    // The camera fires as the lidar faces forward (a sync drive's image is 5-15 ms after its
+    // scan); an _extract drive's frames are numbered apart, so the image is found by its stamp.
+    const std::ptrdiff_t image = images.nearestFrame(stamp_ns, kImageToScanMaxOffsetNs);
+    if (image >= 0) scan.image_stem = images.fileStem(static_cast<std::size_t>(image));
     try {
       visit(scan);
     } catch (const std::out_of_range& e) {
       // A scan far outside the map: its pose is wrong.
-      throw std::runtime_error(poses_source + ": pose of frame " + stem + ": " + e.what());
+      throw std::runtime_error(poses_source + ": pose of velodyne frame " + scan.stem + ": " +
+                               e.what());
     }
   }
 }
 
 void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress) {
-  forEachRawDriveScan(drive, [&](const RawDriveScan& scan) {
-    OwnedLabelImage image;
-    std::string evidence = "no labels";
-    if (camera_labels && (*camera_labels)(scan.stem, &image)) {
-      const LabelImageView view{image.pixels.data(), image.width, image.height,
-                                static_cast<std::size_t>(image.width)};
-      const CameraModel camera{scan.camera.P_rect, scan.camera.R_rect, scan.camera.T_cam0_velo,
-                               image.width, image.height};
-      session->insertScan(scan.points, scan.T_map_velo, &view, &camera);
-      evidence = "camera labels";
-    } else {
-      session->insertScan(scan.points, scan.T_map_velo);
-    }
-    if (drive.on_scan_inserted) drive.on_scan_inserted(scan.T_map_velo);
-    if (progress) {
-      *progress << "[semantic_map_offline] scan " << (scan.index + 1) << "/" << scan.count << " ("
-                << scan.points.cols() << " points, " << evidence << "), map "
-                << session->mapSizeText() << "\n";
-    }
-  });
+  forEachRawDriveScan(
+      drive,
+      [&](const RawDriveScan& scan) {
+        OwnedLabelImage image;
+        std::string evidence = "no labels";
+        if (camera_labels && !scan.image_stem.empty() &&
+            (*camera_labels)(scan.image_stem, &image)) {
+          const LabelImageView view{image.pixels.data(), image.width, image.height,
+                                    static_cast<std::size_t>(image.width)};
+          const CameraModel camera{scan.camera.P_rect, scan.camera.R_rect, scan.camera.T_cam0_velo,
+                                   image.width, image.height};
+          session->insertScan(scan.points, scan.T_map_velo, &view, &camera);
+          evidence = "camera labels";
+        } else {
+          session->insertScan(scan.points, scan.T_map_velo);
+        }
+        if (drive.on_scan_inserted) drive.on_scan_inserted(scan.T_map_velo);
+        if (progress) {
+          *progress << "[semantic_map_offline] scan " << (scan.index + 1) << "/" << scan.count
+                    << " (" << scan.points.cols() << " points, " << evidence << "), map "
+                    << session->mapSizeText() << "\n";
+        }
+      },
+      progress);
   finishRun(session, progress);
 }
 

@@ -45,6 +45,9 @@ class KittiPlayer {
       ROS_WARN_STREAM("kitti_player: " << drive_->driveDir() << " has no" << text.str()
                                        << ": those topics will not be published");
     }
+    for (const std::string& warning : drive_->frameWarnings()) {
+      ROS_WARN_STREAM("kitti_player: " << warning);
+    }
     for (const std::string& step : drive_->stampWarnings()) {
       ROS_WARN_STREAM("kitti_player: " << step << " (published in stamp order)");
     }

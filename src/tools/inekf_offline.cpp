@@ -26,7 +26,6 @@
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
-#include "inekf_semantic_mapping/kitti/timestamps.h"
 #include "inekf_semantic_mapping/registration/icp_registration.h"
 
 namespace ism = inekf_semantic_mapping;
@@ -194,12 +193,10 @@ int main(int argc, char** argv) {
     std::vector<ism::kitti::OxtsFrame> frames;
     {
       ism::ScopedTimer timer("read_oxts");
-      frames = ism::kitti::readOxtsFolder(cli.get("--oxts"));
-      std::vector<std::int64_t> stamps;
-      for (const auto& frame : frames) stamps.push_back(frame.stamp_ns);
-      for (const std::string& step :
-           ism::kitti::timestampWarnings(stamps, cli.get("--oxts") + "/timestamps.txt")) {
-        std::printf("inekf_offline: warning: %s\n", step.c_str());
+      std::vector<std::string> warnings;
+      frames = ism::kitti::readOxtsFolder(cli.get("--oxts"), &warnings);
+      for (const std::string& warning : warnings) {
+        std::printf("inekf_offline: warning: %s\n", warning.c_str());
       }
     }
     // The loop closure's inputs are checked before the (long) run.

@@ -107,6 +107,9 @@ int run(const Arguments& args) {
     std::cerr << "kitti2bag: warning: " << drive.driveDir() << " has no " << part
               << ": not written\n";
   }
+  for (const std::string& warning : drive.frameWarnings()) {
+    std::cerr << "kitti2bag: warning: " << warning << "\n";
+  }
   for (const std::string& step : drive.stampWarnings()) {
     std::cerr << "kitti2bag: warning: " << step << " (the bag is written in stamp order)\n";
   }

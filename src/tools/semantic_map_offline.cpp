@@ -146,7 +146,8 @@ ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
   };
 }
 
-// --label-images: the finished map's classes in each frame's camera, DIR/<stem>.png.
+// --label-images: the finished map's classes in each frame's camera, DIR/<stem>.png named as
+// the image they label.
 void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
                          const ism::mapping::OfflineRawDrive& drive, const std::string& dir,
                          const ism::mapping::MapLabelImageOptions& options) {
@@ -158,11 +159,16 @@ void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
   ism::ScopedTimer timer("semantic_map/label_images");
   mapping::forEachRawDriveScan(drive, [&](const mapping::RawDriveScan& scan) {
     // The image's own size: the rectified size in the calibration is not always the image's.
-    const std::string image_path = images + "/" + scan.stem + ".png";
+    if (scan.image_stem.empty()) {
+      std::cerr << "[semantic_map_offline] velodyne frame " << scan.stem << ": no camera image "
+                << "at its stamp in " << images << ", no label image for it\n";
+      return;
+    }
+    const std::string image_path = images + "/" + scan.image_stem + ".png";
     const cv::Mat image = cv::imread(image_path, cv::IMREAD_UNCHANGED);
     if (image.empty()) {
       std::cerr << "[semantic_map_offline] " << image_path << ": no readable image, no label "
-                << "image for frame " << scan.stem << "\n";
+                << "image for it\n";
       return;
     }
     const mapping::CameraModel camera{scan.camera.P_rect, scan.camera.R_rect,
@@ -172,7 +178,7 @@ void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
         mapping::mapLabelImage(tree, scan.points, scan.T_map_velo, camera, options, &stats);
     const cv::Mat view(labels.height, labels.width, CV_8UC1,
                        const_cast<std::uint8_t*>(labels.pixels.data()));
-    const std::string path = dir + "/" + scan.stem + ".png";
+    const std::string path = dir + "/" + scan.image_stem + ".png";
     ism::common::commitFileAtomically(path, [&](const std::string& tmp) {
       if (!cv::imwrite(tmp, view)) throw std::runtime_error(path + ": cannot write PNG");
     });

@@ -37,17 +37,18 @@ using test::writeFile;
 
 TEST(KittiTimestamps, ReadsRealFileAndNamesBadLine) {
   ISM_REQUIRE_SHARED(kDrive0001);
-  const auto stamps = readTimestampsFile(sharedPath(kDrive0001) + "/oxts/timestamps.txt");
+  const auto stamps = readTimestampLines(sharedPath(kDrive0001) + "/oxts/timestamps.txt");
   ASSERT_EQ(stamps.size(), 108u);
-  EXPECT_EQ(stamps[0], 1317042145964389445LL);
-  EXPECT_EQ(stamps[1] - stamps[0], 109958171LL);  // 26.074347616 - 25.964389445
-  for (std::size_t i = 1; i < stamps.size(); ++i) EXPECT_GT(stamps[i], stamps[i - 1]);
+  for (const auto& stamp : stamps) ASSERT_TRUE(stamp.has_value());
+  EXPECT_EQ(*stamps[0], 1317042145964389445LL);
+  EXPECT_EQ(*stamps[1] - *stamps[0], 109958171LL);  // 26.074347616 - 25.964389445
+  for (std::size_t i = 1; i < stamps.size(); ++i) EXPECT_GT(*stamps[i], *stamps[i - 1]);
 
   const std::string dir = makeTempDir("kitti_ts");
   writeFile(dir + "/timestamps.txt", "2011-09-26 13:02:25.964389445\nnot a time\n");
-  expectFormatError([&] { readTimestampsFile(dir + "/timestamps.txt"); },
+  expectFormatError([&] { readTimestampLines(dir + "/timestamps.txt"); },
                     {dir + "/timestamps.txt:2"});
-  expectFormatError([&] { readTimestampsFile(dir + "/missing.txt"); }, {"missing.txt"});
+  expectFormatError([&] { readTimestampLines(dir + "/missing.txt"); }, {"missing.txt"});
   fs::remove_all(dir);
 }
 

@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/kitti/sensor_stream.h"
+
 namespace inekf_semantic_mapping {
 namespace kitti {
 
@@ -56,9 +58,16 @@ OxtsRecord parseOxtsLine(const std::string& line, const std::string& file_for_er
 // Reads the first line of one oxts/data/%010d.txt file.
 OxtsRecord readOxtsFile(const std::string& path);
 
-// Reads oxts/data/%010d.txt (0..N-1, contiguous) with oxts/timestamps.txt. The number of data
-// files must equal the number of timestamps, else KittiFormatError naming the folder.
-std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir);
+// Reads the frames of oxts/ (readSensorStream: file data/%010d.txt stamped by line n of
+// timestamps.txt; a frame with a blank line or without its file is left out). warnings (optional):
+// one message per run of frames left out and per step of timestamps.txt that goes back or jumps
+// (timestampWarnings). KittiFormatError naming the folder when it has no data/, no .txt frame
+// or no frame at all.
+std::vector<OxtsFrame> readOxtsFolder(const std::string& oxts_dir,
+                                      std::vector<std::string>* warnings = nullptr);
+
+// Reads every frame of an oxts stream (its data files, stamped by its timestamps).
+std::vector<OxtsFrame> readOxtsFrames(const SensorStream& stream);
 
 }  // namespace kitti
 }  // namespace inekf_semantic_mapping

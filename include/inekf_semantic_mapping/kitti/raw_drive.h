@@ -8,31 +8,17 @@
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
+#include "inekf_semantic_mapping/kitti/sensor_stream.h"
 
 namespace inekf_semantic_mapping {
 namespace kitti {
-
-// One sensor folder (oxts, velodyne_points, image_00..03).
-struct SensorStream {
-  std::string name;                           // "oxts", "velodyne_points", "image_02", ...
-  std::string dir;                            // <drive>/<name>
-  bool present = false;                       // dir/data and dir/timestamps.txt exist
-  std::vector<std::int64_t> stamps_ns;        // timestamps.txt
-  std::vector<std::int64_t> start_stamps_ns;  // velodyne timestamps_start.txt (may be empty)
-  std::vector<std::int64_t> end_stamps_ns;    // velodyne timestamps_end.txt (may be empty)
-  std::string extension;                      // of the data files: ".txt", ".bin", ".png"
-
-  std::size_t size() const { return stamps_ns.size(); }
-  // <dir>/data/%010d<extension>
-  std::string framePath(std::size_t frame) const;
-};
 
 class RawDrive {
  public:
   static constexpr int kNumCameras = 4;
 
-  // Opens the drive: finds the sensors, reads their timestamps and checks that each sensor has
-  // as many data files as timestamps (KittiFormatError naming the folder otherwise). calib_dir
+  // Opens the drive: finds the sensors and reads their timestamps (readSensorStream: a frame
+  // with a blank line or without its file is left out and named in frameWarnings()). calib_dir
   // empty: the drive's parent folder (the date folder). Missing calibration is allowed (also in
   // an explicit calib_dir): hasCalibration() is then false and missingParts() says so.
   explicit RawDrive(const std::string& drive_dir, const std::string& calib_dir = "");
@@ -60,6 +46,8 @@ class RawDrive {
   // DIR)", "calibration (no calib_*.txt in DIR)"), for one warning that tells the user what will
   // not be published.
   std::vector<std::string> missingParts() const;
+  // Every present sensor's frames left out (SensorStream::warnings), for one warning each.
+  std::vector<std::string> frameWarnings() const;
   // Every present sensor's timestamps.txt steps that go back or jump ahead by more than a second
   // (timestampWarnings): played or converted in stamp order, such frames land out of place.
   std::vector<std::string> stampWarnings() const;
@@ -68,8 +56,6 @@ class RawDrive {
   std::int64_t firstStampNs() const;
 
  private:
-  SensorStream openSensor(const std::string& name) const;
-
   std::string drive_dir_;
   bool is_extract_ = false;
   SensorStream oxts_, velodyne_;

@@ -60,7 +60,7 @@ CameraModel odometryColorCamera(const std::string& calib_path, int width, int he
 struct OfflineRawDrive {
   std::string drive_dir;
   std::string calib_dir;   // "" = the drive's date folder
-  std::string poses_path;  // IMU poses in the map frame, one 3x4 per frame (inekf_offline
+  std::string poses_path;  // IMU poses in the map frame, one 3x4 per OXTS frame (inekf_offline
                            // --output-kitti); "" = the OXTS RTK/INS solution
   int camera_index = 2;
   int max_scans = -1;  // < 0: all (0 is refused)
@@ -70,8 +70,10 @@ struct OfflineRawDrive {
 
 // One velodyne frame of a raw drive, as mapRawDrive inserts it.
 struct RawDriveScan {
-  std::string stem;       // the 10-digit frame number (image_0N/data/<stem>.png)
-  std::size_t index = 0;  // 0-based, of `count` visited
+  std::string stem;        // its file's 10-digit number (velodyne_points/data/<stem>.bin)
+  std::string image_stem;  // the camera image at its stamp (image_0N/data/<image_stem>.png), or
+                           // "" when the camera has none within 50 ms
+  std::size_t index = 0;   // 0-based, of `count` visited
   std::size_t count = 0;
   Eigen::Matrix3Xf points;  // velodyne frame
   Eigen::Isometry3d T_map_velo;
@@ -79,14 +81,19 @@ struct RawDriveScan {
 };
 using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
 
-// Visits every velodyne frame of the drive in order (at most max_scans) with its pose
-// T_map_velo = T_map_imu * inv(T_velo_imu). Throws on missing inputs (the message names the
-// folder or file); an std::out_of_range from `visit` becomes an error naming the frame's pose.
-void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit);
+// Visits every velodyne frame of the drive in order (at most max_scans; .bin or an _extract
+// drive's .txt) with its pose T_map_velo = T_map_imu * inv(T_velo_imu), T_map_imu at the scan's
+// stamp (interpolated between the OXTS frames around it). A scan more than 50 ms outside the OXTS
+// frames' span, or in a gap of more than 0.5 s between two of them, is left out with a warning,
+// as are the frames the drive lacks (RawDrive::frameWarnings); warnings go to `warnings` when
+// given. Throws on missing inputs (the message names the folder or file);
+// an std::out_of_range from `visit` becomes an error naming the frame's pose.
+void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
+                         std::ostream* warnings = nullptr);
 
-// Inserts every velodyne frame of the drive at T_map_velo = T_map_imu * inv(T_velo_imu), with
-// camera labels from `camera_labels` (stem = the 10-digit frame number, image
-// image_0N/data/<stem>.png) when given. Map frame: the devkit's Mercator frame at the first fix.
+// Inserts every velodyne frame of the drive (forEachRawDriveScan) with camera labels from
+// `camera_labels` (stem: the scan's image_stem) when given; warnings and progress go to
+// `progress`. Map frame: the devkit's Mercator frame at the first fix.
 void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress);
 
