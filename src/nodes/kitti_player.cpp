@@ -3,6 +3,7 @@
 // publish /clock (`~publish_clock`) without depending on it. See config/kitti_player.yaml; any
 // other private parameter, or one of the wrong type, stops the player naming it. /diagnostics:
 // the play rate against the requested one, events published, frames skipped (unreadable files).
+#include <ros/master.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -10,8 +11,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <map>
 #include <memory>
 #include <sstream>
+#include <string>
 #include <vector>
 
 #include "inekf_semantic_mapping/common/timing.h"
@@ -79,6 +82,7 @@ class KittiPlayer {
   void run() {
     static_broadcaster_.sendTransform(
         factory_->staticTransformMessages(conv::toRosTime(timeline_.front().stamp_ns)));
+    if (!paused_ && options_.wait_for_subscribers_s > 0) waitForSubscribers();
     do {
       factory_->restart();
       if (!playOnce()) return;
@@ -116,6 +120,54 @@ class KittiPlayer {
     response.success = true;
     response.message = "stepping one OXTS frame";
     return true;
+  }
+
+  // Subscribers registered with the master per topic (0 where the master cannot be asked).
+  static std::map<std::string, std::size_t> registeredSubscribers() {
+    std::map<std::string, std::size_t> counts;
+    XmlRpc::XmlRpcValue request, response, payload;
+    request[0] = ros::this_node::getName();
+    if (!ros::master::execute("getSystemState", request, response, payload, false)) return counts;
+    XmlRpc::XmlRpcValue& subscribers = payload[1];
+    for (int i = 0; i < subscribers.size(); ++i) {
+      counts[static_cast<std::string>(subscribers[i][0])] =
+          static_cast<std::size_t>(subscribers[i][1].size());
+    }
+    return counts;
+  }
+
+  // A message published before its subscriber has connected is lost: the drive's first fix, and
+  // the filter's start with it, or the first scans of the map. Waits until the IMU and the GPS
+  // fix have a subscriber each and every subscriber the master lists on a sensor topic is
+  // connected, for at most ~wait_for_subscribers_s (wall time).
+  void waitForSubscribers() {
+    const ros::WallTime deadline =
+        ros::WallTime::now() + ros::WallDuration(options_.wait_for_subscribers_s);
+    std::string missing;
+    while (ros::ok()) {
+      const std::map<std::string, std::size_t> registered = registeredSubscribers();
+      missing.clear();
+      for (const auto& publisher : publishers_->sensorTopicConnections()) {
+        const auto it = registered.find(publisher.topic);
+        const std::size_t wanted = std::max<std::size_t>(publisher.essential ? 1 : 0,
+                                                         it == registered.end() ? 0 : it->second);
+        if (publisher.connected < wanted)
+          missing += (missing.empty() ? "" : ", ") + publisher.topic;
+      }
+      if (missing.empty()) return;
+      if (ros::WallTime::now() >= deadline) break;
+      ROS_INFO_ONCE(
+          "kitti_player: waiting up to %.1f s (~wait_for_subscribers_s) for the "
+          "subscribers of %s",
+          options_.wait_for_subscribers_s, missing.c_str());
+      ros::WallDuration(0.05).sleep();
+    }
+    if (!missing.empty()) {
+      ROS_WARN(
+          "kitti_player: no subscriber connected on %s after %.1f s "
+          "(~wait_for_subscribers_s): playing anyway",
+          missing.c_str(), options_.wait_for_subscribers_s);
+    }
   }
 
   // Plays the timeline once; false when ROS shut down.

@@ -22,6 +22,7 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->read("publish_clock", &options.publish_clock);
   reader->read("exit_when_done", &options.exit_when_done);
   reader->read("paused", &options.paused);
+  reader->read("wait_for_subscribers_s", &options.wait_for_subscribers_s);
   reader->read("publish_velodyne", &options.timeline.velodyne);
   reader->read("publish_camera", &options.timeline.cameras[2]);
   kitti::GpsDegradationOptions& gps = options.gps;
@@ -46,6 +47,8 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->rejectUnknown();
   if (options.drive_dir.empty()) reader->fail("drive_dir", "is required (a <date>_drive_<n>_sync)");
   if (!(options.rate > 0)) reader->fail("rate", "must be > 0");
+  if (!(options.wait_for_subscribers_s >= 0))
+    reader->fail("wait_for_subscribers_s", "must be >= 0");
   return options;
 }
 
@@ -65,6 +68,17 @@ DrivePublishers::DrivePublishers(ros::NodeHandle& nh, DriveMessageFactory* facto
     camera_info_ = nh.advertise<sensor_msgs::CameraInfo>(topics::kCameraColorLeftInfo, 5);
   }
   if (publish_clock_) clock_ = nh.advertise<rosgraph_msgs::Clock>("/clock", 100);
+}
+
+std::vector<DrivePublishers::TopicConnections> DrivePublishers::sensorTopicConnections() const {
+  std::vector<TopicConnections> connections;
+  for (const ros::Publisher* publisher : {&imu_, &fix_, &velocity_, &velodyne_, &image_}) {
+    if (*publisher) {
+      connections.push_back({publisher->getTopic(), publisher->getNumSubscribers(),
+                             publisher == &imu_ || publisher == &fix_});
+    }
+  }
+  return connections;
 }
 
 bool DrivePublishers::publish(const kitti::TimelineEvent& event) {

@@ -6,7 +6,9 @@
 #include <ros/publisher.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/kitti/drive_timeline.h"
@@ -21,6 +23,8 @@ struct KittiPlayerOptions {
   std::string calib_dir;  // "": the drive's parent
   double rate = 1.0;
   bool loop = false, publish_clock = false, exit_when_done = false, paused = false;
+  // Before playing (unless paused): wait up to this long for the subscribers (KittiPlayer).
+  double wait_for_subscribers_s = 10.0;
   kitti::TimelineOptions timeline;  // start_offset_s, duration_s, publish_velodyne / _camera
   kitti::GpsDegradationOptions gps;
 };
@@ -39,6 +43,16 @@ class DrivePublishers {
   // The messages of one event (and /clock at its stamp). A frame whose file cannot be read is
   // reported and skipped: one bad file must not stop the replay. True when it was published.
   bool publish(const kitti::TimelineEvent& event);
+
+  // A sensor topic it publishes (IMU, GPS fix and velocity, velodyne, camera image), with the
+  // number of subscribers connected to it. essential: the IMU and the GPS fix, which a filter
+  // needs from the drive's first message on.
+  struct TopicConnections {
+    std::string topic;
+    std::uint32_t connected = 0;
+    bool essential = false;
+  };
+  std::vector<TopicConnections> sensorTopicConnections() const;
 
   std::size_t published() const { return published_; }
   std::size_t skipped() const { return skipped_; }
