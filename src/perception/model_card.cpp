@@ -302,15 +302,19 @@ ModelCard builtinEnetCityscapesCard() {
 
 ModelCard defaultModelCardFor(const std::string& model_path) {
   const fs::path model(model_path);
+  // Named first: "no model card for X" sent users looking for a card when X itself was a typo.
+  if (!fs::exists(model)) throw ModelCardError(model_path + ": no such model file");
   for (const fs::path& candidate :
        {fs::path(model).replace_extension(".yaml"), fs::path(model_path + ".yaml")}) {
     if (fs::exists(candidate)) return loadModelCard(candidate.string());
   }
   const std::string extension = model.extension().string();
   if (extension == ".net" || extension == ".t7") return builtinEnetCityscapesCard();
-  throw ModelCardError("no model card for " + model_path + ": expected " +
-                       fs::path(model).replace_extension(".yaml").string() +
-                       " beside it (or pass --model-card)");
+  throw ModelCardError(
+      "no model card for " + model_path + ": expected " +
+      fs::path(model).replace_extension(".yaml").string() +
+      " beside it (or give the card's path: the tools' --model-card, segmentation_node's "
+      "~model_card)");
 }
 
 }  // namespace perception

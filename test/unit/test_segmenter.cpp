@@ -197,7 +197,9 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
 }
 
 TEST(ModelCard, DefaultCardFollowsTheModelFile) {
-  const ModelCard enet = defaultModelCardFor("/somewhere/enet-model.net");
+  const std::string dir = makeTempDir("card_default");
+  writeFile(dir, "enet-model.net", "not read for the card");
+  const ModelCard enet = defaultModelCardFor(dir + "/enet-model.net");
   ASSERT_EQ(enet.numOutputChannels(), 20);
   EXPECT_EQ(enet.output_label_ids[0], cityscapes::kUnlabeled);
   EXPECT_EQ(enet.output_label_ids[1], cityscapes::kRoad);  // trainId 0
@@ -208,8 +210,21 @@ TEST(ModelCard, DefaultCardFollowsTheModelFile) {
   EXPECT_EQ(enet.color_normalization, ColorNormalization::kStandardize);
   EXPECT_TRUE(enet.suppress_unlabeled);
 
-  const std::string dir = makeTempDir("card_default");
-  EXPECT_THROW(defaultModelCardFor(dir + "/net.onnx"), ModelCardError);
+  // A model that is not there is named as such, before any card is looked for.
+  try {
+    defaultModelCardFor(dir + "/net.onnx");
+    ADD_FAILURE() << "a card for a model that is not there";
+  } catch (const ModelCardError& error) {
+    EXPECT_EQ(std::string(error.what()), dir + "/net.onnx: no such model file");
+  }
+  writeFile(dir, "net.onnx", "not read for the card");
+  try {
+    defaultModelCardFor(dir + "/net.onnx");
+    ADD_FAILURE() << "an .onnx without a card was given one";
+  } catch (const ModelCardError& error) {
+    EXPECT_NE(std::string(error.what()).find("segmentation_node's ~model_card"), std::string::npos)
+        << error.what();
+  }
   writeFile(dir, "net.yaml", "input: {width: 32, height: 16}\noutput_label_ids: [7, 11]\n");
   EXPECT_EQ(defaultModelCardFor(dir + "/net.onnx").numOutputChannels(), 2);
   fs::remove_all(dir);
