@@ -7,6 +7,8 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <cmath>
+#include <iomanip>
 #include <memory>
 #include <optional>
 #include <string>
@@ -26,6 +28,10 @@
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 namespace {
+
+// A scan this far from the clock is not late or early: the clock is another time than the data's
+// (a working pipeline's scans arrive within seconds of their stamps).
+constexpr double kClockMismatchWarnS = 60.0;
 
 // The node's own keys (display, frames, calibration); the rest belong to the session.
 struct NodeOptions {
@@ -173,6 +179,7 @@ class SemanticOctomapNodeCore::Impl {
     try {
       ScopedTimer timer("semantic_map/scan");
       detectClockJump();
+      warnIfOffTheClock(cloud->header.stamp);
       monitor_->noteScan(cloud->header.stamp.toSec(), wallNow());
       label_camera_->setLidarFrame(cloud->header.frame_id);
       if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);
@@ -207,6 +214,26 @@ class SemanticOctomapNodeCore::Impl {
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: inserting pending scans: " << e.what());
     }
+  }
+
+  // Scans are matched to tf and label images as the clock passes them: a clock that is not the
+  // data's time drops every scan as "without pose" and nothing said why. A bag recorded from a
+  // replay and played with --clock gives its record time, years after the stamps.
+  void warnIfOffTheClock(const ros::Time& stamp) {
+    const ros::Time now = ros::Time::now();
+    if (now.isZero()) return;  // sim time before the first /clock
+    const double offset_s = (now - stamp).toSec();
+    if (std::abs(offset_s) < kClockMismatchWarnS) return;
+    ROS_WARN_STREAM_THROTTLE(
+        10, "semantic_octomap_node: " << topics::kVelodyne << " stamped " << stamp << " is "
+                                      << std::fixed << std::setprecision(1) << std::abs(offset_s)
+                                      << " s " << (offset_s > 0 ? "behind" : "ahead of")
+                                      << " the clock (" << now
+                                      << "): the clock is not the data's time (a bag played with "
+                                         "--clock gives its record time: a bag recorded from a "
+                                         "replay is years after its stamps; kitti2bag writes a "
+                                         "drive's bag at its own time). Its scans cannot be "
+                                         "matched to tf and are dropped");
   }
 
   // A bag loop shows as the clock jumping back: the pending scans go in with the poses tf still
