@@ -172,6 +172,41 @@ class KittiPlayerTest(unittest.TestCase):
         self.assertEqual((info.width, info.height, info.P[0], info.P[3]), (40, 30, 400.0, 0.0))
         self.assertEqual(got['tf'][0].transforms[-2].child_frame_id, 'camera_color_left')
 
+    def test_an_unpaused_player_waits_for_its_subscribers(self):
+        """Needs no ../shared. A message published before its subscriber connects is lost: a
+        player that played at once lost the drive's first fix (and the filter's start)."""
+        root = tempfile.mkdtemp(prefix='ism_kitti_player_wait_')
+        drive = write_synthetic_drive(root)
+        remaps = {'/kitti/oxts/imu': '/wait/imu', '/kitti/oxts/gps/fix': '/wait/fix',
+                  '/kitti/oxts/gps/vel': '/wait/vel', '/kitti/oxts/ground_truth': '/wait/gt',
+                  '/kitti/velo/pointcloud': '/wait/velo',
+                  '/kitti/camera_color_left/image_raw': '/wait/image',
+                  '/kitti/camera_color_left/camera_info': '/wait/info', '/clock': '/wait/clock',
+                  '/tf_static': '/wait/tf_static'}
+        player = subprocess.Popen(
+            [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=kitti_player_wait',
+             '_drive_dir:=' + drive, '_rate:=2.0', '_exit_when_done:=true',
+             '_wait_for_subscribers_s:=30.0'] + ['%s:=%s' % item for item in remaps.items()])
+        got = {'imu': [], 'fix': []}
+        try:
+            rospy.wait_for_service('/kitti_player_wait/pause', timeout=30)
+            # Without the wait the 3 frames (1 s at rate 2) would be gone by now.
+            time.sleep(2.0)
+            rospy.Subscriber('/wait/imu', Imu, lambda m: got['imu'].append(m))
+            rospy.Subscriber('/wait/fix', NavSatFix, lambda m: got['fix'].append(m))
+            self.assertTrue(self.wait_for(lambda: all(len(v) >= 3 for v in got.values()), 30.0),
+                            {k: len(v) for k, v in got.items()})
+            self.assertEqual(player.wait(timeout=30), 0)
+        finally:
+            if player.poll() is None:
+                player.terminate()
+                player.wait()
+            shutil.rmtree(root)
+        for key, messages in got.items():
+            self.assertEqual([m.header.stamp.to_nsec() for m in messages],
+                             [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in range(3)],
+                             key)
+
     def test_plays_the_drive(self):
         oxts_dir = os.path.join(self.drive_dir, 'oxts')
         if not os.path.isdir(oxts_dir):
