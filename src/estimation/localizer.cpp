@@ -225,7 +225,10 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   const bool gap = dt > config_.max_imu_gap_s;
   double gyro_scale = 1.0, accel_scale = 1.0;
   if (gap) {
-    gyro_scale = std::max(gyro_scale, config_.gap_noise_scale);
+    // The heading change inside a gap is unknown (a car turns up to 20-30 deg/s): the gyro's
+    // noise grows with the gap's length, as over an interpolated run.
+    gyro_scale =
+        std::max({gyro_scale, config_.gap_noise_scale, config_.gap_gyro_noise_scale_per_s * dt});
     accel_scale = std::max(accel_scale, config_.gap_noise_scale);
   }
   if (sample.interpolated) {

@@ -62,6 +62,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("imu.max_specific_force_mps2", &config.max_specific_force_mps2);
   positive("imu.max_gap_s", &config.max_imu_gap_s);
   positive("imu.gap_noise_scale", &config.gap_noise_scale);
+  non_negative("imu.gap_gyro_noise_scale_per_s", &config.gap_gyro_noise_scale_per_s);
   non_negative("imu.interpolated_gyro_noise_scale_per_s",
                &config.interpolated_gyro_noise_scale_per_s);
   positive("imu.interpolated_accel_noise_scale", &config.interpolated_accel_noise_scale);

@@ -76,6 +76,7 @@ TEST(Localizer, BridgesAGapWithInflatedNoise) {
   config.max_imu_gap_s = 0.5;
   Localizer nominal(config), gapped(config);
   config.gap_noise_scale = 1.0;
+  config.gap_gyro_noise_scale_per_s = 0.0;
   Localizer unscaled(config);
   // A near-zero initial covariance: what grows is the process noise alone.
   for (Localizer* l : {&nominal, &gapped, &unscaled}) {
@@ -93,6 +94,11 @@ TEST(Localizer, BridgesAGapWithInflatedNoise) {
   // Bridged in one step or in twenty, without inflation the uncertainty is about the same.
   const double nominal_v = nominal.filter().covariance().block<3, 3>(3, 3).trace();
   EXPECT_NEAR(unscaled_v / nominal_v, 1.0, 0.2);
+  // The heading after a 2 s gap is unknown by what a car turns in it: the gyro's scale grows
+  // with the gap (200 here: sigma about 11 deg; 10 stated 0.6 deg for a 20 deg error).
+  const double yaw_sigma_deg = std::sqrt(gapped.filter().covariance()(2, 2)) * 180.0 / M_PI;
+  EXPECT_GT(yaw_sigma_deg, 8.0);
+  EXPECT_LT(yaw_sigma_deg, 15.0);
 }
 
 TEST(Localizer, RejectsStaleAndNonFiniteFixesAndInflatesSlightlyOldOnes) {
@@ -689,6 +695,7 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.max_specific_force_mps2, defaults.max_specific_force_mps2);
   EXPECT_DOUBLE_EQ(loaded.max_imu_gap_s, defaults.max_imu_gap_s);
   EXPECT_DOUBLE_EQ(loaded.gap_noise_scale, defaults.gap_noise_scale);
+  EXPECT_DOUBLE_EQ(loaded.gap_gyro_noise_scale_per_s, defaults.gap_gyro_noise_scale_per_s);
   EXPECT_DOUBLE_EQ(loaded.interpolated_gyro_noise_scale_per_s,
                    defaults.interpolated_gyro_noise_scale_per_s);
   EXPECT_DOUBLE_EQ(loaded.interpolated_accel_noise_scale, defaults.interpolated_accel_noise_scale);

@@ -7,7 +7,8 @@
 //    data this fits the rotation far better than (t_k, t_{k+1}] (measured, see inekf.yaml).
 //  - Out of order (t_k < t_{k-1}) or duplicate (|t_k - t_{k-1}| < 1 us) samples are dropped and
 //    counted. A gap longer than max_imu_gap_s is bridged by propagating over it with the process
-//    noise inflated by gap_noise_scale (the covariance grows honestly); the status says kGap.
+//    noise inflated by gap_noise_scale, the gyro's by at least gap_gyro_noise_scale_per_s times
+//    the gap (the covariance grows honestly); the status says kGap.
 //    A clock jumping back (bag loop) shows as kDroppedOutOfOrder: the session calls reset().
 //  - A sample flagged `interpolated` propagates with the gyro/accel white noise inflated (see
 //    interpolated_gyro_noise_scale_per_s / interpolated_accel_noise_scale).

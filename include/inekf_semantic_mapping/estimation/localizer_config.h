@@ -37,6 +37,10 @@ struct LocalizerConfig {
   double min_gps_sigma_m = 0.3;
   double max_imu_gap_s = 0.5;
   double gap_noise_scale = 10.0;  // multiplies the noise densities over a gap
+  // ... and the gyro's is at least this times the gap's length (s): the heading change inside a
+  // gap is unknown (a 2.2 s gap in a turn of 2011_09_26_drive_0036 left the heading 20 deg off
+  // with a stated sigma of 0.6 deg; the fixes took 15 s to bring it within 1 deg).
+  double gap_gyro_noise_scale_per_s = 100.0;
   // Over a sample flagged `interpolated`: KITTI's linear interpolation of the gyro across a
   // dropout integrates to the wrong heading change (up to ~12 deg over a 1.4 s run, nothing
   // over one or two frames), so the gyro noise scale grows with the time spent inside the run:
