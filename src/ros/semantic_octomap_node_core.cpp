@@ -161,10 +161,16 @@ class SemanticOctomapNodeCore::Impl {
     try {
       const std::size_t pending = session_->pendingScans();
       if (pending > 0) {
+        const std::size_t without_pose = session_->statistics().scans_without_pose;
         const std::size_t inserted = session_->flush();
+        const std::size_t no_pose = session_->statistics().scans_without_pose - without_pose;
         logAtShutdown(ShutdownLogLevel::kInfo,
                       "semantic_octomap_node: finishing: " + std::to_string(inserted) + " of " +
-                          std::to_string(pending) + " waiting scans put in the map");
+                          std::to_string(pending) + " waiting scans put in the map" +
+                          (no_pose > 0 ? " (" + std::to_string(no_pose) +
+                                             " without a pose in tf: none was published for "
+                                             "their stamps)"
+                                       : ""));
       }
     } catch (const std::exception& e) {
       logAtShutdown(
