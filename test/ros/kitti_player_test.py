@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """Checks kitti_player against the raw OXTS text files it plays (see kitti_player.test)."""
 import calendar
+import contextlib
 import os
 import shutil
 import struct
@@ -83,6 +84,33 @@ def write_synthetic_drive(root, frames=3):
     return drive
 
 
+# The synthetic drive's three frame stamps.
+SYNTHETIC_STAMPS = [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in range(3)]
+
+
+@contextlib.contextmanager
+def synthetic_player(name, prefix, **params):
+    """A second kitti_player, NAME, on a drive the test writes, its topics under /PREFIX/; stopped
+    and the drive removed afterwards."""
+    root = tempfile.mkdtemp(prefix='ism_%s_' % name)
+    drive = write_synthetic_drive(root)
+    remaps = {'/kitti/velo/pointcloud': 'velo', '/kitti/camera_color_left/image_raw': 'image',
+              '/kitti/camera_color_left/camera_info': 'info', '/kitti/oxts/imu': 'imu',
+              '/kitti/oxts/gps/fix': 'fix', '/kitti/oxts/gps/vel': 'vel',
+              '/kitti/oxts/ground_truth': 'gt', '/tf_static': 'tf_static', '/clock': 'clock'}
+    player = subprocess.Popen(
+        [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=' + name,
+         '_drive_dir:=' + drive] + ['_%s:=%s' % item for item in params.items()] +
+        ['%s:=/%s/%s' % (topic, prefix, short) for topic, short in remaps.items()])
+    try:
+        yield player
+    finally:
+        if player.poll() is None:
+            player.terminate()
+            player.wait()
+        shutil.rmtree(root)
+
+
 class KittiPlayerTest(unittest.TestCase):
     def setUp(self):
         self.drive_dir = os.path.realpath(rospy.get_param('~drive_dir'))
@@ -115,8 +143,6 @@ class KittiPlayerTest(unittest.TestCase):
 
     def test_synthetic_drive_with_lidar_and_camera(self):
         """Needs no ../shared: a second player on a drive the test writes, topics remapped."""
-        root = tempfile.mkdtemp(prefix='ism_kitti_player_')
-        drive = write_synthetic_drive(root)
         got = {'cloud': [], 'image': [], 'info': [], 'tf': [], 'imu': []}
         subscribers = [
             rospy.Subscriber('/synth/velo', PointCloud2, lambda m: got['cloud'].append(m)),
@@ -124,17 +150,8 @@ class KittiPlayerTest(unittest.TestCase):
             rospy.Subscriber('/synth/info', CameraInfo, lambda m: got['info'].append(m)),
             rospy.Subscriber('/synth/tf_static', TFMessage, lambda m: got['tf'].append(m)),
             rospy.Subscriber('/synth/imu', Imu, lambda m: got['imu'].append(m))]
-        remaps = {'/kitti/velo/pointcloud': '/synth/velo',
-                  '/kitti/camera_color_left/image_raw': '/synth/image',
-                  '/kitti/camera_color_left/camera_info': '/synth/info',
-                  '/kitti/oxts/imu': '/synth/imu', '/kitti/oxts/gps/fix': '/synth/fix',
-                  '/kitti/oxts/gps/vel': '/synth/vel', '/kitti/oxts/ground_truth': '/synth/gt',
-                  '/tf_static': '/synth/tf_static'}
-        player = subprocess.Popen(
-            [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=kitti_player_synth',
-             '_drive_dir:=' + drive, '_rate:=2.0', '_paused:=true', '_exit_when_done:=true'] +
-            ['%s:=%s' % item for item in remaps.items()])
-        try:
+        with synthetic_player('kitti_player_synth', 'synth', rate=2.0, paused='true',
+                              exit_when_done='true') as player:
             rospy.wait_for_service('/kitti_player_synth/pause', timeout=30)
             # The drive has 3 frames: unpausing before every subscriber is connected to the
             # player (slow on a loaded machine) would lose the first frame.
@@ -148,14 +165,8 @@ class KittiPlayerTest(unittest.TestCase):
                                                       ('cloud', 'image', 'info', 'imu')), 30.0),
                             {k: len(v) for k, v in got.items()})
             self.assertEqual(player.wait(timeout=30), 0)
-        finally:
-            if player.poll() is None:
-                player.terminate()
-                player.wait()
-            shutil.rmtree(root)
         for k in ('cloud', 'image', 'info', 'imu'):
-            self.assertEqual([m.header.stamp.to_nsec() for m in got[k]],
-                             [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in range(3)])
+            self.assertEqual([m.header.stamp.to_nsec() for m in got[k]], SYNTHETIC_STAMPS, k)
         cloud = got['cloud'][0]
         self.assertEqual(cloud.header.frame_id, 'velo_link')
         self.assertEqual([f.name for f in cloud.fields], ['x', 'y', 'z', 'intensity', 'ring'])
@@ -175,20 +186,9 @@ class KittiPlayerTest(unittest.TestCase):
     def test_an_unpaused_player_waits_for_its_subscribers(self):
         """Needs no ../shared. A message published before its subscriber connects is lost: a
         player that played at once lost the drive's first fix (and the filter's start)."""
-        root = tempfile.mkdtemp(prefix='ism_kitti_player_wait_')
-        drive = write_synthetic_drive(root)
-        remaps = {'/kitti/oxts/imu': '/wait/imu', '/kitti/oxts/gps/fix': '/wait/fix',
-                  '/kitti/oxts/gps/vel': '/wait/vel', '/kitti/oxts/ground_truth': '/wait/gt',
-                  '/kitti/velo/pointcloud': '/wait/velo',
-                  '/kitti/camera_color_left/image_raw': '/wait/image',
-                  '/kitti/camera_color_left/camera_info': '/wait/info', '/clock': '/wait/clock',
-                  '/tf_static': '/wait/tf_static'}
-        player = subprocess.Popen(
-            [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=kitti_player_wait',
-             '_drive_dir:=' + drive, '_rate:=2.0', '_exit_when_done:=true',
-             '_wait_for_subscribers_s:=30.0'] + ['%s:=%s' % item for item in remaps.items()])
         got = {'imu': [], 'fix': []}
-        try:
+        with synthetic_player('kitti_player_wait', 'wait', rate=2.0, exit_when_done='true',
+                              wait_for_subscribers_s=30.0) as player:
             rospy.wait_for_service('/kitti_player_wait/pause', timeout=30)
             # Without the wait the 3 frames (1 s at rate 2) would be gone by now.
             time.sleep(2.0)
@@ -197,15 +197,8 @@ class KittiPlayerTest(unittest.TestCase):
             self.assertTrue(self.wait_for(lambda: all(len(v) >= 3 for v in got.values()), 30.0),
                             {k: len(v) for k, v in got.items()})
             self.assertEqual(player.wait(timeout=30), 0)
-        finally:
-            if player.poll() is None:
-                player.terminate()
-                player.wait()
-            shutil.rmtree(root)
         for key, messages in got.items():
-            self.assertEqual([m.header.stamp.to_nsec() for m in messages],
-                             [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in range(3)],
-                             key)
+            self.assertEqual([m.header.stamp.to_nsec() for m in messages], SYNTHETIC_STAMPS, key)
 
     def test_plays_the_drive(self):
         oxts_dir = os.path.join(self.drive_dir, 'oxts')
