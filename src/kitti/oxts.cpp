@@ -113,6 +113,7 @@ std::vector<OxtsFrame> readOxtsFrames(const SensorStream& stream) {
   std::vector<OxtsFrame> frames(stream.size());
   for (std::size_t i = 0; i < frames.size(); ++i) {
     frames[i].stamp_ns = stream.stamps_ns[i];
+    frames[i].file_number = stream.file_numbers[i];
     frames[i].record = readOxtsFile(stream.framePath(i));
   }
   return frames;

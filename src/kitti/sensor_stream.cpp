@@ -35,10 +35,11 @@ std::string numberRuns(const std::vector<std::size_t>& numbers, std::size_t max_
   return text;
 }
 
-// The number of a data file named as KITTI names them (digits only), or nullopt.
+// The number of a data file named as KITTI names them (%010d), or nullopt: framePath() rebuilds
+// the name from the number, so "000001.bin" is no frame.
 std::optional<std::size_t> fileNumber(const fs::path& path) {
   const std::string stem = path.stem().string();
-  if (stem.empty() || stem.size() > 12 || !std::all_of(stem.begin(), stem.end(), [](char c) {
+  if (stem.size() != 10 || !std::all_of(stem.begin(), stem.end(), [](char c) {
         return std::isdigit(static_cast<unsigned char>(c)) != 0;
       })) {
     return std::nullopt;
@@ -104,21 +105,28 @@ SensorStream readSensorStream(const std::string& dir, const std::string& name) {
   stream.present = true;
   const std::vector<std::optional<std::int64_t>> lines = readTimestampLines(timestamps.string());
 
-  // The most common extension is the sensor's format; its files by number.
-  std::map<std::string, std::vector<std::size_t>> numbers_by_extension;
+  // The most common extension is the sensor's format; its files named as frames, by number.
+  struct Files {
+    std::size_t count = 0;  // however named
+    std::vector<std::size_t> numbers;
+    std::string example;
+  };
+  std::map<std::string, Files> by_extension;
   for (const auto& entry : fs::directory_iterator(data_dir)) {
     if (!entry.is_regular_file()) continue;
-    if (const auto number = fileNumber(entry.path())) {
-      numbers_by_extension[entry.path().extension().string()].push_back(*number);
-    }
+    Files& files = by_extension[entry.path().extension().string()];
+    ++files.count;
+    files.example = entry.path().filename().string();
+    if (const auto number = fileNumber(entry.path())) files.numbers.push_back(*number);
   }
-  std::vector<std::size_t> files;
-  for (auto& [extension, numbers] : numbers_by_extension) {
-    if (numbers.size() > files.size()) {
-      files = std::move(numbers);
+  Files data;
+  for (auto& [extension, files] : by_extension) {
+    if (files.count > data.count) {
+      data = std::move(files);
       stream.extension = extension;
     }
   }
+  std::vector<std::size_t>& files = data.numbers;
   std::sort(files.begin(), files.end());
 
   std::vector<std::size_t> dropped, without_file, without_stamp, beyond;
@@ -138,12 +146,16 @@ SensorStream readSensorStream(const std::string& dir, const std::string& name) {
   for (; file != files.end(); ++file) {
     if (*file >= lines.size()) beyond.push_back(*file);
   }
-  if (stream.stamps_ns.empty() && !files.empty()) {
-    throw KittiFormatError(dir, std::to_string(files.size()) + " files in data/ (" +
-                                    stream.extension +
-                                    ") but none numbered as a line of "
-                                    "timestamps.txt (data/%010d" +
-                                    stream.extension + ", from 0)");
+  if (stream.stamps_ns.empty() && data.count > 0) {
+    const bool no_stamp = std::none_of(lines.begin(), lines.end(),
+                                       [](const auto& stamp) { return stamp.has_value(); });
+    throw KittiFormatError(
+        no_stamp ? timestamps.string() : dir,
+        no_stamp ? "no stamp for the " + std::to_string(data.count) + " files in data/"
+                 : std::to_string(data.count) + " files in data/ (" + stream.extension + ", e.g. " +
+                       data.example +
+                       ") but none named as a line of timestamps.txt numbers it (data/%010d" +
+                       stream.extension + ", from 0)");
   }
   const auto warn = [&stream](const std::vector<std::size_t>& numbers, const std::string& why) {
     if (numbers.empty()) return;

@@ -96,6 +96,43 @@ class PoseTimeline {
   std::vector<Eigen::Isometry3d> poses_;
 };
 
+// The IMU's poses in time, for each scan to take the pose at its own stamp (the OXTS frame beside
+// a sync drive's scan is up to 20 ms off it; an _extract drive's OXTS runs at 100 Hz): the OXTS
+// solution at the OXTS stamps, or poses_path's lines at them (one per OXTS frame from the first,
+// as inekf_offline writes them). A drive without oxts/ has only the file's lines, one per velodyne
+// frame number.
+PoseTimeline imuPoses(const kitti::RawDrive& raw, const std::string& poses_path) {
+  const bool has_oxts = raw.hasOxts() && raw.oxts().size() > 0;
+  if (poses_path.empty()) {
+    if (!has_oxts) throw std::runtime_error(raw.driveDir() + ": no oxts/ frames and no poses file");
+    std::vector<Eigen::Isometry3d> poses;
+    const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
+    const auto projection = kitti::MercatorProjection::atFirstFix(oxts.front().record);
+    for (const kitti::OxtsFrame& frame : oxts) poses.push_back(projection.poseInMap(frame.record));
+    return PoseTimeline(raw.oxts().stamps_ns, std::move(poses));
+  }
+  std::vector<Eigen::Isometry3d> poses = kitti::readKittiPoses(poses_path);
+  std::vector<std::int64_t> stamps;
+  if (has_oxts) {
+    if (poses.size() > raw.oxts().size()) {
+      throw std::runtime_error(poses_path + ": " + std::to_string(poses.size()) +
+                               " poses for the " + std::to_string(raw.oxts().size()) +
+                               " frames of " + raw.oxts().dir +
+                               " (one per OXTS frame, as inekf_offline --output-kitti writes)");
+    }
+    stamps.assign(raw.oxts().stamps_ns.begin(), raw.oxts().stamps_ns.begin() + poses.size());
+    return PoseTimeline(stamps, std::move(poses));
+  }
+  std::vector<Eigen::Isometry3d> placed;
+  const kitti::SensorStream& velodyne = raw.velodyne();
+  for (std::size_t i = 0; i < velodyne.size(); ++i) {
+    if (velodyne.file_numbers[i] >= poses.size()) continue;
+    stamps.push_back(velodyne.stamps_ns[i]);
+    placed.push_back(poses[velodyne.file_numbers[i]]);
+  }
+  return PoseTimeline(stamps, std::move(placed));
+}
+
 }  // namespace
 
 std::vector<ScanFile> listScanFiles(const std::string& scans_dir, int max_scans) {
@@ -245,34 +282,12 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
   }
   const kitti::RawCalibration calibration = raw.readCalibration();
   const Eigen::Isometry3d T_imu_velo = calibration.T_velo_imu.inverse();
-  // The IMU's poses at the OXTS frames' stamps: each scan takes the pose at its own stamp (the
-  // OXTS frame beside a sync scan is up to 20 ms off it; an _extract drive's OXTS runs at 100 Hz).
-  if (!raw.hasOxts() || raw.oxts().size() == 0) {
-    throw std::runtime_error(drive.drive_dir + ": no oxts/ frames (their stamps place the " +
-                             (drive.poses_path.empty() ? "OXTS poses" : drive.poses_path) +
-                             " in time)");
-  }
-  std::vector<Eigen::Isometry3d> T_map_imu;
-  if (!drive.poses_path.empty()) {
-    T_map_imu = kitti::readKittiPoses(drive.poses_path);
-    if (T_map_imu.size() != raw.oxts().size()) {
-      throw std::runtime_error(drive.poses_path + ": " + std::to_string(T_map_imu.size()) +
-                               " poses for the " + std::to_string(raw.oxts().size()) +
-                               " frames of " + raw.oxts().dir +
-                               " (one per OXTS frame, as inekf_offline --output-kitti writes)");
-    }
-  } else {
-    const std::vector<kitti::OxtsFrame> oxts = raw.readOxts();
-    const auto projection = kitti::MercatorProjection::atFirstFix(oxts.front().record);
-    for (const kitti::OxtsFrame& frame : oxts) {
-      T_map_imu.push_back(projection.poseInMap(frame.record));
-    }
-  }
-  const PoseTimeline timeline(raw.oxts().stamps_ns, std::move(T_map_imu));
+  const PoseTimeline timeline = imuPoses(raw, drive.poses_path);
   const std::string poses_source =
       drive.poses_path.empty() ? drive.drive_dir + "/oxts" : drive.poses_path;
   const kitti::SensorStream& images = raw.camera(drive.camera_index);
   const kitti::CameraProjection projection = calibration.projection(drive.camera_index);
+  std::size_t visited = 0;
   for (std::size_t frame = 0; frame < frames; ++frame) {
     const std::int64_t stamp_ns = velodyne.stamps_ns[frame];
     const std::optional<Eigen::Isometry3d> T_map_imu_at_scan = timeline.poseAt(stamp_ns);
@@ -284,6 +299,7 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
       }
       continue;
     }
+    ++visited;
     kitti::VelodyneScan scan_data;
     {
       ScopedTimer timer("offline/read");
@@ -306,6 +322,10 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
                                e.what());
     }
   }
+  if (visited == 0) {
+    throw std::runtime_error(drive.drive_dir + ": none of the " + std::to_string(frames) +
+                             " scans has a pose in " + poses_source + " at its stamp");
+  }
 }
 
 void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
@@ -315,6 +335,9 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
       [&](const RawDriveScan& scan) {
         OwnedLabelImage image;
         std::string evidence = "no labels";
+        if (camera_labels && scan.image_stem.empty()) {
+          evidence = "no labels: no camera image within 50 ms of its stamp";
+        }
         if (camera_labels && !scan.image_stem.empty() &&
             (*camera_labels)(scan.image_stem, &image)) {
           const LabelImageView view{image.pixels.data(), image.width, image.height,

@@ -22,7 +22,8 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->read("publish_clock", &options.publish_clock);
   reader->read("exit_when_done", &options.exit_when_done);
   reader->read("paused", &options.paused);
-  reader->read("wait_for_subscribers_s", &options.wait_for_subscribers_s);
+  // An hour is beyond any start-up; far more overflows ros::WallDuration.
+  reader->readInRange("wait_for_subscribers_s", &options.wait_for_subscribers_s, 0.0, 3600.0);
   reader->read("publish_velodyne", &options.timeline.velodyne);
   reader->read("publish_camera", &options.timeline.cameras[2]);
   kitti::GpsDegradationOptions& gps = options.gps;
@@ -47,8 +48,6 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->rejectUnknown();
   if (options.drive_dir.empty()) reader->fail("drive_dir", "is required (a <date>_drive_<n>_sync)");
   if (!(options.rate > 0)) reader->fail("rate", "must be > 0");
-  if (!(options.wait_for_subscribers_s >= 0))
-    reader->fail("wait_for_subscribers_s", "must be >= 0");
   return options;
 }
 

@@ -90,16 +90,19 @@ void addOutput(ism::common::AtomicFileSet* outputs, const std::string& path,
 
 // The scan file of each OXTS frame in dir (%010d.bin, else .txt); a missing one is an error
 // naming it.
-std::vector<std::string> scanPaths(const std::string& dir, std::size_t frames) {
+// The scan of each OXTS frame: the velodyne file of the same number (a sync drive's frames share
+// it; by index, every frame after one the recorder dropped took the next frame's scan).
+std::vector<std::string> scanPaths(const std::string& dir,
+                                   const std::vector<ism::kitti::OxtsFrame>& frames) {
   namespace fs = std::filesystem;
   if (!fs::is_directory(dir)) {
     throw ism::common::UsageError("--loop-closure: the scan folder " + dir +
                                   " does not exist (give --scans DIR)");
   }
-  std::vector<std::string> paths(frames);
-  for (std::size_t k = 0; k < frames; ++k) {
+  std::vector<std::string> paths(frames.size());
+  for (std::size_t k = 0; k < frames.size(); ++k) {
     char name[32];
-    std::snprintf(name, sizeof(name), "%010zu", k);
+    std::snprintf(name, sizeof(name), "%010zu", frames[k].file_number);
     const fs::path base = fs::path(dir) / name;
     for (const char* extension : {".bin", ".txt"}) {
       const fs::path candidate = base.string() + extension;
@@ -109,7 +112,7 @@ std::vector<std::string> scanPaths(const std::string& dir, std::size_t frames) {
       }
     }
     if (paths[k].empty()) {
-      throw std::runtime_error("--loop-closure: no scan for OXTS frame " + std::to_string(k) +
+      throw std::runtime_error("--loop-closure: no scan for OXTS frame " + std::string(name) +
                                ": " + base.string() + ".bin is missing");
     }
   }
@@ -210,7 +213,7 @@ int main(int argc, char** argv) {
       const std::string scans_dir = cli.has("--scans")
                                         ? cli.get("--scans")
                                         : (drive_dir / "velodyne_points" / "data").string();
-      scan_paths = scanPaths(scans_dir, frames.size());
+      scan_paths = scanPaths(scans_dir, frames);
       // The raw calibration: the date folder's (KITTI's layout), else the drive folder's.
       std::string calib_dir;
       for (const fs::path& dir : {drive_dir.parent_path(), drive_dir}) {

@@ -145,15 +145,23 @@ TEST(KittiOxts, BadLinesNameFileLineAndField) {
 TEST(KittiOxts, AFrameWithoutItsFileIsLeftOutAndNamed) {
   const std::string dir = makeTempDir("kitti_oxts_count");
   writeFile(dir + "/oxts/data/0000000000.txt", std::string(kLine0001Frame0) + "\n");
+  writeFile(dir + "/oxts/data/0000000002.txt", std::string(kLine0001Frame0) + "\n");
   writeFile(dir + "/oxts/timestamps.txt",
-            "2011-09-26 13:02:25.964389445\n2011-09-26 13:02:26.074347616\n");
+            "2011-09-26 13:02:25.964389445\n2011-09-26 13:02:26.074347616\n"
+            "2011-09-26 13:02:26.184347616\n");
   std::vector<std::string> warnings;
-  ASSERT_EQ(readOxtsFolder(dir + "/oxts", &warnings).size(), 1u);
+  const std::vector<OxtsFrame> frames = readOxtsFolder(dir + "/oxts", &warnings);
+  ASSERT_EQ(frames.size(), 2u);
+  // The frame after the missing one keeps its own number: its scan is the file of that number
+  // (inekf_offline --loop-closure paired OXTS frame k with scan k).
+  EXPECT_EQ(frames[1].file_number, 2u);
+  EXPECT_EQ(frames[1].stamp_ns, parseKittiTimestampNs("2011-09-26 13:02:26.184347616"));
   const std::string expected = dir + "/oxts: frame 1 left out: in timestamps.txt but no data/ file";
   EXPECT_EQ(warnings, std::vector<std::string>{expected});
   EXPECT_EQ(RawDrive(dir).frameWarnings(), std::vector<std::string>{expected});
   // No frames at all: named here, not as "runLocalizerOnOxts: no OXTS frames" later.
   fs::remove(dir + "/oxts/data/0000000000.txt");
+  fs::remove(dir + "/oxts/data/0000000002.txt");
   writeFile(dir + "/oxts/timestamps.txt", "");
   expectFormatError([&] { readOxtsFolder(dir + "/oxts"); }, {dir + "/oxts", "no frames"});
   fs::remove_all(dir);
@@ -213,7 +221,16 @@ TEST(KittiSensorStream, FilesNumberedOtherwiseAreAnErrorNamingTheFolder) {
   writeFile(dir + "/data/0000000010.png", "");
   writeFile(dir + "/data/0000000011.png", "");
   expectFormatError([&] { readSensorStream(dir, "image_02"); },
-                    {dir, "2 files in data/ (.png) but none numbered as a line"});
+                    {dir, "2 files in data/ (.png, e.g. 00000000", "none named as a line"});
+  // Named with 6 digits (the odometry benchmark's way): no frame of a raw drive.
+  fs::remove_all(dir + "/data");
+  writeFile(dir + "/data/000000.png", "");
+  writeFile(dir + "/data/000001.png", "");
+  expectFormatError([&] { readSensorStream(dir, "image_02"); }, {dir, "e.g. 00000"});
+  // Files but no stamp at all: timestamps.txt is named, not the files.
+  writeFile(dir + "/timestamps.txt", "\n\n");
+  expectFormatError([&] { readSensorStream(dir, "image_02"); },
+                    {dir + "/timestamps.txt", "no stamp for the 2 files in data/"});
   // A folder without data/ is no sensor at all.
   EXPECT_FALSE(readSensorStream(dir + "/none", "image_03").present);
   fs::remove_all(fs::path(dir).parent_path());

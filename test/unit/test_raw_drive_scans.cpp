@@ -243,6 +243,60 @@ TEST(RawDriveScans, AScanWithoutAPoseNearItsStampIsLeftOutAndNamed) {
   fs::remove_all(fs::path(date_dir).parent_path());
 }
 
+// Nothing mapped is an error, not an empty map written with exit status 0.
+TEST(RawDriveScans, NoScanWithAPoseIsAnError) {
+  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
+  const std::string drive_dir = date_dir + "/2011_09_26_drive_0003_sync";
+  writeCalibration(date_dir);
+  writeOxts(drive_dir + "/oxts", evenTimes(5, 0.1));
+  writeSensor(drive_dir + "/velodyne_points", evenTimes(3, 0.1, 600.0), ".bin", std::string(16, 0));
+  OfflineRawDrive drive;
+  drive.drive_dir = drive_dir;
+  std::string warnings;
+  try {
+    visitAll(drive, &warnings);
+    ADD_FAILURE() << "a drive without a posed scan was visited";
+  } catch (const std::runtime_error& error) {
+    EXPECT_NE(std::string(error.what()).find("none of the 3 scans has a pose in"),
+              std::string::npos)
+        << error.what();
+  }
+  fs::remove_all(fs::path(date_dir).parent_path());
+}
+
+// A poses file of the drive's first OXTS frames places the scans it covers; a drive without
+// oxts/ takes one pose per velodyne frame number.
+TEST(RawDriveScans, APosesFileCoversWhatItHas) {
+  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
+  const std::string drive_dir = date_dir + "/2011_09_26_drive_0004_sync";
+  writeCalibration(date_dir);
+  const std::vector<double> times = evenTimes(6, 0.1);
+  writeOxts(drive_dir + "/oxts", times);
+  std::vector<double> scan_times = times;
+  scan_times[1] = -1;  // dropped
+  writeSensor(drive_dir + "/velodyne_points", scan_times, ".bin", std::string(16, 0));
+  std::string poses;
+  for (int k = 0; k < 4; ++k) poses += "1 0 0 " + std::to_string(k) + " 0 1 0 0 0 0 1 0\n";
+  writeFile(date_dir + "/poses.txt", poses);
+  OfflineRawDrive drive;
+  drive.drive_dir = drive_dir;
+  drive.poses_path = date_dir + "/poses.txt";
+  std::string warnings;
+  std::vector<Visited> visited = visitAll(drive, &warnings);
+  ASSERT_EQ(visited.size(), 3u) << warnings;  // frames 0, 2, 3; 4 and 5 beyond the file
+  for (const Visited& scan : visited) {
+    EXPECT_NEAR(scan.position.x(), std::stod(scan.stem), 1e-9) << scan.stem;
+  }
+  EXPECT_NE(warnings.find(frameName(4) + ".bin: no pose in"), std::string::npos) << warnings;
+  fs::remove_all(drive_dir + "/oxts");
+  visited = visitAll(drive, &warnings);
+  ASSERT_EQ(visited.size(), 3u) << warnings;
+  for (const Visited& scan : visited) {
+    EXPECT_NEAR(scan.position.x(), std::stod(scan.stem), 1e-9) << scan.stem;
+  }
+  fs::remove_all(fs::path(date_dir).parent_path());
+}
+
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

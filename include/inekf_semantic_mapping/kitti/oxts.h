@@ -1,6 +1,7 @@
 // OXTS RT3003 GPS/IMU records of KITTI raw drives (oxts/dataformat.txt).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -26,6 +27,9 @@ struct OxtsRecord {
 
 struct OxtsFrame {
   std::int64_t stamp_ns = 0;  // from oxts/timestamps.txt
+  // Its data file's number, which a sync drive's scan and images of the same frame share (a
+  // frame the recorder dropped leaves a number out).
+  std::size_t file_number = 0;
   OxtsRecord record;
   double stampSeconds() const { return static_cast<double>(stamp_ns) * 1e-9; }
 };
