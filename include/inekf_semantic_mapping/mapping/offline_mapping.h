@@ -60,8 +60,9 @@ CameraModel odometryColorCamera(const std::string& calib_path, int width, int he
 struct OfflineRawDrive {
   std::string drive_dir;
   std::string calib_dir;   // "" = the drive's date folder
-  std::string poses_path;  // IMU poses in the map frame, one 3x4 per OXTS frame (inekf_offline
-                           // --output-kitti); "" = the OXTS RTK/INS solution
+  std::string poses_path;  // IMU poses in the map frame, one 3x4 per OXTS frame from the first
+                           // (inekf_offline --output-kitti; without oxts/: per velodyne frame
+                           // number); "" = the OXTS RTK/INS solution
   int camera_index = 2;
   int max_scans = -1;  // < 0: all (0 is refused)
   // Called after each scan went in, with its lidar pose (e.g. the grids' GroundTrace).
