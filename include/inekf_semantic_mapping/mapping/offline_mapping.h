@@ -87,8 +87,8 @@ using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
 // stamp (interpolated between the OXTS frames around it). A scan more than 50 ms outside the OXTS
 // frames' span, or in a gap of more than 0.5 s between two of them, is left out with a warning,
 // as are the frames the drive lacks (RawDrive::frameWarnings); warnings go to `warnings` when
-// given. Throws on missing inputs (the message names the folder or file);
-// an std::out_of_range from `visit` becomes an error naming the frame's pose.
+// given. Throws on missing inputs (the message names the folder or file) and when no scan has a
+// pose; an std::out_of_range from `visit` becomes an error naming the frame's pose.
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
                          std::ostream* warnings = nullptr);
 
