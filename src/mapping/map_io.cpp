@@ -37,14 +37,6 @@ void writeAtomically(const std::string& path, const std::function<void(std::ostr
   }
 }
 
-std::size_t countOccupiedLeaves(const SemanticOcTree& tree) {
-  std::size_t count = 0;
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    if (tree.isNodeOccupied(*it)) ++count;
-  }
-  return count;
-}
-
 // A ColorOcTree that can be built as a node-by-node mirror of a SemanticOcTree (same structure
 // and occupancy, color = palette color of the most likely class).
 class MirrorColorOcTree : public octomap::ColorOcTree {
@@ -109,14 +101,14 @@ std::size_t saveMapInto(SemanticOcTree& tree, const std::string& path, MapFormat
     case MapFormat::kSemanticOt: {
       writeAtomically(
           path, [&](std::ostream& out) { tree.write(out); }, set);
-      return countOccupiedLeaves(tree);
+      return countOccupiedFinestVoxels(tree);
     }
     case MapFormat::kColorOt: {
       MirrorColorOcTree color(tree.getResolution());
       color.mirror(tree);
       writeAtomically(
           path, [&](std::ostream& out) { color.write(out); }, set);
-      return countOccupiedLeaves(tree);
+      return countOccupiedFinestVoxels(tree);
     }
     case MapFormat::kPly: {
       const std::size_t vertex_count = countOccupiedFinestVoxels(tree);

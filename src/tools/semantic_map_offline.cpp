@@ -374,15 +374,12 @@ int main(int argc, char** argv) {
     // The insertion grid's figures were printed when its map moved into the tree (mapRawDrive,
     // mapSequence): the session holds the tree alone now.
     std::cerr << "[semantic_map_offline] wrote " << output << " (" << session.tree().size()
-              << " nodes, " << counts[0] << " occupied leaves, " << session.tree().classSet().size()
+              << " nodes, " << counts[0] << " occupied voxels, " << session.tree().classSet().size()
               << " classes, " << session.tree().memoryUsage() / 1e6
               << " MB in memory; the session's map structures " << session.mapMemoryUsage() / 1e6
               << " MB)\n";
     for (std::size_t i = 1; i < outputs.size(); ++i) {
-      std::cerr << "[semantic_map_offline] wrote " << outputs[i].first;
-      if (outputs[i].second == mapping::MapFormat::kPly)
-        std::cerr << " (" << counts[i] << " occupied voxels)";
-      std::cerr << "\n";
+      std::cerr << "[semantic_map_offline] wrote " << outputs[i].first << "\n";
     }
     if (cli.has("--grid")) {
       mapping::ProjectedGrids grids;

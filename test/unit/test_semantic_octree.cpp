@@ -489,6 +489,10 @@ TEST(SemanticOcTreeIo, PlyListsEveryOccupiedFinestVoxelWithItsLabel) {
   const std::string dir = test::makeTempDir("semantic_octree_ply");
   const std::string path = dir + "/map.ply";
   EXPECT_EQ(saveMap(tree, path, MapFormat::kPly), 9u);
+  // Every format counts the map's voxels, not its stored leaves (the .ot said 2, the .ply 9:
+  // save_map gave another count for the same map by the format asked for).
+  EXPECT_EQ(saveMap(tree, dir + "/map.ot", MapFormat::kSemanticOt), 9u);
+  EXPECT_EQ(saveMap(tree, dir + "/map_color.ot", MapFormat::kColorOt), 9u);
   std::ifstream in(path);
   std::string line;
   std::vector<std::string> header;

@@ -29,8 +29,9 @@ enum class MapFormat {
 // "ot" | "color_ot" | "ply"; empty: from the extension (.ply -> ply, else ot). Throws MapIoError.
 MapFormat parseMapFormat(const std::string& format, const std::string& path);
 
-// Writes `tree` in `format` to `path`; returns the number of occupied leaves written (finest
-// resolution for PLY, leaf nodes as stored for the octree formats). Refreshes inner nodes first.
+// Writes `tree` in `format` to `path`; returns the map's occupied voxels at the finest resolution
+// (the same for every format; an .ot stores 8 equal ones as one pruned leaf). Refreshes inner
+// nodes first.
 std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format);
 // Several formats of one map (a tool's --output, --export-ply, --color-ot) as a set: all are
 // written, or none replaces its target. Returns saveMap's count for each.
