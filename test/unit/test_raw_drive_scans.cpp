@@ -87,6 +87,17 @@ void writeCalibration(const std::string& date_dir) {
             "R_rect_02: 1 0 0 0 1 0 0 0 1\nP_rect_02: 700 0 600 0 0 700 180 0 0 0 1 0\n");
 }
 
+// A drive folder NAME in a date folder with its calibration, in a temporary folder removed at the
+// end of the test.
+struct ScratchDrive {
+  explicit ScratchDrive(const std::string& name)
+      : date_dir(makeTempDir("raw_drive_scans") + "/2011_09_26"), drive_dir(date_dir + "/" + name) {
+    writeCalibration(date_dir);
+  }
+  ~ScratchDrive() { fs::remove_all(fs::path(date_dir).parent_path()); }
+  std::string date_dir, drive_dir;
+};
+
 std::vector<double> evenTimes(std::size_t count, double step_s, double offset_s = 0.0) {
   std::vector<double> times;
   for (std::size_t i = 0; i < count; ++i) times.push_back(offset_s + step_s * i);
@@ -136,9 +147,8 @@ Eigen::Vector3d truePosition(double t_s, double first_s = 0.0) {
 // An _extract drive: OXTS at 100 Hz, scans as text at 10 Hz, numbered apart from the OXTS. By
 // frame number the scan at 0.3 s took the OXTS pose at 0.03 s, 2 m from where it was.
 TEST(RawDriveScans, AnExtractDrivesScansTakeThePoseAtTheirOwnStamp) {
-  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
-  const std::string drive_dir = date_dir + "/2011_09_26_drive_0001_extract";
-  writeCalibration(date_dir);
+  const ScratchDrive scratch("2011_09_26_drive_0001_extract");
+  const std::string& drive_dir = scratch.drive_dir;
   writeOxts(drive_dir + "/oxts", evenTimes(61, 0.01));
   const std::vector<double> scan_times = evenTimes(6, 0.1, 0.004);
   writeSensor(drive_dir + "/velodyne_points", scan_times, ".txt", "1 2 3 0.5\n4 5 6 0.25\n");
@@ -159,15 +169,14 @@ TEST(RawDriveScans, AnExtractDrivesScansTakeThePoseAtTheirOwnStamp) {
   }
   EXPECT_GT((truePosition(0.304) - truePosition(0.03)).norm(), 1.9);
   EXPECT_EQ(warnings, "");
-  fs::remove_all(fs::path(date_dir).parent_path());
 }
 
 // The recorder dropped velodyne frames 2-3 (blank lines, no files) and camera frame 4: every
 // other scan keeps its own stamp, pose and image, and the gaps are named.
 TEST(RawDriveScans, DroppedFramesLeaveTheOthersWithTheirOwnStampsAndImages) {
-  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
-  const std::string drive_dir = date_dir + "/2011_09_26_drive_0009_sync";
-  writeCalibration(date_dir);
+  const ScratchDrive scratch("2011_09_26_drive_0009_sync");
+  const std::string& date_dir = scratch.date_dir;
+  const std::string& drive_dir = scratch.drive_dir;
   const std::vector<double> oxts_times = evenTimes(8, 0.1, 0.017);
   writeOxts(drive_dir + "/oxts", oxts_times);
   std::vector<double> scan_times = evenTimes(8, 0.1);
@@ -222,15 +231,13 @@ TEST(RawDriveScans, DroppedFramesLeaveTheOthersWithTheirOwnStampsAndImages) {
   writeFile(date_dir + "/poses.txt", poses + poses);
   const std::string error = visitError(drive);
   EXPECT_NE(error.find("16 poses for the 8 frames of"), std::string::npos) << error;
-  fs::remove_all(fs::path(date_dir).parent_path());
 }
 
 // A scan outside the OXTS frames' span, or inside a long OXTS gap, has no pose: it is left out
 // with a warning rather than put at the nearest frame's pose seconds away.
 TEST(RawDriveScans, AScanWithoutAPoseNearItsStampIsLeftOutAndNamed) {
-  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
-  const std::string drive_dir = date_dir + "/2011_09_26_drive_0002_sync";
-  writeCalibration(date_dir);
+  const ScratchDrive scratch("2011_09_26_drive_0002_sync");
+  const std::string& drive_dir = scratch.drive_dir;
   writeOxts(drive_dir + "/oxts", {0.0, 0.1, 0.2, 1.5, 1.6});
   writeSensor(drive_dir + "/velodyne_points", {0.05, 0.8, 1.55, 1.7}, ".bin", std::string(16, 0));
   OfflineRawDrive drive;
@@ -246,29 +253,26 @@ TEST(RawDriveScans, AScanWithoutAPoseNearItsStampIsLeftOutAndNamed) {
               std::string::npos)
         << warnings;
   }
-  fs::remove_all(fs::path(date_dir).parent_path());
 }
 
 // Nothing mapped is an error, not an empty map written with exit status 0.
 TEST(RawDriveScans, NoScanWithAPoseIsAnError) {
-  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
-  const std::string drive_dir = date_dir + "/2011_09_26_drive_0003_sync";
-  writeCalibration(date_dir);
+  const ScratchDrive scratch("2011_09_26_drive_0003_sync");
+  const std::string& drive_dir = scratch.drive_dir;
   writeOxts(drive_dir + "/oxts", evenTimes(5, 0.1));
   writeSensor(drive_dir + "/velodyne_points", evenTimes(3, 0.1, 600.0), ".bin", std::string(16, 0));
   OfflineRawDrive drive;
   drive.drive_dir = drive_dir;
   const std::string error = visitError(drive);
   EXPECT_NE(error.find("none of the 3 scans has a pose in"), std::string::npos) << error;
-  fs::remove_all(fs::path(date_dir).parent_path());
 }
 
 // A poses file of the drive's first OXTS frames places the scans it covers; a drive without
 // oxts/ takes one pose per velodyne frame number.
 TEST(RawDriveScans, APosesFileCoversWhatItHas) {
-  const std::string date_dir = makeTempDir("raw_drive_scans") + "/2011_09_26";
-  const std::string drive_dir = date_dir + "/2011_09_26_drive_0004_sync";
-  writeCalibration(date_dir);
+  const ScratchDrive scratch("2011_09_26_drive_0004_sync");
+  const std::string& date_dir = scratch.date_dir;
+  const std::string& drive_dir = scratch.drive_dir;
   const std::vector<double> times = evenTimes(6, 0.1);
   writeOxts(drive_dir + "/oxts", times);
   std::vector<double> scan_times = times;
@@ -293,7 +297,6 @@ TEST(RawDriveScans, APosesFileCoversWhatItHas) {
   for (const Visited& scan : visited) {
     EXPECT_NEAR(scan.position.x(), std::stod(scan.stem), 1e-9) << scan.stem;
   }
-  fs::remove_all(fs::path(date_dir).parent_path());
 }
 
 }  // namespace
