@@ -193,6 +193,10 @@ def parse_args(argv=None):
                         "(stochastic weight averaging); the mean competes with the best "
                         "validated step on the held-out frames (0: off)")
     p.add_argument("--val-interval", type=float, default=5.0, help="minutes between validations")
+    p.add_argument("--keep", default="best", choices=["best", "last"],
+                   help="which weights are exported: the best validated (the base network "
+                        "itself when no step beats it on the held-out frames) or the last step's "
+                        "(their mean with --average-weights), whatever the validation says")
     p.add_argument("--gamma", type=float, default=0.7, help="the card's tone curve")
     p.add_argument("--no-standardize", action="store_true",
                    help="no per-image colour standardisation in the card")
@@ -639,6 +643,29 @@ def validate_and_keep(model, torch, val, step, history, best, best_path):
     return best
 
 
+def keep_last_weights(model, torch, last_scores, averaged, best_path):
+    """--keep last: saves the model's weights as best_path whatever the validation said (the last
+    step's, or their mean, which keep_average_if_better has loaded, when they were averaged);
+    returns their scores."""
+    torch.save(model.state_dict(), best_path)
+    return averaged if averaged is not None else last_scores
+
+
+def kept_weights_note(best, steps, base_miou):
+    """The log line naming the weights that are exported; a warning when a run that trained
+    exports the base network unchanged because no validated step beat it."""
+    if best.get("steps_averaged"):
+        return (f"kept the mean of the last {best['steps_averaged']} steps' weights (validation "
+                f"mIoU {best['miou']:.4f})")
+    note = f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})"
+    if best["step"] == 0 and steps > 0:
+        note += (f"\nWARNING: none of the {steps} steps beat the base network on the held-out "
+                 f"frames (validation mIoU {base_miou:.4f}): the exported model is the base "
+                 "network as it came. Train longer (--minutes, --max-steps), or export the last "
+                 "step's weights anyway with --keep last.")
+    return note
+
+
 def keep_average_if_better(model, torch, val, averager, step, best, best_path, averaged_path):
     """Loads the averaged weights into the model, saves them to averaged_path, scores them on the
     validation samples and, when they beat the best step, saves them as best_path too. Returns
@@ -1017,13 +1044,11 @@ def main(argv=None):
         best, averaged = keep_average_if_better(model, torch, val, averager, step, best,
                                                 best_path,
                                                 os.path.join(args.output, "averaged.pt"))
+    if args.keep == "last":
+        best = keep_last_weights(model, torch, history["val"][-1], averaged, best_path)
     model.load_state_dict(torch.load(best_path, map_location="cpu"))
     model.to("cpu").eval()
-    if best.get("steps_averaged"):
-        log(f"kept the mean of the last {best['steps_averaged']} steps' weights (validation mIoU "
-            f"{best['miou']:.4f})")
-    else:
-        log(f"kept the weights of step {best['step']} (validation mIoU {best['miou']:.4f})")
+    log(kept_weights_note(best, step, history["val"][0]["miou"]))
 
     import onnx_export
 

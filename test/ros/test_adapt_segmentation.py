@@ -747,6 +747,34 @@ class WeightAveraging(unittest.TestCase):
         finally:
             adapt.validate = real_validate
 
+    def test_keep_last_exports_the_last_weights_even_when_a_step_validated_better(self):
+        import torch
+        import adapt_segmentation as adapt
+
+        model = torch.nn.Linear(1, 1, bias=False)
+        with torch.no_grad():
+            model.weight.fill_(0.5)
+        best_path = os.path.join(tempfile.mkdtemp(prefix="ism_keep_"), "best.pt")
+        torch.save({"weight": torch.full((1, 1), 0.3)}, best_path)  # a better step's
+        last = {"step": 9, "miou": 0.1}
+        self.assertIs(adapt.keep_last_weights(model, torch, last, None, best_path), last)
+        self.assertAlmostEqual(torch.load(best_path)["weight"].item(), 0.5, places=6)
+        averaged = {"step": 9, "steps_averaged": 4, "miou": 0.2}
+        self.assertIs(adapt.keep_last_weights(model, torch, last, averaged, best_path), averaged)
+
+    def test_a_run_that_kept_the_base_network_says_so_and_how_to_avoid_it(self):
+        import adapt_segmentation as adapt
+
+        note = adapt.kept_weights_note({"step": 0, "miou": 0.4252}, 300, 0.4252)
+        self.assertIn("kept the weights of step 0", note)
+        self.assertIn("WARNING: none of the 300 steps beat the base network", note)
+        self.assertIn("--keep last", note)
+        # A step that beat it, or no training at all (--minutes 0), is no warning.
+        self.assertNotIn("WARNING", adapt.kept_weights_note({"step": 300, "miou": 0.43}, 300, 0.42))
+        self.assertNotIn("WARNING", adapt.kept_weights_note({"step": 0, "miou": 0.42}, 0, 0.42))
+        self.assertIn("mean of the last 4 steps", adapt.kept_weights_note(
+            {"step": 9, "steps_averaged": 4, "miou": 0.2}, 9, 0.1))
+
     def test_a_fraction_outside_zero_to_one_is_refused_naming_the_option(self):
         import adapt_segmentation as adapt
 
@@ -1522,7 +1550,7 @@ class TinyPipeline(unittest.TestCase):
                    "--input", "512x160", "--export-input", "416x128", "--crop", "128x256",
                    "--batch", "2", "--interpolate", "0.5,1", "--average-weights", "0.7",
                    "--sparse-sequences", "01", "--val-sequence", "06", "--dense-val-every", "2",
-                   "--teacher-store", "disk"]
+                   "--teacher-store", "disk", "--keep", "last"]
         result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True, timeout=600)
         print(result.stdout[-3000:])
@@ -1548,6 +1576,9 @@ class TinyPipeline(unittest.TestCase):
         self.assertIn(summary["interpolation"]["chosen"], (0.5, 1.0))
         # Steps 2 and 3 of 3 lie in the last 70 % of the budget; their mean was scored.
         self.assertEqual(summary["averaged"]["steps_averaged"], 2)
+        # --keep last: that mean is exported whatever the validation said of it.
+        self.assertEqual(summary["best_validation"].get("steps_averaged"), 2)
+        self.assertIn("kept the mean of the last 2 steps' weights", result.stdout)
         self.assertTrue(os.path.exists(os.path.join(out, "averaged.pt")))
 
         # The C++ Segmenter, with the card the script wrote, against PyTorch on a held-out image
