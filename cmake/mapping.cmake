@@ -96,6 +96,7 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/semantic_octomap_nodelet_shutdown_save.test
               DEPENDENCIES ${PROJECT_NAME}_nodelets)
   add_rostest(test/ros/semantic_octomap_grids.test DEPENDENCIES semantic_octomap_node)
+  add_rostest(test/ros/semantic_octomap_clock_stopped.test DEPENDENCIES semantic_octomap_node)
 endif()
 
 # Bad values in KITTI, calibration and pose files (regressions of the fault-injection findings).

@@ -174,6 +174,19 @@ std::size_t ScanLabelPairing::flush(const Insert& insert) {
   return inserted;
 }
 
+std::size_t ScanLabelPairing::insertWithoutWaiting(const Insert& insert) {
+  std::size_t inserted = 0;
+  for (auto it = scans_.begin(); it != scans_.end();) {
+    if (insert(*it)) {
+      ++inserted;
+      it = scans_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  return inserted;
+}
+
 void ScanLabelPairing::keepForLateLabels(InsertedScan scan) {
   const double oldest_kept = scan.stamp - kLateLabelWindow_s;
   unlabelled_scans_.push_back(std::move(scan));

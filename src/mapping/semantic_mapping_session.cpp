@@ -315,6 +315,13 @@ std::size_t SemanticMappingSession::flush() {
   return taken - (statistics_.scans_rejected - rejected);
 }
 
+std::size_t SemanticMappingSession::insertWithoutWaiting() {
+  const std::size_t rejected = statistics_.scans_rejected;
+  const std::size_t taken = pairing_.insertWithoutWaiting(
+      [this](PendingScan& scan) { return insertOrReject(scan, /*may_wait=*/false); });
+  return taken - (statistics_.scans_rejected - rejected);
+}
+
 bool SemanticMappingSession::insertOrReject(PendingScan& scan, bool may_wait) {
   try {
     return insertWhenReady(scan, may_wait);

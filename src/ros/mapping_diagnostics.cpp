@@ -1,5 +1,7 @@
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
+#include <cstdio>
+#include <optional>
 #include <utility>
 
 namespace inekf_semantic_mapping {
@@ -46,6 +48,14 @@ void MappingMonitor::noteInserted(double stamp_s, double wall_s) {
 
 void MappingMonitor::noteLabelImage(double wall_s) { last_label_wall_s_ = wall_s; }
 
+double MappingMonitor::oldestWaitS(const mapping::SemanticMappingSession& session,
+                                   double wall_s) const {
+  const std::optional<double> stamp = session.oldestPendingStamp();
+  if (!stamp) return 0.0;
+  const auto arrival = arrival_wall_s_.find(*stamp);
+  return arrival == arrival_wall_s_.end() ? 0.0 : wall_s - arrival->second;
+}
+
 void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, const SaveRecord& save,
                              const SaveRecord& autosave, double wall_s,
                              diagnostic_updater::DiagnosticStatusWrapper* status) {
@@ -59,6 +69,16 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
     level = DiagnosticStatus::WARN;
     message = "falling behind: insertion latency p95 above " +
               std::to_string(options_.max_latency_warn_s) + " s";
+  }
+  const double waited_s = oldestWaitS(session, wall_s);
+  if (waited_s > options_.max_latency_warn_s) {
+    level = DiagnosticStatus::WARN;
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "%zu scans waiting for %.0f s (for their pose in tf, or their label images "
+                  "while the clock runs)",
+                  session.pendingScans(), waited_s);
+    message = text;
   }
   if ((save.wall_s >= 0 && !save.ok) || (autosave.wall_s >= 0 && !autosave.ok)) {
     level = DiagnosticStatus::WARN;
@@ -74,6 +94,7 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
   status->add("scans received", stats.scans_received);
   status->add("scans inserted", stats.scans_inserted);
   status->add("pending scans", session.pendingScans());
+  status->addf("oldest pending scan waiting (s)", "%.1f", waited_s);
   status->add("scans without pose", stats.scans_without_pose);
   status->add("scans rejected by the map", stats.scans_rejected);
   status->addf("insertion latency p50 (s)", "%.3f", scans_inserted_.percentile(0.5));

@@ -32,6 +32,10 @@ namespace {
 // A scan this far from the clock is not late or early: the clock is another time than the data's
 // (a working pipeline's scans arrive within seconds of their stamps).
 constexpr double kClockMismatchWarnS = 60.0;
+// Wall seconds without the clock moving after which scans stop waiting for their label images:
+// at the end of a bag (or while it is paused) data time stands still and would hold the last
+// second of scans out of the map, and out of a save_map, until shutdown.
+constexpr double kClockStoppedInsertS = 2.0;
 
 // The node's own keys (display, frames, calibration); the rest belong to the session.
 struct NodeOptions {
@@ -216,10 +220,33 @@ class SemanticOctomapNodeCore::Impl {
   void onTick(const ros::WallTimerEvent&) {
     try {
       detectClockJump();
-      session_->advanceTo(ros::Time::now().toSec());
+      const ros::Time now = ros::Time::now();
+      session_->advanceTo(now.toSec());
+      insertIfClockStopped(now);
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: inserting pending scans: " << e.what());
     }
+  }
+
+  void insertIfClockStopped(const ros::Time& now) {
+    const double wall_s = wallNow();
+    if (now != clock_at_last_move_) {
+      clock_at_last_move_ = now;
+      clock_moved_wall_s_ = wall_s;
+      return;
+    }
+    if (wall_s - clock_moved_wall_s_ < kClockStoppedInsertS || session_->pendingScans() == 0) {
+      return;
+    }
+    const std::size_t waiting = session_->pendingScans();
+    const std::size_t inserted = session_->insertWithoutWaiting();
+    if (inserted == 0) return;  // they wait for their pose (the map diagnostics say so)
+    ROS_INFO_STREAM("semantic_octomap_node: the clock has stood at "
+                    << now << " for " << std::fixed << std::setprecision(1)
+                    << wall_s - clock_moved_wall_s_
+                    << " s (the bag ended or is paused): " << inserted << " of " << waiting
+                    << " waiting scans put in the map without waiting longer for their label "
+                       "images (one that still comes is added to its scan)");
   }
 
   // Scans are matched to tf and label images as the clock passes them: a clock that is not the
@@ -256,6 +283,8 @@ class SemanticOctomapNodeCore::Impl {
   }
 
   ros::NodeHandle nh_, pnh_;
+  ros::Time clock_at_last_move_;
+  double clock_moved_wall_s_ = 0.0;
   NodeOptions options_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_{tf_buffer_, nh_};  // nh_: the node's tf remapping

@@ -472,6 +472,38 @@ TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
   EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
 }
 
+// The clock stops (a bag ended or paused): data time will not end the label wait. The scans whose
+// pose is known go in now, a scan without one waits on, and a label image that comes later still
+// reaches its scan.
+TEST(SemanticMappingSessionTest, AStoppedClockEndsTheLabelWaitOfPosedScansOnly) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingSession session(testConfig(1.0));
+  session.setPoseLookup([](double, const std::string& frame) {
+    return frame == "velo" ? std::optional<Eigen::Isometry3d>(Eigen::Isometry3d::Identity())
+                           : std::nullopt;
+  });
+  session.setCameraView(testCamera());
+  session.addLabelImage(0.0, view, testCamera());  // segmentation is running
+  EXPECT_EQ(session.addScan(0.0, "velo", testScan()), 1u);
+  EXPECT_EQ(session.addScan(0.1, "velo", testScan()), 0u);     // waits for its label image
+  EXPECT_EQ(session.addScan(0.2, "nowhere", testScan()), 0u);  // and for a pose
+  EXPECT_EQ(session.advanceTo(0.3), 0u);
+  ASSERT_EQ(session.oldestPendingStamp(), std::optional<double>(0.1));
+
+  EXPECT_EQ(session.insertWithoutWaiting(), 1u);
+  EXPECT_EQ(session.pendingScans(), 1u);
+  EXPECT_EQ(session.oldestPendingStamp(), std::optional<double>(0.2));
+  EXPECT_EQ(session.statistics().scans_inserted, 2u);
+  EXPECT_EQ(session.statistics().scans_without_pose, 0u);  // not dropped: it may still come
+  const std::vector<std::uint8_t> building(100 * 100, 11);
+  session.addLabelImage(0.1, LabelImageView{building.data(), 100, 100, 100}, testCamera());
+  EXPECT_EQ(session.statistics().label_images_late, 1u);
+  EXPECT_EQ(session.statistics().scans_with_labels, 2u);
+  EXPECT_EQ(session.insertWithoutWaiting(), 0u);  // again: the scan without pose waits on
+  EXPECT_EQ(session.pendingScans(), 1u);
+}
+
 // A busy node: the scans sit in their subscriber queue 3 s behind the clock (longer than
 // label_wait), while label images come before their scans. No label image is lost, and a lagging
 // scan is no bag loop.

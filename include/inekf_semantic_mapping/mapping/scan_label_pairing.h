@@ -95,6 +95,10 @@ class ScanLabelPairing {
   std::size_t insertReady(double now, const Insert& insert);
   // Every pending scan to `insert` (false: dropped); the waiting label images are let go.
   std::size_t flush(const Insert& insert);
+  // Every pending scan to `insert` now, however long its label wait has left (false: it waits
+  // on); the waiting label images stay. For a clock that has stopped: data time will not end
+  // the wait.
+  std::size_t insertWithoutWaiting(const Insert& insert);
   // A scan that went in without labels (its label image may still come).
   void keepForLateLabels(InsertedScan scan);
   // Those scans, oldest first, for the class evidence of a neighbouring label image.
@@ -107,6 +111,9 @@ class ScanLabelPairing {
 
   double now() const { return newest_stamp_; }
   std::size_t pendingScans() const { return scans_.size(); }
+  std::optional<double> oldestPendingStamp() const {
+    return scans_.empty() ? std::nullopt : std::optional<double>(scans_.front().stamp);
+  }
   std::size_t waitingLabelImages() const { return labels_.size(); }
 
  private:

@@ -96,7 +96,13 @@ class SemanticMappingSession {
   // Inserts every pending scan (with the labels that have arrived) whose pose is known, e.g. at
   // the end of a run or before the node clears its tf buffer; the others are dropped.
   std::size_t flush();
+  // Inserts every pending scan whose pose is known now, with the labels that have arrived,
+  // without waiting longer for the rest: for a clock that has stopped (a bag ended or paused),
+  // when data time will not end the wait. Scans without a pose wait on; label images stay
+  // (one that comes later still reaches its scan as late labels).
+  std::size_t insertWithoutWaiting();
   std::size_t pendingScans() const { return pairing_.pendingScans(); }
+  std::optional<double> oldestPendingStamp() const { return pairing_.oldestPendingStamp(); }
   // The camera whose view scans without a label image are cut to (with
   // insert_points_outside_image false) before the first label image brings its own; without it
   // such scans go in whole (lidar-only runs).

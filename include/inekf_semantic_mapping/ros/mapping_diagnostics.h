@@ -47,6 +47,9 @@ class MappingMonitor {
                   double wall_s, diagnostic_updater::DiagnosticStatusWrapper* status);
 
  private:
+  // Wall seconds since the oldest scan still pending arrived (0: none pending).
+  double oldestWaitS(const mapping::SemanticMappingSession& session, double wall_s) const;
+
   MappingDiagnosticsOptions options_;
   EventWindow scans_in_, scans_inserted_;    // wall times; inserted values: latency (s)
   std::map<double, double> arrival_wall_s_;  // by scan stamp, until inserted (bounded)
