@@ -37,11 +37,14 @@ bool LazyStart::velocityArrivedForPendingFix() const {
 
 std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_source_exists) {
   if (!pending_fix_) return std::nullopt;
-  if (now_s - pending_fix_->stamp_s <= config_.max_wait_s) {
-    if (config_.use_reference && !orientation_) return std::nullopt;  // its IMU message
+  const bool waiting_for_orientation = config_.use_reference && !orientation_;
+  if (now_s - waiting_since_s_ <= config_.max_wait_s) {
+    if (waiting_for_orientation) return std::nullopt;  // its IMU message
     // Its velocity: a map-frame one serves a start levelled from gravity too (it needs no
     // orientation; it was dropped there and the start took zero at 15 m/s).
     if (velocity_source_exists && !velocityArrivedForPendingFix()) return std::nullopt;
+  } else if (waiting_for_orientation && !imu_seen_) {
+    return std::nullopt;  // no IMU message yet: its first may bring the orientation
   }
   Start start;
   start.fix = *pending_fix_;
@@ -56,6 +59,7 @@ std::optional<LazyStart::Start> LazyStart::poll(double now_s, bool velocity_sour
 
 void LazyStart::reset() {
   pending_fix_.reset();
+  imu_seen_ = false;
   orientation_.reset();
   orientation_covariance_.reset();
   velocity_stamp_s_.reset();

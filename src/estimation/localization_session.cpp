@@ -398,6 +398,14 @@ void LocalizationSession::handleImu(const ImuEvent& event, Update* out) {
   if (!std::isfinite(sample.stamp_s) || !sample.angular_velocity.allFinite() ||
       !sample.specific_force.allFinite()) {
     ++statistics_.imu_invalid;
+    // Said, not only counted: an IMU whose every message has a NaN never starts the filter.
+    std::ostringstream note;
+    note << "IMU sample at " << sample.stamp_s << " s dropped: "
+         << (!std::isfinite(sample.stamp_s)         ? "its stamp"
+             : !sample.angular_velocity.allFinite() ? "its angular velocity"
+                                                    : "its linear acceleration")
+         << " is not finite (NaN or Inf); " << statistics_.imu_invalid << " dropped so far";
+    update.note = note.str();
     return;
   }
   if (started() && config_.restart_after_imu_gap_s > 0.0 &&
@@ -409,8 +417,11 @@ void LocalizationSession::handleImu(const ImuEvent& event, Update* out) {
     reset(why.str(), &update);
   }
   latest_angular_velocity_ = sample.angular_velocity;
-  if (!started() && event.orientation) {
-    lazy_start_.offerOrientation(*event.orientation, event.orientation_covariance);
+  if (!started()) {
+    lazy_start_.noteImu();
+    if (event.orientation) {
+      lazy_start_.offerOrientation(*event.orientation, event.orientation_covariance);
+    }
   }
   Localizer::ImuStatus status = localizer_.addImu(sample);
   if (status == Localizer::ImuStatus::kNotInitialized) {
@@ -452,14 +463,24 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   Update& update = *out;
   if (!event.has_solution || !std::isfinite(event.stamp_s)) {
     ++statistics_.fixes_ignored;
+    std::ostringstream note;
+    note << "GPS fix at " << event.stamp_s << " s ignored: "
+         << (event.has_solution ? "its stamp is not finite"
+                                : "the receiver reports no solution (status: no fix)");
+    update.note = note.str();
     return;
   }
   if (!kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
     ++statistics_.fixes_ignored;
     std::ostringstream note;
     note << "GPS fix at " << event.stamp_s << " s ignored: latitude " << event.lat_deg
-         << ", longitude " << event.lon_deg << ", altitude " << event.alt_m
-         << " (latitude must be in (-90, 90) deg, longitude in [-180, 180] deg)";
+         << ", longitude " << event.lon_deg << ", altitude " << event.alt_m;
+    if (!std::isfinite(event.alt_m)) {
+      note << " (no altitude: this filter takes 3D fixes only; a receiver in a 2D mode gives "
+              "none)";
+    } else {
+      note << " (latitude must be in (-90, 90) deg, longitude in [-180, 180] deg)";
+    }
     update.note = note.str();
     return;
   }

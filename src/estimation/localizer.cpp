@@ -348,7 +348,10 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   PositionFix used = fix;
   const double age = filter_->state().stamp_s - fix.stamp_s;
   if (std::abs(age) > config_.max_fix_age_s) {
-    result.reason = "stale fix: " + std::to_string(age) + " s from the state's time";
+    // age < 0: the fix is ahead of the state (the IMU fell silent), not old.
+    result.reason = (age > 0 ? "stale fix: " + std::to_string(age) + " s older than"
+                             : "fix " + std::to_string(-age) + " s ahead of") +
+                    std::string(" the state's time (more than gps.max_fix_age_s)");
     ++statistics_.gps_rejected;
     return result;
   }

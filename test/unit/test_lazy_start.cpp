@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <optional>
 
 #include "inekf_semantic_mapping/estimation/lazy_start.h"
 
@@ -102,10 +103,44 @@ TEST(LazyStart, ResetForgetsTheFixAndTheReferences) {
   gate.reset();
   EXPECT_FALSE(gate.waiting());
   gate.offerFix(fixAt(10.0));
-  EXPECT_FALSE(gate.poll(10.0, true));  // the old orientation and velocity are gone
+  EXPECT_FALSE(gate.poll(10.0, true));   // the old orientation and velocity are gone
+  EXPECT_FALSE(gate.poll(10.5, false));  // and so is the IMU: its first message may bring one
+  gate.noteImu();                        // it came, without an orientation
   const auto start = gate.poll(10.5, false);
   ASSERT_TRUE(start);
   EXPECT_FALSE(start->orientation);
+}
+
+// A 10 Hz GPS and an IMU without orientation: each fix replaced the waiting one and restarted
+// its 0.2 s wait, so the filter never started. The wait runs from the first fix; the start is
+// made at the newest.
+TEST(LazyStart, AFastGpsDoesNotRestartTheWaitForAnOrientationThatNeverComes) {
+  LazyStart gate{LazyStart::Config()};
+  std::optional<LazyStart::Start> start;
+  double t = 10.0;
+  for (; !start && t < 12.0; t += 0.1) {
+    gate.offerFix(fixAt(t));
+    for (double imu = t; imu < t + 0.099; imu += 0.01) {
+      gate.noteImu();
+      start = gate.poll(imu, /*velocity_source_exists=*/false);
+      if (start) break;
+    }
+  }
+  ASSERT_TRUE(start);
+  EXPECT_FALSE(start->orientation);
+  EXPECT_NEAR(start->fix.stamp_s, 10.2, 1e-9);  // the newest fix once 0.2 s had passed
+  // The same with a velocity source whose stamps never match a fix.
+  LazyStart velocity_gate{LazyStart::Config()};
+  velocity_gate.offerOrientation(kHeading);
+  std::optional<LazyStart::Start> with_velocity;
+  for (double fix = 10.0; !with_velocity && fix < 12.0; fix += 0.1) {
+    velocity_gate.offerFix(fixAt(fix));
+    velocity_gate.offerVelocity(fix - 5.0, Eigen::Vector3d::UnitX(), false);
+    with_velocity = velocity_gate.poll(fix + 0.05, /*velocity_source_exists=*/true);
+  }
+  ASSERT_TRUE(with_velocity);
+  EXPECT_LT(with_velocity->fix.stamp_s, 10.35);
+  EXPECT_TRUE(with_velocity->orientation);
 }
 
 }  // namespace

@@ -157,6 +157,21 @@ TEST(LocalizationSession, WithoutOrientationTheStartLevelsAfterMaxWait) {
   EXPECT_NE(update.note.find("levelled from gravity"), std::string::npos) << update.note;
 }
 
+// A 10 Hz GPS and a 100 Hz IMU without orientation (a u-blox receiver and a plain MEMS IMU): each
+// fix restarted the 0.2 s wait and the filter never started, with no word of why.
+TEST(LocalizationSession, AFastGpsAndAnImuWithoutOrientationStart) {
+  LocalizationSession session(originConfig());
+  session.setGpsVelocityExpected(false);
+  bool started = false;
+  for (int k = 0; k < 300 && !started; ++k) {
+    const double t = 10.0 + 0.01 * k;
+    started = session.addImu(restingImu(t, false)).started;
+    if (k % 10 == 0) started = session.addFix(fixAt(t)).started || started;
+  }
+  ASSERT_TRUE(session.started());
+  EXPECT_LT(session.state().stamp_s, 10.35);
+}
+
 TEST(LocalizationSession, MapOriginIsTheFirstUsableFixUnlessConfigured) {
   LocalizationSession session{LocalizationSessionConfig()};
   GeodeticFixEvent no_solution = fixAt(9.0, 50.0);
@@ -225,18 +240,26 @@ TEST(LocalizationSession, BadSamplesAreCountedAndTheFilterKeepsGoing) {
   EXPECT_FALSE(session.addImu(restingImu(10.1)).new_estimate);  // duplicate
   ImuEvent nan_sample = restingImu(10.2);
   nan_sample.sample.specific_force.x() = kNaN;
-  EXPECT_FALSE(session.addImu(nan_sample).new_estimate);
+  const LocalizationSession::Update nan_update = session.addImu(nan_sample);
+  EXPECT_FALSE(nan_update.new_estimate);
+  EXPECT_NE(nan_update.note.find("linear acceleration is not finite"), std::string::npos)
+      << nan_update.note;
   EXPECT_TRUE(session.addImu(restingImu(10.3)).new_estimate);
   EXPECT_FALSE(session.addImu(restingImu(10.25)).new_estimate);  // out of order
   GeodeticFixEvent nan_fix = fixAt(10.3);
   nan_fix.alt_m = kNaN;
-  EXPECT_FALSE(session.addFix(nan_fix).correction.has_value());
+  const LocalizationSession::Update no_altitude = session.addFix(nan_fix);
+  EXPECT_FALSE(no_altitude.correction.has_value());
+  EXPECT_NE(no_altitude.note.find("no altitude"), std::string::npos) << no_altitude.note;
+  GeodeticFixEvent no_fix = fixAt(10.3);
+  no_fix.has_solution = false;
+  EXPECT_NE(session.addFix(no_fix).note.find("reports no solution"), std::string::npos);
   EXPECT_TRUE(session.addFix(fixAt(10.3)).correction->accepted);
   const LocalizationSession::Statistics statistics = session.statistics();
   EXPECT_EQ(statistics.imu_samples, 6);
   EXPECT_EQ(statistics.imu_invalid, 1);
   EXPECT_EQ(statistics.filter.imu_dropped, 2);
-  EXPECT_EQ(statistics.fixes_ignored, 1);
+  EXPECT_EQ(statistics.fixes_ignored, 2);
   EXPECT_EQ(statistics.filter.gps_used, 2);  // the start and 10.3
   EXPECT_EQ(statistics.resets, 0);
   EXPECT_TRUE(session.state().position_map.allFinite());

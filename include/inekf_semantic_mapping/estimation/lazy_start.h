@@ -2,9 +2,10 @@
 // GPS velocity arrive on separate connections in any order (LocalizationSession, for inekf_node
 // and inekf_offline alike): at the newest fix, with
 // the orientation of the latest IMU message and the velocity of the fix's instant, once those
-// have arrived, or once a message max_wait_s (data time) newer than the fix shows that they are
-// not coming. Before this existed, a fix handled before any IMU message started the filter
-// levelled with yaw 0 (CI: e2e_real_oxts ATE 9.6 m, yaw error 42 deg on a drive heading -44.5).
+// have arrived, or once a message max_wait_s (data time) newer than the first waiting fix shows
+// that they are not coming. Before this existed, a fix handled before any IMU message started the
+// filter levelled with yaw 0 (CI: e2e_real_oxts ATE 9.6 m, yaw error 42 deg on a drive heading
+// -44.5).
 #pragma once
 
 #include <Eigen/Core>
@@ -40,8 +41,16 @@ class LazyStart {
 
   explicit LazyStart(Config config) : config_(config) {}
 
-  // The newest fix replaces one still waiting.
-  void offerFix(const PositionFix& fix) { pending_fix_ = fix; }
+  // The newest fix replaces one still waiting; the wait is counted from the first (a GPS faster
+  // than 1 / max_wait_s would otherwise restart it with every fix, and a start waiting for an
+  // orientation the IMU does not publish would never come).
+  void offerFix(const PositionFix& fix) {
+    if (!pending_fix_) waiting_since_s_ = fix.stamp_s;
+    pending_fix_ = fix;
+  }
+  // An IMU message arrived, with or without an orientation: once the wait is over, one without
+  // is not waited for any longer (before any IMU message, the start still waits for one).
+  void noteImu() { imu_seen_ = true; }
   // The orientation (body -> map) of the latest IMU message that has one, with its stated
   // covariance (nullopt: none stated).
   void offerOrientation(const Eigen::Matrix3d& body_to_map,
@@ -66,6 +75,8 @@ class LazyStart {
 
   Config config_;
   std::optional<PositionFix> pending_fix_;
+  double waiting_since_s_ = 0.0;  // the stamp of the first fix of this wait
+  bool imu_seen_ = false;
   std::optional<Eigen::Matrix3d> orientation_;
   std::optional<Eigen::Matrix3d> orientation_covariance_;
   std::optional<double> velocity_stamp_s_;
