@@ -63,8 +63,11 @@ ism_add_gtest(test_raw_drive_scans SOURCES test/unit/test_raw_drive_scans.cpp
   LINK ${PROJECT_NAME}_mapping)
 ism_add_gtest(test_semantic_map_offline
   SOURCES test/cli/test_semantic_map_offline.cpp
-  LINK ${PROJECT_NAME}_mapping
+  LINK ${PROJECT_NAME}_mapping ${OpenCV_LIBS}
   TOOL semantic_map_offline TOOL_MACRO SEMANTIC_MAP_OFFLINE_PATH)
+if(TARGET test_semantic_map_offline)
+  target_include_directories(test_semantic_map_offline SYSTEM PRIVATE ${OpenCV_INCLUDE_DIRS})
+endif()
 
 if(benchmark_FOUND)
   ism_add_tool(bench_semantic_octree

@@ -12,6 +12,7 @@
 
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
+#include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
@@ -261,6 +262,21 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   }
 }
 
+void checkRectifiedSize(const RawDriveScan& scan, int width, int height) {
+  const kitti::CameraProjection& camera = scan.camera;
+  if (camera.width <= 0 || camera.height <= 0) return;  // the calibration gives no size
+  if (width == camera.width && height == camera.height) return;
+  // Projected with P_rect, an unrectified image (an _extract drive's raw 1392x512) labels every
+  // point from the wrong pixel, with no error.
+  throw kitti::KittiFormatError(
+      scan.image_path, std::to_string(width) + "x" + std::to_string(height) +
+                           ", the calibration's rectified size (S_rect) says " +
+                           std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+                           ": not the rectified image the projection needs (an _extract drive's "
+                           "images are not rectified: use its _sync drive, or map without "
+                           "--model)");
+}
+
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
                          std::ostream* warnings) {
   // An empty map written with exit status 0 would look like a map.
@@ -308,12 +324,15 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
     const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
         scan_data.xyzi.data(), 4, static_cast<Eigen::Index>(scan_data.size()));
     RawDriveScan scan{
-        velodyne.fileStem(frame),        "",        frame, frames, buffer.topRows<3>(),
-        *T_map_imu_at_scan * T_imu_velo, projection};
+        velodyne.fileStem(frame),        "",         frame, frames, buffer.topRows<3>(),
+        *T_map_imu_at_scan * T_imu_velo, projection, ""};
     // The camera fires as the lidar faces forward (a sync drive's image is 5-15 ms after its
     // scan); an _extract drive's frames are numbered apart, so the image is found by its stamp.
     const std::ptrdiff_t image = images.nearestFrame(stamp_ns, kImageToScanMaxOffsetNs);
-    if (image >= 0) scan.image_stem = images.fileStem(static_cast<std::size_t>(image));
+    if (image >= 0) {
+      scan.image_stem = images.fileStem(static_cast<std::size_t>(image));
+      scan.image_path = images.framePath(static_cast<std::size_t>(image));
+    }
     try {
       visit(scan);
     } catch (const std::out_of_range& e) {
@@ -340,6 +359,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
         }
         if (camera_labels && !scan.image_stem.empty() &&
             (*camera_labels)(scan.image_stem, &image)) {
+          checkRectifiedSize(scan, image.width, image.height);
           const LabelImageView view{image.pixels.data(), image.width, image.height,
                                     static_cast<std::size_t>(image.width)};
           const CameraModel camera{scan.camera.P_rect, scan.camera.R_rect, scan.camera.T_cam0_velo,

@@ -310,7 +310,9 @@ std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> DriveMessageFactory::came
     throw kitti::KittiFormatError(
         path, std::to_string(image.width) + "x" + std::to_string(image.height) +
                   ", the calibration's S_rect_0" + std::to_string(camera_index) + " says " +
-                  std::to_string(projection.width) + "x" + std::to_string(projection.height));
+                  std::to_string(projection.width) + "x" + std::to_string(projection.height) +
+                  ": not the rectified image (an _extract drive's images are not rectified: use "
+                  "its _sync drive, or leave the camera out: kitti2bag --no-camera)");
   }
   return {std::move(image), toCameraInfoMessage(projection, frame_id, stamp)};
 }

@@ -93,6 +93,23 @@ std::uint8_t scoredTruth(std::uint32_t raw_label) {
   return ism::perception::kIgnoredLabel;
 }
 
+// SemanticKITTI's ids (40 road, 50 building, ...) read as labelIds scored nothing, or the wrong
+// class where they overlap (20: other-vehicle against Cityscapes' traffic sign), with exit status
+// 0.
+void checkCityscapesLabelIds(const std::vector<std::uint32_t>& labels, const std::string& path) {
+  constexpr std::uint16_t kLastCityscapesLabelId = 33;
+  for (std::size_t p = 0; p < labels.size(); ++p) {
+    const std::uint16_t label = ism::kitti::semanticClass(labels[p]);
+    if (label > kLastCityscapesLabelId) {
+      throw ism::kitti::KittiFormatError(
+          path, "point " + std::to_string(p) + " has label " + std::to_string(label) +
+                    ", not a Cityscapes labelId (0-33): SemanticKITTI's own ids? --labels takes "
+                    "Cityscapes labelIds (make_camera_labels, generate_synthetic_drive write "
+                    "them); a SemanticKITTI sequence is scored by evaluate_semantics");
+    }
+  }
+}
+
 int run(const ism::common::CommandLine& cli) {
   // Normalised: its parent is the date folder (the calibration), also for "DRIVE/" and ".".
   fs::path drive_path = fs::absolute(cli.require("--drive")).lexically_normal();
@@ -159,6 +176,7 @@ int run(const ism::common::CommandLine& cli) {
                                              std::to_string(scan.size()) + " points of " +
                                              scan_path.string());
     }
+    checkCityscapesLabelIds(labels, label_path.string());
     const Eigen::Isometry3f T_map_velo = (poses[i] * T_imu_velo).cast<float>();
     for (std::size_t p = 0; p < scan.size(); ++p) {
       const Eigen::Vector3f point(scan.point(p)[0], scan.point(p)[1], scan.point(p)[2]);
@@ -178,6 +196,12 @@ int run(const ism::common::CommandLine& cli) {
   if (scans == 0) {
     throw std::runtime_error("no frame of " + poses_path + " has both a scan in " + drive +
                              "/velodyne_points/data and labels in " + labels_dir);
+  }
+  if (score.scored() == 0) {
+    throw std::runtime_error("no labelled point of the " + std::to_string(scans) + " scans in " +
+                             labels_dir +
+                             " is of a scored class in the camera's view: nothing "
+                             "to score");
   }
   tree->updateInnerOccupancy();
   const std::size_t map_voxels = ism::mapping::countOccupiedFinestVoxels(*tree);

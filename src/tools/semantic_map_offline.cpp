@@ -124,11 +124,51 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   return config;
 }
 
-// Segments DIR/<stem>.png for each scan (the segmentation_node's Segmenter).
+constexpr const char* kImageExtensions[] = {".png", ".jpg", ".jpeg"};
+
+// DIR/<stem> with the first image extension that exists (.png unless only another does).
+std::string imagePath(const std::string& dir, const std::string& stem) {
+  for (const char* extension : kImageExtensions) {
+    const std::string path = dir + "/" + stem + extension;
+    if (std::filesystem::exists(path)) return path;
+  }
+  return dir + "/" + stem + kImageExtensions[0];
+}
+
+// --model labels nothing without images: a missing camera folder (a grayscale-only download, a
+// mistyped --images) gave an occupancy-only map, a warning per scan and exit status 0.
+void checkImageFolder(const std::string& dir, const std::string& flag, const std::string& hint) {
+  namespace fs = std::filesystem;
+  if (!fs::is_directory(dir)) {
+    throw std::runtime_error(dir + ": no such folder (" + flag + " labels the scans from its " +
+                             "images)" + hint);
+  }
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    for (const char* extension : kImageExtensions) {
+      if (entry.path().extension() == extension) return;
+    }
+  }
+  throw std::runtime_error(dir + ": no .png, .jpg or .jpeg image in it (" + flag +
+                           " labels the scans from its images)" + hint);
+}
+
+// The camera folders a raw drive has, for the error when the one asked for is missing.
+std::string otherCamerasHint(const std::string& drive_dir) {
+  std::string present;
+  for (int camera = 0; camera < 4; ++camera) {
+    if (std::filesystem::is_directory(drive_dir + "/image_0" + std::to_string(camera) + "/data")) {
+      present += (present.empty() ? "" : ", ") + std::string("image_0") + std::to_string(camera);
+    }
+  }
+  return present.empty() ? "; the drive has no camera folder: map without --model"
+                         : "; the drive has " + present + ": --camera N picks one";
+}
+
+// Segments DIR/<stem>.png (or .jpg) for each scan (the segmentation_node's Segmenter).
 ism::mapping::CameraLabelSource segmentingSource(const std::string& images_dir,
                                                  std::shared_ptr<ism::perception::Segmenter> net) {
   return [images_dir, net](const std::string& stem, ism::mapping::OwnedLabelImage* out) {
-    const std::string path = images_dir + "/" + stem + ".png";
+    const std::string path = imagePath(images_dir, stem);
     const cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
     if (image.empty()) {
       std::cerr << "[semantic_map_offline] " << path << ": no readable image, scan mapped "
@@ -164,13 +204,14 @@ void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
                 << "at its stamp in " << images << ", no label image for it\n";
       return;
     }
-    const std::string image_path = images + "/" + scan.image_stem + ".png";
+    const std::string& image_path = scan.image_path;
     const cv::Mat image = cv::imread(image_path, cv::IMREAD_UNCHANGED);
     if (image.empty()) {
       std::cerr << "[semantic_map_offline] " << image_path << ": no readable image, no label "
                 << "image for it\n";
       return;
     }
+    mapping::checkRectifiedSize(scan, image.cols, image.rows);
     const mapping::CameraModel camera{scan.camera.P_rect, scan.camera.R_rect,
                                       scan.camera.T_cam0_velo, image.cols, image.rows};
     mapping::MapLabelImageStats stats;
@@ -329,6 +370,8 @@ int main(int argc, char** argv) {
                                                  (cli.getInt("--camera", 2) < 10 ? "0" : "") +
                                                  std::to_string(cli.getInt("--camera", 2)) + "/data"
                                            : cli.get("--images");
+      checkImageFolder(images, raw_drive ? "--model" : "--images",
+                       raw_drive ? otherCamerasHint(cli.get("--drive")) : "");
       std::cerr << "[semantic_map_offline] segmenting " << images << " with " << model << " (card "
                 << card.source << ")\n";
       camera_labels = segmentingSource(images, net);
@@ -358,6 +401,8 @@ int main(int argc, char** argv) {
     std::cerr << "[semantic_map_offline] " << stats.scans_inserted << " scans, "
               << stats.scans_with_labels << " with class evidence, " << stats.points_with_class
               << " of " << stats.points_inserted << " inserted points labelled\n";
+    const std::size_t scans_inserted = stats.scans_inserted;
+    const std::size_t scans_with_labels = stats.scans_with_labels;
     // The map and its exports appear together or not at all.
     std::vector<std::pair<std::string, mapping::MapFormat>> outputs{
         {output, mapping::MapFormat::kSemanticOt}};
@@ -432,6 +477,12 @@ int main(int argc, char** argv) {
                 << cpu_s / reference_cpu_s << "x (octomap map: " << reference.size() << " nodes)\n";
     }
     std::cerr << ism::TimingRegistry::instance().report();
+    if (camera_labels && scans_with_labels == 0) {
+      // Written (nothing mapped is lost), but not what --model asked for.
+      throw std::runtime_error("none of the " + std::to_string(scans_inserted) +
+                               " scans got class evidence from the camera (the warnings above "
+                               "say why): the map written holds occupancy only");
+    }
     return 0;
   });
 }

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "inekf_semantic_mapping/evaluation/semantic_evaluation.h"
@@ -203,6 +204,36 @@ TEST_F(EvaluateMapTest, BadInputsNameTheFile) {
                             "/missing.ot --drive " + drive_ + " --max-range -5");
   EXPECT_NE(range_status, 0);
   EXPECT_NE(range_output.find("--max-range must be >= 0"), std::string::npos) << range_output;
+}
+
+// Labels the tool cannot score: SemanticKITTI's own ids scored nothing (or the wrong class where
+// the ids overlap) and unlabelled points gave "mIoU nan", both with exit status 0.
+TEST_F(EvaluateMapTest, LabelsItCannotScoreAreAnErrorNotANanScore) {
+  const std::string map = buildMap(ism::kitti::readKittiPoses(truePoses()), "for_labels");
+  const std::string truth_dir = drive_ + "/ground_truth/velodyne_labels";
+  for (const auto& [name, label] :
+       {std::pair<std::string, std::uint32_t>{"semantickitti", 40}, {"unlabelled", 0}}) {
+    const std::string dir = dir_ + "/labels_" + name;
+    fs::create_directories(dir);
+    for (const auto& entry : fs::directory_iterator(truth_dir)) {
+      std::vector<std::uint32_t> labels = ism::kitti::readLabelFile(entry.path().string());
+      for (std::uint32_t& l : labels) l = (7u << 16) | label;  // an instance id above
+      std::ofstream out(dir + "/" + entry.path().filename().string(), std::ios::binary);
+      out.write(reinterpret_cast<const char*>(labels.data()),
+                static_cast<std::streamsize>(labels.size() * sizeof(std::uint32_t)));
+    }
+    const auto [status, output] =
+        ism::test::runCommand(std::string(EVALUATE_MAP_PATH) + " --map " + map + " --drive " +
+                              drive_ + " --labels " + dir);
+    EXPECT_NE(status, 0) << name << ": " << output;
+    EXPECT_EQ(output.find("RESULT"), std::string::npos) << output;
+    if (label == 40) {
+      EXPECT_NE(output.find(dir + "/0000000000.label"), std::string::npos) << output;
+      EXPECT_NE(output.find("has label 40, not a Cityscapes labelId"), std::string::npos) << output;
+    } else {
+      EXPECT_NE(output.find("nothing to score"), std::string::npos) << output;
+    }
+  }
 }
 
 TEST(SemanticKittiListing, NamesTheScansWithoutTheirLabelOrImage) {

@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
@@ -126,6 +128,33 @@ TEST_F(OfflineMappingTest, FlagsOfTheOtherInputFormAreRefused) {
     EXPECT_NE(output.find(message), std::string::npos) << flags << "\n" << output;
   }
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/f.ot"));
+}
+
+// --model labels the scans from images: a folder that is not there, or holds none, is an error
+// before the run (it gave an occupancy-only map with exit status 0), and .jpg images are read
+// (only .png were: "no readable image" for every scan).
+TEST_F(OfflineMappingTest, ModelImagesMustBeThereAndMayBeJpeg) {
+  const std::string model = std::string(ISM_REPO_ROOT) + "/models/unet_synthetic.onnx";
+  const std::string base = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
+                           "/velodyne --poses " + dir_ + "/poses.txt --calib " + dir_ +
+                           "/calib.txt --model " + model + " --output " + dir_ + "/m.ot";
+  const auto [missing_status, missing] = test::runCommand(base + " --images " + dir_ + "/nope");
+  EXPECT_NE(missing_status, 0);
+  EXPECT_NE(missing.find(dir_ + "/nope: no such folder"), std::string::npos) << missing;
+  std::filesystem::create_directories(dir_ + "/images");
+  std::ofstream(dir_ + "/images/readme.txt") << "no images\n";
+  const auto [empty_status, empty] = test::runCommand(base + " --images " + dir_ + "/images");
+  EXPECT_NE(empty_status, 0);
+  EXPECT_NE(empty.find("no .png, .jpg or .jpeg image in it"), std::string::npos) << empty;
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "/m.ot"));
+  for (const char* stem : {"000000", "000001"}) {
+    const cv::Mat gray(375, 1242, CV_8UC3, cv::Scalar(90, 110, 100));
+    ASSERT_TRUE(cv::imwrite(dir_ + "/images/" + stem + ".jpg", gray));
+  }
+  const auto [status, output] = test::runCommand(base + " --images " + dir_ + "/images");
+  EXPECT_EQ(status, 0) << output;
+  EXPECT_EQ(output.find("no readable image"), std::string::npos) << output;
+  EXPECT_NE(output.find("2 scans, 2 with class evidence"), std::string::npos) << output;
 }
 
 // Found by review: a copy named 000001_copy.bin went in as frame 1 a second time (the frame

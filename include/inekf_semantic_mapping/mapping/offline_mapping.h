@@ -79,6 +79,7 @@ struct RawDriveScan {
   Eigen::Matrix3Xf points;  // velodyne frame
   Eigen::Isometry3d T_map_velo;
   kitti::CameraProjection camera;  // the drive's camera_index
+  std::string image_path;          // the image of image_stem, or ""
 };
 using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
 
@@ -91,6 +92,9 @@ using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
 // pose; an std::out_of_range from `visit` becomes an error naming the frame's pose.
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
                          std::ostream* warnings = nullptr);
+// Throws kitti::KittiFormatError naming scan.image_path when an image of width x height is not
+// the rectified size the scan's camera calibration states (S_rect; unchecked when it states none).
+void checkRectifiedSize(const RawDriveScan& scan, int width, int height);
 
 // Inserts every velodyne frame of the drive (forEachRawDriveScan) with camera labels from
 // `camera_labels` (stem: the scan's image_stem) when given; warnings and progress go to
