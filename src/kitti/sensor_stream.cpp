@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -90,6 +91,30 @@ std::ptrdiff_t SensorStream::nearestFrame(std::int64_t stamp_ns, std::int64_t ma
     }
   }
   return best;
+}
+
+std::vector<std::ptrdiff_t> SensorStream::framesAt(const std::vector<std::int64_t>& other_stamps_ns,
+                                                   std::int64_t max_offset_ns) const {
+  std::vector<std::ptrdiff_t> frame_at(other_stamps_ns.size(), -1);
+  std::vector<std::int64_t> offset_at(other_stamps_ns.size(), 0);
+  for (std::size_t frame = 0; frame < size(); ++frame) {
+    std::ptrdiff_t nearest = -1;
+    std::int64_t nearest_offset = 0;
+    for (std::size_t k = 0; k < other_stamps_ns.size(); ++k) {
+      const std::int64_t offset = std::abs(other_stamps_ns[k] - stamps_ns[frame]);
+      if (nearest < 0 || offset < nearest_offset) {
+        nearest = static_cast<std::ptrdiff_t>(k);
+        nearest_offset = offset;
+      }
+    }
+    if (nearest < 0 || nearest_offset > max_offset_ns) continue;
+    const auto k = static_cast<std::size_t>(nearest);
+    if (frame_at[k] < 0 || nearest_offset < offset_at[k]) {
+      frame_at[k] = static_cast<std::ptrdiff_t>(frame);
+      offset_at[k] = nearest_offset;
+    }
+  }
+  return frame_at;
 }
 
 SensorStream readSensorStream(const std::string& dir, const std::string& name) {

@@ -26,6 +26,7 @@
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
+#include "inekf_semantic_mapping/kitti/sensor_stream.h"
 #include "inekf_semantic_mapping/registration/icp_registration.h"
 
 namespace ism = inekf_semantic_mapping;
@@ -88,35 +89,73 @@ void addOutput(ism::common::AtomicFileSet* outputs, const std::string& path,
   });
 }
 
-// The scan file of each OXTS frame in dir (%010d.bin, else .txt); a missing one is an error
-// naming it.
-// The scan of each OXTS frame: the velodyne file of the same number (a sync drive's frames share
-// it; by index, every frame after one the recorder dropped took the next frame's scan).
-std::vector<std::string> scanPaths(const std::string& dir,
-                                   const std::vector<ism::kitti::OxtsFrame>& frames) {
+// The scan of each OXTS frame, for the loop search.
+struct LoopScans {
+  std::vector<std::string> paths;  // per OXTS frame; "" where it has none
+  std::vector<bool> has_scan;
+};
+
+// A drive's scans (dir = velodyne_points/data beside its timestamps.txt) go with the OXTS frame
+// nearest their stamp (within 50 ms): by file number, an _extract drive's 100 Hz OXTS frame k
+// took scan k, ten times too early, and a frame the recorder dropped stopped the run. A folder
+// of scans without timestamps pairs by file number (%010d.bin, else .txt). Frames without a scan
+// take no part in the loop search.
+LoopScans loopScans(const std::string& dir, const std::vector<ism::kitti::OxtsFrame>& frames) {
   namespace fs = std::filesystem;
   if (!fs::is_directory(dir)) {
     throw ism::common::UsageError("--loop-closure: the scan folder " + dir +
                                   " does not exist (give --scans DIR)");
   }
-  std::vector<std::string> paths(frames.size());
-  for (std::size_t k = 0; k < frames.size(); ++k) {
-    char name[32];
-    std::snprintf(name, sizeof(name), "%010zu", frames[k].file_number);
-    const fs::path base = fs::path(dir) / name;
-    for (const char* extension : {".bin", ".txt"}) {
-      const fs::path candidate = base.string() + extension;
-      if (fs::exists(candidate)) {
-        paths[k] = candidate.string();
-        break;
+  LoopScans scans{std::vector<std::string>(frames.size()), std::vector<bool>(frames.size())};
+  fs::path data_dir = fs::path(dir);
+  if (!data_dir.has_filename()) data_dir = data_dir.parent_path();  // a trailing slash
+  const fs::path stream_dir = data_dir.parent_path();
+  if (data_dir.filename() == "data" && fs::is_regular_file(stream_dir / "timestamps.txt")) {
+    const ism::kitti::SensorStream velodyne =
+        ism::kitti::readSensorStream(stream_dir.string(), "velodyne_points");
+    for (const std::string& warning : velodyne.warnings) {
+      std::printf("inekf_offline: warning: %s\n", warning.c_str());
+    }
+    std::vector<std::int64_t> stamps_ns;
+    for (const ism::kitti::OxtsFrame& frame : frames) stamps_ns.push_back(frame.stamp_ns);
+    constexpr std::int64_t kScanToFrameMaxOffsetNs = 50'000'000;
+    const std::vector<std::ptrdiff_t> scan_of =
+        velodyne.framesAt(stamps_ns, kScanToFrameMaxOffsetNs);
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      if (scan_of[k] >= 0)
+        scans.paths[k] = velodyne.framePath(static_cast<std::size_t>(scan_of[k]));
+    }
+  } else {
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "%010zu", frames[k].file_number);
+      for (const char* extension : {".bin", ".txt"}) {
+        const fs::path candidate = data_dir / (name + std::string(extension));
+        if (fs::exists(candidate)) {
+          scans.paths[k] = candidate.string();
+          break;
+        }
       }
     }
-    if (paths[k].empty()) {
-      throw std::runtime_error("--loop-closure: no scan for OXTS frame " + std::string(name) +
-                               ": " + base.string() + ".bin is missing");
-    }
   }
-  return paths;
+  std::size_t without = 0;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    scans.has_scan[k] = !scans.paths[k].empty();
+    without += scans.has_scan[k] ? 0 : 1;
+  }
+  if (without == frames.size()) {
+    throw std::runtime_error("--loop-closure: no OXTS frame has a scan in " + dir +
+                             " (within 50 ms of its stamp, or of its file number without "
+                             "timestamps)");
+  }
+  if (without > 0) {
+    std::printf(
+        "inekf_offline: warning: %zu of %zu OXTS frames have no scan in %s (frames the "
+        "recorder dropped, or OXTS faster than the lidar): they take no part in the loop "
+        "search\n",
+        without, frames.size(), dir.c_str());
+  }
+  return scans;
 }
 
 }  // namespace
@@ -203,7 +242,7 @@ int main(int argc, char** argv) {
       }
     }
     // The loop closure's inputs are checked before the (long) run.
-    std::vector<std::string> scan_paths;
+    LoopScans loop_scans;
     Eigen::Isometry3d T_imu_velo = Eigen::Isometry3d::Identity();
     if (loop_closure) {
       namespace fs = std::filesystem;
@@ -213,7 +252,7 @@ int main(int argc, char** argv) {
       const std::string scans_dir = cli.has("--scans")
                                         ? cli.get("--scans")
                                         : (drive_dir / "velodyne_points" / "data").string();
-      scan_paths = scanPaths(scans_dir, frames);
+      loop_scans = loopScans(scans_dir, frames);
       // The raw calibration: the date folder's (KITTI's layout), else the drive folder's.
       std::string calib_dir;
       for (const fs::path& dir : {drive_dir.parent_path(), drive_dir}) {
@@ -247,8 +286,8 @@ int main(int argc, char** argv) {
       smoothed_errors = estimation::compareWithTruth(run);
       ism::ScopedTimer timer("loop_closure");
       const ism::registration::IcpScanMatcher matcher(
-          [&scan_paths](int frame) { return scan_paths.at(frame); }, icp_options);
-      loops = estimation::closeLoops(run, {}, T_imu_velo, matcher, loop_options);
+          [&loop_scans](int frame) { return loop_scans.paths.at(frame); }, icp_options);
+      loops = estimation::closeLoops(run, loop_scans.has_scan, T_imu_velo, matcher, loop_options);
       run.states = loops.states;
       run.pose_covariances = loops.pose_covariances;  // what --output-states writes
       for (const estimation::LoopRecord& loop : loops.loops) {

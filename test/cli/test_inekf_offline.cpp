@@ -113,6 +113,39 @@ TEST_F(InekfOfflineTest, AStampThatGoesBackIsNamedAndTheRunGoesOn) {
   EXPECT_LT(std::stod(output.substr(at + 4)), 3.0) << output;
 }
 
+// A velodyne frame the recorder dropped (its file missing, its line blank, as in
+// 2011_09_26_drive_0009_sync): the loop search goes on without it. Before, --loop-closure
+// stopped at "no scan for OXTS frame"; an _extract drive's 100 Hz OXTS frames took the scans of
+// their own file numbers (KittiSensorStream's framesAt pairs by stamp).
+TEST_F(InekfOfflineTest, LoopClosureLeavesOutAFrameWithoutAScan) {
+  const fs::path sync = fs::path(oxts_).parent_path();
+  const fs::path copy = fs::path(dir_) / "dropped" / sync.parent_path().filename();
+  fs::create_directories(copy.parent_path());
+  fs::copy(sync.parent_path(), copy, fs::copy_options::recursive);
+  const fs::path velodyne = copy / sync.filename() / "velodyne_points";
+  std::vector<std::string> lines;
+  {
+    std::ifstream in(velodyne / "timestamps.txt");
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+  }
+  ASSERT_GT(lines.size(), 10u);
+  lines[3].clear();
+  {
+    std::ofstream out(velodyne / "timestamps.txt");
+    for (const std::string& line : lines) out << line << "\n";
+  }
+  ASSERT_TRUE(fs::remove(velodyne / "data" / "0000000003.bin"));
+  const auto [status, output] =
+      run("--oxts " + (copy / sync.filename() / "oxts").string() + " --output-kitti " + dir_ +
+          "/dropped_poses.txt --smooth --loop-closure");
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find("frame 3 left out"), std::string::npos) << output;
+  EXPECT_NE(output.find("1 of " + std::to_string(lines.size()) + " OXTS frames have no scan"),
+            std::string::npos)
+      << output;
+  EXPECT_EQ(lineCount(dir_ + "/dropped_poses.txt"), lines.size());
+}
+
 TEST_F(InekfOfflineTest, OneFileForTwoOutputsIsRefused) {
   const std::string both = dir_ + "/both.txt";
   const auto [status, output] =

@@ -204,6 +204,19 @@ TEST(KittiSensorStream, AFrameTheRecorderDroppedKeepsTheOthersOnTheirOwnLines) {
   const std::int64_t t4 = stream.stamps_ns[2];
   EXPECT_EQ(stream.nearestFrame(t4 - 40'000'000, 50'000'000), 2);
   EXPECT_EQ(stream.nearestFrame(t4 - 160'000'000, 50'000'000), -1);
+  // Another stream's frames at 100 Hz (an _extract drive's OXTS): each scan goes with the one
+  // nearest it, the frames between scans and those of the dropped scans with none.
+  std::vector<std::int64_t> oxts_ns;
+  const std::int64_t t0 = stream.stamps_ns[0];
+  for (int k = 0; k < 60; ++k) oxts_ns.push_back(t0 - 3'000'000 + 10'000'000 * k);
+  const std::vector<std::ptrdiff_t> scan_of = stream.framesAt(oxts_ns, 50'000'000);
+  ASSERT_EQ(scan_of.size(), oxts_ns.size());
+  for (int k = 0; k < 60; ++k) {
+    const std::ptrdiff_t expected = k == 0 ? 0 : k == 10 ? 1 : k == 40 ? 2 : k == 50 ? 3 : -1;
+    EXPECT_EQ(scan_of[k], expected) << "OXTS frame " << k;
+  }
+  // Far from every frame: none.
+  EXPECT_EQ(stream.framesAt({t0 + 10'000'000'000}, 50'000'000), (std::vector<std::ptrdiff_t>{-1}));
   // The start stamps of a frame the main file has but this one lacks: not used, and named.
   writeFile(dir + "/timestamps_start.txt", "2011-09-26 13:02:25.05\n");
   const SensorStream short_start = readSensorStream(dir, "velodyne_points");

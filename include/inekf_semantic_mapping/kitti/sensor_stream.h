@@ -34,6 +34,12 @@ struct SensorStream {
   // The frame whose stamp is nearest stamp_ns, if within max_offset_ns of it (-1 otherwise, and
   // for a stream without frames). Stamps need not be sorted.
   std::ptrdiff_t nearestFrame(std::int64_t stamp_ns, std::int64_t max_offset_ns) const;
+  // For each of `other_stamps_ns` (another stream's frames), the frame of this stream that goes
+  // with it, or -1: each frame goes to the stamp nearest it if within max_offset_ns, and a stamp
+  // that two frames pick keeps the nearer. Pairs a drive's OXTS frames with its scans whatever
+  // their rates (an _extract drive's OXTS at 100 Hz) and wherever the recorder dropped frames.
+  std::vector<std::ptrdiff_t> framesAt(const std::vector<std::int64_t>& other_stamps_ns,
+                                       std::int64_t max_offset_ns) const;
 };
 
 // Reads the folder dir (name: the stream's name). Not present when dir/data is not a folder.
