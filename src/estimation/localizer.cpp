@@ -415,8 +415,10 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
       consecutive_rejected_fixes_ == config_.heading_reopen_after_rejected_fixes) {
     reopen_why = std::to_string(consecutive_rejected_fixes_) + " fixes in a row failed the gate";
   }
-  if (config_.heading_nis_window_fixes > 0 && std::isfinite(horizontal_nis)) {
-    // Clipped, so that one real outlier (a 100 m jump) cannot re-open the heading alone.
+  // The fixes the filter took: a gated-out one is the rejected-in-a-row count's to judge. Counted
+  // here (clipped at the gate) two outliers in a row made the mean of 10 exceed 6: the heading
+  // was re-opened and the second outlier applied, a 25 m jump for a 30 m multipath.
+  if (config_.heading_nis_window_fixes > 0 && !gated_out && std::isfinite(horizontal_nis)) {
     horizontal_nis_.push_back(std::min(horizontal_nis, config_.gps_gate_mahalanobis_squared));
     while (static_cast<int>(horizontal_nis_.size()) > config_.heading_nis_window_fixes) {
       horizontal_nis_.pop_front();
