@@ -77,8 +77,13 @@ MapFormat parseMapFormat(const std::string& format, const std::string& path) {
   if (format == "color_ot") return MapFormat::kColorOt;
   if (format == "ply") return MapFormat::kPly;
   if (format.empty()) {
+    // From the extension; another one (.bt: octomap's own binary format, which tools would try
+    // and fail to read) is refused rather than given a semantic octree under its name.
     const std::string extension = std::filesystem::path(path).extension().string();
-    return extension == ".ply" ? MapFormat::kPly : MapFormat::kSemanticOt;
+    if (extension == ".ply") return MapFormat::kPly;
+    if (extension == ".ot") return MapFormat::kSemanticOt;
+    throw MapIoError(path + ": no format given and the extension '" + extension +
+                     "' is not .ot or .ply (format: ot, color_ot or ply)");
   }
   throw MapIoError("unknown map format '" + format + "' (expected ot, color_ot or ply)");
 }

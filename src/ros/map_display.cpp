@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/ros/map_display.h"
 
 #include <ros/console.h>
+#include <ros/single_subscriber_publisher.h>
 
 #include <stdexcept>
 
@@ -25,7 +26,13 @@ MapDisplay::MapDisplay(ros::NodeHandle& nh, mapping::SemanticMappingSession& ses
                                 mapping::mapClassSetName(session_.config().class_set) + ")");
   }
   markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(topics::kMapMarkers, 1, true);
-  info_pub_ = nh.advertise<SemanticMapInfo>(topics::kMapInfo, 1, true);
+  // Not latched: the info is published only while someone listens, so a latched one could be
+  // stale (a `rostopic echo -n1` after a reset showed the old map). A new subscriber gets the
+  // current figures at once instead.
+  info_pub_ = nh.advertise<SemanticMapInfo>(
+      topics::kMapInfo, 1, [this](const ros::SingleSubscriberPublisher& subscriber) {
+        subscriber.publish(mapInfoMessage(session_, options_.map_frame, ros::Time::now()));
+      });
   projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(topics::kProjectedMap, 1, true);
   drivable_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(topics::kDrivableMap, 1, true);
 }

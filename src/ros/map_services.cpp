@@ -1,11 +1,14 @@
 #include "inekf_semantic_mapping/ros/map_services.h"
 
 #include <ros/console.h>
+#include <unistd.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <string>
 #include <utility>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/ros/shutdown_log.h"
@@ -56,20 +59,38 @@ void MapServices::finalAutosave() {
   if (saveToAutosavePath()) {
     logAtShutdown(ShutdownLogLevel::kInfo, "semantic_octomap_node: map saved to " + autosave_path_ +
                                                " (" + std::to_string(scans) + " scans)");
-  } else {
-    logAtShutdown(ShutdownLogLevel::kError, "semantic_octomap_node: the final autosave to " +
-                                                autosave_path_ +
-                                                " failed: " + last_autosave_.error);
+    return;
   }
+  // The folder went away, or the disk filled, while mapping: the map is not lost with it.
+  const std::string fallback =
+      (std::filesystem::temp_directory_path() /
+       ("semantic_map_autosave_" + std::to_string(static_cast<long>(::getpid())) + ".ot"))
+          .string();
+  std::string fallback_result;
+  try {
+    session_.save(fallback, mapping::MapFormat::kSemanticOt);
+    fallback_result = "saved to " + fallback + " instead";
+  } catch (const std::exception& e) {
+    fallback_result = "and to " + fallback + ": " + e.what() + ": the map is lost";
+  }
+  logAtShutdown(ShutdownLogLevel::kError, "semantic_octomap_node: the final autosave to " +
+                                              autosave_path_ + " failed: " + last_autosave_.error +
+                                              "; " + fallback_result);
 }
 
 bool MapServices::onSave(SaveMap::Request& request, SaveMap::Response& response) {
   last_save_ = SaveRecord{request.path, wallNow(), true, ""};
   try {
     const mapping::MapFormat format = mapping::parseMapFormat(request.format, request.path);
-    response.voxel_count = session_.save(request.path, format);
+    // A relative path is the node's working directory's ($ROS_HOME under roslaunch, where no one
+    // looks): said in full. A folder is refused before the map is written out.
+    const std::string path =
+        request.path.empty() ? request.path : std::filesystem::absolute(request.path).string();
+    common::checkOutputPath(path);
+    last_save_.path = path;
+    response.voxel_count = session_.save(path, format);
     response.success = true;
-    response.message = "wrote " + request.path + " (" + std::to_string(response.voxel_count) +
+    response.message = "wrote " + path + " (" + std::to_string(response.voxel_count) +
                        " occupied voxels, " + std::to_string(session_.statistics().scans_inserted) +
                        " scans)";
     ROS_INFO_STREAM("semantic_octomap_node: " << response.message);

@@ -116,6 +116,11 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
       last_scan_wall_s_ >= 0 && wall_s - last_scan_wall_s_ < options_.label_stall_warn_s;
   if (!labels_expected) {
     status->summary(DiagnosticStatus::OK, "no label publisher (occupancy only)");
+  } else if (stats.label_images_received >= 5 &&
+             2 * stats.label_images_unmatched > stats.label_images_received) {
+    status->summary(DiagnosticStatus::WARN,
+                    "most label images match no scan (stamps more than label_stamp_tolerance_s "
+                    "from every scan's)");
   } else if (scans_coming && since_label_s > options_.label_stall_warn_s) {
     status->summary(DiagnosticStatus::WARN, "segmentation stalled: no label image for " +
                                                 std::to_string(static_cast<int>(since_label_s)) +

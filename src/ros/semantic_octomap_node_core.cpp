@@ -8,11 +8,13 @@
 #include <tf2_ros/transform_listener.h>
 
 #include <cmath>
+#include <filesystem>
 #include <iomanip>
 #include <memory>
 #include <optional>
 #include <string>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/common/timing.h"
 #include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/kitti/calibration.h"
@@ -36,6 +38,8 @@ constexpr double kClockMismatchWarnS = 60.0;
 // at the end of a bag (or while it is paused) data time stands still and would hold the last
 // second of scans out of the map, and out of a save_map, until shutdown.
 constexpr double kClockStoppedInsertS = 2.0;
+// Label images before "most of them matched no scan" is said (a few at the ends of a run do not).
+constexpr std::size_t kLabelsBeforeUnmatchedWarning = 5;
 
 // The node's own keys (display, frames, calibration); the rest belong to the session.
 struct NodeOptions {
@@ -72,6 +76,15 @@ class SemanticOctomapNodeCore::Impl {
     reader.readInRange("camera_index", &options_.camera_index, 0, 3);
     reader.read("map_file", &options_.map_file);
     reader.read("autosave_path", &options_.autosave_path);
+    if (!options_.autosave_path.empty()) {
+      // Checked now: a mistyped folder was found at the end, when the whole map was lost.
+      options_.autosave_path = std::filesystem::absolute(options_.autosave_path).string();
+      try {
+        common::checkOutputPath(options_.autosave_path);
+      } catch (const std::exception& e) {
+        reader.fail("autosave_path", e.what());
+      }
+    }
     reader.read("autosave_period_s", &options_.autosave_period_s);  // <= 0: at shutdown only
     reader.readInRange("log_period_s", &options_.log_period_s, 0.0, 1e6, true);
     const YAML::Node& all = parameters;  // const: operator[] must not add the key
@@ -86,8 +99,11 @@ class SemanticOctomapNodeCore::Impl {
     session_->setPoseLookup([this](double stamp, const std::string& frame) {
       const std::string& map = options_.display.map_frame;
       std::optional<Eigen::Isometry3d> pose;
-      if (tf_buffer_.canTransform(map, frame, ros::Time(stamp))) {
+      std::string why;
+      if (tf_buffer_.canTransform(map, frame, ros::Time(stamp), &why)) {
         pose = tf2::transformToEigen(tf_buffer_.lookupTransform(map, frame, ros::Time(stamp)));
+      } else {
+        last_pose_error_ = map + " -> " + frame + " at " + std::to_string(stamp) + ": " + why;
       }
       return pose;
     });
@@ -191,10 +207,14 @@ class SemanticOctomapNodeCore::Impl {
       detectClockJump();
       warnIfOffTheClock(cloud->header.stamp);
       monitor_->noteScan(cloud->header.stamp.toSec(), wallNow());
-      label_camera_->setLidarFrame(cloud->header.frame_id);
+      // tf2 refuses a frame with a leading slash (older drivers' "/velo_link"): every scan
+      // was dropped "without a pose".
+      std::string frame = cloud->header.frame_id;
+      if (!frame.empty() && frame.front() == '/') frame.erase(0, 1);
+      if (frame.empty()) throw std::invalid_argument("no frame_id: its pose in tf needs one");
+      label_camera_->setLidarFrame(frame);
       if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);
-      session_->addScan(cloud->header.stamp.toSec(), cloud->header.frame_id,
-                        pointsFromCloud(*cloud));
+      session_->addScan(cloud->header.stamp.toSec(), frame, pointsFromCloud(*cloud));
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
                                                              << cloud->header.stamp
@@ -223,8 +243,38 @@ class SemanticOctomapNodeCore::Impl {
       const ros::Time now = ros::Time::now();
       session_->advanceTo(now.toSec());
       insertIfClockStopped(now);
+      warnOfDroppedInputs();
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: inserting pending scans: " << e.what());
+    }
+  }
+
+  // Scans dropped without a pose, and label images that matched no scan, were only counted (a
+  // number in the 10 s status line): said with what tf or the stamps gave, every 10 s at most.
+  void warnOfDroppedInputs() {
+    const double wall_s = wallNow();
+    if (wall_s - dropped_warned_wall_s_ < 10.0) return;
+    const mapping::MappingStatistics& s = session_->statistics();
+    if (s.scans_without_pose > scans_without_pose_warned_) {
+      ROS_WARN_STREAM("semantic_octomap_node: "
+                      << s.scans_without_pose - scans_without_pose_warned_ << " scans on "
+                      << topics::kVelodyne << " dropped without a pose (" << s.scans_without_pose
+                      << " of " << s.scans_received << " so far): no transform "
+                      << last_pose_error_);
+      scans_without_pose_warned_ = s.scans_without_pose;
+      dropped_warned_wall_s_ = wall_s;
+    }
+    if (s.label_images_received >= kLabelsBeforeUnmatchedWarning &&
+        2 * s.label_images_unmatched > s.label_images_received &&
+        s.label_images_unmatched > label_images_unmatched_warned_) {
+      ROS_WARN_STREAM("semantic_octomap_node: "
+                      << s.label_images_unmatched << " of " << s.label_images_received
+                      << " label images on " << topics::kSegmentationLabels
+                      << " matched no scan: each needs a scan within label_stamp_tolerance_s ("
+                      << session_->config().label_stamp_tolerance_s
+                      << " s) of its stamp (label images keep their camera image's stamp)");
+      label_images_unmatched_warned_ = s.label_images_unmatched;
+      dropped_warned_wall_s_ = wall_s;
     }
   }
 
@@ -283,6 +333,9 @@ class SemanticOctomapNodeCore::Impl {
   }
 
   ros::NodeHandle nh_, pnh_;
+  std::string last_pose_error_;  // the last tf lookup that failed, for the warning
+  std::size_t scans_without_pose_warned_ = 0, label_images_unmatched_warned_ = 0;
+  double dropped_warned_wall_s_ = -1e9;
   ros::Time clock_at_last_move_;
   double clock_moved_wall_s_ = 0.0;
   NodeOptions options_;

@@ -208,6 +208,13 @@ class SemanticOctomapNodeTest(unittest.TestCase):
                         "info: %s" % self.info)
         with self.lock:
             self.assertEqual(self.info.scans_inserted, scans_before, "a scan without a pose was inserted")
+        # An older driver's "/velo_link": tf2 refuses the slash, and every such scan was dropped
+        # "without a pose". It is the frame velo_link.
+        slashed = wall_cloud(rospy.Time.now())
+        slashed.header.frame_id = "/velo_link"
+        self.cloud_pub.publish(slashed)
+        self.assertTrue(self.wait_for(lambda: self.info.scans_inserted > scans_before, timeout=10),
+                        "a scan in '/velo_link' was not mapped: %s" % self.info)
 
     def test_4_save_map_ot_and_ply(self):
         ot_path = os.path.join(self.out_dir, "map.ot")
@@ -240,6 +247,23 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         self.assertIn(bad, response.message)
         response = self.save(os.path.join(self.out_dir, "again.ot"), "ot")
         self.assertTrue(response.success, "node did not survive the failed save: " + response.message)
+        # A folder is refused before anything is written; an extension that is neither .ot nor
+        # .ply without a format (a .bt is octomap's own format) is refused; a relative path is
+        # the node's working directory's, and the reply says which file that is.
+        response = self.save(self.out_dir, "ot")
+        self.assertFalse(response.success)
+        self.assertIn("is a directory", response.message)
+        response = self.save(os.path.join(self.out_dir, "map.bt"), "")
+        self.assertFalse(response.success)
+        self.assertIn("'.bt' is not .ot or .ply", response.message)
+        self.assertEqual([f for f in os.listdir(self.out_dir) if ".tmp" in f or f == "map.bt"], [])
+        relative = "ism_semantic_octomap_node_test_%d.ot" % os.getpid()
+        response = self.save(relative, "ot")
+        self.assertTrue(response.success, response.message)
+        written = response.message.split()[1]
+        self.assertTrue(os.path.isabs(written) and written.endswith("/" + relative), response.message)
+        self.assertTrue(os.path.isfile(written), written)
+        os.remove(written)
 
     def test_6_reset_empties_the_map_and_load_map_restores_it(self):
         saved = os.path.join(self.out_dir, "before_reset.ot")
@@ -249,6 +273,9 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         response = self.save(os.path.join(self.out_dir, "empty.ply"), "ply")
         self.assertTrue(response.success, response.message)
         self.assertEqual(response.voxel_count, 0)
+        # A one-shot read of the info after the reset says so (a latched one was the old map's).
+        fresh = rospy.wait_for_message("/semantic_map/info", SemanticMapInfo, timeout=5)
+        self.assertEqual(fresh.occupied_voxels, 0, fresh)
         # A corrupt file is refused and the (empty) map is kept; the saved one loads back.
         with open(saved, "rb") as f:
             data = bytearray(f.read())
@@ -284,6 +311,9 @@ class SemanticOctomapNodeTest(unittest.TestCase):
         # log_period were announced as still read and then ignored.
         from strict_parameters import run_with_parameters
         cases = [({"log_period_s": 0}, "'log_period_s' must be in (0, "),
+                 # A mistyped folder was found at shutdown, when the whole map was lost.
+                 ({"autosave_path": "/nonexistent_ism_dir/map.ot"},
+                  "cannot write '/nonexistent_ism_dir/map.ot': no directory /nonexistent_ism_dir"),
                  ({"log_period": 0}, "'log_period' (now 'log_period_s') must be in (0, "),
                  ({"marker_depth": 40}, "'marker_depth' must be an integer in [1, 16]"),
                  ({"camera_index": 7}, "'camera_index' must be an integer in [0, 3]"),

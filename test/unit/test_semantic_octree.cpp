@@ -533,6 +533,13 @@ TEST(SemanticOcTreeIo, UnwritablePathFailsClearly) {
   EXPECT_THROW(loadSemanticOcTree("/nonexistent_dir_ism/missing.ot"), MapIoError);
   EXPECT_THROW(parseMapFormat("bt", "x.bt"), MapIoError);
   EXPECT_EQ(parseMapFormat("", "x.ply"), MapFormat::kPly);
+  EXPECT_EQ(parseMapFormat("", "x.ot"), MapFormat::kSemanticOt);
+  // Found by review: without a format, x.bt got a semantic octree that octomap's tools expect to
+  // be their own binary format; any extension but .ply did.
+  for (const char* path : {"x.bt", "x.xyz", "x"}) {
+    EXPECT_THROW(parseMapFormat("", path), MapIoError) << path;
+  }
+  EXPECT_EQ(parseMapFormat("ot", "x.bt"), MapFormat::kSemanticOt);  // asked for by name
 }
 
 // A tool's map and its exports appear together or not at all.

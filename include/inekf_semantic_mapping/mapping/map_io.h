@@ -26,7 +26,8 @@ enum class MapFormat {
   kPly,         // ASCII PLY: occupied leaves at finest resolution, x y z label red green blue
 };
 
-// "ot" | "color_ot" | "ply"; empty: from the extension (.ply -> ply, else ot). Throws MapIoError.
+// "ot" | "color_ot" | "ply"; empty: from the extension (.ply -> ply, .ot -> ot; another one is
+// refused). Throws MapIoError.
 MapFormat parseMapFormat(const std::string& format, const std::string& path);
 
 // Writes `tree` in `format` to `path`; returns the map's occupied voxels at the finest resolution
