@@ -7,7 +7,7 @@ namespaces). Three modes:
       --png: also PNG-encodes every message (a mono8/rgb8/bgr8 sensor_msgs/Image) and sums the
       encoded sizes: what a PNG (lossless) transport would send instead.
   two_host_probe.py info OUT.json [TIMEOUT_S]
-      Waits for /semantic_map/info (SemanticMapInfo, latched) and writes its counts to OUT.json.
+      Waits for /semantic_map/info (SemanticMapInfo; a new subscriber gets it at once) and writes its counts to OUT.json.
   two_host_probe.py subscribed TIMEOUT_S TOPIC=NODE...
       Waits until every NODE subscribes to its TOPIC (one master query a poll, no CLI tools in a
       pipeline); exit 0, or 1 with the master's subscriber lists when TIMEOUT_S passes.

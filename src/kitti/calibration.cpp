@@ -153,6 +153,18 @@ Eigen::Isometry3d CameraProjection::T_rectified_camera_velo() const {
   return result;
 }
 
+void CameraProjection::checkRectifiedImageSize(const std::string& image_path, int image_width,
+                                               int image_height) const {
+  if (width <= 0 || height <= 0) return;
+  if (image_width == width && image_height == height) return;
+  throw KittiFormatError(
+      image_path, std::to_string(image_width) + "x" + std::to_string(image_height) +
+                      ", the calibration's rectified size (S_rect) says " + std::to_string(width) +
+                      "x" + std::to_string(height) +
+                      ": not the rectified image the projection needs (an _extract "
+                      "drive's images are not rectified: use its _sync drive)");
+}
+
 CameraProjection RawCalibration::projection(int camera_index) const {
   if (camera_index < 0 || camera_index >= 4 || !cameras[camera_index].present) {
     throw std::out_of_range("RawCalibration::projection: camera " + std::to_string(camera_index) +

@@ -262,21 +262,6 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   }
 }
 
-void checkRectifiedSize(const RawDriveScan& scan, int width, int height) {
-  const kitti::CameraProjection& camera = scan.camera;
-  if (camera.width <= 0 || camera.height <= 0) return;  // the calibration gives no size
-  if (width == camera.width && height == camera.height) return;
-  // Projected with P_rect, an unrectified image (an _extract drive's raw 1392x512) labels every
-  // point from the wrong pixel, with no error.
-  throw kitti::KittiFormatError(
-      scan.image_path, std::to_string(width) + "x" + std::to_string(height) +
-                           ", the calibration's rectified size (S_rect) says " +
-                           std::to_string(camera.width) + "x" + std::to_string(camera.height) +
-                           ": not the rectified image the projection needs (an _extract drive's "
-                           "images are not rectified: use its _sync drive, or map without "
-                           "--model)");
-}
-
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
                          std::ostream* warnings) {
   // An empty map written with exit status 0 would look like a map.
@@ -359,7 +344,7 @@ void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
         }
         if (camera_labels && !scan.image_stem.empty() &&
             (*camera_labels)(scan.image_stem, &image)) {
-          checkRectifiedSize(scan, image.width, image.height);
+          scan.camera.checkRectifiedImageSize(scan.image_path, image.width, image.height);
           const LabelImageView view{image.pixels.data(), image.width, image.height,
                                     static_cast<std::size_t>(image.width)};
           const CameraModel camera{scan.camera.P_rect, scan.camera.R_rect, scan.camera.T_cam0_velo,

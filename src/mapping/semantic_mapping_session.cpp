@@ -1,6 +1,7 @@
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 
@@ -285,8 +286,24 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   return addLabels(std::move(copy));
 }
 
+void SemanticMappingSession::noteUnknownLabelIds(const LabelImageView& labels) {
+  std::array<bool, 256> seen{};
+  for (int row = 0; row < labels.height; ++row) {
+    const std::uint8_t* pixel = labels.data + static_cast<std::size_t>(row) * labels.step;
+    for (int col = 0; col < labels.width; ++col) seen[pixel[col]] = true;
+  }
+  for (int id = 1; id < 256; ++id) {  // 0: unlabelled in every set
+    if (seen[static_cast<std::size_t>(id)] && classSet().indexOf(id) == kNoClass) {
+      ++statistics_.label_images_with_unknown_ids;
+      statistics_.last_unknown_label_id = static_cast<std::uint32_t>(id);
+      return;
+    }
+  }
+}
+
 std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> labels) {
   ++statistics_.label_images_received;
+  noteUnknownLabelIds(labels->view);
   const std::optional<CameraModel> camera = labels->camera;
   const std::shared_ptr<PendingLabels> shared = labels;  // the same pixels, for the neighbours
   const ScanLabelPairing::LabelsPlace place = pairing_.addLabels(

@@ -304,15 +304,12 @@ std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> DriveMessageFactory::came
   sensor_msgs::Image image = readImageMessage(path, color, frame_id, stamp);
   // Its camera_info says the calibration's size: an image of another size would be projected
   // with the wrong intrinsics by everything downstream.
-  if (projection.width > 0 && projection.height > 0 &&
-      (static_cast<int>(image.width) != projection.width ||
-       static_cast<int>(image.height) != projection.height)) {
-    throw kitti::KittiFormatError(
-        path, std::to_string(image.width) + "x" + std::to_string(image.height) +
-                  ", the calibration's S_rect_0" + std::to_string(camera_index) + " says " +
-                  std::to_string(projection.width) + "x" + std::to_string(projection.height) +
-                  ": not the rectified image (an _extract drive's images are not rectified: use "
-                  "its _sync drive, or leave the camera out: kitti2bag --no-camera)");
+  try {
+    projection.checkRectifiedImageSize(path, static_cast<int>(image.width),
+                                       static_cast<int>(image.height));
+  } catch (const kitti::KittiFormatError& e) {
+    throw std::runtime_error(std::string(e.what()) +
+                             "; or leave the camera out (kitti2bag --no-camera)");
   }
   return {std::move(image), toCameraInfoMessage(projection, frame_id, stamp)};
 }

@@ -62,12 +62,14 @@ void MapServices::finalAutosave() {
     return;
   }
   // The folder went away, or the disk filled, while mapping: the map is not lost with it.
-  const std::string fallback =
-      (std::filesystem::temp_directory_path() /
-       ("semantic_map_autosave_" + std::to_string(static_cast<long>(::getpid())) + ".ot"))
-          .string();
+  const std::string name =
+      "semantic_map_autosave_" + std::to_string(static_cast<long>(::getpid())) + ".ot";
+  std::string fallback = "/tmp/" + name;
   std::string fallback_result;
   try {
+    std::error_code no_tmpdir;  // a TMPDIR that does not exist: /tmp
+    const std::filesystem::path tmp = std::filesystem::temp_directory_path(no_tmpdir);
+    if (!no_tmpdir) fallback = (tmp / name).string();
     session_.save(fallback, mapping::MapFormat::kSemanticOt);
     fallback_result = "saved to " + fallback + " instead";
   } catch (const std::exception& e) {

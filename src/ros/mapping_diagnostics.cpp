@@ -116,8 +116,7 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
       last_scan_wall_s_ >= 0 && wall_s - last_scan_wall_s_ < options_.label_stall_warn_s;
   if (!labels_expected) {
     status->summary(DiagnosticStatus::OK, "no label publisher (occupancy only)");
-  } else if (stats.label_images_received >= 5 &&
-             2 * stats.label_images_unmatched > stats.label_images_received) {
+  } else if (mostLabelImagesUnmatched(stats)) {
     status->summary(DiagnosticStatus::WARN,
                     "most label images match no scan (stamps more than label_stamp_tolerance_s "
                     "from every scan's)");

@@ -38,8 +38,6 @@ constexpr double kClockMismatchWarnS = 60.0;
 // at the end of a bag (or while it is paused) data time stands still and would hold the last
 // second of scans out of the map, and out of a save_map, until shutdown.
 constexpr double kClockStoppedInsertS = 2.0;
-// Label images before "most of them matched no scan" is said (a few at the ends of a run do not).
-constexpr std::size_t kLabelsBeforeUnmatchedWarning = 5;
 
 // The node's own keys (display, frames, calibration); the rest belong to the session.
 struct NodeOptions {
@@ -259,14 +257,12 @@ class SemanticOctomapNodeCore::Impl {
       ROS_WARN_STREAM("semantic_octomap_node: "
                       << s.scans_without_pose - scans_without_pose_warned_ << " scans on "
                       << topics::kVelodyne << " dropped without a pose (" << s.scans_without_pose
-                      << " of " << s.scans_received << " so far): no transform "
-                      << last_pose_error_);
+                      << " of " << s.scans_received
+                      << " so far); the last tf lookup that failed: " << last_pose_error_);
       scans_without_pose_warned_ = s.scans_without_pose;
       dropped_warned_wall_s_ = wall_s;
     }
-    if (s.label_images_received >= kLabelsBeforeUnmatchedWarning &&
-        2 * s.label_images_unmatched > s.label_images_received &&
-        s.label_images_unmatched > label_images_unmatched_warned_) {
+    if (mostLabelImagesUnmatched(s) && s.label_images_unmatched > label_images_unmatched_warned_) {
       ROS_WARN_STREAM("semantic_octomap_node: "
                       << s.label_images_unmatched << " of " << s.label_images_received
                       << " label images on " << topics::kSegmentationLabels
@@ -274,6 +270,18 @@ class SemanticOctomapNodeCore::Impl {
                       << session_->config().label_stamp_tolerance_s
                       << " s) of its stamp (label images keep their camera image's stamp)");
       label_images_unmatched_warned_ = s.label_images_unmatched;
+      dropped_warned_wall_s_ = wall_s;
+    }
+    if (s.label_images_with_unknown_ids > unknown_ids_warned_) {
+      ROS_WARN_STREAM("semantic_octomap_node: "
+                      << s.label_images_with_unknown_ids << " of " << s.label_images_received
+                      << " label images on " << topics::kSegmentationLabels
+                      << " hold ids the map's class set ("
+                      << mapping::mapClassSetName(session_->config().class_set)
+                      << ") does not know, e.g. " << s.last_unknown_label_id
+                      << ": those pixels give no class evidence (labels of another id scheme? "
+                         "~class_set)");
+      unknown_ids_warned_ = s.label_images_with_unknown_ids;
       dropped_warned_wall_s_ = wall_s;
     }
   }
@@ -335,6 +343,7 @@ class SemanticOctomapNodeCore::Impl {
   ros::NodeHandle nh_, pnh_;
   std::string last_pose_error_;  // the last tf lookup that failed, for the warning
   std::size_t scans_without_pose_warned_ = 0, label_images_unmatched_warned_ = 0;
+  std::size_t unknown_ids_warned_ = 0;
   double dropped_warned_wall_s_ = -1e9;
   ros::Time clock_at_last_move_;
   double clock_moved_wall_s_ = 0.0;

@@ -104,8 +104,8 @@ void checkCityscapesLabelIds(const std::vector<std::uint32_t>& labels, const std
       throw ism::kitti::KittiFormatError(
           path, "point " + std::to_string(p) + " has label " + std::to_string(label) +
                     ", not a Cityscapes labelId (0-33): SemanticKITTI's own ids? --labels takes "
-                    "Cityscapes labelIds (make_camera_labels, generate_synthetic_drive write "
-                    "them); a SemanticKITTI sequence is scored by evaluate_semantics");
+                    "Cityscapes labelIds per point (generate_synthetic_drive writes them); a "
+                    "SemanticKITTI sequence is scored by evaluate_semantics");
     }
   }
 }

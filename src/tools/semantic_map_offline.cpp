@@ -198,7 +198,7 @@ void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
   std::size_t frames = 0, labelled = 0, in_view = 0, hidden = 0;
   ism::ScopedTimer timer("semantic_map/label_images");
   mapping::forEachRawDriveScan(drive, [&](const mapping::RawDriveScan& scan) {
-    // The image's own size: the rectified size in the calibration is not always the image's.
+    // The image's size is the calibration's rectified one (checked), or the calibration says none.
     if (scan.image_stem.empty()) {
       std::cerr << "[semantic_map_offline] velodyne frame " << scan.stem << ": no camera image "
                 << "at its stamp in " << images << ", no label image for it\n";
@@ -211,7 +211,7 @@ void writeMapLabelImages(const ism::mapping::SemanticOcTree& tree,
                 << "image for it\n";
       return;
     }
-    mapping::checkRectifiedSize(scan, image.cols, image.rows);
+    scan.camera.checkRectifiedImageSize(image_path, image.cols, image.rows);
     const mapping::CameraModel camera{scan.camera.P_rect, scan.camera.R_rect,
                                       scan.camera.T_cam0_velo, image.cols, image.rows};
     mapping::MapLabelImageStats stats;

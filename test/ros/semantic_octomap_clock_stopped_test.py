@@ -50,7 +50,7 @@ class ClockStoppedTest(unittest.TestCase):
         clock_thread = threading.Thread(target=run_clock, daemon=True)
         clock_thread.start()
         self.addCleanup(state.update, stop=True)
-        rospy.Subscriber("/semantic_map/info", SemanticMapInfo, on_info)
+        info_subscriber = rospy.Subscriber("/semantic_map/info", SemanticMapInfo, on_info)
         rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics)
         static_tf = tf2_ros.StaticTransformBroadcaster()
         static_tf.sendTransform([
@@ -119,6 +119,14 @@ class ClockStoppedTest(unittest.TestCase):
             self.assertEqual(values["pending scans"], "1")
             self.assertGreater(float(values["oldest pending scan waiting (s)"]), 1.0)
             self.assertEqual(state["info"].scans_inserted, 2, state["info"])
+
+        # The info is published only while someone listens: latched, a one-shot read after the
+        # map changed unheard gave the old figures. Now a new subscriber gets the current ones.
+        info_subscriber.unregister()
+        cloud_pub.publish(wall_cloud(rospy.Time.from_sec(100.4)))
+        time.sleep(4.0)  # a stopped clock: in after 2 s
+        fresh = rospy.wait_for_message("/semantic_map/info", SemanticMapInfo, timeout=5)
+        self.assertEqual(fresh.scans_inserted, 3, fresh)
 
 
 if __name__ == "__main__":

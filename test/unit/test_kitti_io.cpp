@@ -228,6 +228,29 @@ TEST(KittiSensorStream, AFrameTheRecorderDroppedKeepsTheOthersOnTheirOwnLines) {
   fs::remove_all(fs::path(dir).parent_path());
 }
 
+// An _extract drive's camera images are the raw 1392x512 ones: projected with P_rect they label
+// every point from the wrong pixel. semantic_map_offline labelled such a drive without a word.
+TEST(KittiCalibration, AnImageNotOfTheRectifiedSizeIsRefusedNamingIt) {
+  CameraProjection camera;
+  camera.width = 1242;
+  camera.height = 375;
+  const std::string path = "drive/image_02/data/0000000000.png";
+  EXPECT_NO_THROW(camera.checkRectifiedImageSize(path, 1242, 375));
+  try {
+    camera.checkRectifiedImageSize(path, 1392, 512);
+    ADD_FAILURE() << "an unrectified image was taken";
+  } catch (const KittiFormatError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path), std::string::npos) << what;
+    EXPECT_NE(what.find("1392x512, the calibration's rectified size (S_rect) says 1242x375"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("_sync drive"), std::string::npos) << what;
+  }
+  camera.width = camera.height = 0;  // a calibration that states no size
+  EXPECT_NO_THROW(camera.checkRectifiedImageSize(path, 1392, 512));
+}
+
 TEST(KittiSensorStream, FilesNumberedOtherwiseAreAnErrorNamingTheFolder) {
   const std::string dir = makeTempDir("kitti_stream") + "/image_02";
   writeFile(dir + "/timestamps.txt", "2011-09-26 13:02:25.0\n2011-09-26 13:02:25.1\n");

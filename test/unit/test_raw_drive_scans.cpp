@@ -299,29 +299,6 @@ TEST(RawDriveScans, APosesFileCoversWhatItHas) {
   }
 }
 
-// An _extract drive's camera images are the raw 1392x512 ones: projected with P_rect they label
-// every point from the wrong pixel. semantic_map_offline labelled such a drive without a word.
-TEST(RawDriveScans, AnImageNotOfTheRectifiedSizeIsRefusedNamingIt) {
-  RawDriveScan scan;
-  scan.image_path = "drive/image_02/data/0000000000.png";
-  scan.camera.width = 1242;
-  scan.camera.height = 375;
-  EXPECT_NO_THROW(checkRectifiedSize(scan, 1242, 375));
-  try {
-    checkRectifiedSize(scan, 1392, 512);
-    ADD_FAILURE() << "an unrectified image was taken";
-  } catch (const std::runtime_error& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(scan.image_path), std::string::npos) << what;
-    EXPECT_NE(what.find("1392x512, the calibration's rectified size (S_rect) says 1242x375"),
-              std::string::npos)
-        << what;
-    EXPECT_NE(what.find("_sync drive"), std::string::npos) << what;
-  }
-  scan.camera.width = scan.camera.height = 0;  // a calibration that states no size
-  EXPECT_NO_THROW(checkRectifiedSize(scan, 1392, 512));
-}
-
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

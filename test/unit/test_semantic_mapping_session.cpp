@@ -504,6 +504,19 @@ TEST(SemanticMappingSessionTest, AStoppedClockEndsTheLabelWaitOfPosedScansOnly) 
   EXPECT_EQ(session.pendingScans(), 1u);
 }
 
+// Found by review: label images in another id scheme (SemanticKITTI's, an "ignore" 255) gave no
+// class evidence, were counted as used and nothing said so. They are counted apart now.
+TEST(SemanticMappingSessionTest, LabelIdsTheClassSetDoesNotKnowAreCounted) {
+  SemanticMappingSession session(testConfig());
+  std::vector<std::uint8_t> pixels = testLabels();
+  session.addLabelImage(0.0, LabelImageView{pixels.data(), 100, 100, 100}, testCamera());
+  EXPECT_EQ(session.statistics().label_images_with_unknown_ids, 0u);
+  pixels[4321] = 250;  // one pixel is enough to say so
+  session.addLabelImage(0.1, LabelImageView{pixels.data(), 100, 100, 100}, testCamera());
+  EXPECT_EQ(session.statistics().label_images_with_unknown_ids, 1u);
+  EXPECT_EQ(session.statistics().last_unknown_label_id, 250u);
+}
+
 // A busy node: the scans sit in their subscriber queue 3 s behind the clock (longer than
 // label_wait), while label images come before their scans. No label image is lost, and a lagging
 // scan is no bag loop.

@@ -34,6 +34,11 @@ struct CameraProjection {
   Eigen::Isometry3d T_rectified_camera_velo() const;
   // K of the rectified image (the left 3x3 block of P_rect).
   Eigen::Matrix3d rectifiedIntrinsics() const { return P_rect.leftCols<3>(); }
+  // Throws KittiFormatError naming image_path unless a width x height image is the rectified
+  // size stated (unchecked when none is): projected with P_rect, another image (an _extract
+  // drive's unrectified 1392x512) is labelled from the wrong pixels, with no error.
+  void checkRectifiedImageSize(const std::string& image_path, int image_width,
+                               int image_height) const;
 };
 
 // One camera of calib_cam_to_cam.txt (suffix _00.._03).

@@ -92,9 +92,6 @@ using RawDriveScanVisitor = std::function<void(const RawDriveScan& scan)>;
 // pose; an std::out_of_range from `visit` becomes an error naming the frame's pose.
 void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor& visit,
                          std::ostream* warnings = nullptr);
-// Throws kitti::KittiFormatError naming scan.image_path when an image of width x height is not
-// the rectified size the scan's camera calibration states (S_rect; unchecked when it states none).
-void checkRectifiedSize(const RawDriveScan& scan, int width, int height);
 
 // Inserts every velodyne frame of the drive (forEachRawDriveScan) with camera labels from
 // `camera_labels` (stem: the scan's image_stem) when given; warnings and progress go to

@@ -41,13 +41,17 @@ struct MappingStatistics {
                                        // extent or not finite): dropped and reported
   std::size_t label_images_received = 0;
   std::size_t label_images_used = 0;
-  std::size_t label_images_late = 0;            // of the used ones: came after their scan went in
-                                                // (class evidence only)
-  std::size_t label_images_unmatched = 0;       // no scan within the tolerance while it was kept
-  std::size_t label_images_without_camera = 0;  // their camera never became known or was
-                                                // unusable: their scans went in without classes
-  std::size_t scans_with_neighbour_labels = 0;  // without a label image of their own, the
-                                                // evidence of one within label_neighbour_s
+  std::size_t label_images_late = 0;              // of the used ones: came after their scan went in
+                                                  // (class evidence only)
+  std::size_t label_images_unmatched = 0;         // no scan within the tolerance while it was kept
+  std::size_t label_images_without_camera = 0;    // their camera never became known or was
+                                                  // unusable: their scans went in without classes
+  std::size_t scans_with_neighbour_labels = 0;    // without a label image of their own, the
+                                                  // evidence of one within label_neighbour_s
+  std::size_t label_images_with_unknown_ids = 0;  // holding ids the class set does not know
+                                                  // (another id scheme, an "ignore" 255): those
+                                                  // pixels give no class evidence
+  std::uint32_t last_unknown_label_id = 0;        // one of them, for the message
   std::size_t points_inserted = 0;
   std::size_t points_with_class = 0;  // points that added class evidence
 };
@@ -182,6 +186,7 @@ class SemanticMappingSession {
 
   // Streaming: the pairing's scans go in through these.
   std::size_t addLabels(std::shared_ptr<PendingLabels> labels);
+  void noteUnknownLabelIds(const LabelImageView& labels);
   std::size_t insertReadyScans(double now);
   // insertWhenReady, with a scan the map cannot take dropped and reported (true: off the queue).
   bool insertOrReject(PendingScan& scan, bool may_wait);

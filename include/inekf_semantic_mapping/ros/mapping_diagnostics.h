@@ -17,6 +17,16 @@
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
 
+// Label images received before "most of them matched no scan" is said (the status and the
+// node's log line): a few at the ends of a run match none.
+constexpr std::size_t kLabelsBeforeUnmatchedWarning = 5;
+
+// True when most of the label images received matched no scan.
+inline bool mostLabelImagesUnmatched(const mapping::MappingStatistics& s) {
+  return s.label_images_received >= kLabelsBeforeUnmatchedWarning &&
+         2 * s.label_images_unmatched > s.label_images_received;
+}
+
 struct MappingDiagnosticsOptions {
   double window_s = 10.0;            // rates and latency percentiles over this many wall seconds
   double label_stall_warn_s = 10.0;  // no label image for this long while scans come: WARN
