@@ -130,7 +130,8 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
       std::string(KITTI2BAG_PATH) + " --drive " + drive + " --output " + bag_path + ".5");
   EXPECT_EQ(size_status, 1) << size_output;
   EXPECT_NE(size_output.find(cropped), std::string::npos) << size_output;
-  EXPECT_NE(size_output.find("40x20, the calibration's rectified size (S_rect) says 40x30"), std::string::npos)
+  EXPECT_NE(size_output.find("40x20, the calibration's rectified size (S_rect) says 40x30"),
+            std::string::npos)
       << size_output;
   EXPECT_EQ(size_output.find("cannot write"),
             std::string::npos)  // the input's fault, not the bag's
