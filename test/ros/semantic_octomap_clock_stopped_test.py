@@ -11,13 +11,11 @@ import unittest
 
 import rospy
 import rostest
-import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from inekf_semantic_mapping.msg import SemanticMapInfo
-from semantic_octomap_node_test import camera_info, label_image, transform, wall_cloud
+from semantic_octomap_node_test import CameraRig, camera_info, label_image, wall_cloud
 
 NODE = "/semantic_octomap_node"
 MAP_STATUS = "semantic_octomap_node: map"
@@ -52,15 +50,8 @@ class ClockStoppedTest(unittest.TestCase):
         self.addCleanup(state.update, stop=True)
         info_subscriber = rospy.Subscriber("/semantic_map/info", SemanticMapInfo, on_info)
         rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics)
-        static_tf = tf2_ros.StaticTransformBroadcaster()
-        static_tf.sendTransform([
-            transform("map", "velo_link", (0.0, 0.0, 0.0), (0, 0, 0, 1)),
-            transform("velo_link", "camera_color_left", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)),
-        ])
-        info_pub = rospy.Publisher("/kitti/camera_color_left/camera_info", CameraInfo,
-                                   queue_size=1, latch=True)
-        cloud_pub = rospy.Publisher("/kitti/velo/pointcloud", PointCloud2, queue_size=5)
-        labels_pub = rospy.Publisher("/segmentation/labels", Image, queue_size=5)
+        rig = CameraRig()
+        info_pub, cloud_pub, labels_pub = rig.info_pub, rig.cloud_pub, rig.labels_pub
 
         def wait_until(predicate, timeout_s):
             deadline = time.time() + timeout_s

@@ -79,6 +79,22 @@ def camera_info():
     return msg
 
 
+class CameraRig:
+    """The map node's inputs for a lidar at the map's origin with the camera on it, as the
+    rostests publish them: the static tf, camera_info (latched), clouds and label images."""
+
+    def __init__(self):
+        self.static_tf = tf2_ros.StaticTransformBroadcaster()  # kept: its transforms stay sent
+        self.static_tf.sendTransform([
+            transform("map", "velo_link", (0.0, 0.0, 0.0), (0, 0, 0, 1)),
+            transform("velo_link", "camera_color_left", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)),
+        ])
+        self.info_pub = rospy.Publisher("/kitti/camera_color_left/camera_info", CameraInfo,
+                                        queue_size=1, latch=True)
+        self.cloud_pub = rospy.Publisher("/kitti/velo/pointcloud", PointCloud2, queue_size=5)
+        self.labels_pub = rospy.Publisher("/segmentation/labels", Image, queue_size=5)
+
+
 def read_ply(path):
     with open(path) as f:
         lines = f.read().splitlines()

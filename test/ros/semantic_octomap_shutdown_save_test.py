@@ -14,11 +14,9 @@ import unittest
 
 import rospy
 import rostest
-import tf2_ros
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 import e2e_support as e2e
-from semantic_octomap_node_test import camera_info, label_image, transform, wall_cloud
+from semantic_octomap_node_test import CameraRig, camera_info, label_image, wall_cloud
 
 NODE = "/semantic_octomap_node"
 
@@ -30,15 +28,8 @@ class ShutdownSaveTest(unittest.TestCase):
         stderr_log = rospy.get_param("~stderr_log", "")
         path = rospy.get_param(NODE + "/autosave_path")
         self.addCleanup(lambda: os.path.exists(path) and os.remove(path))
-        static_tf = tf2_ros.StaticTransformBroadcaster()
-        static_tf.sendTransform([
-            transform("map", "velo_link", (0.0, 0.0, 0.0), (0, 0, 0, 1)),
-            transform("velo_link", "camera_color_left", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)),
-        ])
-        info_pub = rospy.Publisher("/kitti/camera_color_left/camera_info", CameraInfo,
-                                   queue_size=1, latch=True)
-        cloud_pub = rospy.Publisher("/kitti/velo/pointcloud", PointCloud2, queue_size=5)
-        labels_pub = rospy.Publisher("/segmentation/labels", Image, queue_size=5)
+        rig = CameraRig()
+        info_pub, cloud_pub, labels_pub = rig.info_pub, rig.cloud_pub, rig.labels_pub
         rospy.wait_for_service(NODE + "/save_map", timeout=30)
         deadline = time.time() + 20
         while (cloud_pub.get_num_connections() == 0 or labels_pub.get_num_connections() == 0) \
