@@ -175,6 +175,7 @@ ModelCard parseModelCard(const std::string& yaml_path, const YAML::Node& root) {
   r.read("tile_max_width", &card.tile_max_width);
   r.read("flip_average", &card.flip_average);
   r.read("suppress_unlabeled", &card.suppress_unlabeled);
+  r.read("output_name", &card.output_name);
   requireMap(&r, root, "label_filter", "{min_confidence, boundary_radius_px}");
   card.label_filter = LabelFilterOptions{0.0, 0};  // a card without a filter filters nothing
   r.read("label_filter.min_confidence", &card.label_filter.min_confidence);
@@ -231,6 +232,9 @@ void saveModelCard(const ModelCard& card, const std::string& yaml_path) {
   out << YAML::Key << "tile_max_width" << YAML::Value << card.tile_max_width;
   out << YAML::Key << "flip_average" << YAML::Value << card.flip_average;
   out << YAML::Key << "suppress_unlabeled" << YAML::Value << card.suppress_unlabeled;
+  if (!card.output_name.empty()) {
+    out << YAML::Key << "output_name" << YAML::Value << card.output_name;
+  }
   out << YAML::Key << "label_filter" << YAML::Value << YAML::BeginMap << YAML::Key
       << "min_confidence" << YAML::Value << card.label_filter.min_confidence << YAML::Key
       << "boundary_radius_px" << YAML::Value << card.label_filter.boundary_radius_px

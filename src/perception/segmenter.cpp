@@ -204,17 +204,46 @@ Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int n
     throw SegmentationError("model card " + card_.source + ": more than 256 output channels");
   cv::setNumThreads(num_threads);
   network_->net = readNetworkForCpu(model_path);
+  checkOutputName();
   network_->label_lut = cv::Mat::zeros(1, 256, CV_8U);
   for (int i = 0; i < card_.numOutputChannels(); ++i)
     network_->label_lut.at<std::uint8_t>(i) = card_.output_label_ids[i];
 
   // One forward pass on a neutral image: catches a card that does not fit the model now,
-  // not on the first camera frame (and warms up the network).
+  // not on the first camera frame (and warms up the network). Odd multiples of pad_multiple: a
+  // 64x64 probe passed a network that needs multiples of 32 under a card saying 8, and every
+  // camera frame then failed.
+  int odd_multiple = std::max(3, (64 + card_.pad_multiple - 1) / card_.pad_multiple);
+  if (odd_multiple % 2 == 0) ++odd_multiple;  // 64 px or more, an odd multiple of pad_multiple
   const int probe_width =
-      card_.input_width > 0 ? card_.input_width : std::max(64, 4 * card_.pad_multiple);
+      card_.input_width > 0 ? card_.input_width : odd_multiple * card_.pad_multiple;
   const int probe_height =
-      card_.input_height > 0 ? card_.input_height : std::max(64, 4 * card_.pad_multiple);
-  segment(cv::Mat(probe_height, probe_width, CV_8UC3, cv::Scalar(127, 127, 127)));
+      card_.input_height > 0 ? card_.input_height : odd_multiple * card_.pad_multiple;
+  try {
+    segment(cv::Mat(probe_height, probe_width, CV_8UC3, cv::Scalar(127, 127, 127)));
+  } catch (const SegmentationError& e) {
+    if (card_.input_width > 0 && card_.input_height > 0) throw;
+    throw SegmentationError(std::string(e.what()) + " (a probe of the input sizes its card " +
+                            card_.source + " allows: is pad_multiple " +
+                            std::to_string(card_.pad_multiple) +
+                            " the network's own stride, e.g. 32?)");
+  }
+}
+
+void Segmenter::checkOutputName() {
+  const std::vector<std::string> outputs = network_->net.getUnconnectedOutLayersNames();
+  std::string listed;
+  for (const std::string& name : outputs) listed += (listed.empty() ? "" : ", ") + name;
+  if (card_.output_name.empty()) {
+    if (outputs.size() <= 1) return;
+    throw SegmentationError("model " + model_path_ + " has " + std::to_string(outputs.size()) +
+                            " outputs (" + listed + "): name the one with the class scores in " +
+                            "its card " + card_.source + " (output_name: ...)");
+  }
+  if (std::find(outputs.begin(), outputs.end(), card_.output_name) == outputs.end()) {
+    throw SegmentationError("model card " + card_.source + ": output_name '" + card_.output_name +
+                            "' is not an output of " + model_path_ + " (" + listed + ")");
+  }
 }
 
 Segmenter::~Segmenter() = default;
@@ -234,7 +263,8 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
     }
     network_->input_size = input_size;
     network_->net.setInput(blob);
-    output = network_->net.forward();
+    output = card_.output_name.empty() ? network_->net.forward()
+                                       : network_->net.forward(card_.output_name);
   } catch (const cv::Exception& e) {
     throw SegmentationError("forward pass of " + model_path_ + " on a " +
                             std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +

@@ -91,25 +91,21 @@ class SegmentationNodeCore::Impl {
                                          << image_subscriber_.getTopic() << " at "
                                          << msg->header.stamp << " is " << msg->width << "x"
                                          << msg->height << " (frame skipped)");
+      noteRejectedFrame();
       return;
     }
     try {
-      if (msg->encoding == enc::BGR8 || msg->encoding == enc::RGB8) {
-        frame.image = cv_bridge::toCvCopy(msg, enc::BGR8)->image;
-      } else if (msg->encoding == enc::MONO8) {
-        frame.image = cv_bridge::toCvCopy(msg, enc::MONO8)->image;
-      } else {
-        ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: image on "
-                                           << image_subscriber_.getTopic() << " has encoding '"
-                                           << msg->encoding
-                                           << "'; only bgr8, rgb8 and mono8 are segmented "
-                                              "(frame skipped)");
-        return;
-      }
+      // Whatever cv_bridge turns into 8-bit BGR or grey (a camera driver's image_raw is often
+      // Bayer, bgra8 or 16-bit): mono stays mono, the rest becomes bgr8.
+      const bool mono = msg->encoding == enc::MONO8 || msg->encoding == enc::MONO16;
+      frame.image = cv_bridge::toCvCopy(msg, mono ? enc::MONO8 : enc::BGR8)->image;
     } catch (const std::exception& e) {  // cv_bridge's own, and OpenCV's from its conversion
-      ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: cannot convert image ("
-                                         << msg->width << "x" << msg->height << " " << msg->encoding
-                                         << "): " << e.what());
+      ROS_ERROR_STREAM_THROTTLE(5.0, "segmentation_node: cannot convert image on "
+                                         << image_subscriber_.getTopic() << " (" << msg->width
+                                         << "x" << msg->height << " " << msg->encoding
+                                         << ") to bgr8 or mono8: " << e.what()
+                                         << " (frame skipped)");
+      noteRejectedFrame();
       return;
     }
     frames_.put(std::move(frame));
@@ -187,6 +183,13 @@ class SegmentationNodeCore::Impl {
     status->add("frames received", frames_.putCount());
     status->add("dropped stale frames", frames_.droppedCount());
     status->add("failed frames in window", frames_failed_.count());
+  }
+
+  // A frame refused as it came counts as failed: the status said OK "segmenting" while every
+  // frame of a camera in an unreadable encoding was dropped.
+  void noteRejectedFrame() {
+    std::lock_guard<std::mutex> lock(window_mutex_);
+    frames_failed_.add(wallNow(), 0.0);
   }
 
   void segmentAndPublish(const Frame& frame) {

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """rostest for segmentation_node: an image published on the camera topic comes back as a mono8
 Cityscapes labelId image with the same header (stamp, frame_id) and size, and an rgb8 overlay;
-rgb8 and mono8 inputs work too; an unsupported encoding is skipped with the node staying up."""
+rgb8, mono8, bgra8, mono16 and Bayer inputs work too; an encoding cv_bridge cannot make bgr8 of
+is skipped, counted as a failed frame on /diagnostics, with the node staying up."""
 import os
 import sys
 import threading
@@ -11,6 +12,7 @@ import numpy as np
 import rospy
 import rostest
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Image
 
 PKG = "inekf_semantic_mapping"
@@ -22,7 +24,8 @@ WIDTH, HEIGHT = 1242, 375
 
 def make_image(encoding, stamp, frame_id, seed):
     rng = np.random.default_rng(seed)
-    channels = {"bgr8": 3, "rgb8": 3, "mono8": 1, "16UC1": 2}[encoding]
+    channels = {"bgr8": 3, "rgb8": 3, "mono8": 1, "16UC1": 2, "bgra8": 4, "mono16": 2,
+                "bayer_rggb8": 1}[encoding]
     # A sky-like top, a road-like bottom, noise: a plausible image, not an all-black one.
     pixels = rng.integers(0, 60, size=(HEIGHT, WIDTH * channels), dtype=np.uint8)
     pixels[: HEIGHT // 2] += 150
@@ -100,11 +103,24 @@ class SegmentationNodeTest(unittest.TestCase):
         self.assertEqual((overlay.width, overlay.height), (WIDTH, HEIGHT))
 
     def test_2_rgb8_and_mono8_images_are_segmented(self):
-        for encoding, seed in (("rgb8", 2), ("mono8", 3)):
+        # bgra8, mono16 and Bayer (a driver's image_raw) were refused: only bgr8, rgb8, mono8 were
+        # segmented.
+        for encoding, seed in (("rgb8", 2), ("mono8", 3), ("bgra8", 6), ("mono16", 7),
+                               ("bayer_rggb8", 8)):
             reply, stamp = self.publish_until_answered(encoding, "cam_" + encoding, seed)
             self.check_labels(reply, stamp, "cam_" + encoding)
 
     def test_3_unsupported_encoding_is_skipped_and_node_stays_up(self):
+        failed = []
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                for value in status.values:
+                    if value.key == "failed frames in window" and int(value.value) > 0:
+                        failed.append(status.message)
+
+        diagnostics = rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics)
+        self.addCleanup(diagnostics.unregister)
         bad = make_image("16UC1", rospy.Time(2000), "cam_bad", 4)
         # An empty rgb8 image passes cv_bridge's own checks and fails in OpenCV's conversion.
         empty = Image(encoding="rgb8", height=0, width=0, step=0, data=b"")
@@ -117,6 +133,12 @@ class SegmentationNodeTest(unittest.TestCase):
         with self.lock:
             self.assertNotIn("cam_bad", self.labels)
             self.assertNotIn("cam_empty", self.labels)
+        # Counted as failed frames: the status said OK "segmenting" while every frame was dropped.
+        deadline = rospy.Time.now() + rospy.Duration(5)
+        while not failed and rospy.Time.now() < deadline:
+            rospy.sleep(0.2)
+        self.assertTrue(failed, "the refused frames are not on /diagnostics")
+        self.assertIn(failed[-1], ("every frame failed", "some frames failed"))
         reply, stamp = self.publish_until_answered("bgr8", "cam_after_bad", 5)
         self.check_labels(reply, stamp, "cam_after_bad")
 

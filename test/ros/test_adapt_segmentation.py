@@ -7,6 +7,7 @@ does. Runs standalone or as the test node of test/ros/adapt_segmentation.test (r
 the result for catkin)."""
 
 import json
+import shutil
 import os
 import subprocess
 import sys
@@ -1526,6 +1527,87 @@ class OutputDefault(unittest.TestCase):
         self.assertTrue(script.rstrip().endswith(
             '/usr/bin/python3 -u "$ISM_ROOT/training/adapt_segmentation.py" "$@"'), script)
         self.assertNotIn("args+=", script)
+
+
+class UsersOwnModels(unittest.TestCase):
+    """Models as users bring them, through the C++ Segmenter (segment_image): the class score of
+    channel c is 10 x the input's colour c, so a red, a green and a blue band must come out as the
+    card's first, second and third labelId."""
+
+    CARD = ("input: {width: 0, height: 0}\nresize_policy: pad_to_multiple\npad_multiple: %d\n"
+            "mean: [0, 0, 0]\nscale: 0.00392156862745098\nswap_rb: true\n"
+            "num_output_channels: 3\noutput_label_ids: [7, 26, 23]\n%s")
+
+    def setUp(self):
+        require_torch(self)
+        import e2e_support
+        self.segment_image = e2e_support.find_executable("segment_image")
+        if self.segment_image is None:
+            self.fail("segment_image not built (scripts/build.sh all)")
+        self.dir = tempfile.mkdtemp(prefix="ism_user_models_")
+        self.addCleanup(shutil.rmtree, self.dir, ignore_errors=True)
+        import cv2
+        image = np.zeros((60, 90, 3), np.uint8)  # BGR: red, green, blue bands
+        image[:20, :, 2] = 255
+        image[20:40, :, 1] = 255
+        image[40:, :, 0] = 255
+        self.image = os.path.join(self.dir, "bands.png")
+        cv2.imwrite(self.image, image)
+
+    def export(self, name, module):
+        import torch
+        path = os.path.join(self.dir, name + ".onnx")
+        outputs = ["main", "aux"] if name == "two_outputs" else ["main"]
+        torch.onnx.export(module, torch.zeros(1, 3, 64, 96), path, opset_version=11,
+                          input_names=["image"], output_names=outputs,
+                          dynamic_axes={"image": {2: "h", 3: "w"}})
+        return path
+
+    def run_tool(self, model, card_text):
+        card = os.path.join(self.dir, "card.yaml")
+        with open(card, "w") as f:
+            f.write(card_text)
+        out = os.path.join(self.dir, "labels.png")
+        run = subprocess.run([self.segment_image, "--model", model, "--model-card", card,
+                              "--input", self.image, "--output", out],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             timeout=120)
+        return run, out
+
+    def test_a_second_output_is_named_in_the_card_not_guessed(self):
+        import cv2
+        import torch
+
+        class TwoOutputs(torch.nn.Module):  # an auxiliary head: the negated scores
+            def forward(self, x):
+                return 10 * x, -10 * x
+
+        model = self.export("two_outputs", TwoOutputs())
+        run, _ = self.run_tool(model, self.CARD % (8, ""))
+        self.assertNotEqual(run.returncode, 0, run.stdout)
+        self.assertIn("has 2 outputs", run.stdout)
+        self.assertIn("output_name", run.stdout)
+        run, _ = self.run_tool(model, self.CARD % (8, "output_name: nope\n"))
+        self.assertNotEqual(run.returncode, 0, run.stdout)
+        self.assertIn("output_name 'nope' is not an output", run.stdout)
+        run, out = self.run_tool(model, self.CARD % (8, "output_name: main\n"))
+        self.assertEqual(run.returncode, 0, run.stdout)
+        labels = cv2.imread(out, cv2.IMREAD_GRAYSCALE)
+        self.assertEqual([int(np.median(labels[r])) for r in (10, 30, 50)], [7, 26, 23])
+
+    def test_a_card_padding_less_than_the_network_needs_fails_at_load_naming_it(self):
+        import torch
+
+        class NeedsMultiplesOf32(torch.nn.Module):  # down by 32 and back up, added to its input
+            def forward(self, x):
+                low = torch.nn.functional.avg_pool2d(x, 32)
+                return 10 * x + torch.nn.functional.interpolate(low, scale_factor=32.0)
+
+        run, _ = self.run_tool(self.export("stride32", NeedsMultiplesOf32()), self.CARD % (8, ""))
+        self.assertNotEqual(run.returncode, 0, run.stdout)
+        self.assertIn("is pad_multiple 8 the network's own stride", run.stdout)
+        run, _ = self.run_tool(self.export("stride32", NeedsMultiplesOf32()), self.CARD % (32, ""))
+        self.assertEqual(run.returncode, 0, run.stdout)
 
 
 class TinyPipeline(unittest.TestCase):

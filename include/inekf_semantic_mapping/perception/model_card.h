@@ -89,6 +89,10 @@ struct ModelCard {
   // confidence. Cityscapes' void is mostly the ego car's bonnet at the bottom of the frame, which
   // a network trained there paints over the road of cameras without a bonnet in view.
   bool suppress_unlabeled = false;
+  // The output holding the class scores, for a model with more than one (an auxiliary head:
+  // DeepLab, PSPNet, BiSeNet); "" for a model with one. OpenCV lists a model's outputs in an order
+  // of its own, so a model with several and no name here is refused, not guessed.
+  std::string output_name;
   // Tone curve applied to every pixel before the colour normalization: v' = 255 (v / 255)^gamma
   // (< 1 lifts the shadows and midtones). 1: none. Valid: [kMinGamma, kMaxGamma].
   double gamma = 1.0;

@@ -63,6 +63,8 @@ class Segmenter {
   Segmentation labelsFromProbabilitySums(const std::vector<cv::Mat>& sum, const cv::Mat& weight,
                                          const cv::Rect& valid, const cv::Size& image_size) const;
   cv::Mat forward(const cv::Mat& network_image);  // 1 x C x h x w scores, checked
+  // Throws unless the card names one of the model's outputs, or the model has only one.
+  void checkOutputName();
   bool skipsInArgmax(int channel) const;
   std::string model_path_;
   ModelCard card_;
