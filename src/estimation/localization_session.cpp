@@ -48,6 +48,7 @@ LocalizationSessionConfig LocalizationSessionConfig::fromYamlFile(const std::str
   positive("session.default_fix_sigma_horizontal_m", &config.default_fix_sigma_horizontal_m);
   positive("session.default_fix_sigma_vertical_m", &config.default_fix_sigma_vertical_m);
   positive("session.time_jump_back_s", &config.time_jump_back_s);
+  positive("session.resume_origin_max_m", &config.resume_origin_max_m);
   reader.read("session.restart_after_imu_gap_s", &config.restart_after_imu_gap_s);
   if (!(config.restart_after_imu_gap_s >= 0.0) ||
       (config.restart_after_imu_gap_s > 0.0 &&
@@ -361,6 +362,12 @@ void LocalizationSession::handle(const Event& event, Update* update) {
     handleImu(*imu, update);
   } else if (const auto* fix = std::get_if<GeodeticFixEvent>(&event)) {
     handleFix(*fix, update);
+    if (!origin_note_.empty()) {  // after the start's own note
+      Update origin;
+      origin.note = origin_note_;
+      origin_note_.clear();
+      fold(origin, update);
+    }
   } else {
     handleGpsVelocity(std::get<GpsVelocityEvent>(event), update);
   }
@@ -484,7 +491,7 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
     update.note = note.str();
     return;
   }
-  if (!projection_) projection_.emplace(event.lat_deg, event.lon_deg, event.alt_m);
+  if (!projection_) takeOrigin(event);
   PositionFix fix;
   fix.stamp_s = event.stamp_s;
   fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, event.alt_m);
@@ -516,6 +523,29 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   }
   releaseWaitingFixes(&update);
   guardSound(&update);
+}
+
+void LocalizationSession::takeOrigin(const GeodeticFixEvent& event) {
+  if (config_.resume_origin) {
+    const GeodeticOrigin& o = *config_.resume_origin;
+    const kitti::MercatorProjection earlier(o.lat_deg, o.lon_deg, o.alt_m);
+    const double distance_m =
+        earlier.toMap(event.lat_deg, event.lon_deg, event.alt_m).head<2>().norm();
+    std::ostringstream note;
+    note << std::fixed << std::setprecision(9) << "map origin (lat " << o.lat_deg << ", lon "
+         << o.lon_deg << ", alt " << std::setprecision(3) << o.alt_m << ") ";
+    if (std::isfinite(distance_m) && distance_m <= config_.resume_origin_max_m) {
+      projection_ = earlier;
+      note << "resumed from an earlier run: the first fix is " << std::setprecision(0) << distance_m
+           << " m from it";
+      origin_note_ = note.str();
+      return;
+    }
+    note << "of an earlier run not resumed: the first fix is " << std::setprecision(0)
+         << distance_m / 1000.0 << " km from it (session.resume_origin_max_m)";
+    origin_note_ = note.str();
+  }
+  projection_.emplace(event.lat_deg, event.lon_deg, event.alt_m);
 }
 
 void LocalizationSession::correct(const PositionFix& fix, Update* update) {

@@ -22,6 +22,7 @@
 #include "inekf_semantic_mapping/ros/diagnostics.h"
 #include "inekf_semantic_mapping/ros/drive_publishers.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
+#include "inekf_semantic_mapping/ros/names.h"
 #include "inekf_semantic_mapping/ros/node_parameters.h"
 
 namespace inekf_semantic_mapping {
@@ -32,6 +33,8 @@ using kitti::DriveSensor;
 
 // How long the player stays up after the last message when ~exit_when_done is set.
 constexpr double kExitFlushSeconds = 1.0;
+// Wall seconds between the end of a loop and the clock jumping back to its start.
+constexpr double kLoopGapSeconds = 0.2;
 
 class KittiPlayer {
  public:
@@ -77,16 +80,32 @@ class KittiPlayer {
              options_.drive_dir.c_str(), timeline_.size(), spanSeconds(), options_.rate,
              options_.loop ? ", looping" : "",
              paused_ ? ", PAUSED (call ~pause false or ~step)" : "");
+    if (!factory_->oxtsFrames().empty()) {
+      // inekf_node's map is at its own first fix (a later one with a start offset, a noisy one
+      // with degraded GPS): the truth and the estimate sat 20-50 m apart in rviz, unexplained.
+      const kitti::OxtsRecord& first = factory_->oxtsFrames().front().record;
+      ROS_INFO(
+          "kitti_player: %s is in the map frame at the drive's first OXTS fix (lat %.9f, "
+          "lon %.9f, alt %.3f); inekf_node's map is at its own first fix unless "
+          "origin_lat/lon/alt are these",
+          topics::kGroundTruthOdometry, first.lat, first.lon, first.alt);
+    }
   }
 
   void run() {
     static_broadcaster_.sendTransform(
         factory_->staticTransformMessages(conv::toRosTime(timeline_.front().stamp_ns)));
+    warnOfOtherClocks();
     if (!paused_ && options_.wait_for_subscribers_s > 0) waitForSubscribers();
     do {
       factory_->restart();
       if (!playOnce()) return;
-      if (options_.loop) ROS_INFO("kitti_player: end of drive, looping");
+      if (options_.loop) {
+        ROS_INFO("kitti_player: end of drive, looping");
+        // The last frame's messages leave before the clock jumps back: sent in the same
+        // millisecond, tf listeners took them for the new loop's (TF_REPEATED_DATA each loop).
+        ros::WallDuration(kLoopGapSeconds).sleep();
+      }
     } while (options_.loop && ros::ok());
     ROS_INFO("kitti_player: finished (%zu events)", publishers_->published());
     if (!options_.exit_when_done) {
@@ -122,18 +141,47 @@ class KittiPlayer {
     return true;
   }
 
+  // The master's publishers (kind 0) or subscribers (kind 1) per topic; empty where the master
+  // cannot be asked.
+  static std::map<std::string, std::vector<std::string>> registeredNodes(int kind) {
+    std::map<std::string, std::vector<std::string>> nodes;
+    XmlRpc::XmlRpcValue request, response, payload;
+    request[0] = ros::this_node::getName();
+    if (!ros::master::execute("getSystemState", request, response, payload, false)) return nodes;
+    XmlRpc::XmlRpcValue& topics = payload[kind];
+    for (int i = 0; i < topics.size(); ++i) {
+      std::vector<std::string>& names = nodes[static_cast<std::string>(topics[i][0])];
+      for (int j = 0; j < topics[i][1].size(); ++j) {
+        names.push_back(static_cast<std::string>(topics[i][1][j]));
+      }
+    }
+    return nodes;
+  }
+
   // Subscribers registered with the master per topic (0 where the master cannot be asked).
   static std::map<std::string, std::size_t> registeredSubscribers() {
     std::map<std::string, std::size_t> counts;
-    XmlRpc::XmlRpcValue request, response, payload;
-    request[0] = ros::this_node::getName();
-    if (!ros::master::execute("getSystemState", request, response, payload, false)) return counts;
-    XmlRpc::XmlRpcValue& subscribers = payload[1];
-    for (int i = 0; i < subscribers.size(); ++i) {
-      counts[static_cast<std::string>(subscribers[i][0])] =
-          static_cast<std::size_t>(subscribers[i][1].size());
-    }
+    for (const auto& [topic, names] : registeredNodes(1)) counts[topic] = names.size();
     return counts;
+  }
+
+  // Two players (or a player and `rosbag play --clock`) on one master publish two clocks: time
+  // jumps back and forth and every node clears its tf buffer, with no word of why.
+  void warnOfOtherClocks() const {
+    if (!options_.publish_clock) return;
+    std::string others;
+    const std::map<std::string, std::vector<std::string>> publishers = registeredNodes(0);
+    const auto clock = publishers.find(ros::names::resolve("/clock"));
+    if (clock == publishers.end()) return;
+    for (const std::string& node : clock->second) {
+      if (node != ros::this_node::getName()) others += (others.empty() ? "" : ", ") + node;
+    }
+    if (!others.empty()) {
+      ROS_WARN_STREAM("kitti_player: "
+                      << clock->first << " is also published by " << others
+                      << ": one master has one clock, two make time jump back and forth (run "
+                         "one drive per master, or give this player publish_clock false)");
+    }
   }
 
   // A message published before its subscriber has connected is lost: the drive's first fix, and

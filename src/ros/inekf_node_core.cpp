@@ -67,7 +67,8 @@ class InekfNodeCore::Impl {
         session_(parameters.session),
         output_(nh, parameters.output),
         monitor_(parameters.diagnostics),
-        diagnostics_(nh, private_nh) {
+        diagnostics_(nh, private_nh),
+        private_nh_(private_nh) {
     diagnostics_.add("localization",
                      [this](auto& status) { monitor_.fill(session_, wallNow(), &status); });
     status_publisher_ = nh.advertise<FilterStatus>(topics::kFilterStatus, 10);
@@ -93,6 +94,7 @@ class InekfNodeCore::Impl {
       session_.setGpsVelocityExpected(velocity_subscriber_.getNumPublishers() > 0);
       const LocalizationSession::Update update = event();
       report(update);
+      keepOriginForARestart();
       // The start's pose at the first fix's stamp, whichever message completed the start: a scan
       // between it and the next IMU sample has a pose (otherwise the first pose would come with
       // the next IMU sample, 0.1 s later on KITTI, and such scans would stay out of the map).
@@ -114,6 +116,18 @@ class InekfNodeCore::Impl {
       ROS_ERROR_STREAM_THROTTLE(
           5.0, "inekf_node: " << stage << " message at " << stamp << " failed: " << error.what());
     }
+  }
+
+  // The map origin on the parameter server (~map_origin_in_use): a restarted node (respawn, a
+  // crash) takes it again (session.resume_origin_max_m). Its own first fix moved the map frame by
+  // metres under the map and rviz, with no word.
+  void keepOriginForARestart() {
+    if (origin_kept_ || !session_.projection()) return;
+    const kitti::MercatorProjection& origin = *session_.projection();
+    private_nh_.setParam("map_origin_in_use/lat", origin.lat0Deg());
+    private_nh_.setParam("map_origin_in_use/lon", origin.lon0Deg());
+    private_nh_.setParam("map_origin_in_use/alt", origin.alt0M());
+    origin_kept_ = true;
   }
 
   void report(const LocalizationSession::Update& update) {
@@ -210,6 +224,8 @@ class InekfNodeCore::Impl {
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
   LocalizationMonitor monitor_;
   NodeDiagnostics diagnostics_;
+  ros::NodeHandle private_nh_;
+  bool origin_kept_ = false;
 };
 
 InekfNodeCore::InekfNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh)

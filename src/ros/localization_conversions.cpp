@@ -64,6 +64,18 @@ estimation::LocalizationSessionConfig sessionConfigFromParameters(common::YamlRe
   } else if (origin_parts != 0) {
     reader->fail("origin_lat", "set all three of origin_lat, origin_lon, origin_alt or none");
   }
+  // Written by an earlier run of this node (InekfNodeCore), for a restart.
+  estimation::GeodeticOrigin earlier;
+  if (reader->has("map_origin_in_use.lat") && reader->has("map_origin_in_use.lon") &&
+      reader->has("map_origin_in_use.alt")) {
+    reader->read("map_origin_in_use.lat", &earlier.lat_deg);
+    reader->read("map_origin_in_use.lon", &earlier.lon_deg);
+    reader->read("map_origin_in_use.alt", &earlier.alt_m);
+    if (!config.origin &&
+        kitti::isGeodeticInRange(earlier.lat_deg, earlier.lon_deg, earlier.alt_m)) {
+      config.resume_origin = earlier;
+    }
+  }
   return config;
 }
 

@@ -89,9 +89,9 @@ SYNTHETIC_STAMPS = [stamp_ns('2011-01-01 10:00:00.%09d' % (10**8 * i)) for i in 
 
 
 @contextlib.contextmanager
-def synthetic_player(name, prefix, **params):
-    """A second kitti_player, NAME, on a drive the test writes, its topics under /PREFIX/; stopped
-    and the drive removed afterwards."""
+def synthetic_player(name, prefix, output=None, **params):
+    """A second kitti_player, NAME, on a drive the test writes, its topics under /PREFIX/ (its
+    stdout and stderr to the file OUTPUT when given); stopped and the drive removed afterwards."""
     root = tempfile.mkdtemp(prefix='ism_%s_' % name)
     drive = write_synthetic_drive(root)
     remaps = {'/kitti/velo/pointcloud': 'velo', '/kitti/camera_color_left/image_raw': 'image',
@@ -101,7 +101,8 @@ def synthetic_player(name, prefix, **params):
     player = subprocess.Popen(
         [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=' + name,
          '_drive_dir:=' + drive] + ['_%s:=%s' % item for item in params.items()] +
-        ['%s:=/%s/%s' % (topic, prefix, short) for topic, short in remaps.items()])
+        ['%s:=/%s/%s' % (topic, prefix, short) for topic, short in remaps.items()],
+        stdout=output, stderr=subprocess.STDOUT if output else None)
     try:
         yield player
     finally:
@@ -199,6 +200,23 @@ class KittiPlayerTest(unittest.TestCase):
             self.assertEqual(player.wait(timeout=30), 0)
         for key, messages in got.items():
             self.assertEqual([m.header.stamp.to_nsec() for m in messages], SYNTHETIC_STAMPS, key)
+
+    def test_a_second_clock_publisher_is_named_and_the_drive_still_plays(self):
+        """Needs no ../shared. Two players (or a player and rosbag play --clock) on one master:
+        time jumps back and forth and every node clears its tf buffer, with no word of why."""
+        from rosgraph_msgs.msg import Clock
+        other_clock = rospy.Publisher('/second/clock', Clock, queue_size=1)
+        self.addCleanup(other_clock.unregister)
+        log = tempfile.NamedTemporaryFile(mode='w+', suffix='.log')
+        self.addCleanup(log.close)
+        with synthetic_player('kitti_player_second_clock', 'second', output=log, rate=5.0,
+                              exit_when_done='true', publish_clock='true',
+                              wait_for_subscribers_s=0) as player:
+            self.assertEqual(player.wait(timeout=30), 0)
+        log.seek(0)
+        output = log.read()
+        self.assertIn('/second/clock is also published by ' + rospy.get_name(), output)
+        self.assertIn('finished (', output)
 
     def test_plays_the_drive(self):
         oxts_dir = os.path.join(self.drive_dir, 'oxts')

@@ -141,6 +141,29 @@ TEST(SessionParameters, AnOriginOffTheProjectionIsAnErrorNamingTheParameter) {
             std::string::npos);
 }
 
+// The origin an earlier run of the node kept on the parameter server: resumed unless one is
+// configured (a strict reader that refused the key would have stopped the restarted node).
+TEST(SessionParameters, AnEarlierRunsOriginIsReadForAResumeUnlessOneIsConfigured) {
+  const auto config = [](const std::string& yaml) {
+    common::YamlReader reader("ROS parameters of /inekf_node", YAML::Load(yaml));
+    std::string config_file;
+    estimation::LocalizationSessionConfig read =
+        sessionConfigFromParameters(&reader, "/nonexistent/inekf.yaml", &config_file);
+    reader.rejectUnknown();
+    return read;
+  };
+  const auto resumed = config("{map_origin_in_use: {lat: 49.0, lon: 8.4, alt: 110}}");
+  ASSERT_TRUE(resumed.resume_origin);
+  EXPECT_EQ(resumed.resume_origin->lon_deg, 8.4);
+  EXPECT_FALSE(resumed.origin);
+  const auto configured = config(
+      "{origin_lat: 48.0, origin_lon: 8.0, origin_alt: 100, map_origin_in_use: {lat: 49.0, lon: "
+      "8.4, alt: 110}}");
+  EXPECT_FALSE(configured.resume_origin);
+  ASSERT_TRUE(configured.origin);
+  EXPECT_EQ(configured.origin->lat_deg, 48.0);
+}
+
 TEST(Velocity, MapFrameOrBodyFrameByFrameId) {
   geometry_msgs::TwistStamped message;
   message.header.stamp = ros::Time(12, 500000000);

@@ -218,6 +218,28 @@ double startVarianceEast(const std::optional<Eigen::Matrix3d>& covariance) {
   return session.poseCovariance()(0, 0);
 }
 
+// A restarted inekf_node took a new origin at its own first fix: the map frame moved by metres
+// under the map and rviz (5 m on a review's bag). An earlier run's origin near the first fix is
+// taken again; one far away (another drive) is not.
+TEST(LocalizationSession, AnEarlierRunsOriginIsResumedWhenNearTheFirstFix) {
+  for (const double east_m : {100.0, 50000.0}) {
+    LocalizationSessionConfig config;
+    config.resume_origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
+    LocalizationSession session(config);
+    session.setGpsVelocityExpected(false);
+    session.addImu(restingImu(10.0));
+    const LocalizationSession::Update update = session.addFix(fixAt(10.0, east_m));
+    ASSERT_TRUE(session.started()) << update.note;
+    const bool resumed = east_m < config.resume_origin_max_m;
+    EXPECT_NE(update.note.find(resumed ? "resumed from an earlier run" : "not resumed"),
+              std::string::npos)
+        << update.note;
+    EXPECT_NEAR(session.state().position_map.x(), resumed ? east_m : 0.0, 0.01) << east_m;
+    EXPECT_NEAR(session.projection()->lat0Deg(), resumed ? kLat0 : session.projection()->lat0Deg(),
+                1e-12);
+  }
+}
+
 TEST(LocalizationSession, FixCovarianceDefaultsAndOneFloor) {
   const LocalizationSessionConfig config;
   const double floor = config.localizer.min_gps_sigma_m * config.localizer.min_gps_sigma_m;

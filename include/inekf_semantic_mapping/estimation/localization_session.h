@@ -81,6 +81,12 @@ struct LocalizationSessionConfig {
   double start_max_wait_s = 0.2;
   double start_max_velocity_age_s = 0.2;
   std::optional<GeodeticOrigin> origin;  // nullopt: the first usable fix
+  // Without `origin`: the origin an earlier run of the same node took (inekf_node keeps it on the
+  // parameter server), taken again when the first usable fix is within resume_origin_max_m of
+  // it, so that a restarted node keeps the map frame the map and rviz hold. Further away (another
+  // drive): the fix, and a note says why.
+  std::optional<GeodeticOrigin> resume_origin;
+  double resume_origin_max_m = 10000.0;
   // For fixes that carry no covariance.
   double default_fix_sigma_horizontal_m = 1.5;
   double default_fix_sigma_vertical_m = 3.0;
@@ -194,6 +200,7 @@ class LocalizationSession {
     return localizer_.predictedCovariance();
   }
   // The map frame's origin; nullopt before the first usable fix (without a configured origin).
+  // Taken from the first usable fix, or resume_origin near it (the update's note says which).
   const std::optional<kitti::MercatorProjection>& projection() const { return projection_; }
   Statistics statistics() const;
   // The steady offset of the GPS stamps from the IMU's (s; GPS minus IMU) while they run on two
@@ -251,6 +258,8 @@ class LocalizationSession {
   void tryStart(double now_s, Update* update);
   // Gives a fix to the started filter and records the result (and why it was not used).
   void correct(const PositionFix& fix, Update* update);
+  // The map origin at the first usable fix: resume_origin when near it, else the fix.
+  void takeOrigin(const GeodeticFixEvent& event);
   // Applies the waiting fixes the IMU has reached, and those it has not reached within
   // fix_wait_for_imu_s of the newest stamp, in stamp order.
   void releaseWaitingFixes(Update* update);
@@ -260,6 +269,7 @@ class LocalizationSession {
   LocalizationSessionConfig config_;
   Localizer localizer_;
   LazyStart lazy_start_;
+  std::string origin_note_;  // whether resume_origin was taken, for the update's note
   std::optional<kitti::MercatorProjection> projection_;
   std::vector<PositionFix> waiting_fixes_;  // sorted by stamp
   std::optional<double> newest_stamp_s_;
