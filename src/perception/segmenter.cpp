@@ -177,8 +177,9 @@ void argmaxOverChannels(int channels, int width, RowOf row_of, Skip skip, float*
 
 struct Segmenter::Network {
   cv::dnn::Net net;
-  cv::Mat label_lut;    // 1x256 CV_8U: channel index -> labelId
-  cv::Size input_size;  // of the last forward pass
+  cv::Mat label_lut;            // 1x256 CV_8U: channel index -> labelId
+  cv::Size input_size;          // of the last forward pass
+  bool output_checked = false;  // checkOutputIsScores has seen one output
 };
 
 namespace {
@@ -278,7 +279,34 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
         << card_.numOutputChannels() << " channels to labelIds";
     throw SegmentationError(msg.str());
   }
+  if (!network_->output_checked) {
+    checkOutputIsScores(output);
+    network_->output_checked = true;
+  }
   return output;
+}
+
+void Segmenter::checkOutputIsScores(const cv::Mat& output) const {
+  // Probabilities (a softmax in the graph) take a second softmax here: 3 classes never pass
+  // 0.58, and the card's label filter blanked every label, with no error.
+  const int channels = output.size[1];
+  const int pixels = output.size[2] * output.size[3];
+  const float* data = output.ptr<float>();
+  const int step = std::max(1, pixels / 64);
+  for (int p = 0; p < pixels; p += step) {
+    double sum = 0.0;
+    for (int c = 0; c < channels; ++c) {
+      const float v = data[static_cast<std::size_t>(c) * pixels + p];
+      if (!(v >= 0.0f && v <= 1.0f)) return;  // scores outside [0, 1]: not probabilities
+      sum += v;
+    }
+    if (std::abs(sum - 1.0) > 1e-3) return;
+  }
+  throw SegmentationError("model " + model_path_ + " outputs probabilities (every pixel's " +
+                          std::to_string(channels) +
+                          " channels are in [0, 1] and sum to 1: a softmax in the graph); the "
+                          "Segmenter takes the softmax of the class scores itself: export the "
+                          "model without its final softmax");
 }
 
 double Segmenter::tileScaleFor(const cv::Size& image_size, double camera_focal_px) const {

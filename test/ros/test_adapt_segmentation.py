@@ -1595,6 +1595,18 @@ class UsersOwnModels(unittest.TestCase):
         labels = cv2.imread(out, cv2.IMREAD_GRAYSCALE)
         self.assertEqual([int(np.median(labels[r])) for r in (10, 30, 50)], [7, 26, 23])
 
+    def test_a_softmax_in_the_graph_is_refused_at_load(self):
+        import torch
+
+        class Probabilities(torch.nn.Module):  # its softmax would be taken twice
+            def forward(self, x):
+                return torch.softmax(10 * x, dim=1)
+
+        run, _ = self.run_tool(self.export("softmax", Probabilities()), self.CARD % (8, ""))
+        self.assertNotEqual(run.returncode, 0, run.stdout)
+        self.assertIn("outputs probabilities", run.stdout)
+        self.assertIn("without its final softmax", run.stdout)
+
     def test_a_card_padding_less_than_the_network_needs_fails_at_load_naming_it(self):
         import torch
 

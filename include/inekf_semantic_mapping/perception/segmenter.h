@@ -65,6 +65,8 @@ class Segmenter {
   cv::Mat forward(const cv::Mat& network_image);  // 1 x C x h x w scores, checked
   // Throws unless the card names one of the model's outputs, or the model has only one.
   void checkOutputName();
+  // Throws when a (first) output is probabilities rather than class scores.
+  void checkOutputIsScores(const cv::Mat& output) const;
   bool skipsInArgmax(int channel) const;
   std::string model_path_;
   ModelCard card_;
