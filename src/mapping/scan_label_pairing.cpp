@@ -160,14 +160,8 @@ std::size_t ScanLabelPairing::insertReady(double now, const Insert& insert) {
 }
 
 std::size_t ScanLabelPairing::flush(const Insert& insert) {
-  std::size_t inserted = 0;
-  for (PendingScan& scan : scans_) {
-    if (insert(scan)) {
-      ++inserted;
-    } else {
-      ++statistics_->scans_without_pose;
-    }
-  }
+  const std::size_t inserted = insertWithoutWaiting(insert);
+  statistics_->scans_without_pose += scans_.size();  // those `insert` could not take
   scans_.clear();
   statistics_->label_images_unmatched += labels_.size();
   labels_.clear();

@@ -279,6 +279,8 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
         << card_.numOutputChannels() << " channels to labelIds";
     throw SegmentationError(msg.str());
   }
+  // On the load probe's neutral grey only: class scores of a real image can pass for
+  // probabilities here and there (a pooled pure colour is in [0, 1] and sums to 1).
   if (!network_->output_checked) {
     checkOutputIsScores(output);
     network_->output_checked = true;

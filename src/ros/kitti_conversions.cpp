@@ -304,13 +304,8 @@ std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> DriveMessageFactory::came
   sensor_msgs::Image image = readImageMessage(path, color, frame_id, stamp);
   // Its camera_info says the calibration's size: an image of another size would be projected
   // with the wrong intrinsics by everything downstream.
-  try {
-    projection.checkRectifiedImageSize(path, static_cast<int>(image.width),
-                                       static_cast<int>(image.height));
-  } catch (const kitti::KittiFormatError& e) {
-    throw std::runtime_error(std::string(e.what()) +
-                             "; or leave the camera out (kitti2bag --no-camera)");
-  }
+  projection.checkRectifiedImageSize(path, static_cast<int>(image.width),
+                                     static_cast<int>(image.height));
   return {std::move(image), toCameraInfoMessage(projection, frame_id, stamp)};
 }
 

@@ -12,6 +12,7 @@
 #include <iomanip>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "inekf_semantic_mapping/common/atomic_file.h"
@@ -253,37 +254,41 @@ class SemanticOctomapNodeCore::Impl {
     const double wall_s = wallNow();
     if (wall_s - dropped_warned_wall_s_ < 10.0) return;
     const mapping::MappingStatistics& s = session_->statistics();
-    if (s.scans_without_pose > scans_without_pose_warned_) {
-      ROS_WARN_STREAM("semantic_octomap_node: "
-                      << s.scans_without_pose - scans_without_pose_warned_ << " scans on "
-                      << topics::kVelodyne << " dropped without a pose (" << s.scans_without_pose
-                      << " of " << s.scans_received
-                      << " so far); the last tf lookup that failed: " << last_pose_error_);
-      scans_without_pose_warned_ = s.scans_without_pose;
+    // Each count is said, with what `say` writes, when it has grown since it was last said.
+    const auto warnIfGrew = [&](std::size_t count, std::size_t* said, auto say) {
+      if (count <= *said) return;
+      std::ostringstream text;
+      say(text, count - *said);
+      ROS_WARN_STREAM("semantic_octomap_node: " << text.str());
+      *said = count;
       dropped_warned_wall_s_ = wall_s;
+    };
+    warnIfGrew(s.scans_without_pose, &scans_without_pose_warned_,
+               [&](std::ostream& out, std::size_t more) {
+                 out << more << " scans on " << topics::kVelodyne << " dropped without a pose ("
+                     << s.scans_without_pose << " of " << s.scans_received
+                     << " so far); the last tf lookup that failed: " << last_pose_error_;
+               });
+    if (mostLabelImagesUnmatched(s)) {
+      warnIfGrew(s.label_images_unmatched, &label_images_unmatched_warned_,
+                 [&](std::ostream& out, std::size_t) {
+                   out << s.label_images_unmatched << " of " << s.label_images_received
+                       << " label images on " << topics::kSegmentationLabels
+                       << " matched no scan: each needs a scan within label_stamp_tolerance_s ("
+                       << session_->config().label_stamp_tolerance_s
+                       << " s) of its stamp (label images keep their camera image's stamp)";
+                 });
     }
-    if (mostLabelImagesUnmatched(s) && s.label_images_unmatched > label_images_unmatched_warned_) {
-      ROS_WARN_STREAM("semantic_octomap_node: "
-                      << s.label_images_unmatched << " of " << s.label_images_received
-                      << " label images on " << topics::kSegmentationLabels
-                      << " matched no scan: each needs a scan within label_stamp_tolerance_s ("
-                      << session_->config().label_stamp_tolerance_s
-                      << " s) of its stamp (label images keep their camera image's stamp)");
-      label_images_unmatched_warned_ = s.label_images_unmatched;
-      dropped_warned_wall_s_ = wall_s;
-    }
-    if (s.label_images_with_unknown_ids > unknown_ids_warned_) {
-      ROS_WARN_STREAM("semantic_octomap_node: "
-                      << s.label_images_with_unknown_ids << " of " << s.label_images_received
-                      << " label images on " << topics::kSegmentationLabels
-                      << " hold ids the map's class set ("
-                      << mapping::mapClassSetName(session_->config().class_set)
-                      << ") does not know, e.g. " << s.last_unknown_label_id
-                      << ": those pixels give no class evidence (labels of another id scheme? "
-                         "~class_set)");
-      unknown_ids_warned_ = s.label_images_with_unknown_ids;
-      dropped_warned_wall_s_ = wall_s;
-    }
+    warnIfGrew(s.label_images_with_unknown_ids, &unknown_ids_warned_,
+               [&](std::ostream& out, std::size_t) {
+                 out << s.label_images_with_unknown_ids << " of " << s.label_images_received
+                     << " label images on " << topics::kSegmentationLabels
+                     << " hold ids the map's class set ("
+                     << mapping::mapClassSetName(session_->config().class_set)
+                     << ") does not know, e.g. " << s.last_unknown_label_id
+                     << ": those pixels give no class evidence (labels of another id scheme? "
+                        "~class_set)";
+               });
   }
 
   void insertIfClockStopped(const ros::Time& now) {
