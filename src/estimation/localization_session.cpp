@@ -98,8 +98,9 @@ std::string LocalizationSession::summary() const {
   }
   line << "IMU " << s.filter.imu_used << " used / " << s.filter.imu_dropped + s.imu_invalid
        << " dropped / " << s.filter.imu_gaps << " gaps; GPS " << s.filter.gps_used << " used ("
-       << s.filter.gps_applied_late << " late) / " << s.filter.gps_rejected << " rejected / "
-       << s.fixes_ignored << " ignored; ";
+       << s.filter.gps_applied_late << " late";
+  if (s.fixes_horizontal_only > 0) line << ", " << s.fixes_horizontal_only << " 2D";
+  line << ") / " << s.filter.gps_rejected << " rejected / " << s.fixes_ignored << " ignored; ";
   if (s.filter.nonholonomic_used + s.filter.nonholonomic_rejected + s.filter.nonholonomic_skipped >
       0) {
     line << "vehicle constraint " << s.filter.nonholonomic_used << " used / "
@@ -477,14 +478,18 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
     update.note = note.str();
     return;
   }
-  if (!kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
+  // A receiver in a 2D mode gives no altitude (NavSatFix: NaN). Once the filter runs such a fix
+  // still says where the car is on the ground: it is used horizontally (below).
+  const bool horizontal_only = !std::isfinite(event.alt_m) && started() &&
+                               kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, 0.0);
+  if (!horizontal_only && !kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
     ++statistics_.fixes_ignored;
     std::ostringstream note;
     note << "GPS fix at " << event.stamp_s << " s ignored: latitude " << event.lat_deg
          << ", longitude " << event.lon_deg << ", altitude " << event.alt_m;
     if (!std::isfinite(event.alt_m)) {
-      note << " (no altitude: this filter takes 3D fixes only; a receiver in a 2D mode gives "
-              "none)";
+      note << " (no altitude, a receiver in a 2D mode: the filter starts from a 3D fix; once "
+              "started it uses such fixes horizontally)";
     } else {
       note << " (latitude must be in (-90, 90) deg, longitude in [-180, 180] deg)";
     }
@@ -494,7 +499,15 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   if (!projection_) takeOrigin(event);
   PositionFix fix;
   fix.stamp_s = event.stamp_s;
-  fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, event.alt_m);
+  if (horizontal_only) {
+    // The filter's own height as the measured one, with a variance that makes its weight nil
+    // (its innovation is zero and its gain ~1e-6): the update is the horizontal one.
+    fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, 0.0);
+    fix.position_map.z() = state().position_map.z();
+    ++statistics_.fixes_horizontal_only;
+  } else {
+    fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, event.alt_m);
+  }
   const bool known = event.covariance_enu && event.covariance_enu->allFinite() &&
                      event.covariance_enu->diagonal().minCoeff() > 0.0;
   if (known) {
@@ -503,6 +516,11 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
     const double h = config_.default_fix_sigma_horizontal_m;
     const double v = config_.default_fix_sigma_vertical_m;
     fix.covariance_map = Eigen::Vector3d(h * h, h * h, v * v).asDiagonal();
+  }
+  if (horizontal_only) {
+    fix.covariance_map.row(2).setZero();
+    fix.covariance_map.col(2).setZero();
+    fix.covariance_map(2, 2) = kHorizontalOnlyVarianceM2;
   }
   // The floor (gps.min_sigma_m) is the Localizer's: the one place it is applied.
   if (!started()) {

@@ -269,10 +269,10 @@ TEST(LocalizationSession, BadSamplesAreCountedAndTheFilterKeepsGoing) {
   EXPECT_TRUE(session.addImu(restingImu(10.3)).new_estimate);
   EXPECT_FALSE(session.addImu(restingImu(10.25)).new_estimate);  // out of order
   GeodeticFixEvent nan_fix = fixAt(10.3);
-  nan_fix.alt_m = kNaN;
-  const LocalizationSession::Update no_altitude = session.addFix(nan_fix);
-  EXPECT_FALSE(no_altitude.correction.has_value());
-  EXPECT_NE(no_altitude.note.find("no altitude"), std::string::npos) << no_altitude.note;
+  nan_fix.lat_deg = kNaN;
+  const LocalizationSession::Update no_latitude = session.addFix(nan_fix);
+  EXPECT_FALSE(no_latitude.correction.has_value());
+  EXPECT_NE(no_latitude.note.find("latitude must be"), std::string::npos) << no_latitude.note;
   GeodeticFixEvent no_fix = fixAt(10.3);
   no_fix.has_solution = false;
   EXPECT_NE(session.addFix(no_fix).note.find("reports no solution"), std::string::npos);
@@ -285,6 +285,42 @@ TEST(LocalizationSession, BadSamplesAreCountedAndTheFilterKeepsGoing) {
   EXPECT_EQ(statistics.filter.gps_used, 2);  // the start and 10.3
   EXPECT_EQ(statistics.resets, 0);
   EXPECT_TRUE(session.state().position_map.allFinite());
+}
+
+// A receiver in a 2D mode (NavSatFix altitude NaN): nothing to start from, but once the filter
+// runs its fixes place the car on the ground and leave its height alone.
+TEST(LocalizationSession, FixesWithoutAltitudeAreUsedHorizontallyOnceStarted) {
+  LocalizationSession session(originConfig());
+  GeodeticFixEvent first = fixAt(10.0);
+  first.alt_m = kNaN;
+  session.addImu(restingImu(10.0));
+  session.addGpsVelocity(stillAt(10.0));
+  const LocalizationSession::Update refused = session.addFix(first);
+  EXPECT_FALSE(session.started());
+  EXPECT_NE(refused.note.find("starts from a 3D fix"), std::string::npos) << refused.note;
+  standStill(&session, 10.1, 3.0);
+  ASSERT_TRUE(session.started());
+  const double height_before = session.state().position_map.z();
+  const double east_before = session.state().position_map.x();
+  // 2D fixes 3 m east of where the car stands.
+  int accepted = 0;
+  for (int k = 1; k <= 5; ++k) {
+    const double t = 13.1 + 0.1 * k;
+    session.addImu(restingImu(t));
+    GeodeticFixEvent flat = fixAt(t, 3.0);
+    flat.alt_m = kNaN;
+    const LocalizationSession::Update update = session.addFix(flat);
+    ASSERT_TRUE(update.correction.has_value()) << update.note;
+    accepted += update.correction->accepted ? 1 : 0;
+  }
+  EXPECT_EQ(accepted, 5);
+  EXPECT_GT(session.state().position_map.x() - east_before, 1.0);
+  EXPECT_NEAR(session.state().position_map.z(), height_before, 0.01);
+  EXPECT_TRUE(session.state().position_map.allFinite());
+  const LocalizationSession::Statistics statistics = session.statistics();
+  EXPECT_EQ(statistics.fixes_horizontal_only, 5);
+  EXPECT_EQ(statistics.fixes_ignored, 1);  // the first, before the start
+  EXPECT_NE(session.summary().find("5 2D"), std::string::npos) << session.summary();
 }
 
 // A bag loop: one reset, and what is still queued of the old loop (IMU, fixes and velocities come

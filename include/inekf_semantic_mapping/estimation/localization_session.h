@@ -134,9 +134,10 @@ class LocalizationSession {
     std::int64_t imu_samples = 0;  // IMU events received
     std::int64_t imu_invalid = 0;  // non-finite ones (never reach the filter)
     std::int64_t fixes_received = 0;
-    std::int64_t fixes_ignored = 0;         // no solution or non-finite (never reach the filter)
-    std::int64_t fixes_waited_for_imu = 0;  // arrived before their instant's IMU sample
-    std::int64_t fixes_imu_never_came = 0;  // ... and were applied after fix_wait_for_imu_s
+    std::int64_t fixes_ignored = 0;          // no solution or non-finite (never reach the filter)
+    std::int64_t fixes_horizontal_only = 0;  // without altitude (2D), used horizontally
+    std::int64_t fixes_waited_for_imu = 0;   // arrived before their instant's IMU sample
+    std::int64_t fixes_imu_never_came = 0;   // ... and were applied after fix_wait_for_imu_s
     std::int64_t starts = 0;
     std::int64_t resets = 0;  // time jumps back and non-finite states
     // Dropped after a time jump back: stamped in the old time line's span, ahead of the new one.
@@ -219,6 +220,9 @@ class LocalizationSession {
   // How long (s of fix stamps) a steady GPS-IMU offset must last to be taken for two clocks: a
   // bag loop or a seek shows on both sensors within a message or two.
   static constexpr double kClockOffsetConfirmS = 5.0;
+  // The vertical variance given a fix without altitude (sigma 1 km): its weight in the height is
+  // nil, its horizontal update that of a 3D fix.
+  static constexpr double kHorizontalOnlyVarianceM2 = 1e6;
   // A message held back as the first of a time jump (more than time_jump_back_s off the newest
   // stamp), with the messages of its sensor and instant after it, until a second confirms it.
   struct HeldJump {
