@@ -86,6 +86,12 @@ ism_add_ros_library(${PROJECT_NAME}_mapping_ros
 ism_add_ros_executable(semantic_octomap_node
   SOURCES src/nodes/semantic_octomap_node.cpp
   LINK ${PROJECT_NAME}_mapping_ros)
+ism_add_gtest(test_mapping_diagnostics
+  SOURCES test/unit/test_mapping_diagnostics.cpp
+  LINK ${PROJECT_NAME}_mapping_ros)
+if(TARGET test_mapping_diagnostics)
+  target_include_directories(test_mapping_diagnostics PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+endif()
 
 # The segmentation and map nodes as nodelets in one library (nodelet_plugins.xml).
 ism_add_ros_library(${PROJECT_NAME}_nodelets

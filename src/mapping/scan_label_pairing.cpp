@@ -80,6 +80,12 @@ ScanLabelPairing::LabelsPlace ScanLabelPairing::addLabels(std::shared_ptr<Pendin
                                                           const ApplyLate& apply_late) {
   const double stamp = labels->stamp;
   const double tolerance = options_.label_stamp_tolerance_s;
+  if (stamp > newest_stamp_ + kTimeJump_s && stamp <= previous_timeline_end_ + kTimeJump_s) {
+    // Of the timeline that ended (a bag loop): as one of the present it moved the clock seconds
+    // ahead, and the new timeline's scans, suddenly "old", were dropped waiting for their poses.
+    ++statistics_->label_images_unmatched;
+    return LabelsPlace::kUnmatched;
+  }
   // Its scan, in this order: still pending (waiting for labels or its pose), already in the map
   // without labels (the labels add class evidence), or not here yet. The scans' own stamps decide
   // the last case, not the clock: under load the scan queue can lag the clock by more than
@@ -119,8 +125,9 @@ bool ScanLabelPairing::labelsMayStillCome(const PendingScan& scan, double now) c
   // No label image has arrived for a whole wait (data time of its arrival, not its stamp: a
   // label image comes one segmentation latency after its stamp), and the run is older than that:
   // segmentation is not running (lidar-only runs). At the start, scans wait for the first one.
+  // After a restart, a run whose last timeline had no label image does not wait at all.
   if (last_label_arrival_ < now - options_.label_wait_s &&
-      first_stamp_ < now - options_.label_wait_s) {
+      (first_stamp_ < now - options_.label_wait_s || !labels_in_previous_timeline_)) {
     return false;
   }
   return now - scan.stamp <= options_.label_wait_s;
@@ -189,8 +196,14 @@ void ScanLabelPairing::keepForLateLabels(InsertedScan scan) {
   }
 }
 
+void ScanLabelPairing::forEachPending(const std::function<void(PendingScan&)>& visit) {
+  for (PendingScan& scan : scans_) visit(scan);
+}
+
 void ScanLabelPairing::restartClock() {
   unlabelled_scans_.clear();
+  previous_timeline_end_ = newest_stamp_;
+  labels_in_previous_timeline_ = newest_label_stamp_ > -1e299;
   newest_stamp_ = newest_scan_stamp_ = newest_label_stamp_ = last_label_arrival_ = -1e300;
   first_stamp_ = 1e300;
 }

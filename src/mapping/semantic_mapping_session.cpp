@@ -238,7 +238,7 @@ std::size_t SemanticMappingSession::addScan(double stamp, const std::string& fra
     pairing_.restartClock();
     recent_labels_.clear();
   }
-  pairing_.addScan(PendingScan{stamp, frame, std::move(points_sensor), nullptr});
+  pairing_.addScan(PendingScan{stamp, frame, std::move(points_sensor), nullptr, std::nullopt});
   return insertReadyScans(pairing_.now());
 }
 
@@ -319,6 +319,17 @@ std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> lab
 std::size_t SemanticMappingSession::advanceTo(double now) { return insertReadyScans(now); }
 
 std::size_t SemanticMappingSession::insertReadyScans(double now) {
+  // The poses of the scans that wait (for their label images), while tf has them.
+  if (pose_lookup_) {
+    pairing_.forEachPending([this](PendingScan& scan) {
+      if (scan.pose) return;
+      try {
+        scan.pose = pose_lookup_(scan.stamp, scan.frame);
+      } catch (const std::exception&) {
+        // Said when the scan is inserted (insertOrReject): the lookup is tried again there.
+      }
+    });
+  }
   const std::size_t rejected = statistics_.scans_rejected;
   const std::size_t taken = pairing_.insertReady(
       now, [this](PendingScan& scan) { return insertOrReject(scan, /*may_wait=*/true); });
@@ -367,9 +378,9 @@ bool SemanticMappingSession::resolveCamera(PendingLabels& labels, bool* unusable
 }
 
 bool SemanticMappingSession::insertWhenReady(PendingScan& scan, bool may_wait) {
-  std::optional<Eigen::Isometry3d> pose;
-  if (pose_lookup_) pose = pose_lookup_(scan.stamp, scan.frame);
-  if (!pose) return false;
+  if (!scan.pose && pose_lookup_) scan.pose = pose_lookup_(scan.stamp, scan.frame);
+  if (!scan.pose) return false;
+  const Eigen::Isometry3d pose = *scan.pose;
   if (scan.labels) {
     bool unusable = false;
     if (!resolveCamera(*scan.labels, &unusable)) {
@@ -388,7 +399,7 @@ bool SemanticMappingSession::insertWhenReady(PendingScan& scan, bool may_wait) {
       scan.labels.reset();
     }
   }
-  insertPending(scan, *pose);
+  insertPending(scan, pose);
   return true;
 }
 

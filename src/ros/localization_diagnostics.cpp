@@ -84,9 +84,12 @@ void LocalizationMonitor::fill(const estimation::LocalizationSession& session, d
                                diagnostic_updater::DiagnosticStatusWrapper* status) const {
   const estimation::LocalizationSession::Statistics statistics = session.statistics();
   const estimation::Localizer::Statistics& filter = statistics.filter;
-  const std::string state = !session.started()      ? "waiting"
-                            : statistics.resets > 0 ? "re-initialised"
-                                                    : "running";
+  // "re-initialised" for a window after a reset, then "running" again (a looping bag said
+  // "re-initialised" for good after its first loop); the count of resets stays below.
+  const bool recently_reset = statistics.resets > 0 && newest_s_ - first_imu_s_ < options_.window_s;
+  const std::string state = !session.started() ? "waiting"
+                            : recently_reset   ? "re-initialised"
+                                               : "running";
   const double since_fix_s = newest_s_ - (last_accepted_s_ >= 0 ? last_accepted_s_ : first_imu_s_);
   double position_sigma_m = 0.0, heading_sigma_deg = 0.0;
   bool finite = true;

@@ -1,5 +1,6 @@
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <optional>
 #include <utility>
@@ -10,6 +11,8 @@ namespace ros_conversions {
 namespace {
 using diagnostic_msgs::DiagnosticStatus;
 constexpr std::size_t kMaxWaitingStamps = 500;
+// One scan in this many dropped without a pose over the window: WARN (half: ERROR).
+constexpr std::size_t kDropsWarnShare = 10;
 
 std::string saveText(const SaveRecord& record, double wall_s) {
   if (record.wall_s < 0) return "never";
@@ -56,6 +59,22 @@ double MappingMonitor::oldestWaitS(const mapping::SemanticMappingSession& sessio
   return arrival == arrival_wall_s_.end() ? 0.0 : wall_s - arrival->second;
 }
 
+std::pair<std::size_t, std::size_t> MappingMonitor::recentDrops(
+    const mapping::MappingStatistics& stats, double wall_s) {
+  // A reset (statistics from zero) starts the count again.
+  if (!drop_counts_.empty() && stats.scans_received < drop_counts_.back().received) {
+    drop_counts_.clear();
+  }
+  drop_counts_.push_back({wall_s, stats.scans_received, stats.scans_without_pose});
+  while (drop_counts_.size() > 1 && drop_counts_[1].wall_s <= wall_s - options_.window_s) {
+    drop_counts_.pop_front();
+  }
+  const DropCount& oldest = drop_counts_.front();
+  // The first status counts from the start.
+  if (drop_counts_.size() == 1) return {stats.scans_received, stats.scans_without_pose};
+  return {stats.scans_received - oldest.received, stats.scans_without_pose - oldest.without_pose};
+}
+
 void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, const SaveRecord& save,
                              const SaveRecord& autosave, double wall_s,
                              diagnostic_updater::DiagnosticStatusWrapper* status) {
@@ -84,9 +103,16 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
     level = DiagnosticStatus::WARN;
     message = "the last save failed";
   }
-  if (stats.scans_received >= 5 && stats.scans_without_pose * 2 > stats.scans_received) {
-    level = DiagnosticStatus::ERROR;
-    message = "most scans dropped without a pose (map -> sensor not in tf)";
+  // Over the window, not since the start: a share of drops is said while it lasts (a quarter of
+  // a looping bag's scans went without a pose under "mapping" OK) and clears when it ends.
+  const auto [received, without_pose] = recentDrops(stats, wall_s);
+  if (received >= 5 && without_pose * kDropsWarnShare > received) {
+    const bool most = without_pose * 2 > received;
+    const unsigned char drops_level = most ? DiagnosticStatus::ERROR : DiagnosticStatus::WARN;
+    level = std::max(level, drops_level);
+    message = std::string(most ? "most" : "some") + " scans dropped without a pose (" +
+              std::to_string(without_pose) + " of the last " + std::to_string(received) +
+              "; map -> sensor not in tf in time)";
   }
   status->summary(level, message);
   status->addf("scan rate in (Hz)", "%.2f", scans_in_.rateOverWindowHz(wall_s));

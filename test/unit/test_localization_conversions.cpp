@@ -346,6 +346,37 @@ TEST(LocalizationMonitor, AGpsOnAnotherClockIsAnErrorNamingIt) {
       << status.message;
 }
 
+// A looping bag resets the filter at every loop: "re-initialised" for a window after each reset,
+// then "running" (it read "re-initialised" for good after the first loop).
+TEST(LocalizationMonitor, TheStateSaysReinitialisedForAWindowAfterAReset) {
+  estimation::LocalizationSession session{estimation::LocalizationSessionConfig{}};
+  LocalizationDiagnosticsOptions options;
+  options.window_s = 5.0;
+  LocalizationMonitor monitor(options);
+  const auto stateAfter = [&](double from_s, double to_s) {
+    for (double t = from_s; t <= to_s + 1e-9; t += 0.1) {
+      session.addImu(stillImu(t));
+      monitor.noteImu(t, t, session);
+      if (std::fmod(t + 1e-6, 1.0) < 0.05) {
+        estimation::GeodeticFixEvent fix;
+        fix.stamp_s = t;
+        fix.lat_deg = 49.0;
+        fix.lon_deg = 8.4;
+        fix.alt_m = 100.0;
+        session.addFix(fix);
+        monitor.noteFix(t, t, session);
+      }
+    }
+    diagnostic_updater::DiagnosticStatusWrapper status;
+    monitor.fill(session, to_s, &status);
+    return valueOf(status, "state");
+  };
+  EXPECT_EQ(stateAfter(100.0, 110.0), "running");
+  EXPECT_EQ(stateAfter(50.0, 52.0), "re-initialised");  // the loop back: reset, started again
+  EXPECT_EQ(session.statistics().resets, 1);
+  EXPECT_EQ(stateAfter(52.1, 60.0), "running");
+}
+
 TEST(LocalizationMonitor, OptionsAreCheckedNamingTheKey) {
   LocalizationDiagnosticsOptions options;
   common::YamlReader reader("test", YAML::Load("diagnostics: {fix_warn_after_s: 9, "

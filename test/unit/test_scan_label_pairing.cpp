@@ -17,7 +17,9 @@ std::shared_ptr<PendingLabels> labelsAt(double stamp) {
   return PendingLabels::copyOf(stamp, LabelImageView{pixels.data(), 2, 2, 2});
 }
 
-PendingScan scanAt(double stamp) { return PendingScan{stamp, "velo", Eigen::Matrix3Xf(3, 0), {}}; }
+PendingScan scanAt(double stamp) {
+  return PendingScan{stamp, "velo", Eigen::Matrix3Xf(3, 0), {}, std::nullopt};
+}
 
 const ScanLabelPairing::ApplyLate kNoLate = [](PendingLabels&, InsertedScan&) { return false; };
 
@@ -96,6 +98,59 @@ TEST(ScanLabelPairingTest, StampsThatGoBackByMoreThanASecondAreANewTimeline) {
   pairing.restartClock();
   EXPECT_FALSE(pairing.wentBack(0.0));
   EXPECT_EQ(pairing.pendingScans(), 0u);
+}
+
+// Segmentation finishing a frame of before a bag loop: its label image comes after the first
+// scan of the new timeline. Taken as one of the present it moved the clock 5 s ahead, and the new
+// scans, "old" at once, were dropped before their poses came.
+TEST(ScanLabelPairingTest, ALabelImageOfTheTimelineThatEndedMovesNoClock) {
+  MappingStatistics stats;
+  ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
+  const auto insert = [](PendingScan&) { return true; };
+  pairing.addLabels(labelsAt(104.9), kNoLate);
+  pairing.addScan(scanAt(104.9));
+  pairing.addScan(scanAt(105.0));
+  ASSERT_TRUE(pairing.wentBack(100.0));
+  pairing.flush(insert);
+  pairing.restartClock();
+  pairing.addScan(scanAt(100.0));
+  EXPECT_EQ(pairing.addLabels(labelsAt(105.0), kNoLate), ScanLabelPairing::LabelsPlace::kUnmatched);
+  EXPECT_DOUBLE_EQ(pairing.now(), 100.0);
+  int asked = 0;
+  pairing.insertReady(100.5, [&](PendingScan&) {
+    ++asked;
+    return false;  // its pose is not in tf yet
+  });
+  EXPECT_EQ(pairing.pendingScans(), 1u);  // still waiting (for labels, then its pose)
+  EXPECT_EQ(stats.scans_without_pose, 0u);
+  // A label image of the new timeline pairs as ever.
+  EXPECT_EQ(pairing.addLabels(labelsAt(100.0), kNoLate), ScanLabelPairing::LabelsPlace::kPaired);
+}
+
+// A lidar-only run: no label image in the timeline that ended, so the new one's scans do not wait
+// label_wait_s for a first one (at each loop of a looping bag they did).
+TEST(ScanLabelPairingTest, ALidarOnlyRunDoesNotWaitForLabelsAfterARestart) {
+  MappingStatistics stats;
+  ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
+  std::vector<double> inserted;
+  const auto insert = [&](PendingScan& scan) {
+    inserted.push_back(scan.stamp);
+    return true;
+  };
+  pairing.addScan(scanAt(100.0));
+  EXPECT_EQ(pairing.insertReady(100.0, insert), 0u);  // the start waits for a first label image
+  EXPECT_EQ(pairing.insertReady(101.1, insert), 1u);
+  pairing.flush(insert);
+  pairing.restartClock();
+  pairing.addScan(scanAt(50.0));
+  EXPECT_EQ(pairing.insertReady(50.0, insert), 1u);
+  // With label images in the timeline that ended, the new one waits for its first as at the start.
+  pairing.addLabels(labelsAt(50.0), kNoLate);
+  pairing.addScan(scanAt(50.05));
+  pairing.flush(insert);
+  pairing.restartClock();
+  pairing.addScan(scanAt(10.0));
+  EXPECT_EQ(pairing.insertReady(10.0, insert), 0u);
 }
 
 }  // namespace

@@ -50,6 +50,9 @@ struct PendingScan {
   std::string frame;
   Eigen::Matrix3Xf points_sensor;
   std::shared_ptr<PendingLabels> labels;  // its label image, once paired
+  // Looked up while it waits for its label image: tf forgets it at a bag loop (the clock going
+  // back clears tf's buffer), and the scans of a loop's end went without a pose.
+  std::optional<Eigen::Isometry3d> pose;
 };
 
 // A scan that went in without labels, kept a while for a label image that comes late.
@@ -104,6 +107,9 @@ class ScanLabelPairing {
   // Those scans, oldest first, for the class evidence of a neighbouring label image.
   std::deque<InsertedScan>& scansWithoutLabels() { return unlabelled_scans_; }
 
+  // Each pending scan (to look up what it will need while it waits).
+  void forEachPending(const std::function<void(PendingScan&)>& visit);
+
   // After a flush: the clocks start again and the late window empties (a new timeline).
   void restartClock();
   // Nothing pending, clocks from the start.
@@ -131,6 +137,12 @@ class ScanLabelPairing {
   double newest_label_stamp_ = -1e300;  // newest label image
   double first_stamp_ = 1e300;          // first scan or label image of this timeline
   double last_label_arrival_ = -1e300;  // data time when the newest label image arrived
+  // The newest stamp of the timeline before the last restart: label images stamped up to it and
+  // ahead of this one are that timeline's (segmentation finishing a frame of before a bag loop).
+  double previous_timeline_end_ = -1e300;
+  // Whether the timeline before the last restart had label images: if not (a lidar-only run),
+  // the scans of this one do not wait for a first label image.
+  bool labels_in_previous_timeline_ = true;
 };
 
 }  // namespace mapping

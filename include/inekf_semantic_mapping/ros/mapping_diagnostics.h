@@ -7,6 +7,7 @@
 
 #include <diagnostic_updater/DiagnosticStatusWrapper.h>
 
+#include <deque>
 #include <map>
 #include <string>
 
@@ -60,7 +61,17 @@ class MappingMonitor {
   // Wall seconds since the oldest scan still pending arrived (0: none pending).
   double oldestWaitS(const mapping::SemanticMappingSession& session, double wall_s) const;
 
+  // Scans received and dropped without a pose over the window: (wall s, received, dropped) at
+  // each status, the oldest within window_s.
+  struct DropCount {
+    double wall_s;
+    std::size_t received, without_pose;
+  };
+  std::pair<std::size_t, std::size_t> recentDrops(const mapping::MappingStatistics& stats,
+                                                  double wall_s);
+
   MappingDiagnosticsOptions options_;
+  std::deque<DropCount> drop_counts_;
   EventWindow scans_in_, scans_inserted_;    // wall times; inserted values: latency (s)
   std::map<double, double> arrival_wall_s_;  // by scan stamp, until inserted (bounded)
   double first_scan_wall_s_ = -1.0, last_scan_wall_s_ = -1.0, last_label_wall_s_ = -1.0;
