@@ -25,7 +25,17 @@ MapDisplay::MapDisplay(ros::NodeHandle& nh, mapping::SemanticMappingSession& ses
     throw std::invalid_argument(std::string(e.what()) + " (class_set " +
                                 mapping::mapClassSetName(session_.config().class_set) + ")");
   }
-  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(topics::kMapMarkers, 1, true);
+  // Latched (octomap_server's topics are), and a new subscriber to a map that changed since the
+  // last message is sent the map as it is now: the latched one can be seconds old.
+  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
+      topics::kMapMarkers, 1,
+      [this](const ros::SingleSubscriberPublisher& subscriber) {
+        if (!map_changed_) return;
+        session_.tree().updateInnerOccupancy();
+        subscriber.publish(occupiedVoxelMarkers(session_.tree(), options_.marker_depth,
+                                                options_.map_frame, ros::Time::now()));
+      },
+      ros::SubscriberStatusCallback(), ros::VoidConstPtr(), true);
   // Not latched: the info is published only while someone listens, so a latched one could be
   // stale (a `rostopic echo -n1` after a reset showed the old map). A new subscriber gets the
   // current figures at once instead.
@@ -33,8 +43,21 @@ MapDisplay::MapDisplay(ros::NodeHandle& nh, mapping::SemanticMappingSession& ses
       topics::kMapInfo, 1, [this](const ros::SingleSubscriberPublisher& subscriber) {
         subscriber.publish(mapInfoMessage(session_, options_.map_frame, ros::Time::now()));
       });
-  projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(topics::kProjectedMap, 1, true);
-  drivable_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(topics::kDrivableMap, 1, true);
+  const auto currentGrid = [this](bool drivable) {
+    return [this, drivable](const ros::SingleSubscriberPublisher& subscriber) {
+      if (!grids_changed_) return;
+      const std::optional<mapping::ProjectedGrids> grids = gridsNow();
+      if (!grids) return;
+      subscriber.publish(occupancyGridMessage(drivable ? grids->drivable : grids->occupancy,
+                                              options_.map_frame, ros::Time::now()));
+    };
+  };
+  projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(
+      topics::kProjectedMap, 1, currentGrid(false), ros::SubscriberStatusCallback(),
+      ros::VoidConstPtr(), true);
+  drivable_pub_ = nh.advertise<nav_msgs::OccupancyGrid>(topics::kDrivableMap, 1, currentGrid(true),
+                                                        ros::SubscriberStatusCallback(),
+                                                        ros::VoidConstPtr(), true);
 }
 
 void MapDisplay::scanInserted(const mapping::LabeledScan& scan) {
@@ -45,8 +68,12 @@ void MapDisplay::scanInserted(const mapping::LabeledScan& scan) {
 
 void MapDisplay::mapReplaced() {
   map_changed_ = true;
-  grids_changed_ = true;
+  grids_changed_ = true;  // until published (the grids' projection may fail)
   ground_trace_.clear();
+  const ros::Time now = ros::Time::now();
+  publishMarkers(now);
+  publishGrids(now);
+  info_pub_.publish(mapInfoMessage(session_, options_.map_frame, now));
 }
 
 void MapDisplay::update() {
@@ -76,12 +103,7 @@ void MapDisplay::update() {
     (grids_turn_ ? do_markers : do_grids) = false;
     grids_turn_ = !grids_turn_;
   }
-  if (do_markers) {
-    session_.tree().updateInnerOccupancy();  // what the merged markers show
-    markers_pub_.publish(
-        occupiedVoxelMarkers(session_.tree(), options_.marker_depth, options_.map_frame, now));
-    map_changed_ = false;
-  }
+  if (do_markers) publishMarkers(now);
   if (do_grids) publishGrids(now);
   published_counts_ = counts;
   info_pub_.publish(mapInfoMessage(session_, options_.map_frame, now));
@@ -89,19 +111,31 @@ void MapDisplay::update() {
   last_display_cost_s_ = (ros::WallTime::now() - start).toSec();
 }
 
-void MapDisplay::publishGrids(const ros::Time& now) {
+void MapDisplay::publishMarkers(const ros::Time& now) {
+  session_.tree().updateInnerOccupancy();  // what the merged markers show
+  markers_pub_.publish(
+      occupiedVoxelMarkers(session_.tree(), options_.marker_depth, options_.map_frame, now));
+  map_changed_ = false;
+}
+
+std::optional<mapping::ProjectedGrids> MapDisplay::gridsNow() {
   ScopedTimer stage("semantic_map/grids");
   try {
-    const mapping::ProjectedGrids grids =
-        mapping::projectGrids(session_.tree(), grid_config_, ground_trace_.samples());
-    projected_pub_.publish(occupancyGridMessage(grids.occupancy, options_.map_frame, now));
-    drivable_pub_.publish(occupancyGridMessage(grids.drivable, options_.map_frame, now));
-    grids_changed_ = false;
+    return mapping::projectGrids(session_.tree(), grid_config_, ground_trace_.samples());
   } catch (const std::exception& e) {
     ROS_ERROR_STREAM_THROTTLE(10, "semantic_octomap_node: " << topics::kProjectedMap << ", "
                                                             << topics::kDrivableMap
                                                             << " not published: " << e.what());
+    return std::nullopt;
   }
+}
+
+void MapDisplay::publishGrids(const ros::Time& now) {
+  const std::optional<mapping::ProjectedGrids> grids = gridsNow();
+  if (!grids) return;
+  projected_pub_.publish(occupancyGridMessage(grids->occupancy, options_.map_frame, now));
+  drivable_pub_.publish(occupancyGridMessage(grids->drivable, options_.map_frame, now));
+  grids_changed_ = false;
 }
 
 }  // namespace ros_conversions

@@ -301,7 +301,30 @@ int main(int argc, char** argv) {
     if (cli.has("--threads") && cli.getInt("--threads", 1) < 1) {
       throw UsageError("--threads must be at least 1");
     }
+    // The class set is the label source's: read as another set's, the ids made a wrong map (car
+    // as "rail track") with exit 0.
+    if (cli.has("--classes") && (cli.has("--labels") || cli.has("--model"))) {
+      const bool lidar_labels = cli.has("--labels");
+      const std::string own = lidar_labels ? "semantickitti" : "cityscapes";
+      if (cli.get("--classes") != own) {
+        throw UsageError("--classes " + cli.get("--classes") + " does not go with " +
+                         (lidar_labels ? "--labels (SemanticKITTI label ids)"
+                                       : "--model (Cityscapes labelIds)") +
+                         ": their ids would be read as another class set's (leave --classes out)");
+      }
+    }
     const std::string output = cli.require("--output");
+    // Each file in the format its name says: a semantic octree under .bt (octomap's own binary
+    // format) was written, and octomap's tools failed to read it.
+    for (const auto& [flag, extension] :
+         {std::pair{"--output", ".ot"}, {"--color-ot", ".ot"}, {"--export-ply", ".ply"}}) {
+      if (!cli.has(flag)) continue;
+      const std::string given = std::filesystem::path(cli.get(flag)).extension().string();
+      if (given != extension) {
+        throw UsageError(std::string(flag) + " " + cli.get(flag) + ": the file is written as " +
+                         extension + ", its name ends in '" + given + "'");
+      }
+    }
     if (cli.has("--label-images") && !raw_drive) throw UsageError("--label-images needs --drive");
     if (cli.has("--label-min-probability") && !cli.has("--label-images")) {
       throw UsageError("--label-min-probability goes with --label-images");

@@ -121,6 +121,16 @@ TEST_F(OfflineMappingTest, FlagsOfTheOtherInputFormAreRefused) {
       {scans + " --calib-dir " + dir_, "--calib-dir goes with --drive, not --scans"},
       {scans + " --threads 4", "--threads goes with --model"},
       {scans + " --model-card card.yaml", "--model-card goes with --model"},
+      // The label source's class set, and each file in the format its name says.
+      {scans + " --classes cityscapes", "--classes cityscapes does not go with --labels"},
+      {drive + " --model m.onnx --classes semantickitti",
+       "--classes semantickitti does not go with --model"},
+      {scans + " --export-ply " + dir_ + "/f.bt", "--export-ply " + dir_ +
+                                                      "/f.bt: the file is "
+                                                      "written as .ply, its name ends in '.bt'"},
+      {scans + " --color-ot " + dir_ + "/c.ply", "--color-ot " + dir_ +
+                                                     "/c.ply: the file is "
+                                                     "written as .ot"},
   };
   for (const auto& [flags, message] : cases) {
     const auto [status, output] = test::runCommand(tool + flags);
@@ -128,6 +138,10 @@ TEST_F(OfflineMappingTest, FlagsOfTheOtherInputFormAreRefused) {
     EXPECT_NE(output.find(message), std::string::npos) << flags << "\n" << output;
   }
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/f.ot"));
+  const auto [status, output] = test::runCommand(tool + scans + "x.bt");  // --output f.otx.bt
+  EXPECT_NE(status, 0);
+  EXPECT_NE(output.find("the file is written as .ot, its name ends in '.bt'"), std::string::npos)
+      << output;
 }
 
 // --model labels the scans from images: a folder that is not there, or holds none, is an error

@@ -4,7 +4,8 @@
 the road "road" and the rows above them "building". Checks /semantic_map/projected_map (the wall
 occupied, free air between lidar and wall, nothing occupied over the road) and
 /semantic_map/drivable_map (road cells drivable, wall cells occupied, unseen space unknown), that
-both are latched in the map frame at the map's resolution, and that the markers keep coming."""
+that a late subscriber gets both in the map frame at the map's resolution, that the markers keep
+coming, and that a subscriber after a reset nobody saw gets the empty map, not the old one."""
 import threading
 import unittest
 
@@ -15,6 +16,7 @@ from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import OccupancyGrid
 from sensor_msgs import point_cloud2
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from std_srvs.srv import Empty
 from visualization_msgs.msg import MarkerArray
 
 PKG = "inekf_semantic_mapping"
@@ -104,9 +106,11 @@ class SemanticOctomapGridsTest(unittest.TestCase):
         cls.markers = None
         # Subscribed before anything is inserted: the grids that arrive later must reflect the
         # scans (the node republishes when the map changed).
-        for topic in ("/semantic_map/projected_map", "/semantic_map/drivable_map"):
+        cls.subscribers = [
             rospy.Subscriber(topic, OccupancyGrid, cls.on_grid, callback_args=topic)
-        rospy.Subscriber("/semantic_map/markers", MarkerArray, cls.on_markers)
+            for topic in ("/semantic_map/projected_map", "/semantic_map/drivable_map")]
+        cls.subscribers.append(
+            rospy.Subscriber("/semantic_map/markers", MarkerArray, cls.on_markers))
         cls.static_tf = tf2_ros.StaticTransformBroadcaster()
         cls.static_tf.sendTransform([
             transform("map", "velo_link", (0.0, MAP_Y_OFFSET, 0.0), (0, 0, 0, 1)),
@@ -189,7 +193,7 @@ class SemanticOctomapGridsTest(unittest.TestCase):
         near = cells(grid, (0.5, 3.0), (MAP_Y_OFFSET - 1.0, MAP_Y_OFFSET + 1.0))
         self.assertEqual(fraction(near, 0), 0.0, near)
 
-    def test_3_grids_are_latched(self):
+    def test_3_a_late_subscriber_gets_the_grids(self):
         got = []
         sub = rospy.Subscriber("/semantic_map/drivable_map", OccupancyGrid, got.append)
         deadline = rospy.Time.now() + rospy.Duration(5)
@@ -209,6 +213,21 @@ class SemanticOctomapGridsTest(unittest.TestCase):
                 break
             rospy.sleep(0.1)
         self.assertTrue({"road", "building"} <= names, names)
+
+    def test_5_after_a_reset_nobody_saw_a_new_subscriber_gets_the_empty_map(self):
+        # Latched, the grids and markers were the last ones published: a reset with nobody
+        # listening left the old map there for a `rostopic echo -n1`.
+        for subscriber in self.subscribers:
+            subscriber.unregister()
+        rospy.sleep(1.0)
+        rospy.wait_for_service("/semantic_octomap_node/reset", timeout=10)
+        rospy.ServiceProxy("/semantic_octomap_node/reset", Empty)()
+        rospy.sleep(1.0)
+        grid = rospy.wait_for_message("/semantic_map/drivable_map", OccupancyGrid, timeout=10)
+        self.assertEqual(fraction(self.road(grid), 0), 0.0, "the old map's road after the reset")
+        markers = rospy.wait_for_message("/semantic_map/markers", MarkerArray, timeout=10)
+        cubes = sum(len(m.points) for m in markers.markers)
+        self.assertEqual(cubes, 0, [m.ns for m in markers.markers])
 
 
 if __name__ == "__main__":

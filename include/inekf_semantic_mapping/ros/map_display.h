@@ -2,7 +2,9 @@
 // markers (/semantic_map/markers), SemanticMapInfo (/semantic_map/info) and octomap_server's 2D
 // grids (/semantic_map/projected_map, /semantic_map/drivable_map; mapping/grid_projection.h).
 // Each runs only when something changed and someone subscribes, and the whole display stays
-// within a CPU budget: it walks the map on the thread that inserts scans.
+// within a CPU budget: it walks the map on the thread that inserts scans. A latched message is
+// the last one published, so the map's replacement (reset, load) is published at once whoever
+// listens, and a new subscriber to a map that changed since is sent the map as it is.
 // ROS-facing (src/ros): only nodes include this header.
 #pragma once
 
@@ -13,6 +15,7 @@
 
 #include <array>
 #include <cstddef>
+#include <optional>
 #include <string>
 
 #include "inekf_semantic_mapping/mapping/grid_projection.h"
@@ -38,12 +41,16 @@ class MapDisplay {
   // A scan went in: the display is due, its lidar origin traces the ground for the grids.
   void scanInserted(const mapping::LabeledScan& scan);
   // The map was replaced (load, reset): its path is unknown, the grids use the plane ground_z.
+  // Published at once: a later subscriber's latched map would be the old one.
   void mapReplaced();
   // Publishes what is due (the node's display timer).
   void update();
 
  private:
+  void publishMarkers(const ros::Time& now);
   void publishGrids(const ros::Time& now);
+  // The grids as they are now; nullopt (said) if the projection fails.
+  std::optional<mapping::ProjectedGrids> gridsNow();
 
   mapping::SemanticMappingSession& session_;
   MapDisplayOptions options_;
