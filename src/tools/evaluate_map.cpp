@@ -124,7 +124,11 @@ int run(const ism::common::CommandLine& cli) {
   if (scan_step < 1) throw UsageError("--scan-step must be >= 1");
   const double max_range = cli.getDouble("--max-range", 0.0);
   if (max_range < 0) throw UsageError("--max-range must be >= 0 (0: every point)");
-  if (cli.has("--json")) ism::common::checkOutputPath(cli.get("--json"));  // before the run
+  if (cli.has("--json")) {  // before the run
+    ism::common::checkOutputPath(cli.get("--json"));
+    ism::common::checkOutputsAreNotInputs({cli.get("--json")},
+                                          {drive, map_path, labels_dir, poses_path});
+  }
 
   const std::unique_ptr<ism::mapping::SemanticOcTree> tree =
       ism::mapping::loadSemanticOcTree(map_path);

@@ -354,7 +354,12 @@ int main(int argc, char** argv) {
     const int max_frames = cli.getInt("--max-frames", 0);
     const int map_label_every = cli.getInt("--map-label-every", 1);
     if (map_label_every < 1) throw UsageError("--map-label-every must be >= 1");
-    if (cli.has("--json")) ism::common::checkOutputPath(cli.get("--json"));  // before the run
+    if (cli.has("--json")) {  // before the run
+      ism::common::checkOutputPath(cli.get("--json"));
+      ism::common::checkOutputsAreNotInputs(
+          {cli.get("--json")},
+          cli.valuesOf({"--sequence", "--model", "--model-card", "--map-config"}));
+    }
     const bool use_focal = !cli.has("--no-focal");
     const perception::ModelCard card =
         applyOverrides(cli.has("--model-card") ? perception::loadModelCard(cli.get("--model-card"))

@@ -181,6 +181,8 @@ int main(int argc, char** argv) {
       if (cli.has(flag)) output_paths.push_back(cli.get(flag));
     }
     ism::common::checkOutputPaths(output_paths);
+    ism::common::checkOutputsAreNotInputs(
+        output_paths, cli.valuesOf({"--oxts", "--config", "--scans", "--loop-config"}));
 
     estimation::OxtsRunOptions options;
     const bool loop_closure = cli.has("--loop-closure");

@@ -70,6 +70,7 @@ Arguments parseArguments(const common::CommandLine& cli) {
     throw UsageError("--drive and --output are required");
   }
   common::checkOutputPath(args.output);  // before the bag is written, not at its rename
+  common::checkOutputsAreNotInputs({args.output}, {args.drive_dir, args.calib_dir});
   return args;
 }
 

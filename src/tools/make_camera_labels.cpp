@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
@@ -78,7 +79,8 @@ struct Totals {
   std::size_t labelled_pixels = 0;
   std::size_t points_in_view = 0;
   std::size_t hidden = 0;
-  std::size_t missing_images = 0;  // frames without image_3/<frame>.png (camera 3 asked for)
+  std::size_t missing_images = 0;       // frames without image_3/<frame>.png (camera 3 asked for)
+  std::map<int, cv::Size> image_sizes;  // of each camera's first image
 };
 
 // One camera of one frame: the visible points' classes written as OUT/labels_N/<frame>.png.
@@ -90,8 +92,33 @@ void writeCameraLabels(const ism::kitti::VelodyneScan& scan,
   namespace perception = ism::perception;
   const cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_UNCHANGED);
   if (image.empty()) throw std::runtime_error("cannot read image " + image_path.string());
+  // The training reads 8-bit colour; a 16-bit image was copied into the training set as it was.
+  if (image.depth() != CV_8U) {
+    throw std::runtime_error(image_path.string() + ": " + std::to_string(8 * image.elemSize1()) +
+                             "-bit image: the camera images must be 8-bit");
+  }
   const ism::kitti::CameraProjection projection =
       calibration.projection(camera, image.cols, image.rows);
+  // The calibration is of the camera's own image size: an image of another size (resized) was
+  // labelled through it, the labels in the wrong pixels, with exit status 0.
+  const double cx = projection.P_rect(0, 2), cy = projection.P_rect(1, 2);
+  if (!(cx > 0.25 * image.cols && cx < 0.75 * image.cols && cy > 0.25 * image.rows &&
+        cy < 0.75 * image.rows)) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  ": %dx%d, but the calibration's principal point (%.0f, %.0f) is not near its "
+                  "middle: the image is not of the calibrated size (resized?)",
+                  image.cols, image.rows, cx, cy);
+    throw std::runtime_error(image_path.string() + text);
+  }
+  if (totals->image_sizes.count(camera) &&
+      totals->image_sizes.at(camera) != cv::Size(image.cols, image.rows)) {
+    const cv::Size first = totals->image_sizes.at(camera);
+    throw std::runtime_error(image_path.string() + ": " + std::to_string(image.cols) + "x" +
+                             std::to_string(image.rows) + ", the camera's other images are " +
+                             std::to_string(first.width) + "x" + std::to_string(first.height));
+  }
+  totals->image_sizes[camera] = cv::Size(image.cols, image.rows);
   const perception::PointProjector projector(projection.P_rect, projection.R_rect,
                                              projection.T_cam0_velo, image.cols, image.rows);
   const Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> xyzi(
@@ -135,6 +162,15 @@ void writeCameraLabels(const ism::kitti::VelodyneScan& scan,
   totals->hidden += hidden;
 }
 
+// Removes a folder when it goes out of scope, unless its path was cleared (the run finished).
+struct RemoveOnExit {
+  fs::path path;
+  ~RemoveOnExit() {
+    std::error_code ignored;
+    if (!path.empty()) fs::remove_all(path, ignored);
+  }
+};
+
 int run(const ism::common::CommandLine& cli) {
   const fs::path sequence(cli.require("--sequence"));
   const fs::path output(cli.require("--output"));
@@ -160,9 +196,18 @@ int run(const ism::common::CommandLine& cli) {
   }
   const ism::kitti::ObjectCalibration calibration =
       ism::kitti::readObjectCalibration((sequence / "calib.txt").string());
-  fs::create_directories(output);
+  ism::common::checkOutputsAreNotInputs({output.string()}, {sequence.string()});
+  fs::create_directories(fs::absolute(output).lexically_normal().parent_path());
+  ism::common::checkOutputDirectory(output.string());
+  // Written beside the output and renamed onto it at the end: a run that fails half-way (a
+  // truncated .label) left a folder whose poses listed frames it had no images for, which a
+  // training run would read.
+  const fs::path partial = fs::absolute(output).lexically_normal().string() + ".partial";
+  fs::remove_all(partial);
+  fs::create_directories(partial);
+  RemoveOnExit partial_cleanup{partial};
   for (const char* name : {"calib.txt", "poses.txt", "times.txt"}) {
-    if (fs::exists(sequence / name)) copyAtomically(sequence / name, output / name);
+    if (fs::exists(sequence / name)) copyAtomically(sequence / name, partial / name);
   }
   std::printf("make_camera_labels: %zu of %zu frames of %s (every %d), cameras %s -> %s\n",
               frames.size(), all.size(), sequence.c_str(), every,
@@ -189,11 +234,18 @@ int run(const ism::common::CommandLine& cli) {
         ++totals.missing_images;
         continue;
       }
-      writeCameraLabels(scan, point_labels, calibration, camera, image_path, output, frame,
+      writeCameraLabels(scan, point_labels, calibration, camera, image_path, partial, frame,
                         &totals);
     }
     progress.update(f + 1);
   }
+  // The finished folder takes the output's place (a folder of an earlier run is replaced).
+  const fs::path earlier = partial.string() + ".earlier";
+  fs::remove_all(earlier);
+  if (fs::exists(output)) fs::rename(output, earlier);
+  fs::rename(partial, output);
+  fs::remove_all(earlier);
+  partial_cleanup.path.clear();
   if (totals.missing_images > 0) {
     std::fprintf(stderr,
                  "make_camera_labels: %zu frames have no image_3/<frame>.png: camera 3 "

@@ -108,6 +108,9 @@ int main(int argc, char** argv) {
                                   {"--calib", "--velodyne", "--image", "--output", "--overlay"});
     if (cli.helpRequested()) return common::printUsage(kUsage);
     for (const char* flag : {"--calib", "--velodyne", "--image", "--output"}) cli.require(flag);
+    const std::vector<std::string> outputs = cli.valuesOf({"--output", "--overlay"});
+    common::checkOutputPaths(outputs);
+    common::checkOutputsAreNotInputs(outputs, cli.valuesOf({"--calib", "--velodyne", "--image"}));
     return run(cli);
   });
 }

@@ -74,9 +74,11 @@ int main(int argc, char** argv) {
         throw UsageError(std::string(flag) + " must be a .png file (lossless), not '" + path + "'");
       }
     }
-    for (const char* flag : {"--output", "--overlay", "--confidence"}) {
-      if (cli.has(flag)) ism::common::checkOutputPath(cli.get(flag));
-    }
+    const std::vector<std::string> output_paths =
+        cli.valuesOf({"--output", "--overlay", "--confidence"});
+    ism::common::checkOutputPaths(output_paths);
+    ism::common::checkOutputsAreNotInputs(output_paths,
+                                          cli.valuesOf({"--input", "--model", "--model-card"}));
     if (cli.has("--overlay") && !cv::haveImageWriter(cli.get("--overlay"))) {
       throw UsageError("--overlay: OpenCV writes no image format named by the extension of '" +
                        cli.get("--overlay") + "'");

@@ -343,7 +343,13 @@ int main(int argc, char** argv) {
       }
     }
     ism::common::checkOutputPaths(output_paths);
-    if (cli.has("--label-images")) ism::common::checkOutputDirectory(cli.get("--label-images"));
+    if (cli.has("--label-images")) {
+      ism::common::checkOutputDirectory(cli.get("--label-images"));
+      output_paths.push_back(cli.get("--label-images"));
+    }
+    ism::common::checkOutputsAreNotInputs(
+        output_paths, cli.valuesOf({"--scans", "--drive", "--calib-dir", "--labels", "--images",
+                                    "--model", "--model-card", "--poses", "--calib", "--config"}));
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {

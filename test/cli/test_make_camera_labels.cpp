@@ -148,10 +148,54 @@ TEST_F(MakeCameraLabelsTest, BadInputIsNamed) {
     EXPECT_EQ(comma_status, 2) << list << ": " << comma;
   }
 
+  // A failed run leaves no output folder (it left the frames before the bad one, and poses for
+  // frames it had no images of, for a training run to read).
+  EXPECT_FALSE(fs::exists(out_));
+  EXPECT_FALSE(fs::exists(out_.string() + ".partial"));
+
   fs::remove(seq_ / "calib.txt");
   const auto [calib_status, calib] = makeLabels("");
   EXPECT_EQ(calib_status, 1) << calib;
   EXPECT_NE(calib.find("calib.txt"), std::string::npos) << calib;
+}
+
+// Images the calibration is not of: labelled through it anyway, the labels landed in the wrong
+// pixels (a resized image), or a 16-bit image went into the training set, with exit status 0.
+TEST_F(MakeCameraLabelsTest, ImagesNotOfTheCalibratedCameraAreRefused) {
+  const cv::Mat small(50, 100, CV_8UC3, cv::Scalar(40, 90, 160));
+  cv::imwrite((seq_ / "image_2" / "000001.png").string(), small);
+  const auto [status, output] = makeLabels("--cameras 2");
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("000001.png: 100x50, but the calibration's principal point (100, 50)"),
+            std::string::npos)
+      << output;
+  EXPECT_FALSE(fs::exists(out_));
+
+  const cv::Mat deep(100, 200, CV_16UC3, cv::Scalar(4000, 9000, 16000));
+  cv::imwrite((seq_ / "image_2" / "000001.png").string(), deep);
+  const auto [deep_status, deep_output] = makeLabels("--cameras 2");
+  EXPECT_EQ(deep_status, 1) << deep_output;
+  EXPECT_NE(deep_output.find("000001.png: 16-bit image"), std::string::npos) << deep_output;
+
+  // The output folder must not be the sequence itself (its calib.txt and poses were copied onto
+  // themselves).
+  const auto [same_status, same] = inekf_semantic_mapping::test::runCommand(
+      std::string(MAKE_CAMERA_LABELS_PATH) + " --sequence " + seq_.string() + " --output " +
+      seq_.string());
+  EXPECT_NE(same_status, 0) << same;
+  EXPECT_NE(same.find("is an input"), std::string::npos) << same;
+}
+
+// A second run into the folder of a first replaces it whole.
+TEST_F(MakeCameraLabelsTest, ASecondRunReplacesTheFirstsFolder) {
+  ASSERT_EQ(makeLabels("").first, 0);
+  ASSERT_TRUE(fs::exists(labelPath(3, "000000")));
+  const auto [status, output] = makeLabels("--cameras 2 --max-frames 1");
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_TRUE(fs::exists(labelPath(2, "000000")));
+  EXPECT_FALSE(fs::exists(labelPath(2, "000001")));  // of the first run
+  EXPECT_FALSE(fs::exists(labelPath(3, "000000")));
+  EXPECT_FALSE(fs::exists(out_.string() + ".partial"));
 }
 
 }  // namespace

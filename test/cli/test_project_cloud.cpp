@@ -66,6 +66,18 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
     ++rows;
   }
   EXPECT_EQ(rows, projected.validCount());
+
+  // An output that names an input is refused and the input kept (it was replaced by the CSV).
+  std::filesystem::copy_file(base + "calib/000000.txt", dir + "/calib.txt");
+  const std::string over_input = std::string(PROJECT_CLOUD_PATH) + " --calib " + dir +
+                                 "/calib.txt --velodyne " + base + "velodyne/000000.bin --image " +
+                                 base + "image_2/000000.png --output " + dir + "/calib.txt";
+  const auto [status, output] = test::runCommand(over_input);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(output.find("is an input"), std::string::npos) << output;
+  std::ifstream calib(dir + "/calib.txt");
+  std::getline(calib, line);
+  EXPECT_EQ(line.rfind("P0:", 0), 0u) << line;
   std::filesystem::remove_all(dir);
 }
 

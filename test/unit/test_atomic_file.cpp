@@ -201,6 +201,35 @@ TEST(AtomicFile, CheckOutputPathRefusesWhatCannotBeWritten) {
   fs::remove_all(dir);
 }
 
+// An output typed over an input (project_cloud --output CALIB.txt, kitti2bag --output of a file
+// in the drive) replaced it with exit status 0.
+TEST(AtomicFile, AnOutputThatIsAnInputIsRefused) {
+  const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_inputs");
+  fs::create_directories(dir + "/drive/data");
+  std::ofstream(dir + "/calib.txt") << "x";
+  std::ofstream(dir + "/drive/data/0.txt") << "x";
+  fs::create_symlink(dir + "/calib.txt", dir + "/link.txt");
+  const std::vector<std::string> inputs{dir + "/calib.txt", dir + "/drive"};
+  const auto reason = [&](const std::string& output) {
+    try {
+      checkOutputsAreNotInputs({output}, inputs);
+    } catch (const AtomicWriteError& e) {
+      EXPECT_EQ(e.path(), output);
+      return e.reason();
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(reason(dir + "/calib.txt").rfind("is an input (", 0), 0u);
+  EXPECT_EQ(reason(dir + "/./link.txt").rfind("is an input (", 0), 0u);  // however spelt
+  EXPECT_EQ(reason(dir + "/drive/data/0.txt").rfind("is a file of the input folder ", 0), 0u);
+  EXPECT_EQ(reason(dir + "/drive").rfind("is an input (", 0), 0u);
+  EXPECT_EQ(reason(dir + "/drive/new.txt"), "accepted");  // replaces nothing
+  EXPECT_EQ(reason(dir + "/out.txt"), "accepted");
+  std::ofstream(dir + "/out.txt") << "x";
+  EXPECT_EQ(reason(dir + "/out.txt"), "accepted");  // an earlier output, not an input
+  fs::remove_all(dir);
+}
+
 TEST(AtomicFile, AMissingDirectoryThrowsNamingThePath) {
   const std::string dir = inekf_semantic_mapping::test::makeTempDir("atomic_file_nodir");
   const std::string path = dir + "/no/such/dir/out.txt";

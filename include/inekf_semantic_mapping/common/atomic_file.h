@@ -13,6 +13,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
@@ -89,6 +90,35 @@ inline void checkOutputPaths(const std::vector<std::string>& paths) {
       if (isSameOutput(paths[i], paths[j])) {
         throw AtomicWriteError(paths[i],
                                "given as two outputs (the second would replace the first)");
+      }
+    }
+  }
+}
+
+// Throws AtomicWriteError when an output is an existing input file, an existing file of an input
+// folder, or an input folder itself: the tool would destroy what it reads (an output typed over an
+// input replaced it, with exit status 0). A new file beside the inputs is not refused.
+inline void checkOutputsAreNotInputs(const std::vector<std::string>& outputs,
+                                     const std::vector<std::string>& inputs) {
+  namespace fs = std::filesystem;
+  for (const std::string& output : outputs) {
+    std::error_code error;
+    if (output.empty() || !fs::exists(output, error)) continue;
+    const fs::path out = fs::canonical(output, error);
+    if (error) continue;
+    for (const std::string& input : inputs) {
+      if (input.empty() || !fs::exists(input, error)) continue;
+      const fs::path in = fs::canonical(input, error);
+      if (error) continue;
+      if (out == in) {
+        throw AtomicWriteError(output, "is an input (" + input + "): writing it would destroy it");
+      }
+      const bool below =
+          fs::is_directory(in) && !fs::is_directory(out) &&
+          std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first == in.end();
+      if (below) {
+        throw AtomicWriteError(
+            output, "is a file of the input folder " + input + ": writing it would replace it");
       }
     }
   }

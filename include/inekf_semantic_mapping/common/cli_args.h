@@ -87,6 +87,16 @@ class CommandLine {
     return get(flag);
   }
 
+  // The values of those of `flags` that were given (a tool's inputs, to check its outputs
+  // against).
+  std::vector<std::string> valuesOf(const std::vector<std::string>& flags) const {
+    std::vector<std::string> values;
+    for (const std::string& flag : flags) {
+      for (const std::string& value : getAll(flag)) values.push_back(value);
+    }
+    return values;
+  }
+
   // Every value of a repeatable flag, in command-line order (empty when not given).
   std::vector<std::string> getAll(const std::string& flag) const {
     const auto it = values_.find(flag);
