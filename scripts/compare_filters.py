@@ -56,6 +56,7 @@ def main(argv=None):
     parser.add_argument("--json")
     parser.add_argument("--plot")
     args = parser.parse_args(argv)
+    et.check_output_paths(parser, [args.json, args.plot])
 
     results, all_series = {}, {}
     try:

@@ -527,6 +527,27 @@ def summarize_loops(loops):
 # --------------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------------
+def output_path_problem(path):
+    """Why `path` cannot be written (None if it can): checked before the work, so that a
+    mistyped folder is said at once, not in a traceback after the metrics."""
+    if os.path.isdir(path):
+        return "%s is a directory" % path
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        return "cannot write %s: no directory %s" % (path, folder)
+    if not os.access(folder, os.W_OK):
+        return "cannot write %s: directory %s is not writable" % (path, folder)
+    return None
+
+
+def check_output_paths(parser, paths):
+    """parser.error (exit status 2) naming the first output that cannot be written."""
+    for path in paths:
+        problem = path and output_path_problem(path)
+        if problem:
+            parser.error(problem)
+
+
 def write_json_atomically(path, data):
     temporary = path + ".tmp"
     with open(temporary, "w") as stream:
@@ -644,9 +665,12 @@ def frame_range(text):
     try:
         if not sep:
             raise ValueError
-        return int(first), int(last)
+        first, last = int(first), int(last)
     except ValueError:
         raise argparse.ArgumentTypeError("'%s' is no FIRST:LAST frame range" % text)
+    if first > last:
+        raise argparse.ArgumentTypeError("'%s': FIRST is after LAST" % text)
+    return first, last
 
 
 def main(argv=None):
@@ -666,6 +690,7 @@ def main(argv=None):
                              "wrong; KITTI segments and RPE pairs that touch them are skipped; "
                              "repeatable")
     args = parser.parse_args(argv)
+    check_output_paths(parser, [args.json, args.plot])
     label = args.label or os.path.basename(args.estimate)
     try:
         estimate, truth, stamps, states = load_inputs(args.estimate, args.truth, args.timestamps,

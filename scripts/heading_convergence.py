@@ -37,6 +37,8 @@ def main():
         i = args.index("--exclude-frames")
         a, b = args[i + 1].split(":")
         exclude = (int(a), int(b))
+        if exclude[0] > exclude[1]:
+            sys.exit(f"--exclude-frames {args[i + 1]}: FIRST is after LAST")
         del args[i:i + 2]
     if len(args) != 3:
         sys.exit(__doc__)

@@ -39,6 +39,12 @@ class OdometryToTf:
 
 
 if __name__ == "__main__":
+    import sys
+    if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
+        # Said without a ROS master (init_node waited for one, then failed in a traceback).
+        print(__doc__ + "\nParameters: ~child_frame (default: the message's child_frame_id). "
+              "Topics: odometry (in), tf (out).")
+        sys.exit(0)
     rospy.init_node("odometry_to_tf")
     OdometryToTf()
     rospy.spin()

@@ -248,7 +248,15 @@ ObjectCalibration readObjectCalibration(const std::string& calib_txt) {
   const KeyValues kv = readKeyValues(calib_txt);
   ObjectCalibration calib;
   for (int i = 0; i < 4; ++i) calib.P[i] = kv.projection34("P" + std::to_string(i));
-  if (kv.has("R0_rect")) calib.R0_rect = kv.rotation3("R0_rect");
+  if (kv.has("R0_rect")) {
+    calib.R0_rect = kv.rotation3("R0_rect");
+  } else if (kv.has("Tr_velo_to_cam")) {
+    // The object format always has it (the odometry format, with "Tr", has none: identity). A
+    // file without it is cut short; identity projected every point a little off, silently.
+    throw KittiFormatError(calib_txt,
+                           "missing key 'R0_rect' (the object format's "
+                           "'Tr_velo_to_cam' goes with it)");
+  }
   if (kv.has("Tr_velo_to_cam")) {
     calib.Tr_velo_to_cam = kv.isometry34("Tr_velo_to_cam");
   } else if (kv.has("Tr")) {  // odometry / SemanticKITTI calib.txt

@@ -102,6 +102,20 @@ std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
   return seconds * 1000000000LL + fraction_ns;
 }
 
+std::vector<bool> isolatedMisstampedFrames(const std::vector<std::int64_t>& stamps_ns,
+                                           double max_gap_s) {
+  std::vector<bool> misstamped(stamps_ns.size(), false);
+  for (std::size_t i = 1; i + 1 < stamps_ns.size(); ++i) {
+    const std::int64_t before = stamps_ns[i - 1], after = stamps_ns[i + 1];
+    const double span_s = secondsBetween(before, after);
+    const bool neighbours_in_order = after > before && span_s <= max_gap_s;
+    const bool off = std::abs(secondsBetween(before, stamps_ns[i])) > max_gap_s &&
+                     std::abs(secondsBetween(stamps_ns[i], after)) > max_gap_s;
+    misstamped[i] = neighbours_in_order && off;
+  }
+  return misstamped;
+}
+
 std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stamps_ns,
                                            const std::string& path, double max_gap_s,
                                            std::size_t max_messages,

@@ -13,6 +13,7 @@ namespace {
 
 std::vector<char> readBinaryFile(const std::string& path, std::size_t record_bytes,
                                  const char* what) {
+  if (std::filesystem::is_directory(path)) throw KittiFormatError(path, "is a folder, not a file");
   std::ifstream stream(path, std::ios::binary | std::ios::ate);
   if (!stream) throw KittiFormatError(path, "cannot open file (missing or unreadable)");
   const std::streamsize size = stream.tellg();

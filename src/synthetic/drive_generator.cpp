@@ -117,23 +117,7 @@ Eigen::Isometry3d isometry(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
 // Writes the whole drive under options.output_dir (see generateSyntheticDrive).
 DriveSummary generateInto(const DriveOptions& options) {
   const auto wall_start = std::chrono::steady_clock::now();
-  if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");
-  if (!(options.duration_s > 0 && options.duration_s <= 3600)) {
-    throw std::invalid_argument("--duration must be in (0, 3600] seconds");
-  }
-  if (options.image_width < 16 || options.image_height < 16) {
-    throw std::invalid_argument("--image-size must be at least 16x16");
-  }
-  if (!(options.camera_rate_hz > 0 && options.camera_rate_hz <= 10.0)) {
-    throw std::invalid_argument("--camera-rate-hz must be in (0, 10]");
-  }
-  if (options.lidar.beams < 1 || options.lidar.beams > 512) {
-    throw std::invalid_argument("--lidar-beams must be in 1..512");
-  }
-  if (options.threads < 1) throw std::invalid_argument("--threads must be >= 1");
-  if (options.drive_number < 0 || options.drive_number > 9999) {
-    throw std::invalid_argument("--drive must be in 0..9999");
-  }
+  validateDriveOptions(options);
   const std::int64_t day = parseDateDays(options.date);
 
   DriveSummary summary;
@@ -417,6 +401,35 @@ DriveSummary generateInto(const DriveOptions& options) {
 }
 
 }  // namespace
+
+void validateDriveOptions(const DriveOptions& options) {
+  if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");
+  if (!(options.duration_s > 0 && options.duration_s <= 3600)) {
+    throw std::invalid_argument("--duration must be in (0, 3600] seconds");
+  }
+  if (options.image_width < 16 || options.image_height < 16) {
+    throw std::invalid_argument("--image-size must be at least 16x16");
+  }
+  if (!(options.camera_rate_hz > 0 && options.camera_rate_hz <= 10.0)) {
+    throw std::invalid_argument("--camera-rate-hz must be in (0, 10]");
+  }
+  if (options.lidar.beams < 1 || options.lidar.beams > 512) {
+    throw std::invalid_argument("--lidar-beams must be in 1..512");
+  }
+  if (options.threads < 1) throw std::invalid_argument("--threads must be >= 1");
+  if (options.drive_number < 0 || options.drive_number > 9999) {
+    throw std::invalid_argument("--drive must be in 0..9999");
+  }
+  if (!(options.lidar.azimuth_step_deg >= 0.01 && options.lidar.azimuth_step_deg <= 10)) {
+    throw std::invalid_argument("--azimuth-step-deg must be in [0.01, 10]");
+  }
+  if (!(options.lidar.range_noise_std_m >= 0 && options.imu_noise.accel_noise_std >= 0 &&
+        options.imu_noise.gyro_noise_std >= 0 && options.imu_noise.accel_bias_walk >= 0 &&
+        options.imu_noise.gyro_bias_walk >= 0)) {
+    throw std::invalid_argument("noise levels must be >= 0");
+  }
+  parseDateDays(options.date);
+}
 
 DriveSummary generateSyntheticDrive(const DriveOptions& options) {
   if (options.output_dir.empty()) throw std::invalid_argument("--output must be given");

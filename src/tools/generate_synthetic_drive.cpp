@@ -52,9 +52,6 @@ int main(int argc, char** argv) {
     options.lidar.beams = cli.getInt("--lidar-beams", options.lidar.beams);
     options.lidar.azimuth_step_deg =
         cli.getDouble("--azimuth-step-deg", options.lidar.azimuth_step_deg);
-    if (!(options.lidar.azimuth_step_deg >= 0.01 && options.lidar.azimuth_step_deg <= 10)) {
-      throw UsageError("--azimuth-step-deg must be in [0.01, 10]");
-    }
     options.lidar.range_noise_std_m =
         cli.getDouble("--range-noise", options.lidar.range_noise_std_m);
     if (cli.has("--image-size")) {
@@ -81,10 +78,10 @@ int main(int argc, char** argv) {
     options.imu_noise.gyro_bias_walk =
         cli.getDouble("--gyro-bias-walk", options.imu_noise.gyro_bias_walk);
     options.threads = cli.getInt("--threads", options.threads);
-    if (options.lidar.range_noise_std_m < 0 || options.imu_noise.accel_noise_std < 0 ||
-        options.imu_noise.gyro_noise_std < 0 || options.imu_noise.accel_bias_walk < 0 ||
-        options.imu_noise.gyro_bias_walk < 0) {
-      throw UsageError("noise levels must be >= 0");
+    try {  // every out-of-range option a usage error (exit status 2), before any work
+      synthetic::validateDriveOptions(options);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
     }
 
     // The sensors take most of the time (a minute or more for the default drive on 2 cores).

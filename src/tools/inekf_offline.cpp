@@ -433,6 +433,12 @@ int main(int argc, char** argv) {
           "were dropped: no second message confirmed their time jump\n",
           static_cast<long long>(run.statistics.messages_off_the_time_line));
     }
+    if (!run.misstamped_frames.empty()) {
+      std::printf(
+          "inekf_offline: %zu frames (first %d) stamped off both their neighbours (a bad line of "
+          "timestamps.txt, warned above) left out of the filter\n",
+          run.misstamped_frames.size(), run.misstamped_frames.front());
+    }
     if (!run.held_frames.empty()) {
       std::printf(
           "inekf_offline: %zu frames (first %d) without an estimate of their own (after a reset "

@@ -56,6 +56,10 @@ Arguments parseArguments(const common::CommandLine& cli) {
   Arguments args;
   args.drive_dir = cli.get("--drive");
   args.calib_dir = cli.get("--calib-dir");
+  // Named, it must be there: a mistyped folder dropped the camera with a warning and exit 0.
+  if (!args.calib_dir.empty() && !std::filesystem::is_directory(args.calib_dir)) {
+    throw UsageError("--calib-dir " + args.calib_dir + ": no such folder");
+  }
   args.output = cli.get("--output");
   args.timeline.start_offset_s = cli.getDouble("--start", args.timeline.start_offset_s);
   args.timeline.duration_s = cli.getDouble("--duration", args.timeline.duration_s);

@@ -108,6 +108,13 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
                          bag_path + ".3 --gps-outage 5 2>/dev/null")
                             .c_str()),
             0);
+  // A --calib-dir that is not there: the camera was left out with a warning and exit status 0.
+  const auto [calib_status, calib_output] =
+      test::runCommand(std::string(KITTI2BAG_PATH) + " --drive " + drive + " --calib-dir " + drive +
+                       "/no_such_calib --output " + bag_path + ".5");
+  EXPECT_EQ(calib_status, 2) << calib_output;
+  EXPECT_NE(calib_output.find("no_such_calib: no such folder"), std::string::npos) << calib_output;
+  EXPECT_FALSE(fs::exists(bag_path + ".5"));
   // A full disk (simulated with a file size limit) fails cleanly, naming the output, instead of
   // aborting inside rosbag's destructor; no partial bag stays behind.
   const std::string full_disk = "bash -c 'trap \"\" XFSZ; ulimit -f 64; " +

@@ -3,6 +3,9 @@
 known. Runs standalone (`test/ros/test_evaluate_trajectory.py`) or as the test node of
 test/ros/evaluate_trajectory.test (rostest, which records the result for catkin)."""
 
+import argparse
+import contextlib
+import io
 import json
 import math
 import os
@@ -214,6 +217,9 @@ class TrajectoryMetricsTest(unittest.TestCase):
         with self.assertRaises(et.TrajectoryFormatError):
             et.evaluate(estimate, truth, excluded=[(900, 1200)])
         self.assertEqual(et.frame_range("860:1080"), (860, 1080))
+        # A reversed range was "outside the poses"; it is said for what it is.
+        with self.assertRaisesRegex(argparse.ArgumentTypeError, "FIRST is after LAST"):
+            et.frame_range("10:5")
 
 
 class NeesTest(unittest.TestCase):
@@ -293,6 +299,21 @@ class FilesAndErrorsTest(unittest.TestCase):
         # A 1 m x error against a 1 m^2 covariance: position NEES is exactly 1 everywhere.
         self.assertAlmostEqual(result["nees_position"]["average"], 1.0, places=5)
         self.assertGreater(os.path.getsize(self.path("out.png")), 10000)
+
+    def test_an_output_in_a_missing_folder_is_an_error_before_the_work(self):
+        # It was a traceback after the metrics had been computed and printed.
+        write_kitti(self.path("truth.txt"), self.truth)
+        missing = self.path("no_such_folder/out.json")
+        stderr = io.StringIO()
+        with self.assertRaises(SystemExit) as stop, contextlib.redirect_stderr(stderr):
+            et.main(["--estimate", self.path("truth.txt"), "--truth", self.path("truth.txt"),
+                     "--json", missing])
+        self.assertEqual(stop.exception.code, 2)
+        self.assertIn("no directory " + os.path.dirname(missing), stderr.getvalue())
+        with self.assertRaises(SystemExit), contextlib.redirect_stderr(io.StringIO()):
+            cf.main(["--truth", self.path("truth.txt"), "a=" + self.path("truth.txt"),
+                     "--plot", self.directory])  # a folder, not a file
+        self.assertFalse(os.path.exists(missing))
 
     def test_malformed_line_is_reported_with_file_and_line(self):
         write_kitti(self.path("truth.txt"), self.truth)

@@ -320,6 +320,19 @@ TEST(KittiMercator, TheProjectionsDomainExcludesThePolesAndNonFiniteValues) {
   EXPECT_FALSE(isGeodeticInRange(49.0, 8.4, std::numeric_limits<double>::infinity()));
 }
 
+// One bad line (6.4 s back, or an hour ahead) is listed; a real jump moves every stamp after it
+// and is not; the ends cannot be judged.
+TEST(KittiTimestamps, OnlyAStampOffBothItsNeighboursIsMisstamped) {
+  const std::int64_t s = 1000000000LL;
+  const std::vector<std::int64_t> stamps{
+      0,          s / 10, 2 * s / 10 - 64 * s / 10, 3 * s / 10, 4 * s / 10 + 3600 * s,
+      5 * s / 10, 60 * s, 60 * s + s / 10,          -5 * s};
+  const std::vector<bool> misstamped = isolatedMisstampedFrames(stamps);
+  EXPECT_EQ(misstamped,
+            (std::vector<bool>{false, false, true, false, true, false, false, false, false}));
+  EXPECT_TRUE(isolatedMisstampedFrames({}).empty());
+}
+
 TEST(KittiMercator, ToGeodeticInvertsToMap) {
   const MercatorProjection projection(49.015, 8.434, 116.4);
   for (const Eigen::Vector3d& p : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(-1234.5, 876.25, -3.5),
@@ -346,6 +359,11 @@ TEST(KittiCalibration, OdometryCalibTxtAndErrors) {
   writeFile(dir + "/nan.txt", "P0: 1 2 x\n");
   expectFormatError([&] { readObjectCalibration(dir + "/nan.txt"); }, {"nan.txt:1", "'x'"});
   expectFormatError([&] { readRawCalibration(dir); }, {"calib_imu_to_velo.txt"});
+  // The object format without its R0_rect (a file cut short) was read with the identity.
+  writeFile(dir + "/no_r0.txt", "P0: " + p + "\nP1: " + p + "\nP2: " + p + "\nP3: " + p +
+                                    "\nTr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n");
+  expectFormatError([&] { readObjectCalibration(dir + "/no_r0.txt"); },
+                    {"no_r0.txt", "missing key 'R0_rect'"});
   fs::remove_all(dir);
 }
 

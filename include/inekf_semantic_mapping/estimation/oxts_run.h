@@ -61,6 +61,9 @@ struct OxtsRunResult {
   // the frame's IMU sample (the first of a jump forward). They repeat the last estimate and are
   // left out of compareWithTruth.
   std::vector<int> held_frames;
+  // Frames whose stamp alone was off (kitti::isolatedMisstampedFrames): not fed to the filter,
+  // held (above) once it runs.
+  std::vector<int> misstamped_frames;
   bool smoothed = false;    // the states are the smoother's
   int smoother_breaks = 0;  // IMU steps the smoother could not reproduce (segments restarted)
   // With smoothing, one per OXTS frame (frames before the start repeat it, with a zero gain):

@@ -69,6 +69,9 @@ struct DriveSummary {
 
 // Throws std::invalid_argument for bad options, std::runtime_error for I/O errors.
 DriveSummary generateSyntheticDrive(const DriveOptions& options);
+// Throws std::invalid_argument naming the option (as the command line spells it) that is out of
+// range; generateSyntheticDrive calls it first.
+void validateDriveOptions(const DriveOptions& options);
 
 }  // namespace synthetic
 }  // namespace inekf_semantic_mapping
