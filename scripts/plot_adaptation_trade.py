@@ -20,6 +20,7 @@ STYLE = {  # kind -> marker, colour
     "flip-averaged": ("v", "tab:purple"),  # an adapted network with its mirror image averaged
     "weight-averaged": ("P", "tab:brown"),  # the mean of the weights of a run's steps or of runs
     "calibrated": ("*", "tab:red"),  # a network exported with logit offsets (--calibrate-offsets)
+    "ensemble": ("X", "tab:gray"),  # two networks' logits averaged in one graph
 }
 
 
