@@ -229,17 +229,23 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
   for (std::size_t k = 0; k < frames.size(); ++k) {
     if (misstamped[k]) {
       run.misstamped_frames.push_back(static_cast<int>(k));
-      if (!session.started()) continue;
+      if (run.states.empty()) continue;  // before the start: the start's state repeats for it
       run.held_frames.push_back(static_cast<int>(k));
       run.states.push_back(run.states.back());
       run.pose_covariances.push_back(run.pose_covariances.back());
       pass.filtered.push_back(pass.filtered.back());
       pass.filtered_yaw_sigma_rad.push_back(pass.filtered_yaw_sigma_rad.back());
       pass.gyro_bias_z_sigma_radps.push_back(pass.gyro_bias_z_sigma_radps.back());
-      if (options.smooth) {  // no step: the smoother keeps it as it is
+      if (options.smooth && !epochs.empty()) {
+        // An identity step (no time passes for the filter): the smoother carries what the later
+        // frames know across the glitch instead of ending a segment there.
         ForwardEpoch held;
         held.filtered = epochs.back().filtered;
         held.filtered_covariance = epochs.back().filtered_covariance;
+        held.has_step = true;
+        held.predicted = held.filtered;
+        held.predicted_covariance = held.filtered_covariance;
+        held.transition = Matrix15d::Identity();
         epochs.push_back(held);
       }
       continue;
