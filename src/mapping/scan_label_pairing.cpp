@@ -18,6 +18,9 @@ constexpr double kLabelKeepMax_s = 30.0;
 constexpr double kLateLabelWindow_s = 10.0;
 // A stamp this much older than the newest one means the clock went back (a bag loop).
 constexpr double kTimeJump_s = 1.0;
+// For this long (data time) after a bag loop a label image stamped in the ended timeline is
+// taken for one of its leftovers.
+constexpr double kPreviousTimelineLeftovers_s = 5.0;
 
 double stampOf(const PendingScan& scan) { return scan.stamp; }
 double stampOf(const InsertedScan& scan) { return scan.stamp; }
@@ -80,7 +83,11 @@ ScanLabelPairing::LabelsPlace ScanLabelPairing::addLabels(std::shared_ptr<Pendin
                                                           const ApplyLate& apply_late) {
   const double stamp = labels->stamp;
   const double tolerance = options_.label_stamp_tolerance_s;
-  if (stamp > newest_stamp_ + kTimeJump_s && stamp <= previous_timeline_end_ + kTimeJump_s) {
+  // Only in the first seconds of the new timeline: the old one's leftovers come within a
+  // segmentation latency of the jump.
+  const bool just_restarted = newest_stamp_ - first_stamp_ <= kPreviousTimelineLeftovers_s;
+  if (just_restarted && stamp > newest_stamp_ + kTimeJump_s &&
+      stamp <= previous_timeline_end_ + kTimeJump_s) {
     // Of the timeline that ended (a bag loop): as one of the present it moved the clock seconds
     // ahead, and the new timeline's scans, suddenly "old", were dropped waiting for their poses.
     ++statistics_->label_images_unmatched;
@@ -196,8 +203,10 @@ void ScanLabelPairing::keepForLateLabels(InsertedScan scan) {
   }
 }
 
-void ScanLabelPairing::forEachPending(const std::function<void(PendingScan&)>& visit) {
-  for (PendingScan& scan : scans_) visit(scan);
+void ScanLabelPairing::forEachWaitingForLabels(const std::function<void(PendingScan&)>& visit) {
+  for (PendingScan& scan : scans_) {
+    if (labelsMayStillCome(scan, newest_stamp_)) visit(scan);
+  }
 }
 
 void ScanLabelPairing::restartClock() {
@@ -212,6 +221,9 @@ void ScanLabelPairing::clear() {
   scans_.clear();
   labels_.clear();
   restartClock();
+  // A new map (~reset): as at the start, not as after a bag loop.
+  previous_timeline_end_ = -1e300;
+  labels_in_previous_timeline_ = true;
 }
 
 }  // namespace mapping

@@ -261,11 +261,21 @@ void checkCameraFits(const CameraModel& camera, const LabelImageView& labels) {
 
 }  // namespace
 
+void SemanticMappingSession::checkLabelImage(double stamp, const LabelImageView& labels,
+                                             const CameraModel* camera) {
+  try {
+    if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
+    checkLabelView(labels);
+    if (camera) checkCameraFits(*camera, labels);
+  } catch (const std::invalid_argument&) {
+    ++statistics_.label_images_refused;
+    throw;
+  }
+}
+
 std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
                                                   const CameraModel& camera) {
-  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
-  checkLabelView(labels);
-  checkCameraFits(camera, labels);
+  checkLabelImage(stamp, labels, &camera);
   std::shared_ptr<PendingLabels> copy = PendingLabels::copyOf(stamp, labels);
   copy->camera = camera;
   return addLabels(std::move(copy));
@@ -273,13 +283,12 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
 
 std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImageView& labels,
                                                   const std::string& camera_frame) {
-  if (!std::isfinite(stamp)) throw std::invalid_argument("addLabelImage: stamp is not finite");
-  checkLabelView(labels);
+  checkLabelImage(stamp, labels, nullptr);
   // Known now: checked now, so that a label image that does not fit its camera is reported as it
   // comes.
   std::optional<CameraModel> camera;
   if (camera_lookup_) camera = camera_lookup_(camera_frame, labels.width, labels.height);
-  if (camera) checkCameraFits(*camera, labels);
+  if (camera) checkLabelImage(stamp, labels, &*camera);
   std::shared_ptr<PendingLabels> copy = PendingLabels::copyOf(stamp, labels);
   copy->camera_frame = camera_frame;
   copy->camera = std::move(camera);
@@ -316,12 +325,14 @@ std::size_t SemanticMappingSession::addLabels(std::shared_ptr<PendingLabels> lab
   return insertReadyScans(pairing_.now());
 }
 
-std::size_t SemanticMappingSession::advanceTo(double now) { return insertReadyScans(now); }
-
-std::size_t SemanticMappingSession::insertReadyScans(double now) {
-  // The poses of the scans that wait (for their label images), while tf has them.
+std::size_t SemanticMappingSession::advanceTo(double now) {
+  const std::size_t inserted = insertReadyScans(now);
+  // The poses of the scans that wait for their label images, while tf has them (tf clears its
+  // buffer when the clock goes back: at a bag loop those scans were dropped without a pose).
+  // Here, on the clock's ticks, not at every scan or label image: a few lookups a tick.
   if (pose_lookup_) {
-    pairing_.forEachPending([this](PendingScan& scan) {
+    looking_up_ahead_ = true;
+    pairing_.forEachWaitingForLabels([this](PendingScan& scan) {
       if (scan.pose) return;
       try {
         scan.pose = pose_lookup_(scan.stamp, scan.frame);
@@ -329,7 +340,12 @@ std::size_t SemanticMappingSession::insertReadyScans(double now) {
         // Said when the scan is inserted (insertOrReject): the lookup is tried again there.
       }
     });
+    looking_up_ahead_ = false;
   }
+  return inserted;
+}
+
+std::size_t SemanticMappingSession::insertReadyScans(double now) {
   const std::size_t rejected = statistics_.scans_rejected;
   const std::size_t taken = pairing_.insertReady(
       now, [this](PendingScan& scan) { return insertOrReject(scan, /*may_wait=*/true); });

@@ -61,8 +61,10 @@ double MappingMonitor::oldestWaitS(const mapping::SemanticMappingSession& sessio
 
 std::pair<std::size_t, std::size_t> MappingMonitor::recentDrops(
     const mapping::MappingStatistics& stats, double wall_s) {
-  // A reset (statistics from zero) starts the count again.
-  if (!drop_counts_.empty() && stats.scans_received < drop_counts_.back().received) {
+  // A reset (statistics from zero) starts the count again: seen by either count going down
+  // (more scans may have come since the reset than before it).
+  if (!drop_counts_.empty() && (stats.scans_received < drop_counts_.back().received ||
+                                stats.scans_without_pose < drop_counts_.back().without_pose)) {
     drop_counts_.clear();
   }
   drop_counts_.push_back({wall_s, stats.scans_received, stats.scans_without_pose});
@@ -72,7 +74,10 @@ std::pair<std::size_t, std::size_t> MappingMonitor::recentDrops(
   const DropCount& oldest = drop_counts_.front();
   // The first status counts from the start.
   if (drop_counts_.size() == 1) return {stats.scans_received, stats.scans_without_pose};
-  return {stats.scans_received - oldest.received, stats.scans_without_pose - oldest.without_pose};
+  // A reset between two statuses that took both counts above their old values is not seen:
+  // never more drops than scans.
+  const std::size_t received = stats.scans_received - oldest.received;
+  return {received, std::min(received, stats.scans_without_pose - oldest.without_pose)};
 }
 
 void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, const SaveRecord& save,
@@ -142,6 +147,11 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
       last_scan_wall_s_ >= 0 && wall_s - last_scan_wall_s_ < options_.label_stall_warn_s;
   if (!labels_expected) {
     status->summary(DiagnosticStatus::OK, "no label publisher (occupancy only)");
+  } else if (stats.label_images_refused >= kLabelsBeforeUnmatchedWarning &&
+             stats.label_images_refused > stats.label_images_received) {
+    status->summary(DiagnosticStatus::WARN,
+                    "most label images refused (not mono8 label ids, malformed, or not of their "
+                    "camera's size): see the node's log");
   } else if (mostLabelImagesUnmatched(stats)) {
     status->summary(DiagnosticStatus::WARN,
                     "most label images match no scan (stamps more than label_stamp_tolerance_s "
@@ -155,6 +165,7 @@ void MappingMonitor::fillLabels(const mapping::SemanticMappingSession& session,
   }
   status->add("labels expected", labels_expected ? "yes" : "no");
   status->add("label images received", stats.label_images_received);
+  status->add("label images refused", stats.label_images_refused);
   status->add("label images used", stats.label_images_used);
   status->add("label images late", stats.label_images_late);
   status->add("scans with a neighbour's labels", stats.scans_with_neighbour_labels);

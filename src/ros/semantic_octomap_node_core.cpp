@@ -101,7 +101,7 @@ class SemanticOctomapNodeCore::Impl {
       std::string why;
       if (tf_buffer_.canTransform(map, frame, ros::Time(stamp), &why)) {
         pose = tf2::transformToEigen(tf_buffer_.lookupTransform(map, frame, ros::Time(stamp)));
-      } else {
+      } else if (!session_->lookingUpAhead()) {
         last_pose_error_ = map + " -> " + frame + " at " + std::to_string(stamp) + ": " + why;
       }
       return pose;
@@ -225,10 +225,16 @@ class SemanticOctomapNodeCore::Impl {
     monitor_->noteLabelImage(wallNow());
     try {
       ScopedTimer timer("semantic_map/labels");
+      mapping::LabelImageView view;
+      try {
+        view = labelImageView(*labels);
+      } catch (const std::exception&) {
+        session_->noteLabelImageRefused();  // counted: it came, and the map could not read it
+        throw;
+      }
       // Checked as it comes (a malformed image is reported now, naming the field); the session
       // keeps it until its scan and its camera are there.
-      session_->addLabelImage(labels->header.stamp.toSec(), labelImageView(*labels),
-                              labels->header.frame_id);
+      session_->addLabelImage(labels->header.stamp.toSec(), view, labels->header.frame_id);
     } catch (const std::exception& e) {
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kSegmentationLabels
                                                              << " at " << labels->header.stamp
@@ -304,12 +310,25 @@ class SemanticOctomapNodeCore::Impl {
     const std::size_t waiting = session_->pendingScans();
     const std::size_t inserted = session_->insertWithoutWaiting();
     if (inserted == 0) return;  // they wait for their pose (the map diagnostics say so)
-    ROS_INFO_STREAM("semantic_octomap_node: the clock has stood at "
-                    << now << " for " << std::fixed << std::setprecision(1)
-                    << wall_s - clock_moved_wall_s_
-                    << " s (the bag ended or is paused): " << inserted << " of " << waiting
-                    << " waiting scans put in the map without waiting longer for their label "
-                       "images (one that still comes is added to its scan)");
+    if (now.isZero()) {
+      // Scans come and the clock never started: said for what it is (it read "the clock has
+      // stood at 0 for 1796613641 s (the bag ended or is paused)", ten times a second).
+      ROS_WARN_STREAM_THROTTLE(
+          10,
+          "semantic_octomap_node: use_sim_time is true and no /clock has come while scans "
+          "do (a bag played without --clock?): scans go in without waiting for their label "
+          "images ("
+              << inserted << " of " << waiting << " now)");
+      return;
+    }
+    ROS_INFO_STREAM_THROTTLE(10, "semantic_octomap_node: the clock has stood at "
+                                     << now << " for " << std::fixed << std::setprecision(1)
+                                     << wall_s - clock_moved_wall_s_
+                                     << " s (the bag ended or is paused): " << inserted << " of "
+                                     << waiting
+                                     << " waiting scans put in the map without waiting longer "
+                                        "for their label images (one that still comes is added "
+                                        "to its scan)");
   }
 
   // Scans are matched to tf and label images as the clock passes them: a clock that is not the

@@ -36,9 +36,9 @@ TEST(MappingMonitor, ScansDroppedWithoutAPoseAreSaidWhileTheyLastAndClearAfter) 
   options.window_s = 10.0;
   MappingMonitor monitor(options);
   double t = 0.0;  // data and wall time alike
-  // Ten seconds of scans at 10 Hz, then the status.
-  const auto tenSeconds = [&] {
-    for (int k = 0; k < 100; ++k, t += 0.1) {
+  // Scans at 10 Hz (ten seconds by default), then the status.
+  const auto tenSeconds = [&](int scans = 100) {
+    for (int k = 0; k < scans; ++k, t += 0.1) {
       monitor.noteScan(t, t);
       session.addScan(t, "velo", oneWall());
       session.advanceTo(t + 0.05);
@@ -62,6 +62,54 @@ TEST(MappingMonitor, ScansDroppedWithoutAPoseAreSaidWhileTheyLastAndClearAfter) 
   const diagnostic_updater::DiagnosticStatusWrapper back = tenSeconds();
   EXPECT_EQ(back.level, DiagnosticStatus::OK) << back.message;
   EXPECT_EQ(session.statistics().scans_without_pose, 125u);
+}
+
+// A reset (~reset, load_map) with more scans since than before it: the counts start again (the
+// difference of the drops wrapped around: "most scans dropped (18446744073709551613 of the last
+// 22 ...)").
+TEST(MappingMonitor, AResetStartsTheDropCountAgain) {
+  mapping::SemanticMappingConfig config;
+  config.label_wait_s = 0.1;
+  config.pose_wait_s = 0.1;
+  mapping::SemanticMappingSession session(config);
+  bool tf_has_poses = false;
+  session.setPoseLookup([&](double, const std::string&) -> std::optional<Eigen::Isometry3d> {
+    if (!tf_has_poses) return std::nullopt;
+    return Eigen::Isometry3d::Identity();
+  });
+  MappingMonitor monitor{MappingDiagnosticsOptions{}};
+  double t = 0.0;
+  const auto scansThenStatus = [&](int scans) {
+    for (int k = 0; k < scans; ++k, t += 0.1) {
+      monitor.noteScan(t, t);
+      session.addScan(t, "velo", oneWall());
+      session.advanceTo(t + 0.05);
+    }
+    session.advanceTo(t + 1.0);
+    diagnostic_updater::DiagnosticStatusWrapper status;
+    monitor.fillMap(session, SaveRecord{}, SaveRecord{}, t, &status);
+    return status;
+  };
+  EXPECT_EQ(scansThenStatus(8).level, DiagnosticStatus::ERROR);
+  session.reset();
+  tf_has_poses = true;
+  const diagnostic_updater::DiagnosticStatusWrapper after = scansThenStatus(30);
+  EXPECT_EQ(after.level, DiagnosticStatus::OK) << after.message;
+}
+
+// A label publisher of another encoding: each image refused by the node, counted, and the labels
+// status says so (it read "labels arriving").
+TEST(MappingMonitor, MostLabelImagesRefusedIsAWarning) {
+  mapping::SemanticMappingSession session{mapping::SemanticMappingConfig{}};
+  MappingMonitor monitor{MappingDiagnosticsOptions{}};
+  for (int k = 0; k < 6; ++k) {
+    monitor.noteLabelImage(k);
+    session.noteLabelImageRefused();
+  }
+  diagnostic_updater::DiagnosticStatusWrapper status;
+  monitor.fillLabels(session, /*labels_expected=*/true, 6.0, &status);
+  EXPECT_EQ(status.level, DiagnosticStatus::WARN);
+  EXPECT_NE(status.message.find("most label images refused"), std::string::npos) << status.message;
 }
 
 }  // namespace

@@ -107,8 +107,8 @@ class ScanLabelPairing {
   // Those scans, oldest first, for the class evidence of a neighbouring label image.
   std::deque<InsertedScan>& scansWithoutLabels() { return unlabelled_scans_; }
 
-  // Each pending scan (to look up what it will need while it waits).
-  void forEachPending(const std::function<void(PendingScan&)>& visit);
+  // Each pending scan that waits for its label image (to look up its pose while tf has it).
+  void forEachWaitingForLabels(const std::function<void(PendingScan&)>& visit);
 
   // After a flush: the clocks start again and the late window empties (a new timeline).
   void restartClock();

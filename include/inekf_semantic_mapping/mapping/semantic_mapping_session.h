@@ -40,6 +40,8 @@ struct MappingStatistics {
   std::size_t scans_rejected = 0;      // the map could not take them (a pose beyond the map's
                                        // extent or not finite): dropped and reported
   std::size_t label_images_received = 0;
+  std::size_t label_images_refused = 0;  // malformed, of another encoding, or not fitting their
+                                         // camera: never reached the map (not in received)
   std::size_t label_images_used = 0;
   std::size_t label_images_late = 0;              // of the used ones: came after their scan went in
                                                   // (class evidence only)
@@ -69,6 +71,9 @@ class SemanticMappingSession {
   // --- Streaming (the node): scans and label images in any order; poses looked up when a scan
   // is inserted. Each call inserts what is ready and returns the number of scans inserted.
   void setPoseLookup(PoseLookup lookup) { pose_lookup_ = std::move(lookup); }
+  // True while the lookup is asked ahead, for a scan that still waits for its label image: a
+  // failure then is no drop (the node does not name it as the reason of one).
+  bool lookingUpAhead() const { return looking_up_ahead_; }
   // Called after each streamed scan went in, with its stamp and the scan as inserted (map frame).
   using InsertedCallback = std::function<void(double stamp, const LabeledScan& scan)>;
   void setInsertedCallback(InsertedCallback callback) { inserted_callback_ = std::move(callback); }
@@ -86,6 +91,8 @@ class SemanticMappingSession {
   // labels. Throws std::invalid_argument for a malformed view or a known camera it does not fit.
   std::size_t addLabelImage(double stamp, const LabelImageView& labels,
                             const std::string& camera_frame);
+  // A label image refused before it reached the session (the node: an encoding it cannot read).
+  void noteLabelImageRefused() { ++statistics_.label_images_refused; }
   // Told why a label image gave no class evidence after it was accepted (its camera), with its
   // stamp; the node logs it.
   using LabelWarning = std::function<void(double stamp, const std::string& why)>;
@@ -164,6 +171,9 @@ class SemanticMappingSession {
   void reset();
 
  private:
+  // Throws std::invalid_argument for a label image that cannot be used (stamp, view, or the
+  // camera when given), counting it as refused.
+  void checkLabelImage(double stamp, const LabelImageView& labels, const CameraModel* camera);
   std::unique_ptr<SemanticOcTree> makeTree() const;
   std::unique_ptr<HashedVoxelGrid> makeGrid() const;
   void syncTree() const;
@@ -221,6 +231,7 @@ class SemanticMappingSession {
   MappingStatistics statistics_;
   LabeledScan last_scan_;
   PoseLookup pose_lookup_;
+  bool looking_up_ahead_ = false;
   CameraLookup camera_lookup_;
   LabelWarning label_warning_;
   ScanWarning scan_warning_;
