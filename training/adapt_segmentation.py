@@ -26,6 +26,7 @@ import atexit
 import csv
 import json
 import math
+import signal
 import os
 import random
 import sys
@@ -226,6 +227,17 @@ def check_sequences(args):
                          "sequence or leave it out of --sparse-sequences")
 
 
+def without_nan(value):
+    """`value` (nested dicts, lists, numbers) with every non-finite float as None."""
+    if isinstance(value, dict):
+        return {k: without_nan(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [without_nan(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def check_options(args):
     """The option checks that need no data and no PyTorch, right after parsing: each error
     names the option and what is wrong with it."""
@@ -236,6 +248,13 @@ def check_options(args):
         raise SystemExit(f"--temperature {args.temperature}: must be above 0")
     if args.max_images < 0:
         raise SystemExit(f"--max-images {args.max_images}: must be 0 (all images) or more")
+    # A negative step count never ended the run, whatever --minutes said.
+    if args.max_steps < 0:
+        raise SystemExit(f"--max-steps {args.max_steps}: must be 0 (the --minutes budget) or "
+                         "more")
+    for option, value in (("--batch", args.batch), ("--threads", args.threads)):
+        if value < 1:
+            raise SystemExit(f"{option} {value}: must be 1 or more")
     if not args.distill_labelled_weight >= 0:
         raise SystemExit(f"--distill-labelled-weight {args.distill_labelled_weight}: must be 0 "
                          "or more")
@@ -344,6 +363,8 @@ def size_arg(text, name):
         a, b = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise SystemExit(f"--{name} '{text}': expected AxB (integers)")
+    if a < 1 or b < 1:  # 0x0 and -32x160 passed the multiple-of-32 check into OpenCV's resize
+        raise SystemExit(f"--{name} '{text}': both sizes must be positive")
     return a, b
 
 
@@ -857,6 +878,9 @@ def build_base(base, shared):
 def main(argv=None):
     args = parse_args(argv)
     check_options(args)
+    # A SIGTERM (a job scheduler, `kill`) ends the run through SystemExit, so that the atexit
+    # cleanups (the teacher cache, a half-written export) run: they were left, gigabytes of it.
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     import torch
     import torch.nn.functional as F
 
@@ -893,7 +917,12 @@ def main(argv=None):
     # it before minutes of loading.
     model = build_base(base, shared)
     init_state = load_init(args.init, model, base.name, torch)
-    os.makedirs(args.output, exist_ok=True)
+    try:  # a folder under a file, or one this user may not write: said now, not minutes later
+        os.makedirs(args.output, exist_ok=True)
+    except OSError as e:
+        raise SystemExit(f"--output {args.output}: cannot make the folder: {e.strerror}")
+    if not os.access(args.output, os.W_OK):
+        raise SystemExit(f"--output {args.output}: the folder is not writable")
 
     if args.semantickitti:
         use_semantickitti_download(args)  # its sequences are checked by load_samples
@@ -1134,7 +1163,9 @@ def main(argv=None):
         for h in history["train"]:
             w.writerow([h["step"], h["loss"], h["label_loss"], h["distill_loss"], h["lr"]])
     with open(os.path.join(args.output, "summary.json"), "w") as f:
-        json.dump(summary, f, indent=2)
+        # Standard JSON (null, not NaN: a figure with nothing to score, e.g. no dense frame held
+        # out), which every parser reads.
+        json.dump(without_nan(summary), f, indent=2, allow_nan=False)
     plot_history(history, os.path.join(args.output, "training.png"))
     if not parity_passed:
         # No model where the tools look: this run's is set aside, an earlier run's removed (its

@@ -53,9 +53,15 @@ def _read_image(path):
 
 
 def _read_label(path, flags):
-    label = cv2.imread(path, flags)
+    label = cv2.imread(path, flags if flags != cv2.IMREAD_GRAYSCALE else cv2.IMREAD_UNCHANGED)
     if label is None:
         raise DatasetError(f"cannot read label image {path}")
+    if flags == cv2.IMREAD_GRAYSCALE and (label.ndim != 2 or label.dtype != np.uint8):
+        # A colour label (KITTI's semantic_rgb/) read as grey gave luminances, nearly none a
+        # labelId: the run trained on almost no labels, exit 0.
+        raise DatasetError(f"label image {path} is not one channel of 8-bit labelIds "
+                           f"({label.shape[2] if label.ndim == 3 else 1} channels, "
+                           f"{label.dtype}): the colour labels (semantic_rgb/) are not read")
     return label
 
 

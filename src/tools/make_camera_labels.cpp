@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
@@ -162,6 +163,31 @@ void writeCameraLabels(const ism::kitti::VelodyneScan& scan,
   totals->hidden += hidden;
 }
 
+// The file an output folder of this tool holds: a later run replaces only such a folder.
+constexpr char kOutputMarker[] = ".make_camera_labels";
+
+// The output folder, absolute, without a trailing '/' (its ".partial" sibling went inside it):
+// new, empty, or an earlier run's (its marker file). Anything else is refused: it is replaced
+// whole at the end, and a user's folder (holding the sequence itself) was deleted.
+fs::path outputFolder(const fs::path& output, const fs::path& sequence) {
+  fs::path target = fs::absolute(output).lexically_normal();
+  if (target.filename().empty()) target = target.parent_path();
+  if (!fs::exists(target)) return target;
+  if (!fs::is_directory(target)) throw std::runtime_error(target.string() + ": not a folder");
+  const fs::path input = fs::canonical(sequence);
+  const fs::path place = fs::canonical(target);
+  if (std::mismatch(place.begin(), place.end(), input.begin(), input.end()).first == place.end()) {
+    throw std::runtime_error(target.string() + ": holds the input sequence " + sequence.string() +
+                             ": give a folder of its own");
+  }
+  if (!fs::is_empty(target) && !fs::exists(target / kOutputMarker)) {
+    throw std::runtime_error(
+        target.string() + ": exists and is not a make_camera_labels output (no " + kOutputMarker +
+        "): give a new or empty folder (it is replaced whole)");
+  }
+  return target;
+}
+
 // Removes a folder when it goes out of scope, unless its path was cleared (the run finished).
 struct RemoveOnExit {
   fs::path path;
@@ -197,15 +223,18 @@ int run(const ism::common::CommandLine& cli) {
   const ism::kitti::ObjectCalibration calibration =
       ism::kitti::readObjectCalibration((sequence / "calib.txt").string());
   ism::common::checkOutputsAreNotInputs({output.string()}, {sequence.string()});
-  fs::create_directories(fs::absolute(output).lexically_normal().parent_path());
-  ism::common::checkOutputDirectory(output.string());
+  const fs::path target = outputFolder(output, sequence);
+  fs::create_directories(target.parent_path());
+  ism::common::checkOutputDirectory(target.string());
   // Written beside the output and renamed onto it at the end: a run that fails half-way (a
   // truncated .label) left a folder whose poses listed frames it had no images for, which a
   // training run would read.
-  const fs::path partial = fs::absolute(output).lexically_normal().string() + ".partial";
+  const fs::path partial = target.string() + ".partial";
   fs::remove_all(partial);
   fs::create_directories(partial);
   RemoveOnExit partial_cleanup{partial};
+  std::ofstream(partial / kOutputMarker) << "written by make_camera_labels: a later run into this "
+                                            "folder replaces it whole\n";
   for (const char* name : {"calib.txt", "poses.txt", "times.txt"}) {
     if (fs::exists(sequence / name)) copyAtomically(sequence / name, partial / name);
   }
@@ -239,11 +268,12 @@ int run(const ism::common::CommandLine& cli) {
     }
     progress.update(f + 1);
   }
-  // The finished folder takes the output's place (a folder of an earlier run is replaced).
+  // The finished folder takes the output's place (an empty one, or an earlier run's: see
+  // outputFolder).
   const fs::path earlier = partial.string() + ".earlier";
   fs::remove_all(earlier);
-  if (fs::exists(output)) fs::rename(output, earlier);
-  fs::rename(partial, output);
+  if (fs::exists(target)) fs::rename(target, earlier);
+  fs::rename(partial, target);
   fs::remove_all(earlier);
   partial_cleanup.path.clear();
   if (totals.missing_images > 0) {

@@ -186,8 +186,9 @@ TEST_F(MakeCameraLabelsTest, ImagesNotOfTheCalibratedCameraAreRefused) {
   EXPECT_NE(same.find("is an input"), std::string::npos) << same;
 }
 
-// A second run into the folder of a first replaces it whole.
-TEST_F(MakeCameraLabelsTest, ASecondRunReplacesTheFirstsFolder) {
+// A second run into the folder of a first replaces it whole; a folder it did not write is never
+// replaced (a user's folder, with the sequence in it, was deleted), and "OUT/" is OUT.
+TEST_F(MakeCameraLabelsTest, ASecondRunReplacesTheFirstsFolderAndNoOther) {
   ASSERT_EQ(makeLabels("").first, 0);
   ASSERT_TRUE(fs::exists(labelPath(3, "000000")));
   const auto [status, output] = makeLabels("--cameras 2 --max-frames 1");
@@ -196,6 +197,30 @@ TEST_F(MakeCameraLabelsTest, ASecondRunReplacesTheFirstsFolder) {
   EXPECT_FALSE(fs::exists(labelPath(2, "000001")));  // of the first run
   EXPECT_FALSE(fs::exists(labelPath(3, "000000")));
   EXPECT_FALSE(fs::exists(out_.string() + ".partial"));
+
+  const auto runInto = [&](const std::string& folder) {
+    return inekf_semantic_mapping::test::runCommand(std::string(MAKE_CAMERA_LABELS_PATH) +
+                                                    " --sequence " + seq_.string() +
+                                                    " --cameras 2 --output " + folder);
+  };
+  std::ofstream(fs::path(dir_) / "notes.txt") << "mine";
+  const auto [parent_status, parent] = runInto(dir_);  // holds the sequence and notes.txt
+  EXPECT_NE(parent_status, 0) << parent;
+  EXPECT_NE(parent.find("holds the input sequence"), std::string::npos) << parent;
+  EXPECT_TRUE(fs::exists(seq_ / "calib.txt"));
+  EXPECT_TRUE(fs::exists(fs::path(dir_) / "notes.txt"));
+  const fs::path users = fs::path(dir_) / "users_folder";
+  fs::create_directories(users);
+  std::ofstream(users / "keep.txt") << "mine";
+  const auto [users_status, users_output] = runInto(users.string());
+  EXPECT_NE(users_status, 0) << users_output;
+  EXPECT_NE(users_output.find("is not a make_camera_labels output"), std::string::npos)
+      << users_output;
+  EXPECT_TRUE(fs::exists(users / "keep.txt"));
+  const auto [slash_status, slash] = runInto((fs::path(dir_) / "fresh").string() + "/");
+  EXPECT_EQ(slash_status, 0) << slash;
+  EXPECT_TRUE(fs::exists(fs::path(dir_) / "fresh" / "labels_2" / "000000.png"));
+  EXPECT_FALSE(fs::exists(fs::path(dir_) / "fresh" / ".partial"));
 }
 
 }  // namespace

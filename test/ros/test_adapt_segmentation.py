@@ -1316,6 +1316,29 @@ class OptionChecks(unittest.TestCase):
                       self.refused("--max-images", "-1"))
         self.assertIn("--distill-labelled-weight -1.0",
                       self.refused("--distill-labelled-weight", "-1"))
+        # A negative step count trained for ever, whatever --minutes said; the others ended in
+        # tracebacks from PyTorch or OpenCV after the data had loaded.
+        self.assertIn("--max-steps -1: must be 0", self.refused("--max-steps", "-1"))
+        self.assertIn("--batch 0: must be 1 or more", self.refused("--batch", "0"))
+        self.assertIn("--threads 0: must be 1 or more", self.refused("--threads", "0"))
+
+    def test_sizes_must_be_positive(self):
+        import adapt_segmentation as adapt
+
+        for text in ("0x0", "-32x160"):
+            with self.assertRaises(SystemExit) as e:
+                adapt.size_arg(text, "input")
+            self.assertIn("both sizes must be positive", str(e.exception))
+        self.assertEqual(adapt.size_arg("1024x320", "input"), (1024, 320))
+
+    def test_the_summary_is_standard_json(self):
+        import adapt_segmentation as adapt
+
+        summary = {"validation": {"dense_pixel_accuracy": float("nan"), "miou": 0.5},
+                   "history": [1.0, float("inf")]}
+        text = json.dumps(adapt.without_nan(summary), allow_nan=False)
+        self.assertEqual(json.loads(text)["validation"]["dense_pixel_accuracy"], None)
+        self.assertEqual(json.loads(text)["history"], [1.0, None])
 
     def test_the_labelled_weight_defaults_to_soft_distillation_only(self):
         import adapt_segmentation as adapt
@@ -1394,6 +1417,28 @@ class SparseSequenceFolders(unittest.TestCase):
             with self.assertRaisesRegex(datasets.DatasetError,
                                         f"{seq}: no label images in labels_2/ or labels_3/"):
                 datasets.load_sparse(tmp, ["01"], 64, 32, 0.7, True)
+
+
+class DenseLabels(unittest.TestCase):
+    def test_colour_label_images_are_refused_naming_the_file(self):
+        # KITTI's semantic_rgb/ put where semantic/ goes: read as grey they gave luminances,
+        # almost none a labelId, and the run trained on nearly no labels with exit status 0.
+        import cv2
+
+        with tempfile.TemporaryDirectory() as tmp:
+            for sub in ("image_2", "semantic"):
+                os.makedirs(os.path.join(tmp, sub))
+            cv2.imwrite(os.path.join(tmp, "image_2", "000000_10.png"),
+                        np.full((16, 32, 3), 90, np.uint8))
+            colour = np.zeros((16, 32, 3), np.uint8)
+            colour[:] = (128, 64, 128)  # Cityscapes' road colour
+            cv2.imwrite(os.path.join(tmp, "semantic", "000000_10.png"), colour)
+            with self.assertRaisesRegex(datasets.DatasetError,
+                                        "000000_10.png is not one channel of 8-bit labelIds"):
+                datasets.load_dense(tmp, 32, 16, 0.7, True)
+            cv2.imwrite(os.path.join(tmp, "semantic", "000000_10.png"),
+                        np.full((16, 32), 7, np.uint8))  # road, as labelIds
+            self.assertEqual(len(datasets.load_dense(tmp, 32, 16, 0.7, True)), 1)
 
 
 class MixedImageSizes(unittest.TestCase):

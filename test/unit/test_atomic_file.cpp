@@ -221,7 +221,8 @@ TEST(AtomicFile, AnOutputThatIsAnInputIsRefused) {
   };
   EXPECT_EQ(reason(dir + "/calib.txt").rfind("is an input (", 0), 0u);
   EXPECT_EQ(reason(dir + "/./link.txt").rfind("is an input (", 0), 0u);  // however spelt
-  EXPECT_EQ(reason(dir + "/drive/data/0.txt").rfind("is a file of the input folder ", 0), 0u);
+  EXPECT_EQ(reason(dir + "/drive/data/0.txt").rfind("is in the input folder ", 0), 0u);
+  EXPECT_EQ(reason(dir + "/drive/data").rfind("is in the input folder ", 0), 0u);  // a folder
   EXPECT_EQ(reason(dir + "/drive").rfind("is an input (", 0), 0u);
   EXPECT_EQ(reason(dir + "/drive/new.txt"), "accepted");  // replaces nothing
   EXPECT_EQ(reason(dir + "/out.txt"), "accepted");

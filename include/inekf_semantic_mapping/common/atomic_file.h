@@ -95,9 +95,10 @@ inline void checkOutputPaths(const std::vector<std::string>& paths) {
   }
 }
 
-// Throws AtomicWriteError when an output is an existing input file, an existing file of an input
-// folder, or an input folder itself: the tool would destroy what it reads (an output typed over an
-// input replaced it, with exit status 0). A new file beside the inputs is not refused.
+// Throws AtomicWriteError when an output is an existing input file, an existing file or folder in
+// an input folder, or an input folder itself: the tool would destroy what it reads (an output
+// typed over an input replaced it, with exit status 0; an output folder inside a drive overwrote
+// its images). A new file or folder beside the inputs is not refused.
 inline void checkOutputsAreNotInputs(const std::vector<std::string>& outputs,
                                      const std::vector<std::string>& inputs) {
   namespace fs = std::filesystem;
@@ -114,11 +115,11 @@ inline void checkOutputsAreNotInputs(const std::vector<std::string>& outputs,
         throw AtomicWriteError(output, "is an input (" + input + "): writing it would destroy it");
       }
       const bool below =
-          fs::is_directory(in) && !fs::is_directory(out) &&
+          fs::is_directory(in) &&
           std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first == in.end();
       if (below) {
         throw AtomicWriteError(
-            output, "is a file of the input folder " + input + ": writing it would replace it");
+            output, "is in the input folder " + input + ": writing it would replace what is read");
       }
     }
   }
