@@ -3,6 +3,7 @@
 #include <ros/console.h>
 #include <rosgraph_msgs/Clock.h>
 
+#include <filesystem>
 #include <vector>
 
 #include "inekf_semantic_mapping/common/timing.h"
@@ -15,6 +16,12 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   KittiPlayerOptions options;
   reader->read("drive_dir", &options.drive_dir);
   reader->read("calib_dir", &options.calib_dir);
+  // Named, it must be there: a mistyped folder played the drive without its camera, warned once.
+  if (!options.calib_dir.empty() && !std::filesystem::is_directory(options.calib_dir)) {
+    reader->fail("calib_dir", "'" + options.calib_dir +
+                                  "' is not a folder (empty: the drive's "
+                                  "parent folder)");
+  }
   reader->read("rate", &options.rate);
   reader->read("start_offset_s", &options.timeline.start_offset_s);
   reader->read("duration_s", &options.timeline.duration_s);

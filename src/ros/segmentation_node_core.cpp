@@ -46,9 +46,10 @@ class SegmentationNodeCore::Impl {
     parameters.read("model_card", &card_path);
     parameters.read("image_topic", &image_topic);
     parameters.read("publish_overlay", &publish_overlay_);
-    parameters.read("overlay_alpha", &overlay_alpha_);
-    parameters.read("num_threads", &num_threads);
-    parameters.read("rate_log_period_s", &rate_log_period_s_);
+    // Ranges checked as the other nodes' are (an alpha of 2 went to cv::addWeighted as 2 and -1).
+    parameters.readInRange("overlay_alpha", &overlay_alpha_, 0.0, 1.0);
+    parameters.readInRange("num_threads", &num_threads, 1, 256);
+    parameters.readInRange("rate_log_period_s", &rate_log_period_s_, 0.0, 3600.0, true);
     parameters.read("diagnostics.latency_warn_s", &latency_warn_s_);
     parameters.allow("image_transport");  // image_transport's own choice of transport
     parameters.rejectUnknown();

@@ -17,7 +17,9 @@
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 
+#include "inekf_semantic_mapping/common/yaml_reader.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
+#include "inekf_semantic_mapping/ros/drive_publishers.h"
 #include "inekf_semantic_mapping/ros/kitti_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
 #include "synthetic_kitti_drive.h"
@@ -52,6 +54,25 @@ TEST(KittiConversions, ImuUsesBodyFrameFieldsAndOrientation) {
 
 // ROS time is unsigned 32-bit seconds; roscpp's own error ("Time is out of dual 32-bit range")
 // names neither the stamp nor the file.
+// kitti_player's ~calib_dir, named and not there: an error naming it (the drive played without
+// its camera, warned once).
+TEST(KittiPlayerOptions, ANamedCalibrationFolderMustExist) {
+  const auto read = [](const std::string& yaml) {
+    common::YamlReader reader("ROS parameters of /kitti_player", YAML::Load(yaml));
+    return readKittiPlayerOptions(&reader);
+  };
+  EXPECT_EQ(read("{drive_dir: /d, calib_dir: ''}").calib_dir, "");
+  EXPECT_EQ(read("{drive_dir: /d, calib_dir: /tmp}").calib_dir, "/tmp");
+  try {
+    read("{drive_dir: /d, calib_dir: /nonexistent_calib}");
+    ADD_FAILURE() << "a missing calib_dir was accepted";
+  } catch (const common::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("calib_dir"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("/nonexistent_calib' is not a folder"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(KittiConversions, StampsOutsideRosTimeAreRefusedByDate) {
   EXPECT_TRUE(fitsRosTime(0));
   EXPECT_EQ(toRosTime(1317041067403000000LL).toNSec(), 1317041067403000000ULL);
