@@ -183,15 +183,32 @@ std::vector<NavState> feedAsTheNode(const std::vector<kitti::OxtsFrame>& frames,
   return states;
 }
 
-TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
-  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0027_sync/oxts";
-  ISM_REQUIRE_SHARED(drive);
-  std::vector<kitti::OxtsFrame> frames = kitti::readOxtsFolder(test::sharedPath(drive));
-  frames.resize(std::min<std::size_t>(frames.size(), 450));
+constexpr char kDrive0027[] = "data/kitti_raw/2011_09_30/2011_09_30_drive_0027_sync/oxts";
+
+// The first 450 frames of 2011_09_30_drive_0027 under the protocol with config/inekf.yaml, and
+// inekf_offline's run of them.
+struct ProtocolDrive {
+  std::vector<kitti::OxtsFrame> frames;
   OxtsRunOptions options;
-  options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.gps = protocolGps();
-  const OxtsRunResult offline = runLocalizerOnOxts(frames, options);
+  OxtsRunResult offline;
+};
+ProtocolDrive drive0027() {
+  ProtocolDrive drive;
+  drive.frames = kitti::readOxtsFolder(test::sharedPath(kDrive0027));
+  drive.frames.resize(std::min<std::size_t>(drive.frames.size(), 450));
+  drive.options.config =
+      LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
+  drive.options.gps = protocolGps();
+  drive.offline = runLocalizerOnOxts(drive.frames, drive.options);
+  return drive;
+}
+
+TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
+  ISM_REQUIRE_SHARED(kDrive0027);
+  const ProtocolDrive drive = drive0027();
+  const std::vector<kitti::OxtsFrame>& frames = drive.frames;
+  const OxtsRunOptions& options = drive.options;
+  const OxtsRunResult& offline = drive.offline;
   ASSERT_EQ(offline.first_estimated_frame, 0);
 
   const std::vector<NavState> node = feedAsTheNode(frames, options);
@@ -213,14 +230,11 @@ TEST(LocalizationSession, NodeStreamAndOfflineRunGiveTheSameTrajectory) {
 // fixes still hold the car on the ground as 3D ones do; the height is the IMU's alone. Ignored, as
 // they were, the drive ran on dead reckoning.
 TEST(LocalizationSession, FixesWithoutAltitudeHoldTheTrackOnARealDrive) {
-  const std::string drive = "data/kitti_raw/2011_09_30/2011_09_30_drive_0027_sync/oxts";
-  ISM_REQUIRE_SHARED(drive);
-  std::vector<kitti::OxtsFrame> frames = kitti::readOxtsFolder(test::sharedPath(drive));
-  frames.resize(std::min<std::size_t>(frames.size(), 450));
-  OxtsRunOptions options;
-  options.config = LocalizationSessionConfig::fromYamlFile(test::repoPath("config/inekf.yaml"));
-  options.gps = protocolGps();
-  const OxtsRunResult offline = runLocalizerOnOxts(frames, options);
+  ISM_REQUIRE_SHARED(kDrive0027);
+  const ProtocolDrive drive = drive0027();
+  const std::vector<kitti::OxtsFrame>& frames = drive.frames;
+  const OxtsRunOptions& options = drive.options;
+  const OxtsRunResult& offline = drive.offline;
   const std::vector<NavState> with_altitude = feedAsTheNode(frames, options);
   const std::vector<NavState> without_altitude =
       feedAsTheNode(frames, options, [](GeodeticFixEvent* fix) { fix->alt_m = std::nan(""); });

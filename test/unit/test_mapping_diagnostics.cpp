@@ -15,85 +15,75 @@ namespace {
 
 using diagnostic_msgs::DiagnosticStatus;
 
-Eigen::Matrix3Xf oneWall() {
-  Eigen::Matrix3Xf points(3, 3);
-  points << 5, 5, 5, 0, 0.5, 1, 0, 0, 0;
-  return points;
-}
+// A session fed scans of one wall at 10 Hz (data and wall time alike) whose poses tf has unless
+// `drop_every` says (every n-th scan by stamp has none; 0: every scan has one), and its monitor.
+class MonitoredScans {
+ public:
+  MonitoredScans() : session_(config()), monitor_(MappingDiagnosticsOptions{}) {
+    session_.setPoseLookup([this](double stamp, const std::string&) {
+      const long frame = std::lround(stamp * 10.0);
+      return drop_every > 0 && frame % drop_every == 0
+                 ? std::nullopt
+                 : std::optional<Eigen::Isometry3d>(Eigen::Isometry3d::Identity());
+    });
+  }
+  // `scans` more scans, then the map status.
+  diagnostic_updater::DiagnosticStatusWrapper statusAfter(int scans) {
+    Eigen::Matrix3Xf wall(3, 3);
+    wall << 5, 5, 5, 0, 0.5, 1, 0, 0, 0;
+    for (int k = 0; k < scans; ++k, t_ += 0.1) {
+      monitor_.noteScan(t_, t_);
+      session_.addScan(t_, "velo", wall);
+      session_.advanceTo(t_ + 0.05);
+    }
+    session_.advanceTo(t_ + 1.0);
+    diagnostic_updater::DiagnosticStatusWrapper status;
+    monitor_.fillMap(session_, SaveRecord{}, SaveRecord{}, t_, &status);
+    return status;
+  }
+  mapping::SemanticMappingSession& session() { return session_; }
+  int drop_every = 0;
+
+ private:
+  static mapping::SemanticMappingConfig config() {
+    mapping::SemanticMappingConfig config;
+    config.label_wait_s = 0.1;
+    config.pose_wait_s = 0.1;
+    return config;
+  }
+  mapping::SemanticMappingSession session_;
+  MappingMonitor monitor_;  // window_s 10
+  double t_ = 0.0;
+};
 
 TEST(MappingMonitor, ScansDroppedWithoutAPoseAreSaidWhileTheyLastAndClearAfter) {
-  mapping::SemanticMappingConfig config;
-  config.label_wait_s = 0.1;
-  config.pose_wait_s = 0.1;
-  mapping::SemanticMappingSession session(config);
-  int drop_every = 0;  // every n-th scan (by stamp) has no pose in tf (0: none)
-  session.setPoseLookup([&](double stamp, const std::string&) -> std::optional<Eigen::Isometry3d> {
-    const long frame = std::lround(stamp * 10.0);
-    if (drop_every > 0 && frame % drop_every == 0) return std::nullopt;
-    return Eigen::Isometry3d::Identity();
-  });
-  MappingDiagnosticsOptions options;
-  options.window_s = 10.0;
-  MappingMonitor monitor(options);
-  double t = 0.0;  // data and wall time alike
-  // Scans at 10 Hz (ten seconds by default), then the status.
-  const auto tenSeconds = [&](int scans = 100) {
-    for (int k = 0; k < scans; ++k, t += 0.1) {
-      monitor.noteScan(t, t);
-      session.addScan(t, "velo", oneWall());
-      session.advanceTo(t + 0.05);
-    }
-    session.advanceTo(t + 1.0);
-    diagnostic_updater::DiagnosticStatusWrapper status;
-    monitor.fillMap(session, SaveRecord{}, SaveRecord{}, t, &status);
-    return status;
-  };
-  EXPECT_EQ(tenSeconds().level, DiagnosticStatus::OK);
-  drop_every = 4;  // a quarter: mapping "OK" before
-  const diagnostic_updater::DiagnosticStatusWrapper some = tenSeconds();
+  MonitoredScans scans;
+  EXPECT_EQ(scans.statusAfter(100).level, DiagnosticStatus::OK);
+  scans.drop_every = 4;  // a quarter: mapping "OK" before
+  const diagnostic_updater::DiagnosticStatusWrapper some = scans.statusAfter(100);
   EXPECT_EQ(some.level, DiagnosticStatus::WARN);
   EXPECT_NE(some.message.find("some scans dropped without a pose (25 of the last 100"),
             std::string::npos)
       << some.message;
-  drop_every = 1;
-  const diagnostic_updater::DiagnosticStatusWrapper most = tenSeconds();
+  scans.drop_every = 1;
+  const diagnostic_updater::DiagnosticStatusWrapper most = scans.statusAfter(100);
   EXPECT_EQ(most.level, DiagnosticStatus::ERROR) << most.message;
-  drop_every = 0;  // tf is back: the status clears (it stayed ERROR since the start's count)
-  const diagnostic_updater::DiagnosticStatusWrapper back = tenSeconds();
+  scans.drop_every = 0;  // tf is back: the status clears (it stayed ERROR since the start's count)
+  const diagnostic_updater::DiagnosticStatusWrapper back = scans.statusAfter(100);
   EXPECT_EQ(back.level, DiagnosticStatus::OK) << back.message;
-  EXPECT_EQ(session.statistics().scans_without_pose, 125u);
+  EXPECT_EQ(scans.session().statistics().scans_without_pose, 125u);
 }
 
 // A reset (~reset, load_map) with more scans since than before it: the counts start again (the
 // difference of the drops wrapped around: "most scans dropped (18446744073709551613 of the last
 // 22 ...)").
 TEST(MappingMonitor, AResetStartsTheDropCountAgain) {
-  mapping::SemanticMappingConfig config;
-  config.label_wait_s = 0.1;
-  config.pose_wait_s = 0.1;
-  mapping::SemanticMappingSession session(config);
-  bool tf_has_poses = false;
-  session.setPoseLookup([&](double, const std::string&) -> std::optional<Eigen::Isometry3d> {
-    if (!tf_has_poses) return std::nullopt;
-    return Eigen::Isometry3d::Identity();
-  });
-  MappingMonitor monitor{MappingDiagnosticsOptions{}};
-  double t = 0.0;
-  const auto scansThenStatus = [&](int scans) {
-    for (int k = 0; k < scans; ++k, t += 0.1) {
-      monitor.noteScan(t, t);
-      session.addScan(t, "velo", oneWall());
-      session.advanceTo(t + 0.05);
-    }
-    session.advanceTo(t + 1.0);
-    diagnostic_updater::DiagnosticStatusWrapper status;
-    monitor.fillMap(session, SaveRecord{}, SaveRecord{}, t, &status);
-    return status;
-  };
-  EXPECT_EQ(scansThenStatus(8).level, DiagnosticStatus::ERROR);
-  session.reset();
-  tf_has_poses = true;
-  const diagnostic_updater::DiagnosticStatusWrapper after = scansThenStatus(30);
+  MonitoredScans scans;
+  scans.drop_every = 1;
+  EXPECT_EQ(scans.statusAfter(8).level, DiagnosticStatus::ERROR);
+  scans.session().reset();
+  scans.drop_every = 0;
+  const diagnostic_updater::DiagnosticStatusWrapper after = scans.statusAfter(30);
   EXPECT_EQ(after.level, DiagnosticStatus::OK) << after.message;
 }
 
