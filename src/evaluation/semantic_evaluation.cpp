@@ -127,12 +127,26 @@ double PointLabelScore::meanIoU() const {
   return classes == 0 ? kNaN : sum / classes;
 }
 
+double PointLabelScore::meanIoUWithMisses() const {
+  double sum = 0.0;
+  int classes = 0;
+  for (std::uint8_t label : kScoredCityscapesLabels) {
+    const std::uint64_t truth = truthCount(label) + unlabelledCount(label);
+    const std::uint64_t predicted = predictedCount(label);
+    if (truth + predicted == 0) continue;
+    const std::uint64_t tp = truePositives(label);
+    sum += static_cast<double>(tp) / static_cast<double>(truth + predicted - tp);
+    ++classes;
+  }
+  return classes == 0 ? kNaN : sum / classes;
+}
+
 std::string PointLabelScore::toJson() const {
   std::ostringstream out;
   out << "{\"scored\":" << scored() << ",\"labelled\":" << labelled()
       << ",\"correct\":" << correct() << ",\"coverage\":" << jsonNumber(coverage())
       << ",\"accuracy\":" << jsonNumber(accuracy()) << ",\"miou\":" << jsonNumber(meanIoU())
-      << ",\"classes\":{";
+      << ",\"miou_with_misses\":" << jsonNumber(meanIoUWithMisses()) << ",\"classes\":{";
   bool first = true;
   for (std::uint8_t label : kScoredCityscapesLabels) {
     if (truthCount(label) + predictedCount(label) + unlabelledCount(label) == 0) continue;

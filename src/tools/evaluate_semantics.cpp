@@ -268,10 +268,12 @@ perception::ModelCard applyOverrides(perception::ModelCard card,
 
 void printScore(const std::string& title, const evaluation::PointLabelScore& score,
                 bool per_class) {
-  std::printf("%-58s acc %.4f  coverage %.4f  mIoU %.4f  (%llu of %llu points labelled)\n",
-              title.c_str(), score.accuracy(), score.coverage(), score.meanIoU(),
-              static_cast<unsigned long long>(score.labelled()),
-              static_cast<unsigned long long>(score.scored()));
+  std::printf(
+      "%-58s acc %.4f  coverage %.4f  mIoU %.4f (with misses %.4f)  (%llu of %llu points "
+      "labelled)\n",
+      title.c_str(), score.accuracy(), score.coverage(), score.meanIoU(), score.meanIoUWithMisses(),
+      static_cast<unsigned long long>(score.labelled()),
+      static_cast<unsigned long long>(score.scored()));
   if (!per_class) return;
   std::printf("    %-14s %9s %9s %9s %7s %7s  %s\n", "class", "truth", "predicted", "no label",
               "acc", "IoU", "mistaken for");
@@ -504,9 +506,11 @@ int main(int argc, char** argv) {
             [&](std::size_t done, std::size_t) { map_progress.update(done); });
         printScore("map from the camera labels (voxel class at each point)", maps.camera, true);
         printScore("map from the human labels (ceiling)", maps.ceiling, false);
-        std::printf("map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f, %zu voxels\n",
-                    maps.camera.meanIoU(), maps.ceiling.meanIoU(), maps.camera.accuracy(),
-                    maps.camera.coverage(), maps.map_voxels);
+        std::printf(
+            "map: mIoU %.3f (ceiling %.3f; with misses %.3f), accuracy %.3f, coverage "
+            "%.3f, %zu voxels\n",
+            maps.camera.meanIoU(), maps.ceiling.meanIoU(), maps.camera.meanIoUWithMisses(),
+            maps.camera.accuracy(), maps.camera.coverage(), maps.map_voxels);
         map_totals.merge(maps.camera);
         ceiling_totals.merge(maps.ceiling);
         json << ",\"map\":" << maps.camera.toJson() << ",\"map_ceiling\":" << maps.ceiling.toJson();
@@ -523,9 +527,11 @@ int main(int argc, char** argv) {
     }
     json << "}";
     if (!cli.has("--no-map")) {
-      std::printf("\n== total map: mIoU %.3f (ceiling %.3f), accuracy %.3f, coverage %.3f\n",
-                  map_totals.meanIoU(), ceiling_totals.meanIoU(), map_totals.accuracy(),
-                  map_totals.coverage());
+      std::printf(
+          "\n== total map: mIoU %.3f (ceiling %.3f; with misses %.3f), accuracy %.3f, "
+          "coverage %.3f\n",
+          map_totals.meanIoU(), ceiling_totals.meanIoU(), map_totals.meanIoUWithMisses(),
+          map_totals.accuracy(), map_totals.coverage());
       json << ",\"map\":" << map_totals.toJson() << ",\"map_ceiling\":" << ceiling_totals.toJson();
     }
     json << "}}";

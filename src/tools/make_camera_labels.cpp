@@ -11,6 +11,8 @@
 //
 //   make_camera_labels --sequence SEQ --output OUT/sequences/NN [--every N] [--max-frames N]
 //                      [--cameras 2,3]
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -166,24 +168,47 @@ void writeCameraLabels(const ism::kitti::VelodyneScan& scan,
 // The file an output folder of this tool holds: a later run replaces only such a folder.
 constexpr char kOutputMarker[] = ".make_camera_labels";
 
-// The output folder, absolute, without a trailing '/' (its ".partial" sibling went inside it):
-// new, empty, or an earlier run's (its marker file). Anything else is refused: it is replaced
-// whole at the end, and a user's folder (holding the sequence itself) was deleted.
+// Whether `folder` holds nothing but what this tool writes (an earlier version wrote no marker).
+bool holdsOnlyCameraLabels(const fs::path& folder) {
+  for (const fs::directory_entry& entry : fs::directory_iterator(folder)) {
+    const std::string name = entry.path().filename().string();
+    const bool ours =
+        name == "calib.txt" || name == "poses.txt" || name == "times.txt" ||
+        (entry.is_directory() && (name.rfind("image_", 0) == 0 || name.rfind("labels_", 0) == 0));
+    if (!ours) return false;
+  }
+  return true;
+}
+
+// The output folder, absolute, without a trailing '/' (its ".partial" sibling went inside it),
+// through a link to the folder itself: new, empty, or an earlier run's (its marker file, or only
+// this tool's files). Anything else is refused: it is replaced whole at the end, and a user's
+// folder (holding the sequence itself) was deleted. A mount point is refused before the work: it
+// cannot be renamed.
 fs::path outputFolder(const fs::path& output, const fs::path& sequence) {
   fs::path target = fs::absolute(output).lexically_normal();
   if (target.filename().empty()) target = target.parent_path();
   if (!fs::exists(target)) return target;
+  target = fs::canonical(target);
   if (!fs::is_directory(target)) throw std::runtime_error(target.string() + ": not a folder");
   const fs::path input = fs::canonical(sequence);
-  const fs::path place = fs::canonical(target);
-  if (std::mismatch(place.begin(), place.end(), input.begin(), input.end()).first == place.end()) {
+  if (std::mismatch(target.begin(), target.end(), input.begin(), input.end()).first ==
+      target.end()) {
     throw std::runtime_error(target.string() + ": holds the input sequence " + sequence.string() +
                              ": give a folder of its own");
   }
-  if (!fs::is_empty(target) && !fs::exists(target / kOutputMarker)) {
+  if (!fs::is_empty(target) && !fs::exists(target / kOutputMarker) &&
+      !holdsOnlyCameraLabels(target)) {
     throw std::runtime_error(
         target.string() + ": exists and is not a make_camera_labels output (no " + kOutputMarker +
         "): give a new or empty folder (it is replaced whole)");
+  }
+  struct stat own {
+  }, parent{};
+  if (::stat(target.c_str(), &own) == 0 && ::stat(target.parent_path().c_str(), &parent) == 0 &&
+      own.st_dev != parent.st_dev) {
+    throw std::runtime_error(target.string() +
+                             ": a mount point, which cannot be replaced: give a folder inside it");
   }
   return target;
 }
@@ -223,6 +248,7 @@ int run(const ism::common::CommandLine& cli) {
   const ism::kitti::ObjectCalibration calibration =
       ism::kitti::readObjectCalibration((sequence / "calib.txt").string());
   ism::common::checkOutputsAreNotInputs({output.string()}, {sequence.string()});
+  ism::common::checkOutputFolderIsNotInAnInput(output.string(), {sequence.string()});
   const fs::path target = outputFolder(output, sequence);
   fs::create_directories(target.parent_path());
   ism::common::checkOutputDirectory(target.string());

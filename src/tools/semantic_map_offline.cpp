@@ -343,13 +343,14 @@ int main(int argc, char** argv) {
       }
     }
     ism::common::checkOutputPaths(output_paths);
-    if (cli.has("--label-images")) {
-      ism::common::checkOutputDirectory(cli.get("--label-images"));
-      output_paths.push_back(cli.get("--label-images"));
-    }
     ism::common::checkOutputsAreNotInputs(
         output_paths, cli.valuesOf({"--scans", "--drive", "--calib-dir", "--labels", "--images",
                                     "--model", "--model-card", "--poses", "--calib", "--config"}));
+    if (cli.has("--label-images")) {  // not inside the drive (its image folders are read)
+      ism::common::checkOutputDirectory(cli.get("--label-images"));
+      ism::common::checkOutputFolderIsNotInAnInput(cli.get("--label-images"),
+                                                   cli.valuesOf({"--drive"}));
+    }
     mapping::SemanticMappingSession session(configFrom(cli));
     mapping::GridProjectionConfig grid_config;
     if (cli.has("--config")) {

@@ -94,6 +94,13 @@ TEST(PointLabelScore, AccuracyCoverageAndIouOverLabelledPoints) {
   EXPECT_DOUBLE_EQ(score.iou(road), 6.0 / 9.0);
   EXPECT_DOUBLE_EQ(score.iou(car), 1.0 / 3.0);
   EXPECT_DOUBLE_EQ(score.meanIoU(), (6.0 / 9.0 + 1.0 / 3.0) / 2);
+  // The benchmarks' convention: road's unlabelled point is a miss (6 / 10); a class only
+  // predicted counts with IoU 0.
+  EXPECT_DOUBLE_EQ(score.meanIoUWithMisses(), (6.0 / 10.0 + 1.0 / 3.0) / 2);
+  PointLabelScore with_person = score;
+  with_person.add(car, cityscapes::kPerson);
+  EXPECT_DOUBLE_EQ(with_person.meanIoU(), (6.0 / 9.0 + 1.0 / 4.0) / 2);
+  EXPECT_DOUBLE_EQ(with_person.meanIoUWithMisses(), (6.0 / 10.0 + 1.0 / 4.0 + 0.0) / 3);
   PointLabelScore doubled = score;
   doubled.merge(score);
   EXPECT_EQ(doubled.scored(), 22u);

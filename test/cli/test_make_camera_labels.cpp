@@ -221,6 +221,20 @@ TEST_F(MakeCameraLabelsTest, ASecondRunReplacesTheFirstsFolderAndNoOther) {
   EXPECT_EQ(slash_status, 0) << slash;
   EXPECT_TRUE(fs::exists(fs::path(dir_) / "fresh" / "labels_2" / "000000.png"));
   EXPECT_FALSE(fs::exists(fs::path(dir_) / "fresh" / ".partial"));
+
+  // An earlier version's folder (no marker file, only this tool's files) is still replaced.
+  fs::remove(out_ / ".make_camera_labels");
+  EXPECT_EQ(runInto(out_.string()).first, 0);
+  // Through a link, the folder linked to is replaced (the link moved, the old labels stayed).
+  fs::create_symlink(out_, fs::path(dir_) / "link");
+  fs::remove(labelPath(2, "000002"));
+  EXPECT_EQ(runInto((fs::path(dir_) / "link").string()).first, 0);
+  EXPECT_TRUE(fs::is_symlink(fs::path(dir_) / "link"));
+  EXPECT_TRUE(fs::exists(labelPath(2, "000002")));
+  // A folder inside the sequence: refused on every run, new or not.
+  const auto [inside_status, inside] = runInto((seq_ / "my_labels").string());
+  EXPECT_NE(inside_status, 0) << inside;
+  EXPECT_NE(inside.find("is in the input folder"), std::string::npos) << inside;
 }
 
 }  // namespace

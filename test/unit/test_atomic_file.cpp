@@ -222,7 +222,12 @@ TEST(AtomicFile, AnOutputThatIsAnInputIsRefused) {
   EXPECT_EQ(reason(dir + "/calib.txt").rfind("is an input (", 0), 0u);
   EXPECT_EQ(reason(dir + "/./link.txt").rfind("is an input (", 0), 0u);  // however spelt
   EXPECT_EQ(reason(dir + "/drive/data/0.txt").rfind("is in the input folder ", 0), 0u);
-  EXPECT_EQ(reason(dir + "/drive/data").rfind("is in the input folder ", 0), 0u);  // a folder
+  // Output folders: in an input folder, new or not (the same answer on every run).
+  for (const std::string& folder :
+       {dir + "/drive/data", dir + "/drive/new_folder", dir + "/drive"}) {
+    EXPECT_THROW(checkOutputFolderIsNotInAnInput(folder, inputs), AtomicWriteError) << folder;
+  }
+  EXPECT_NO_THROW(checkOutputFolderIsNotInAnInput(dir + "/labels", inputs));
   EXPECT_EQ(reason(dir + "/drive").rfind("is an input (", 0), 0u);
   EXPECT_EQ(reason(dir + "/drive/new.txt"), "accepted");  // replaces nothing
   EXPECT_EQ(reason(dir + "/out.txt"), "accepted");

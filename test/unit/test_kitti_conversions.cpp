@@ -52,8 +52,6 @@ TEST(KittiConversions, ImuUsesBodyFrameFieldsAndOrientation) {
   EXPECT_GT(imu.linear_acceleration_covariance[0], 0.0);
 }
 
-// ROS time is unsigned 32-bit seconds; roscpp's own error ("Time is out of dual 32-bit range")
-// names neither the stamp nor the file.
 // kitti_player's ~calib_dir, named and not there: an error naming it (the drive played without
 // its camera, warned once).
 TEST(KittiPlayerOptions, ANamedCalibrationFolderMustExist) {
@@ -73,6 +71,8 @@ TEST(KittiPlayerOptions, ANamedCalibrationFolderMustExist) {
   }
 }
 
+// ROS time is unsigned 32-bit seconds; roscpp's own error ("Time is out of dual 32-bit range")
+// names neither the stamp nor the file.
 TEST(KittiConversions, StampsOutsideRosTimeAreRefusedByDate) {
   EXPECT_TRUE(fitsRosTime(0));
   EXPECT_EQ(toRosTime(1317041067403000000LL).toNSec(), 1317041067403000000ULL);

@@ -127,6 +127,37 @@ TEST(ScanLabelPairingTest, ALabelImageOfTheTimelineThatEndedMovesNoClock) {
   EXPECT_EQ(pairing.addLabels(labelsAt(100.0), kNoLate), ScanLabelPairing::LabelsPlace::kPaired);
 }
 
+// Past the first seconds of a new timeline a label image stamped ahead of the scans (the scan
+// queue lagging) is one of the present again, though the ended timeline reached its stamp.
+TEST(ScanLabelPairingTest, TheEndedTimelineRuleHoldsForItsFirstSecondsOnly) {
+  MappingStatistics stats;
+  ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
+  const auto insert = [](PendingScan&) { return true; };
+  pairing.addLabels(labelsAt(100.0), kNoLate);
+  pairing.addScan(scanAt(100.0));
+  pairing.addScan(scanAt(160.0));  // a minute-long timeline
+  pairing.flush(insert);
+  pairing.restartClock();
+  pairing.addScan(scanAt(100.0));
+  EXPECT_EQ(pairing.addLabels(labelsAt(102.0), kNoLate),
+            ScanLabelPairing::LabelsPlace::kUnmatched);  // 2 s ahead, just after the loop
+  pairing.addScan(scanAt(130.0));
+  EXPECT_EQ(pairing.addLabels(labelsAt(131.5), kNoLate), ScanLabelPairing::LabelsPlace::kWaiting);
+}
+
+// A reset (~reset) is a new start, not a bag loop: scans wait for the first label image as at the
+// start, whatever came before, and no label image is taken for an ended timeline's.
+TEST(ScanLabelPairingTest, AClearIsANewStart) {
+  MappingStatistics stats;
+  ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
+  const auto insert = [](PendingScan&) { return true; };
+  pairing.addScan(scanAt(100.0));  // no label image yet
+  pairing.clear();
+  pairing.addScan(scanAt(101.0));
+  EXPECT_EQ(pairing.insertReady(101.0, insert), 0u);  // waits for a first label image
+  EXPECT_EQ(pairing.addLabels(labelsAt(103.0), kNoLate), ScanLabelPairing::LabelsPlace::kWaiting);
+}
+
 // A lidar-only run: no label image in the timeline that ended, so the new one's scans do not wait
 // label_wait_s for a first one (at each loop of a looping bag they did).
 TEST(ScanLabelPairingTest, ALidarOnlyRunDoesNotWaitForLabelsAfterARestart) {

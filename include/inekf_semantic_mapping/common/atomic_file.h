@@ -95,10 +95,10 @@ inline void checkOutputPaths(const std::vector<std::string>& paths) {
   }
 }
 
-// Throws AtomicWriteError when an output is an existing input file, an existing file or folder in
-// an input folder, or an input folder itself: the tool would destroy what it reads (an output
-// typed over an input replaced it, with exit status 0; an output folder inside a drive overwrote
-// its images). A new file or folder beside the inputs is not refused.
+// Throws AtomicWriteError when an output file is an existing input file or an existing file of an
+// input folder, or an output is an input folder itself: the tool would destroy what it reads (an
+// output typed over an input replaced it, with exit status 0). A new file beside the inputs is not
+// refused. Output folders: checkOutputFolderIsNotInAnInput.
 inline void checkOutputsAreNotInputs(const std::vector<std::string>& outputs,
                                      const std::vector<std::string>& inputs) {
   namespace fs = std::filesystem;
@@ -115,12 +115,31 @@ inline void checkOutputsAreNotInputs(const std::vector<std::string>& outputs,
         throw AtomicWriteError(output, "is an input (" + input + "): writing it would destroy it");
       }
       const bool below =
-          fs::is_directory(in) &&
+          fs::is_directory(in) && !fs::is_directory(out) &&
           std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first == in.end();
       if (below) {
         throw AtomicWriteError(
             output, "is in the input folder " + input + ": writing it would replace what is read");
       }
+    }
+  }
+}
+
+// Throws AtomicWriteError when an output folder, new or not, is or lies in an input folder (an
+// output folder inside a drive overwrote its images); the same answer on every run.
+inline void checkOutputFolderIsNotInAnInput(const std::string& dir,
+                                            const std::vector<std::string>& inputs) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  const fs::path out = fs::weakly_canonical(dir, error);
+  if (error || dir.empty()) return;
+  for (const std::string& input : inputs) {
+    if (input.empty() || !fs::is_directory(input, error)) continue;
+    const fs::path in = fs::canonical(input, error);
+    if (error) continue;
+    if (std::mismatch(in.begin(), in.end(), out.begin(), out.end()).first == in.end()) {
+      throw AtomicWriteError(
+          dir, "is in the input folder " + input + ": give an output folder outside the inputs");
     }
   }
 }

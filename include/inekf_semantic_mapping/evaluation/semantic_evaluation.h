@@ -43,12 +43,18 @@ class PointLabelScore {
   std::uint64_t unlabelledCount(std::uint8_t label_id) const;
   double iou(std::uint8_t label_id) const;  // NaN when the class is neither true nor predicted
   double meanIoU() const;                   // over the scored classes present in the truth
+  // The benchmarks' convention (SemanticKITTI's api, Cityscapes' scripts): a true point left
+  // without a label is a miss of its class, and a class predicted where the truth has none
+  // counts with IoU 0. Over the scored classes true or predicted anywhere. Lower than meanIoU
+  // wherever a filter leaves points unlabelled.
+  double meanIoUWithMisses() const;
   // Points of true class `truth` the camera labelled `predicted` (0: no label).
   std::uint64_t count(std::uint8_t truth, std::uint8_t predicted) const {
     return at(truth, predicted);
   }
 
-  // {"scored":..,"labelled":..,"coverage":..,"accuracy":..,"miou":..,"classes":{name:{..}}}
+  // {"scored":..,"labelled":..,"coverage":..,"accuracy":..,"miou":..,"miou_with_misses":..,
+  //  "classes":{name:{..}}}
   std::string toJson() const;
 
  private:
