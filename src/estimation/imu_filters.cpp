@@ -122,7 +122,7 @@ void ImuFilterBase::propagate(const ImuSample& sample, double dt) {
     const Matrix15d left_next = propagateLeftCovariance(phi, sandwich(to_left, covariance_)) + q;
     next_covariance = sandwich(from_left, left_next);
   }
-  commit(next, symmetrized(next_covariance));
+  if (commit(next, symmetrized(next_covariance))) last_dt_ = dt;
 }
 
 bool ImuFilterBase::commit(const NavState& state, const ErrorCovariance& covariance) {
@@ -141,6 +141,24 @@ PoseCovariance ImuFilterBase::poseCovariance() const {
   j.block<3, 3>(3, 0).setIdentity();      // body small angle = xi_R
   const PoseCovariance pose = j * left * j.transpose();
   return 0.5 * (pose + pose.transpose());
+}
+
+TwistCovariance ImuFilterBase::twistCovariance() const {
+  const Matrix15d to_left = leftFromError(state_);
+  const ErrorCovariance left = sandwich(to_left, covariance_);
+  // Left-invariant error: R_true^T v_true = v_b + xi_v + v_b^ xi_R; the true rate is the
+  // measured one less b_true = b + xi_bg.
+  const Eigen::Vector3d v_b = state_.rotation.transpose() * state_.velocity_map;
+  Eigen::Matrix<double, 6, 15> j = Eigen::Matrix<double, 6, 15>::Zero();
+  j.block<3, 3>(0, 0) = lie::hat(v_b);
+  j.block<3, 3>(0, 3).setIdentity();
+  j.block<3, 3>(3, 9) = -Eigen::Matrix3d::Identity();
+  TwistCovariance twist = j * left * j.transpose();
+  if (last_dt_ > 0.0) {  // a rate density over one sample's interval
+    const double density = noise_.gyro_noise_density * gyro_noise_scale_;
+    twist.bottomRightCorner<3, 3>() += Eigen::Matrix3d::Identity() * density * density / last_dt_;
+  }
+  return 0.5 * (twist + twist.transpose());
 }
 
 ErrorCovariance ImuFilterBase::fromWorldCovariance(const NavState& state,

@@ -347,7 +347,7 @@ LocalizationSession::Update LocalizationSession::process(double stamp_s, const E
     Update part;
     handle(earlier, &part);
     if (part.new_estimate) {
-      update.held_estimates.push_back(Estimate{state(), poseCovariance()});
+      update.held_estimates.push_back(estimate());
       part.new_estimate = false;
     }
     fold(part, &update);
@@ -631,7 +631,7 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
   // The filter's estimate at the start fix's instant: the fix's position, the orientation and
   // velocity of that instant's IMU message and GPS velocity. A node publishes it whichever of
   // the three messages completed the start.
-  update->start_estimate = Estimate{state(), poseCovariance()};
+  update->start_estimate = estimate();
   const double yaw_deg = std::atan2(state().rotation(1, 0), state().rotation(0, 0)) * 180.0 / M_PI;
   note << "started at t=" << state().stamp_s << " s, position " << state().position_map.transpose()
        << " m, yaw " << std::setprecision(1) << yaw_deg << " deg (";

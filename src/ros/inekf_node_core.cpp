@@ -99,13 +99,13 @@ class InekfNodeCore::Impl {
       // between it and the next IMU sample has a pose (otherwise the first pose would come with
       // the next IMU sample, 0.1 s later on KITTI, and such scans would stay out of the map).
       if (const auto& start = update.start_estimate) {
-        output_.publish(exactStamp(recent_fix_stamps_, start->state.stamp_s), start->state,
-                        start->pose_covariance, session_.latestAngularVelocity());
+        output_.publish(exactStamp(recent_fix_stamps_, start->state.stamp_s), *start,
+                        session_.latestAngularVelocity());
       }
       // IMU samples held back as the first of a time jump, used once it was confirmed.
       for (const LocalizationSession::Estimate& held : update.held_estimates) {
-        output_.publish(exactStamp(recent_imu_stamps_, held.state.stamp_s), held.state,
-                        held.pose_covariance, session_.latestAngularVelocity());
+        output_.publish(exactStamp(recent_imu_stamps_, held.state.stamp_s), held,
+                        session_.latestAngularVelocity());
       }
       if (update.new_estimate) publishState(stamp);
       if (update.new_estimate || update.correction || update.started ||
@@ -197,8 +197,7 @@ class InekfNodeCore::Impl {
   // Stamped with the message's own stamp, not ros::Time(state.stamp_s): a double loses the
   // nanoseconds, and consumers match our poses to their data by exact stamp.
   void publishState(const ros::Time& stamp) {
-    output_.publish(stamp, session_.state(), session_.poseCovariance(),
-                    session_.latestAngularVelocity());
+    output_.publish(stamp, session_.estimate(), session_.latestAngularVelocity());
     ROS_INFO_STREAM_THROTTLE(10.0, "inekf_node: " << session_.summary());
   }
 

@@ -159,9 +159,9 @@ std::array<double, 36> rosPoseCovariance(const Eigen::Matrix3d& body_to_map,
   return out;
 }
 
-void fillOdometry(const estimation::NavState& state,
-                  const estimation::PoseCovariance& pose_covariance,
+void fillOdometry(const estimation::LocalizationSession::Estimate& estimate,
                   const Eigen::Vector3d& latest_angular_velocity, nav_msgs::Odometry* odometry) {
+  const estimation::NavState& state = estimate.state;
   const Eigen::Quaterniond q(state.rotation);
   odometry->pose.pose.position.x = state.position_map.x();
   odometry->pose.pose.position.y = state.position_map.y();
@@ -170,7 +170,8 @@ void fillOdometry(const estimation::NavState& state,
   odometry->pose.pose.orientation.x = q.x();
   odometry->pose.pose.orientation.y = q.y();
   odometry->pose.pose.orientation.z = q.z();
-  const std::array<double, 36> covariance = rosPoseCovariance(state.rotation, pose_covariance);
+  const std::array<double, 36> covariance =
+      rosPoseCovariance(state.rotation, estimate.pose_covariance);
   std::copy(covariance.begin(), covariance.end(), odometry->pose.covariance.begin());
 
   const Eigen::Vector3d velocity_body = state.rotation.transpose() * state.velocity_map;
@@ -181,8 +182,9 @@ void fillOdometry(const estimation::NavState& state,
   odometry->twist.twist.angular.x = rate_body.x();
   odometry->twist.twist.angular.y = rate_body.y();
   odometry->twist.twist.angular.z = rate_body.z();
-  // The filter's velocity covariance lives in filter-specific error coordinates: leave the twist
-  // covariance unknown (all zero) rather than publish a wrong one.
+  // Both in the body frame, as the twist: geometry_msgs' row-major 6x6.
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(odometry->twist.covariance.data()) =
+      estimate.twist_covariance;
 }
 
 void appendToPath(const nav_msgs::Odometry& odometry, std::size_t max_length,
@@ -226,6 +228,18 @@ nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
   out.twist.twist.angular.x = w_base.x();
   out.twist.twist.angular.y = w_base.y();
   out.twist.twist.angular.z = w_base.z();
+  // d v_base = R (dv - r^ dw), d w_base = R dw.
+  Eigen::Matrix3d r_hat;
+  r_hat << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+  Eigen::Matrix<double, 6, 6> twist_jacobian = Eigen::Matrix<double, 6, 6>::Zero();
+  twist_jacobian.topLeftCorner<3, 3>() = R_base_imu;
+  twist_jacobian.topRightCorner<3, 3>() = -R_base_imu * r_hat;
+  twist_jacobian.bottomRightCorner<3, 3>() = R_base_imu;
+  Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>> twist_in(
+      imu_odometry.twist.covariance.data());
+  Eigen::Matrix<double, 6, 6> twist_out = twist_jacobian * twist_in * twist_jacobian.transpose();
+  Eigen::Map<Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(out.twist.covariance.data()) =
+      0.5 * (twist_out + twist_out.transpose());
 
   // p_base = p_imu + R r: a rotation error dtheta about the map axes moves it by
   // dtheta x (R r) = -[R r]x dtheta.

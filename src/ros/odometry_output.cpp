@@ -37,14 +37,14 @@ void OdometryOutput::noteImuFrame(const std::string& frame_id) {
   if (imu_frame_.empty() && !frame_id.empty()) imu_frame_ = frame_id;
 }
 
-void OdometryOutput::publish(const ros::Time& stamp, const estimation::NavState& state,
-                             const estimation::PoseCovariance& pose_covariance,
+void OdometryOutput::publish(const ros::Time& stamp,
+                             const estimation::LocalizationSession::Estimate& estimate,
                              const Eigen::Vector3d& angular_velocity) {
   nav_msgs::Odometry odometry;
   odometry.header.stamp = stamp;
   odometry.header.frame_id = path_.header.frame_id;
   odometry.child_frame_id = base_frame_;
-  fillOdometry(state, pose_covariance, angular_velocity, &odometry);
+  fillOdometry(estimate, angular_velocity, &odometry);
   if (const auto T_base_imu = baseFromImu()) {
     odometry = odometryOfBase(odometry, *T_base_imu, base_frame_);
   }

@@ -176,6 +176,13 @@ TEST(KittiBagConventions, BaseVelocityIncludesTheLeverArm) {
   imu.pose.covariance[35] = 0.01;  // yaw
   const nav_msgs::Odometry uncertain = conv::odometryOfBase(imu, kBaseImu, "base_link");
   EXPECT_NEAR(uncertain.pose.covariance[7], 0.01 * 1.405 * 1.405, 1e-12);  // y y
+  // So does a yaw-rate uncertainty the base's lateral speed (v_base = v + w x r).
+  imu.twist.covariance[35] = 0.04;  // wz wz
+  imu.twist.covariance[0] = 0.25;   // vx vx
+  const nav_msgs::Odometry twist = conv::odometryOfBase(imu, kBaseImu, "base_link");
+  EXPECT_NEAR(twist.twist.covariance[7], 0.04 * 1.405 * 1.405, 1e-12);       // vy vy
+  EXPECT_NEAR(twist.twist.covariance[0], 0.25 + 0.04 * 0.32 * 0.32, 1e-12);  // vx vx
+  EXPECT_NEAR(twist.twist.covariance[35], 0.04, 1e-12);
 }
 
 conv::BagContents ismBag() {

@@ -216,14 +216,21 @@ TEST(Odometry, TwistIsInTheBodyFrameAndBiasCorrected) {
   state.position_map = Eigen::Vector3d(1.0, 2.0, 3.0);
   state.gyro_bias = Eigen::Vector3d(0.0, 0.0, 0.01);
   nav_msgs::Odometry odometry;
-  fillOdometry(state, estimation::PoseCovariance::Identity(), Eigen::Vector3d(0, 0, 0.11),
-               &odometry);
+  estimation::LocalizationSession::Estimate estimate{state, estimation::PoseCovariance::Identity(),
+                                                     estimation::TwistCovariance::Zero()};
+  estimate.twist_covariance(0, 3) = estimate.twist_covariance(3, 0) = 0.25;
+  estimate.twist_covariance(5, 5) = 0.5;
+  fillOdometry(estimate, Eigen::Vector3d(0, 0, 0.11), &odometry);
   EXPECT_NEAR(odometry.twist.twist.linear.x, 5.0, 1e-12);
   EXPECT_NEAR(odometry.twist.twist.linear.y, 0.0, 1e-12);
   EXPECT_NEAR(odometry.twist.twist.angular.z, 0.10, 1e-12);
   EXPECT_DOUBLE_EQ(odometry.pose.pose.position.z, 3.0);
   EXPECT_NEAR(odometry.pose.pose.orientation.z, std::sin(M_PI / 4), 1e-12);
   EXPECT_NEAR(odometry.pose.covariance[0], 1.0, 1e-12);
+  // The twist covariance row-major, as given (it was all zero: "perfectly known" to a consumer).
+  EXPECT_EQ(odometry.twist.covariance[3], 0.25);
+  EXPECT_EQ(odometry.twist.covariance[18], 0.25);
+  EXPECT_EQ(odometry.twist.covariance[35], 0.5);
 
   EXPECT_TRUE(isFinite(state, estimation::PoseCovariance::Identity()));
   state.position_map.x() = kNaN;

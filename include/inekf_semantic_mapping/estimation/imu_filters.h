@@ -24,6 +24,7 @@ class ImuFilterBase : public NavigationFilter {
   const NavState& state() const override { return state_; }
   ErrorCovariance covariance() const override { return covariance_; }
   PoseCovariance poseCovariance() const override;
+  TwistCovariance twistCovariance() const override;
   ErrorCovariance fromWorldCovariance(const NavState& state,
                                       const ErrorCovariance& world_covariance) const override;
 
@@ -58,6 +59,7 @@ class ImuFilterBase : public NavigationFilter {
   double accel_noise_scale_ = 1.0;
   NavState state_;
   ErrorCovariance covariance_ = ErrorCovariance::Identity();
+  double last_dt_ = 0.0;  // of the last propagation: the white noise of one gyro sample
 };
 
 // Left-invariant EKF: body-frame errors; the GPS fix is a left-invariant observation Y = X b,

@@ -156,6 +156,7 @@ class LocalizationSession {
   struct Estimate {
     NavState state;
     PoseCovariance pose_covariance = PoseCovariance::Zero();
+    TwistCovariance twist_covariance = TwistCovariance::Zero();
   };
 
   // What one event did.
@@ -191,6 +192,9 @@ class LocalizationSession {
   bool started() const { return localizer_.initialized(); }
   const NavState& state() const { return localizer_.state(); }
   PoseCovariance poseCovariance() const { return localizer_.filter().poseCovariance(); }
+  TwistCovariance twistCovariance() const { return localizer_.filter().twistCovariance(); }
+  // The state with its pose and twist covariances.
+  Estimate estimate() const { return Estimate{state(), poseCovariance(), twistCovariance()}; }
   // 1-sigma yaw uncertainty about the map z axis (rad); infinite before the start.
   double yawSigma() const { return localizer_.yawSigma(); }
   // The filter's full 15x15 covariance in its own error coordinates (smoothing records it).

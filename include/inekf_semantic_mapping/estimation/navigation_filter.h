@@ -74,6 +74,9 @@ class NavigationFilter {
   // the map frame (m) first, then the rotation error as a BODY-frame small angle
   // (R_true = R_est Exp(delta), rad). Computed from covariance() to first order.
   virtual PoseCovariance poseCovariance() const = 0;
+  // The body-frame twist's covariance (first order): the velocity R^T v and the bias-corrected
+  // rate of the last IMU sample (the gyro bias's uncertainty and the sample's own white noise).
+  virtual TwistCovariance twistCovariance() const = 0;
 
   // Maps a "world-frame Euclidean" error [dtheta_map (R_true = Exp(dtheta) R_est), dv_map,
   // dp_map, dbg, dba] into this filter's error coordinates at `state` (first order). Used to

@@ -59,6 +59,9 @@ struct CorrectionResult {
 // in the owning filter's own error coordinates (see NavigationFilter).
 using ErrorCovariance = Eigen::Matrix<double, 15, 15>;
 using PoseCovariance = Eigen::Matrix<double, 6, 6>;
+// Body-frame twist covariance, geometry_msgs TwistWithCovariance order: linear velocity (m/s),
+// then angular velocity (rad/s).
+using TwistCovariance = Eigen::Matrix<double, 6, 6>;
 
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

@@ -69,9 +69,8 @@ std::array<double, 36> rosPoseCovariance(const Eigen::Matrix3d& body_to_map,
                                          const estimation::PoseCovariance& pose_covariance);
 
 // Fills pose, twist (body-frame velocity and bias-corrected rate, as nav_msgs/Odometry asks for
-// the twist in child_frame_id) and the pose covariance. Frames and stamp are set by the caller.
-void fillOdometry(const estimation::NavState& state,
-                  const estimation::PoseCovariance& pose_covariance,
+// the twist in child_frame_id) and both covariances. Frames and stamp are set by the caller.
+void fillOdometry(const estimation::LocalizationSession::Estimate& estimate,
                   const Eigen::Vector3d& latest_angular_velocity, nav_msgs::Odometry* odometry);
 
 // Appends the odometry's pose to the path, keeping the newest max_length poses (trimmed in

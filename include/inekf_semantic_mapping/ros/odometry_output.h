@@ -17,6 +17,7 @@
 #include <string>
 
 #include "inekf_semantic_mapping/common/yaml_reader.h"
+#include "inekf_semantic_mapping/estimation/localization_session.h"
 #include "inekf_semantic_mapping/estimation/types.h"
 #include "inekf_semantic_mapping/ros/names.h"
 
@@ -48,8 +49,7 @@ class OdometryOutput {
 
   // One estimate, stamped with the message's own stamp: a double stamp loses the nanoseconds,
   // and consumers match our poses to their data by exact stamp.
-  void publish(const ros::Time& stamp, const estimation::NavState& state,
-               const estimation::PoseCovariance& pose_covariance,
+  void publish(const ros::Time& stamp, const estimation::LocalizationSession::Estimate& estimate,
                const Eigen::Vector3d& angular_velocity);
 
   // Empties the path and publishes the empty path (the filter was reset).
