@@ -604,7 +604,8 @@ TEST(SemanticMappingSessionTest, APoseFoundWhileTheScanWaitsSurvivesTfForgetting
     ++lookups;
     return tf_has_it ? std::optional<Eigen::Isometry3d>(poseAt(stamp)) : std::nullopt;
   });
-  const LabelImageView view{testLabels().data(), 100, 100, 100};
+  const std::vector<std::uint8_t> pixels = testLabels();  // alive as long as the view
+  const LabelImageView view{pixels.data(), 100, 100, 100};
   session.addLabelImage(10.0, view, testCamera());  // segmentation runs
   EXPECT_EQ(session.addScan(10.0, "velo", testScan()), 1u);
   EXPECT_EQ(session.addScan(10.1, "velo", testScan()), 0u);  // waits for its label image
