@@ -219,9 +219,10 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
   run.first_estimated_frame = static_cast<int>(frames.size());
 
   const double t0 = frames.front().stampSeconds();
-  // One bad line of timestamps.txt stamps the frame's IMU sample, fix and velocity alike: fed,
+  // A bad line of timestamps.txt stamps the frame's IMU sample, fix and velocity alike: fed,
   // the session took the frame for a jump back (its second message confirmed it), reset, and the
-  // drive was lost (ATE 7 m for 0.03 m). Such a frame is left out: it holds the last estimate.
+  // drive was lost (ATE 7 m for 0.03 m). Such frames (a few lines in a row at most) are left out:
+  // each holds the last estimate.
   std::vector<std::int64_t> stamps_ns;
   stamps_ns.reserve(frames.size());
   for (const kitti::OxtsFrame& frame : frames) stamps_ns.push_back(frame.stamp_ns);

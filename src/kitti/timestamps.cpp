@@ -103,15 +103,34 @@ std::int64_t parseKittiTimestampNs(const std::string& raw_text) {
 }
 
 std::vector<bool> isolatedMisstampedFrames(const std::vector<std::int64_t>& stamps_ns,
-                                           double max_gap_s) {
-  std::vector<bool> misstamped(stamps_ns.size(), false);
-  for (std::size_t i = 1; i + 1 < stamps_ns.size(); ++i) {
-    const std::int64_t before = stamps_ns[i - 1], after = stamps_ns[i + 1];
-    const double span_s = secondsBetween(before, after);
-    const bool neighbours_in_order = after > before && span_s <= max_gap_s;
-    const bool off = std::abs(secondsBetween(before, stamps_ns[i])) > max_gap_s &&
-                     std::abs(secondsBetween(stamps_ns[i], after)) > max_gap_s;
-    misstamped[i] = neighbours_in_order && off;
+                                           double max_gap_s, std::size_t max_run) {
+  const std::size_t n = stamps_ns.size();
+  std::vector<bool> misstamped(n, false);
+  const auto far = [max_gap_s](std::int64_t a, std::int64_t b) {
+    return std::abs(secondsBetween(a, b)) > max_gap_s;
+  };
+  std::size_t i = 1;
+  while (i + 1 < n) {
+    const std::int64_t before = stamps_ns[i - 1];
+    // The run i..last: every stamp in it far from `before`; it ends where a frame comes back in
+    // order within max_gap_s of `before` and far from each stamp of the run.
+    std::size_t last = i;
+    bool found = false;
+    while (last + 1 < n && last - i < max_run && far(before, stamps_ns[last])) {
+      const std::int64_t after = stamps_ns[last + 1];
+      if (after > before && !far(before, after)) {
+        found = true;
+        for (std::size_t k = i; k <= last && found; ++k) found = far(stamps_ns[k], after);
+        break;
+      }
+      ++last;
+    }
+    if (found) {
+      for (std::size_t k = i; k <= last; ++k) misstamped[k] = true;
+      i = last + 2;  // the frame after the run is in order: the next run starts after it
+    } else {
+      ++i;
+    }
   }
   return misstamped;
 }

@@ -435,7 +435,7 @@ int main(int argc, char** argv) {
     }
     if (!run.misstamped_frames.empty()) {
       std::printf(
-          "inekf_offline: %zu frames (first %d) stamped off both their neighbours (a bad line of "
+          "inekf_offline: %zu frames (first %d) stamped off the frames around them (bad lines of "
           "timestamps.txt, warned above) left out of the filter\n",
           run.misstamped_frames.size(), run.misstamped_frames.front());
     }

@@ -90,29 +90,33 @@ TEST(LocalizationSession, FramesBetweenAResetAndTheRestartKeepTheirPlace) {
   }
 }
 
-// One bad line of timestamps.txt (the frame stamped 6.4 s back): the frame is held, and the run
-// scores as without it, filtered and smoothed. One inside a reset's gap (before the restart) kept
-// the frames after it in their places too (it shifted them one frame early).
+// One bad line of timestamps.txt (the frame stamped 6.4 s back), or two in a row: the frames are
+// held, and the run scores as without them, filtered and smoothed. One inside a reset's gap
+// (before the restart) kept the frames after it in their places too (it shifted them one frame
+// early).
 TEST(LocalizationSession, AMisstampedFrameIsHeldAndTheDriveGoesOn) {
   const std::string drive = "data/kitti_raw/2011_09_26/2011_09_26_drive_0009_sync/oxts";
   ISM_REQUIRE_SHARED(drive);
   std::vector<kitti::OxtsFrame> clean = kitti::readOxtsFolder(test::sharedPath(drive));
   ASSERT_GT(clean.size(), 300u);
   clean.resize(300);
-  std::vector<kitti::OxtsFrame> glitched = clean;
-  glitched[150].stamp_ns -= 6'400'000'000;
-  for (const bool smooth : {false, true}) {
-    SCOPED_TRACE(smooth ? "smoothed" : "filtered");
-    OxtsRunOptions options;
-    options.gps = protocolGps();
-    options.smooth = smooth;
-    const OxtsRunResult reference = runLocalizerOnOxts(clean, options);
-    const OxtsRunResult run = runLocalizerOnOxts(glitched, options);
-    EXPECT_EQ(run.misstamped_frames, std::vector<int>{150});
-    EXPECT_EQ(run.statistics.resets, 0);
-    ASSERT_EQ(run.states.size(), clean.size());
-    EXPECT_LT((run.states[150].position_map - run.states[149].position_map).norm(), 1e-6);
-    EXPECT_LT(compareWithTruth(run).ate_m, compareWithTruth(reference).ate_m + 0.1);
+  for (const std::vector<int>& bad : {std::vector<int>{150}, std::vector<int>{150, 151}}) {
+    std::vector<kitti::OxtsFrame> glitched = clean;
+    for (int k : bad) glitched[k].stamp_ns -= 6'400'000'000;
+    for (const bool smooth : {false, true}) {
+      SCOPED_TRACE(std::to_string(bad.size()) + " bad lines, " +
+                   (smooth ? "smoothed" : "filtered"));
+      OxtsRunOptions options;
+      options.gps = protocolGps();
+      options.smooth = smooth;
+      const OxtsRunResult reference = runLocalizerOnOxts(clean, options);
+      const OxtsRunResult run = runLocalizerOnOxts(glitched, options);
+      EXPECT_EQ(run.misstamped_frames, bad);
+      EXPECT_EQ(run.statistics.resets, 0);
+      ASSERT_EQ(run.states.size(), clean.size());
+      EXPECT_LT((run.states[bad.back()].position_map - run.states[149].position_map).norm(), 1e-6);
+      EXPECT_LT(compareWithTruth(run).ate_m, compareWithTruth(reference).ate_m + 0.1);
+    }
   }
   // Inside the gap of a reset (15 s of silence after frame 205; the restart waits for frame
   // 210's fix).

@@ -333,6 +333,34 @@ TEST(KittiTimestamps, OnlyAStampOffBothItsNeighboursIsMisstamped) {
   EXPECT_TRUE(isolatedMisstampedFrames({}).empty());
 }
 
+// Two and three bad lines in a row (the same or different offsets) are listed as well; a run
+// longer than max_run, or one that never comes back, is a jump.
+TEST(KittiTimestamps, AShortRunOfMisstampedLinesIsListedAsWhole) {
+  const std::int64_t s = 1000000000LL;
+  const auto tenths = [s](std::int64_t k) { return k * s / 10; };
+  std::vector<std::int64_t> stamps;
+  for (int k = 0; k < 20; ++k) stamps.push_back(tenths(k));
+  stamps[3] -= 64 * s / 10;  // two lines 6.4 s back
+  stamps[4] -= 64 * s / 10;
+  stamps[8] += 3600 * s;  // three lines: an hour ahead, 5 s back, half an hour ahead
+  stamps[9] -= 5 * s;
+  stamps[10] += 1800 * s;
+  std::vector<bool> expected(20, false);
+  for (int k : {3, 4, 8, 9, 10}) expected[k] = true;
+  EXPECT_EQ(isolatedMisstampedFrames(stamps), expected);
+  // With runs of at most two, the three are not listed.
+  for (int k : {8, 9, 10}) expected[k] = false;
+  EXPECT_EQ(isolatedMisstampedFrames(stamps, 1.0, 2), expected);
+  // A jump that lasts (every later stamp 6.4 s back) is the recording's own.
+  std::vector<std::int64_t> jump;
+  for (int k = 0; k < 20; ++k) jump.push_back(tenths(k) - (k >= 12 ? 64 * s / 10 : 0));
+  EXPECT_EQ(isolatedMisstampedFrames(jump), std::vector<bool>(20, false));
+  // A gap of 2 s is real too: the frames after it are in order among themselves.
+  std::vector<std::int64_t> gap;
+  for (int k = 0; k < 20; ++k) gap.push_back(tenths(k) + (k >= 5 ? 2 * s : 0));
+  EXPECT_EQ(isolatedMisstampedFrames(gap), std::vector<bool>(20, false));
+}
+
 TEST(KittiMercator, ToGeodeticInvertsToMap) {
   const MercatorProjection projection(49.015, 8.434, 116.4);
   for (const Eigen::Vector3d& p : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(-1234.5, 876.25, -3.5),

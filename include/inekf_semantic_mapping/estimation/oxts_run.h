@@ -61,7 +61,8 @@ struct OxtsRunResult {
   // the frame's IMU sample (the first of a jump forward). They repeat the last estimate and are
   // left out of compareWithTruth.
   std::vector<int> held_frames;
-  // Frames whose stamp alone was off (kitti::isolatedMisstampedFrames): not fed to the filter,
+  // Frames whose stamps alone were off (kitti::isolatedMisstampedFrames: one bad line of
+  // timestamps.txt or a few in a row): not fed to the filter,
   // held (above) once it runs.
   std::vector<int> misstamped_frames;
   bool smoothed = false;    // the states are the smoother's

@@ -34,12 +34,13 @@ std::vector<std::string> timestampWarnings(const std::vector<std::int64_t>& stam
                                            std::size_t max_messages = 5,
                                            const std::vector<std::size_t>& lines = {});
 
-// The frames whose stamp alone is off (one bad line of timestamps.txt): more than max_gap_s
-// away from the frames on either side while those two are in order within max_gap_s of each
-// other. A recording's real jumps (a gap, a second recording) move every stamp after them and are
-// not listed; the first and last frames, with one neighbour, cannot be judged.
+// The frames whose stamps alone are off (bad lines of timestamps.txt, up to max_run in a row):
+// each more than max_gap_s away from the frames on either side of the run while those two are in
+// order within max_gap_s of each other. A recording's real jumps (a gap, a second recording) move
+// every stamp after them and are not listed; the first and last frames, with one neighbour,
+// cannot be judged.
 std::vector<bool> isolatedMisstampedFrames(const std::vector<std::int64_t>& stamps_ns,
-                                           double max_gap_s = 1.0);
+                                           double max_gap_s = 1.0, std::size_t max_run = 5);
 
 // Seconds between two nanosecond stamps, without the precision loss of converting each first.
 inline double secondsBetween(std::int64_t from_ns, std::int64_t to_ns) {
