@@ -502,10 +502,11 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   if (horizontal_only) {
     // The filter's own height (now: the fix may wait for its IMU sample) as the measured one,
     // with a variance that makes its weight nil (a gain of ~1e-6 on an innovation near zero): the
-    // update is the horizontal one. Its d^2 has about 2 degrees of freedom: the 3-dof gate is a
-    // little looser for it, and the diagnostics' NIS / 3 reads ~0.67 on 2D fixes.
+    // update is the horizontal one. Its d^2 has 2 degrees of freedom (horizontal_only: gated and
+    // normalised as such).
     fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, 0.0);
     fix.position_map.z() = state().position_map.z();
+    fix.horizontal_only = true;
     ++statistics_.fixes_horizontal_only;
   } else {
     fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, event.alt_m);
@@ -571,6 +572,7 @@ void LocalizationSession::takeOrigin(const GeodeticFixEvent& event) {
 void LocalizationSession::correct(const PositionFix& fix, Update* update) {
   update->correction = localizer_.addPositionFix(fix);
   last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
+  last_innovation_dof_ = fix.horizontal_only ? 2 : 3;
   std::ostringstream note;
   if (!update->correction->accepted) {
     note << std::fixed << std::setprecision(3) << "GPS fix at " << fix.stamp_s
@@ -619,6 +621,7 @@ void LocalizationSession::tryStart(double now_s, Update* update) {
   }
   update->correction = localizer_.addPositionFix(start->fix);
   last_mahalanobis_squared_ = update->correction->mahalanobis_squared;
+  last_innovation_dof_ = start->fix.horizontal_only ? 2 : 3;
   std::ostringstream note;
   note << std::fixed << std::setprecision(3);
   if (!started()) {

@@ -37,6 +37,15 @@ NonholonomicModel nonholonomicModel(const LocalizerConfig& config) {
 
 }  // namespace
 
+double twoDofGateOfSameTail(double gate_3dof) {
+  if (!(gate_3dof > 0.0)) return gate_3dof;
+  if (!std::isfinite(gate_3dof)) return gate_3dof;
+  const double tail = std::erfc(std::sqrt(0.5 * gate_3dof)) +
+                      std::sqrt(2.0 * gate_3dof / M_PI) * std::exp(-0.5 * gate_3dof);
+  // Beyond ~1500 the tail underflows to 0; the quantiles there differ by a negligible 2 ln g.
+  return tail > 0.0 ? -2.0 * std::log(tail) : gate_3dof;
+}
+
 Localizer::Localizer(LocalizerConfig config)
     : config_(std::move(config)),
       nonholonomic_model_(nonholonomicModel(config_)),
@@ -405,9 +414,11 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     if (llt.info() == Eigen::Success && e.allFinite()) horizontal_nis = e.dot(llt.solve(e));
   }
   double heading_before = headingOf(filter_->state().rotation);
-  result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
-  bool gated_out =
-      !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
+  const double gate = used.horizontal_only
+                          ? twoDofGateOfSameTail(config_.gps_gate_mahalanobis_squared)
+                          : config_.gps_gate_mahalanobis_squared;
+  result = filter_->correctPosition(used, gate);
+  bool gated_out = !result.accepted && result.mahalanobis_squared > gate;
   if (gated_out) ++consecutive_rejected_fixes_;
   // The fixes keep disagreeing: the heading (and with it velocity) may be what is wrong.
   std::string reopen_why;
@@ -453,9 +464,8 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
       horizontal_nis_.clear();
       if (gated_out) {
         if (hold_yaw) decorrelateYaw();
-        result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
-        gated_out =
-            !result.accepted && result.mahalanobis_squared > config_.gps_gate_mahalanobis_squared;
+        result = filter_->correctPosition(used, gate);
+        gated_out = !result.accepted && result.mahalanobis_squared > gate;
       }
     }
   }
@@ -475,7 +485,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     inflation.block<3, 3>(6, 6).diagonal().setConstant(innovation.squaredNorm());
     filter_->initialize(state,
                         filter_->covariance() + filter_->fromWorldCovariance(state, inflation));
-    result = filter_->correctPosition(used, config_.gps_gate_mahalanobis_squared);
+    result = filter_->correctPosition(used, gate);
     if (result.accepted) ++statistics_.gps_reacquisitions;
   }
   statistics_.last_mahalanobis_squared = result.mahalanobis_squared;

@@ -55,7 +55,8 @@ void LocalizationMonitor::noteCounters(double stamp_s,
   }
   if (statistics.filter.gps_used > used_) {
     const double d2 = session.lastMahalanobisSquared();
-    accepted_.add(stamp_s, std::isfinite(d2) ? d2 / 3.0 : 0.0);
+    const double dof = session.lastInnovationDegreesOfFreedom();
+    accepted_.add(stamp_s, std::isfinite(d2) ? d2 / dof : 0.0);
     last_accepted_s_ = stamp_s;
   }
   const std::int64_t rejected = statistics.filter.gps_rejected + statistics.fixes_ignored;
@@ -161,7 +162,7 @@ void LocalizationMonitor::fill(const estimation::LocalizationSession& session, d
   status->addf("since last accepted fix (s, data time)", "%.1f", has_imu ? since_fix_s : 0.0);
   status->add("fixes accepted in window", accepted_.count());
   status->add("fixes rejected in window", rejected_.count());
-  status->addf("mean normalised innovation (NIS / 3)", "%.2f", accepted_.mean());
+  status->addf("mean normalised innovation (NIS / dof)", "%.2f", accepted_.mean());
   status->addf("position sigma horizontal (m)", "%.2f", position_sigma_m);
   status->addf("heading sigma (deg)", "%.2f", heading_sigma_deg);
   status->add("fixes used", filter.gps_used);

@@ -300,6 +300,7 @@ TEST(LocalizationSession, FixesWithoutAltitudeAreUsedHorizontallyOnceStarted) {
   EXPECT_NE(refused.note.find("starts from a 3D fix"), std::string::npos) << refused.note;
   standStill(&session, 10.1, 3.0);
   ASSERT_TRUE(session.started());
+  EXPECT_EQ(session.lastInnovationDegreesOfFreedom(), 3);
   const double height_before = session.state().position_map.z();
   const double east_before = session.state().position_map.x();
   // 2D fixes 3 m east of where the car stands.
@@ -312,6 +313,7 @@ TEST(LocalizationSession, FixesWithoutAltitudeAreUsedHorizontallyOnceStarted) {
     const LocalizationSession::Update update = session.addFix(flat);
     ASSERT_TRUE(update.correction.has_value()) << update.note;
     accepted += update.correction->accepted ? 1 : 0;
+    EXPECT_EQ(session.lastInnovationDegreesOfFreedom(), 2);
   }
   EXPECT_EQ(accepted, 5);
   EXPECT_GT(session.state().position_map.x() - east_before, 1.0);

@@ -142,6 +142,45 @@ LocalizerConfig withoutHeadingMonitor(LocalizerConfig config) {
   return config;
 }
 
+TEST(Localizer, TheTwoDofGateHasTheThreeDofGatesTailProbability) {
+  // Chi-square tables: the 3-dof and 2-dof quantiles at 95 %, 99 % and 99.9 %.
+  EXPECT_NEAR(twoDofGateOfSameTail(7.815), 5.991, 2e-3);
+  EXPECT_NEAR(twoDofGateOfSameTail(11.345), 9.210, 2e-3);
+  EXPECT_NEAR(twoDofGateOfSameTail(16.266), 13.816, 2e-3);
+  EXPECT_NEAR(twoDofGateOfSameTail(30.0), 26.987, 2e-3);
+}
+
+// A fix without altitude has a 2-dof innovation: at the same tail probability its gate is 27.0,
+// not the 3-dof 30 (the looser gate let through what a 3D fix at that d^2 would be as unlikely).
+TEST(Localizer, AFixWithoutAltitudeIsGatedWithTwoDegreesOfFreedom) {
+  const LocalizerConfig config = withoutHeadingMonitor(LocalizerConfig());
+  const auto firstFix = [&](const PositionFix& fix) {
+    Localizer localizer{config};
+    localizer.initialize(startState(0.0));
+    localizer.addImu(restingSample(0.1));
+    return localizer.addPositionFix(fix);
+  };
+  const auto horizontalFix = [](double east_m, bool flagged) {
+    PositionFix fix = fixAt(0.1, Eigen::Vector3d(east_m, 0, 0));
+    fix.covariance_map(2, 2) = 1e6;  // the session's nil weight on the height
+    fix.horizontal_only = flagged;
+    return fix;
+  };
+  const double d2_at_1m = firstFix(fixAt(0.1, Eigen::Vector3d(1, 0, 0))).mahalanobis_squared;
+  ASSERT_GT(d2_at_1m, 0.0);
+  const double east_m = std::sqrt(28.5 / d2_at_1m);  // d^2 28.5: between 27.0 and 30
+  const CorrectionResult as_3d = firstFix(fixAt(0.1, Eigen::Vector3d(east_m, 0, 0)));
+  EXPECT_TRUE(as_3d.accepted) << as_3d.reason;
+  EXPECT_NEAR(as_3d.mahalanobis_squared, 28.5, 0.01);
+  const CorrectionResult unflagged = firstFix(horizontalFix(east_m, false));
+  EXPECT_TRUE(unflagged.accepted) << unflagged.reason;
+  const CorrectionResult as_2d = firstFix(horizontalFix(east_m, true));
+  EXPECT_FALSE(as_2d.accepted);
+  EXPECT_NEAR(as_2d.mahalanobis_squared, 28.5, 0.05);
+  // Well inside both gates a 2D fix is taken.
+  EXPECT_TRUE(firstFix(horizontalFix(0.5 * east_m, true)).accepted);
+}
+
 TEST(Localizer, ReacquiresAfterConsecutiveRejectedFixes) {
   LocalizerConfig config = withoutHeadingMonitor(LocalizerConfig());
   config.max_consecutive_rejected_fixes = 3;

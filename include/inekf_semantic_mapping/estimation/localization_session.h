@@ -217,6 +217,8 @@ class LocalizationSession {
   std::string summary() const;
   // The latest innovation's squared Mahalanobis distance (0 before any).
   double lastMahalanobisSquared() const { return last_mahalanobis_squared_; }
+  // Its degrees of freedom: 3, or 2 for a fix without altitude (used horizontally).
+  int lastInnovationDegreesOfFreedom() const { return last_innovation_dof_; }
   const LocalizationSessionConfig& config() const { return config_; }
 
  private:
@@ -298,6 +300,7 @@ class LocalizationSession {
   bool gps_velocity_expected_ = true;
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
+  int last_innovation_dof_ = 3;
   Statistics statistics_;
 };
 

@@ -23,6 +23,10 @@ struct PositionFix {
   double stamp_s = 0.0;
   Eigen::Vector3d position_map = Eigen::Vector3d::Zero();        // m, map frame (IMU position)
   Eigen::Matrix3d covariance_map = Eigen::Matrix3d::Identity();  // m^2, map frame
+  // A fix without altitude (a receiver in a 2D mode): position_map.z() is the filter's own height
+  // and covariance_map gives it a nil weight, so the innovation has 2 degrees of freedom, not 3
+  // (the Localizer gates it at the same tail probability; diagnostics normalise by 2).
+  bool horizontal_only = false;
 };
 
 struct NavState {

@@ -50,7 +50,7 @@ class LocalizationMonitor {
   void noteCounters(double stamp_s, const estimation::LocalizationSession& session);
 
   LocalizationDiagnosticsOptions options_;
-  EventWindow imu_, fixes_, accepted_, rejected_;  // accepted_ values: NIS / 3
+  EventWindow imu_, fixes_, accepted_, rejected_;  // accepted_ values: NIS / dof
   double first_imu_s_ = 0.0, newest_s_ = 0.0, last_accepted_s_ = -1.0, last_imu_wall_s_ = -1.0;
   std::int64_t used_ = 0, rejected_count_ = 0, resets_ = 0;
 };
