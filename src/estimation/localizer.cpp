@@ -81,6 +81,7 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   track_fixes_.clear();
   chords_.clear();
   horizontal_nis_.clear();
+  heading_confirmed_ = false;
   recordStep(ImuStep());  // the initial state: dt 0, nothing to replay
 }
 
@@ -396,6 +397,8 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
                       yaw_sigma / kDegToRad);
         ++statistics_.heading_recoveries;
         realignHeading(track, why);
+      } else {
+        heading_confirmed_ = true;
       }
     }
   }
@@ -609,6 +612,12 @@ void Localizer::addToTrack(const PositionFix& fix) {
     Chord c;
     c.stamp_s = current.stamp_s;
     c.offset_rad = wrapRad(std::atan2(chord.y(), chord.x()) - middle_heading);
+    // A confirmed heading with the velocity backwards along the body x axis: reversing (the
+    // chord is at least heading_track_min_speed_mps on average: no stop inside it).
+    const NavState& now = filter_->state();
+    if (heading_confirmed_ && (now.rotation.transpose() * now.velocity_map).x() < 0.0) {
+      c.offset_rad = wrapRad(c.offset_rad + M_PI);
+    }
     c.variance = (start.variance + current.variance) / (length * length) + floor * floor +
                  std::pow(config_.heading_track_turn_weight * turn, 2);
     chords_.push_back(c);
@@ -727,6 +736,7 @@ void Localizer::realignHeading(const TrackHeading& track, const std::string& why
   if (!world.allFinite() || !state.rotation.allFinite() || !state.velocity_map.allFinite()) return;
   filter_->initialize(state, filter_->fromWorldCovariance(state, world));
   heading_correction_rad_ += delta;
+  heading_confirmed_ = false;
   // The rejected fixes are still counted: a heading realigned from the track does not mend an
   // error the track cannot see (altitude, speed), and zeroing the count here kept re-acquisition
   // from ever firing (each re-open made the heading unknown, the next fix realigned it).
@@ -751,6 +761,7 @@ void Localizer::reopenHeading(const Eigen::Vector3d& innovation, const std::stri
       filter_->covariance() + filter_->fromWorldCovariance(state, world);
   if (!inflated.allFinite()) return;
   filter_->initialize(state, inflated);
+  heading_confirmed_ = false;
   ++statistics_.heading_reopens;
   char text[64];
   std::snprintf(text, sizeof(text), " at t=%.2f s", state.stamp_s);

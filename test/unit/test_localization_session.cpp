@@ -1128,6 +1128,69 @@ TEST(LocalizationSession, AWrongReferenceHeadingIsNoticedAndRecovered) {
   }
 }
 
+// A car that drives forward 20 s at 8 m/s east-north-east, stops, and reverses 33 s at 5 m/s
+// (165 m; the heading monitor's 20 s window fills with chords pointing backwards). The IMU gives
+// the true yaw (1 deg). Found by review: the track's chords (a land vehicle drives forward) said
+// the heading was 180 deg off and the check turned it round.
+TEST(LocalizationSession, ACarReversingKeepsItsHeading) {
+  const double t0 = 100.0, yaw = 0.4;
+  const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
+  const Eigen::Vector3d forward(std::cos(yaw), std::sin(yaw), 0.0);
+  const Eigen::Matrix3d rotation = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).matrix();
+  const auto acceleration = [](double t) {  // along the car's x axis, over (t - 0.1, t]
+    if (t > 20.0 + 1e-9 && t <= 24.0 + 1e-9) return -2.0;        // 8 m/s to a stop
+    if (t > 24.0 + 1e-9 && t <= 27.0 + 1e-9) return -5.0 / 3.0;  // to 5 m/s backwards
+    return 0.0;
+  };
+  LocalizationSession session(originConfig());
+  std::mt19937 random(11);
+  std::normal_distribution<double> noise(0.0, 1.5);
+  double speed = 8.0, along = 0.0, worst_yaw_error_deg = 0.0;
+  std::vector<std::string> heading_notes;
+  for (int k = 0; k <= 600; ++k) {
+    const double t = 0.1 * k;
+    if (k > 0) {
+      const double a = acceleration(t);
+      along += speed * 0.1 + 0.5 * a * 0.01;
+      speed += a * 0.1;
+    }
+    ImuEvent imu;
+    imu.sample.stamp_s = t0 + t;
+    imu.sample.specific_force = Eigen::Vector3d(acceleration(t), 0.0, 9.81);
+    imu.orientation = rotation;
+    const double s = M_PI / 180.0;
+    imu.orientation_covariance = Eigen::Vector3d(0.25 * s * s, 0.25 * s * s, s * s).asDiagonal();
+    std::vector<LocalizationSession::Update> updates{session.addImu(imu)};
+    GpsVelocityEvent velocity;
+    velocity.stamp_s = t0 + t;
+    velocity.velocity = speed * forward;
+    updates.push_back(session.addGpsVelocity(velocity));
+    if (k % 10 == 0) {
+      const Eigen::Vector3d p =
+          along * forward + Eigen::Vector3d(noise(random), noise(random), 0.0);
+      GeodeticFixEvent fix;
+      fix.stamp_s = t0 + t;
+      projection.toGeodetic(p, &fix.lat_deg, &fix.lon_deg, &fix.alt_m);
+      fix.covariance_enu = Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal();
+      updates.push_back(session.addFix(fix));
+    }
+    for (const auto& update : updates) {
+      if (update.heading_event) heading_notes.push_back(update.note);
+    }
+    if (!session.started()) continue;
+    const Eigen::Matrix3d& r = session.state().rotation;
+    worst_yaw_error_deg =
+        std::max(worst_yaw_error_deg,
+                 std::abs(wrapDeg((std::atan2(r(1, 0), r(0, 0)) - yaw) * 180.0 / M_PI)));
+  }
+  ASSERT_LT(speed, -4.9);
+  const auto& f = session.statistics().filter;
+  EXPECT_EQ(f.heading_recoveries + f.heading_reopens, 0)
+      << (heading_notes.empty() ? "" : heading_notes.front());
+  EXPECT_LT(worst_yaw_error_deg, 2.0);
+  EXPECT_LT((session.state().position_map - along * forward).head<2>().norm(), 3.0);
+}
+
 // A real outlier is still rejected and touches neither the heading nor the monitor.
 TEST(LocalizationSession, AHundredMetreJumpIsRejectedAndTheHeadingKept) {
   const CurveRun run = runCurve(60.0, true, 0.0, 0.0, 30);

@@ -32,9 +32,12 @@
 //    one after next, or to a later one until the chord is heading_track_min_chord_m long (a
 //    slow car), of a car moving at heading_track_min_speed_mps or more, points along its
 //    heading at the chord's middle instant (a land vehicle drives forward; on a circular arc the
-//    chord is parallel to the tangent at its midpoint). Against the filter's "gyro heading" (its
-//    yaw minus every change its corrections made to it) each chord measures one constant offset;
-//    their robust weighted circular mean over heading_track_window_s is the track's heading
+//    chord is parallel to the tangent at its midpoint). Once the track has confirmed the filter's
+//    heading, a chord taken while the filter's own velocity points backwards (the car reversing:
+//    the filter's yaw came continuously from a confirmed one) is turned by 180 deg; before that
+//    (a start, an alignment, a re-open) the forward rule holds. Against the filter's "gyro heading"
+//    (its yaw minus every change its corrections made to it) each chord measures one constant
+//    offset; their robust weighted circular mean over heading_track_window_s is the track's heading
 //    estimate for now. It is used three ways:
 //      * alignment: while the filter's yaw sigma (about the map z axis) exceeds
 //        heading_align_above_sigma_deg (a start levelled from gravity: 180 deg) and the track's
@@ -262,6 +265,9 @@ class Localizer {
   std::deque<TrackFix> track_fixes_;     // the window's fixes (the velocity fit)
   std::deque<Chord> chords_;
   std::deque<double> horizontal_nis_;
+  // The track agreed with the filter's heading since its last (re)initialisation: its velocity
+  // pointing backwards is then a car reversing, not a heading 180 deg off.
+  bool heading_confirmed_ = false;
   std::string heading_event_;
 };
 
