@@ -38,6 +38,9 @@ if(CATKIN_ENABLE_TESTING)
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   add_rostest(test/ros/inekf_node_robustness.test
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+  # The IMU mounted turned 90 deg in base_link (tf): the forward axis comes from tf.
+  add_rostest(test/ros/inekf_node_turned_imu.test
+    DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   # /diagnostics without fixes: WARN, then ERROR (seconds).
   add_rostest(test/ros/inekf_node_diagnostics.test DEPENDENCIES inekf_node)
   add_rostest(test/ros/inekf_node_kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR}

@@ -21,16 +21,20 @@ constexpr double kDuplicateStampS = Localizer::kDuplicateStampS;
 
 double wrapRad(double angle) { return std::atan2(std::sin(angle), std::cos(angle)); }
 
-// Heading of the body x axis in the map frame.
-double headingOf(const Eigen::Matrix3d& rotation) {
-  return std::atan2(rotation(1, 0), rotation(0, 0));
+// Azimuth of a map-frame direction.
+double headingOf(const Eigen::Vector3d& direction_map) {
+  return std::atan2(direction_map.y(), direction_map.x());
 }
 
-NonholonomicModel nonholonomicModel(const LocalizerConfig& config) {
+// The configured direction of travel is relative to base_link's axes, the constraint's model in
+// the IMU's.
+NonholonomicModel nonholonomicModel(const LocalizerConfig& config,
+                                    const Eigen::Matrix3d& base_from_imu) {
   NonholonomicModel model;
   model.lateral_sigma_mps = config.nonholonomic_lateral_sigma_mps;
   model.vertical_sigma_mps = config.nonholonomic_vertical_sigma_mps;
-  model.imu_from_vehicle = vehicleFrameInImu(config.nonholonomic_vehicle_pitch_deg * kDegToRad,
+  model.imu_from_vehicle = base_from_imu.transpose() *
+                           vehicleFrameInImu(config.nonholonomic_vehicle_pitch_deg * kDegToRad,
                                              config.nonholonomic_vehicle_yaw_deg * kDegToRad);
   return model;
 }
@@ -48,9 +52,30 @@ double twoDofGateOfSameTail(double gate_3dof) {
 
 Localizer::Localizer(LocalizerConfig config)
     : config_(std::move(config)),
-      nonholonomic_model_(nonholonomicModel(config_)),
+      nonholonomic_model_(nonholonomicModel(config_, base_from_imu_)),
       filter_(makeFilter(config_.filter_type, config_.imu_noise)) {}
 
+bool Localizer::setImuMounting(const Eigen::Matrix3d& base_from_imu) {
+  const bool rotation = base_from_imu.allFinite() &&
+                        (base_from_imu.transpose() * base_from_imu - Eigen::Matrix3d::Identity())
+                                .cwiseAbs()
+                                .maxCoeff() < 1e-6 &&
+                        base_from_imu.determinant() > 0.0;
+  if (!rotation) return false;
+  if (base_from_imu.isApprox(base_from_imu_, 1e-12)) return true;
+  base_from_imu_ = base_from_imu;
+  forward_in_imu_ = base_from_imu.transpose().col(0);
+  nonholonomic_model_ = nonholonomicModel(config_, base_from_imu_);
+  // The track's headings were of the old axis.
+  track_fixes_.clear();
+  chords_.clear();
+  heading_confirmed_ = false;
+  return true;
+}
+
+double Localizer::vehicleHeading() const {
+  return headingOf(filter_->state().rotation * forward_in_imu_);
+}
 ErrorCovariance Localizer::initialWorldCovariance() const {
   Eigen::Matrix<double, 15, 1> sigma;
   const double tilt = config_.initial_rotation_sigma_deg * kDegToRad;
@@ -108,7 +133,7 @@ bool Localizer::propagate(const ImuStep& step) {
       ++statistics_.nonholonomic_suspended;
       return true;
     }
-    const double heading_before = headingOf(filter_->state().rotation);
+    const double heading_before = vehicleHeading();
     const CorrectionResult result = filter_->correctNonholonomic(
         nonholonomic_model_, config_.nonholonomic_gate_mahalanobis_squared);
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
@@ -416,7 +441,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     const Eigen::LLT<Eigen::Matrix2d> llt(s);
     if (llt.info() == Eigen::Success && e.allFinite()) horizontal_nis = e.dot(llt.solve(e));
   }
-  double heading_before = headingOf(filter_->state().rotation);
+  double heading_before = vehicleHeading();
   const double gate = used.horizontal_only
                           ? twoDofGateOfSameTail(config_.gps_gate_mahalanobis_squared)
                           : config_.gps_gate_mahalanobis_squared;
@@ -461,7 +486,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
       if (result.accepted) {
         // Undo nothing: the accepted fix stands; re-open around the corrected state.
         noteHeadingChange(heading_before);
-        heading_before = headingOf(filter_->state().rotation);
+        heading_before = vehicleHeading();
       }
       reopenHeading(gated_out ? innovation : Eigen::Vector3d::Zero(), reopen_why);
       horizontal_nis_.clear();
@@ -507,7 +532,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
 }
 
 void Localizer::noteHeadingChange(double heading_before_rad) {
-  heading_correction_rad_ += wrapRad(headingOf(filter_->state().rotation) - heading_before_rad);
+  heading_correction_rad_ += wrapRad(vehicleHeading() - heading_before_rad);
 }
 
 void Localizer::decorrelateYaw() {
@@ -559,7 +584,7 @@ void Localizer::addToTrack(const PositionFix& fix) {
   current.stamp_s = fix.stamp_s;
   current.position = fix.position_map.head<2>();
   current.variance = 0.5 * fix.covariance_map.topLeftCorner<2, 2>().trace();
-  current.gyro_heading_rad = headingOf(filter_->state().rotation) - heading_correction_rad_;
+  current.gyro_heading_rad = vehicleHeading() - heading_correction_rad_;
   if (!current.position.allFinite() || !std::isfinite(current.variance)) return;
   // A chord from an earlier fix to this one, at least two fix intervals and
   // heading_track_min_chord_m long (1.5 m fixes: a 12 m chord is worth ~10 deg, a 6 m one ~20;
@@ -615,7 +640,7 @@ void Localizer::addToTrack(const PositionFix& fix) {
     // A confirmed heading with the velocity backwards along the body x axis: reversing (the
     // chord is at least heading_track_min_speed_mps on average: no stop inside it).
     const NavState& now = filter_->state();
-    if (heading_confirmed_ && (now.rotation.transpose() * now.velocity_map).x() < 0.0) {
+    if (heading_confirmed_ && now.velocity_map.dot(now.rotation * forward_in_imu_) < 0.0) {
       c.offset_rad = wrapRad(c.offset_rad + M_PI);
     }
     c.variance = (start.variance + current.variance) / (length * length) + floor * floor +

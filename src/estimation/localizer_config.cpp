@@ -71,11 +71,15 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
   positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
   angle("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg, false);
-  // A mounting error, not another axis convention: an IMU turned further needs its data rotated
-  // (imu_link in tf), not a constraint that bends.
+  // A mounting error, not another axis convention: an IMU turned further is described by tf
+  // (base_link -> its frame), which inekf_node reads (Localizer::setImuMounting).
   const auto mounting_angle = [&](const char* key, double* out) {
     reader->read(key, out);
-    if (!(std::abs(*out) <= 30.0)) reader->fail(key, "must be in [-30, 30] deg");
+    if (!(std::abs(*out) <= 30.0)) {
+      reader->fail(key,
+                   "must be in [-30, 30] deg (a small mounting error; an IMU mounted turned is "
+                   "described by the tf base_link -> its frame, which inekf_node reads)");
+    }
   };
   mounting_angle("nonholonomic.vehicle_pitch_deg", &config.nonholonomic_vehicle_pitch_deg);
   mounting_angle("nonholonomic.vehicle_yaw_deg", &config.nonholonomic_vehicle_yaw_deg);

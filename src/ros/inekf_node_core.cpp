@@ -9,6 +9,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <functional>
@@ -144,8 +145,33 @@ class InekfNodeCore::Impl {
     }
   }
 
+  // The IMU's mounting from tf, once: the land-vehicle constraint and the heading monitor take
+  // base_link's x axis as the car's forward one (an IMU turned 90 deg about z held the heading
+  // 90 deg off before).
+  void takeImuMounting() {
+    const std::optional<Eigen::Matrix3d> base_from_imu = output_.imuMounting();
+    if (!base_from_imu) return;  // tf has none yet: the next IMU message asks again
+    mounting_taken_ = true;
+    if (!session_.setImuMounting(*base_from_imu)) {
+      ROS_ERROR_STREAM("inekf_node: the tf " << output_.baseFrame() << " -> IMU frame is not a "
+                                             << "rotation: the IMU's x axis is taken as forward");
+      return;
+    }
+    if (!base_from_imu->isIdentity(1e-6)) {
+      const Eigen::Vector3d forward = base_from_imu->transpose().col(0);
+      char axis[96];
+      std::snprintf(axis, sizeof(axis), "(%.2f, %.2f, %.2f)", forward.x() + 0.0, forward.y() + 0.0,
+                    forward.z() + 0.0);
+      ROS_INFO_STREAM("inekf_node: the IMU is mounted turned in "
+                      << output_.baseFrame() << " (tf): the car's forward axis is " << axis
+                      << " in the IMU's axes, for the land-vehicle constraint and the heading "
+                         "monitor");
+    }
+  }
+
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
     output_.noteImuFrame(message->header.frame_id);
+    if (!mounting_taken_) takeImuMounting();
     remember(message->header.stamp, kRecentImuStamps, &recent_imu_stamps_);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(imuEvent(*message)); });
@@ -225,6 +251,7 @@ class InekfNodeCore::Impl {
   NodeDiagnostics diagnostics_;
   ros::NodeHandle private_nh_;
   bool origin_kept_ = false;
+  bool mounting_taken_ = false;
 };
 
 InekfNodeCore::InekfNodeCore(ros::NodeHandle nh, ros::NodeHandle private_nh)

@@ -65,6 +65,16 @@ void OdometryOutput::clearPath() {
   last_path_publish_ = ros::Time();
 }
 
+std::optional<Eigen::Matrix3d> OdometryOutput::imuMounting() {
+  if (imu_frame_.empty() || imu_frame_ == base_frame_) return Eigen::Matrix3d::Identity();
+  try {
+    return toIsometry(tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0)).transform)
+        .rotation();
+  } catch (const tf2::TransformException&) {
+    return std::nullopt;  // baseFromImu says so once
+  }
+}
+
 std::optional<Eigen::Isometry3d> OdometryOutput::baseFromImu() {
   if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
   try {

@@ -14,8 +14,13 @@ With ~source:=kitti_player the test publishes nothing: kitti_player (started pau
 .test) plays the drive, the test resumes it through ~pause and compares /inekf/odometry with
 /kitti/oxts/ground_truth at the same stamps.
 
+With ~imu_mount_yaw_deg the IMU is mounted turned by that angle about base_link's z axis (frame
+imu_turned; the .test publishes the tf): its rates, accelerations, orientation and body-frame
+velocity are those of the turned axes.
+
 Parameters (private): source (self | kitti_player), drive, first_frame, frames, rate, gps_every,
-gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames.
+gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames,
+imu_mount_yaw_deg.
 """
 
 import math
@@ -106,6 +111,13 @@ class InekfNodeTest(unittest.TestCase):
         rospy.Subscriber("/kitti/oxts/ground_truth", Odometry, cls.on_ground_truth, queue_size=1000)
         cls.tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(1e6))
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
+        # base_link -> the IMU frame (the OXTS body is base_link).
+        cls.mount_yaw = math.radians(rospy.get_param("~imu_mount_yaw_deg", 0.0))
+        cls.imu_frame = "imu_turned" if cls.mount_yaw != 0.0 else "imu_link"
+        cls.base_from_imu = rotation_rpy(0.0, 0.0, cls.mount_yaw)
+
+    def in_imu_axes(self, vector):
+        return self.base_from_imu.T.dot(np.array(vector))
 
     def setUp(self):
         if self._testMethodName.startswith("test_0_"):
@@ -135,11 +147,17 @@ class InekfNodeTest(unittest.TestCase):
     def imu_message(self, record, stamp):
         message = Imu()
         message.header.stamp = stamp
-        message.header.frame_id = "imu_link"
-        message.angular_velocity.x, message.angular_velocity.y, message.angular_velocity.z = record[17:20]
+        message.header.frame_id = self.imu_frame
+        (message.angular_velocity.x, message.angular_velocity.y,
+         message.angular_velocity.z) = self.in_imu_axes(record[17:20])
         (message.linear_acceleration.x, message.linear_acceleration.y,
-         message.linear_acceleration.z) = record[11:14]
-        q = quaternion_rpy(*record[3:6])
+         message.linear_acceleration.z) = self.in_imu_axes(record[11:14])
+        roll, pitch, yaw = record[3:6]
+        if self.mount_yaw != 0.0:
+            r = rotation_rpy(roll, pitch, yaw).dot(self.base_from_imu)
+            roll, pitch, yaw = (math.atan2(r[2, 1], r[2, 2]), math.asin(-r[2, 0]),
+                                math.atan2(r[1, 0], r[0, 0]))
+        q = quaternion_rpy(roll, pitch, yaw)
         message.orientation.x, message.orientation.y, message.orientation.z, message.orientation.w = q
         message.orientation_covariance = [1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4]
         return message
@@ -162,8 +180,9 @@ class InekfNodeTest(unittest.TestCase):
     def velocity_message(self, record, stamp):
         message = TwistStamped()
         message.header.stamp = stamp
-        message.header.frame_id = "imu_link"  # kitti2bag: body-frame vf, vl, vu
-        message.twist.linear.x, message.twist.linear.y, message.twist.linear.z = record[8:11]
+        message.header.frame_id = self.imu_frame  # kitti2bag: body-frame vf, vl, vu
+        (message.twist.linear.x, message.twist.linear.y,
+         message.twist.linear.z) = self.in_imu_axes(record[8:11])
         return message
 
     def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False,

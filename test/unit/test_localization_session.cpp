@@ -1001,15 +1001,31 @@ struct CurveRun {
   bool finite = true;
 };
 
+// The IMU's mounting on the car: turned by yaw_deg about the car's z axis, and whether the
+// session is told (setImuMounting).
+struct ImuMount {
+  double yaw_deg = 0.0;
+  bool told = true;
+  Eigen::Matrix3d baseFromImu() const {
+    return Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  }
+};
+
 // Runs `seconds` of the drive; with_orientation: the IMU reports the truth's yaw plus
 // yaw_error_deg with a stated (1 deg)^2 yaw covariance (and the GPS velocity is given).
-// From outlier_at_s on, `outliers` fixes in a row are outlier_m east of the truth.
+// From outlier_at_s on, `outliers` fixes in a row are outlier_m east of the truth. The yaw
+// errors are of the car (base_link).
 CurveRun runCurve(double seconds, bool with_orientation, double yaw_error_deg, double settle_s,
-                  int outlier_at_s = -1, int outliers = 1, double outlier_m = 100.0) {
+                  int outlier_at_s = -1, int outliers = 1, double outlier_m = 100.0,
+                  const ImuMount& mount = ImuMount()) {
   const CurveDrive drive;
   const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
   LocalizationSession session(originConfig());
   session.setGpsVelocityExpected(with_orientation);
+  const Eigen::Matrix3d base_from_imu = mount.baseFromImu();
+  if (mount.told) {
+    EXPECT_TRUE(session.setImuMounting(base_from_imu));
+  }
   std::mt19937 random(7);
   std::normal_distribution<double> noise(0.0, 1.5);
   CurveRun run;
@@ -1018,12 +1034,15 @@ CurveRun runCurve(double seconds, bool with_orientation, double yaw_error_deg, d
     const double t = drive.t0 + 0.1 * k;
     ImuEvent imu;
     imu.sample.stamp_s = t;
-    imu.sample.angular_velocity = Eigen::Vector3d(0.0, 0.0, drive.yaw_rate);
-    imu.sample.specific_force = Eigen::Vector3d(0.0, drive.yaw_rate * drive.speed, 9.81);
+    imu.sample.angular_velocity =
+        base_from_imu.transpose() * Eigen::Vector3d(0.0, 0.0, drive.yaw_rate);
+    imu.sample.specific_force =
+        base_from_imu.transpose() * Eigen::Vector3d(0.0, drive.yaw_rate * drive.speed, 9.81);
     if (with_orientation) {
       imu.orientation =
           Eigen::AngleAxisd(drive.yaw(t) + yaw_error_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ())
-              .toRotationMatrix();
+              .toRotationMatrix() *
+          base_from_imu;
       const double s = M_PI / 180.0;
       imu.orientation_covariance = Eigen::Vector3d(0.25 * s * s, 0.25 * s * s, s * s).asDiagonal();
     }
@@ -1051,7 +1070,7 @@ CurveRun runCurve(double seconds, bool with_orientation, double yaw_error_deg, d
     if (!session.started()) continue;
     run.finite = run.finite && session.state().rotation.allFinite() &&
                  session.state().position_map.allFinite() && session.poseCovariance().allFinite();
-    const Eigen::Matrix3d& r = session.state().rotation;
+    const Eigen::Matrix3d r = session.state().rotation * base_from_imu.transpose();
     const double yaw_error = wrapDeg((std::atan2(r(1, 0), r(0, 0)) - drive.yaw(t)) * 180.0 / M_PI);
     if (t - drive.t0 >= settle_s) {
       run.worst_yaw_error_after_deg = std::max(run.worst_yaw_error_after_deg, std::abs(yaw_error));
@@ -1107,6 +1126,29 @@ TEST(LocalizationSession, WithoutAnOrientationTheHeadingIsAlignedFromTheGpsTrack
       << run.heading_notes[0];
   EXPECT_LT(run.worst_yaw_error_after_deg, 2.0);
   EXPECT_EQ(run.statistics.filter.gps_rejected, 0);
+}
+
+// Found by review: an IMU mounted turned (90 deg: its x axis the car's left; 180: backwards), tf
+// saying so. The heading monitor and the land-vehicle constraint took the IMU's x axis for the
+// car's and held the heading that far off. Told the mounting, the levelled start aligns right.
+TEST(LocalizationSession, AnImuMountedTurnedIsAlignedToTheCarsHeading) {
+  for (const double mount_yaw_deg : {90.0, 180.0, -120.0}) {
+    SCOPED_TRACE(mount_yaw_deg);
+    ImuMount mount;
+    mount.yaw_deg = mount_yaw_deg;
+    const CurveRun run = runCurve(60.0, false, 0.0, 30.0, -1, 1, 100.0, mount);
+    EXPECT_TRUE(run.finite);
+    EXPECT_EQ(run.statistics.filter.heading_recoveries, 0);
+    EXPECT_LT(run.worst_yaw_error_after_deg, 2.0);
+    EXPECT_LT(run.worst_horizontal_error_after_m, 3.0);
+    EXPECT_GT(run.statistics.filter.nonholonomic_used, 100);
+    mount.told = false;  // as before: the IMU's x axis taken as the car's
+    const CurveRun untold = runCurve(60.0, false, 0.0, 30.0, -1, 1, 100.0, mount);
+    EXPECT_GT(untold.worst_yaw_error_after_deg, 45.0);
+  }
+  LocalizationSession session(originConfig());
+  EXPECT_FALSE(session.setImuMounting(2.0 * Eigen::Matrix3d::Identity()));
+  EXPECT_FALSE(session.setImuMounting(-Eigen::Matrix3d::Identity()));  // a reflection
 }
 
 // A reference heading 60 / 120 / 180 deg off claiming 1 deg: the fixes disagree, the monitor

@@ -188,6 +188,10 @@ class LocalizationSession {
   Update addGpsVelocity(const GpsVelocityEvent& event);
   // Whether a GPS velocity source exists (default true): without one the start does not wait.
   void setGpsVelocityExpected(bool expected) { gps_velocity_expected_ = expected; }
+  // The IMU's axes in base_link's (Localizer::setImuMounting); false: not a rotation, not taken.
+  bool setImuMounting(const Eigen::Matrix3d& base_from_imu) {
+    return localizer_.setImuMounting(base_from_imu);
+  }
 
   bool started() const { return localizer_.initialized(); }
   const NavState& state() const { return localizer_.state(); }

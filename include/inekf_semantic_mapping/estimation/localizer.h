@@ -31,14 +31,14 @@
 //  - The heading monitor. Every fix also goes into a GPS track: the chord from a fix to the
 //    one after next, or to a later one until the chord is heading_track_min_chord_m long (a
 //    slow car), of a car moving at heading_track_min_speed_mps or more, points along its
-//    heading at the chord's middle instant (a land vehicle drives forward; on a circular arc the
-//    chord is parallel to the tangent at its midpoint). Once the track has confirmed the filter's
-//    heading, a chord taken while the filter's own velocity points backwards (the car reversing:
-//    the filter's yaw came continuously from a confirmed one) is turned by 180 deg; before that
-//    (a start, an alignment, a re-open) the forward rule holds. Against the filter's "gyro heading"
-//    (its yaw minus every change its corrections made to it) each chord measures one constant
-//    offset; their robust weighted circular mean over heading_track_window_s is the track's heading
-//    estimate for now. It is used three ways:
+//    heading (base_link's x axis: setImuMounting) at the chord's middle instant (a land vehicle
+//    drives forward; on a circular arc the chord is parallel to the tangent at its midpoint). Once
+//    the track has confirmed the filter's heading, a chord taken while the filter's own velocity
+//    points backwards (the car reversing: the filter's yaw came continuously from a confirmed one)
+//    is turned by 180 deg; before that (a start, an alignment, a re-open) the forward rule holds.
+//    Against the filter's "gyro heading" (its yaw minus every change its corrections made to it)
+//    each chord measures one constant offset; their robust weighted circular mean over
+//    heading_track_window_s is the track's heading estimate for now. It is used three ways:
 //      * alignment: while the filter's yaw sigma (about the map z axis) exceeds
 //        heading_align_above_sigma_deg (a start levelled from gravity: 180 deg) and the track's
 //        sigma is below heading_align_max_sigma_deg, the state is re-initialised from the track
@@ -158,6 +158,14 @@ class Localizer {
   ImuStatus addImu(const ImuSample& sample);
   CorrectionResult addPositionFix(const PositionFix& fix);
 
+  // The IMU's mounting: its axes in base_link's (the rotation of tf base_link -> the IMU's frame;
+  // identity by default: the IMU's x axis points forward). The land-vehicle constraint and the
+  // heading monitor take the car's forward axis from it, and the configured
+  // nonholonomic_vehicle_pitch/yaw_deg are then relative to base_link. Kept over reset().
+  // False (nothing changed) for a matrix that is not a rotation.
+  bool setImuMounting(const Eigen::Matrix3d& base_from_imu);
+  const Eigen::Matrix3d& imuMounting() const { return base_from_imu_; }
+
   // Forgets the state (e.g. the bag looped); statistics are kept.
   void reset();
 
@@ -237,9 +245,13 @@ class Localizer {
   void decorrelateYaw();
   // Accumulates the change a correction made to the filter's yaw since `heading_before_rad`.
   void noteHeadingChange(double heading_before_rad);
+  // The azimuth of the car's forward axis (base_link's x) in the map frame.
+  double vehicleHeading() const;
 
   LocalizerConfig config_;
-  NonholonomicModel nonholonomic_model_;  // from config_, built once
+  Eigen::Matrix3d base_from_imu_ = Eigen::Matrix3d::Identity();  // setImuMounting
+  Eigen::Vector3d forward_in_imu_ = Eigen::Vector3d::UnitX();    // base_link's x axis
+  NonholonomicModel nonholonomic_model_;                         // from config_ and the mounting
   std::unique_ptr<NavigationFilter> filter_;
   bool initialized_ = false;
   std::optional<ImuSample> last_imu_;  // latest sample, also before initialization

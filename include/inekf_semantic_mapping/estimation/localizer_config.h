@@ -59,13 +59,15 @@ struct LocalizerConfig {
 
   // Land-vehicle constraint after every IMU step (NavigationFilter::correctNonholonomic): the
   // body velocity has no lateral / vertical component, up to these sigmas. Only for an IMU fixed
-  // to a wheeled vehicle, x forward (this package's use: a car); false for anything else.
+  // to a wheeled vehicle (this package's use: a car), its forward axis base_link's x
+  // (Localizer::setImuMounting: inekf_node reads it from tf); false for anything else.
   bool nonholonomic = true;
   double nonholonomic_lateral_sigma_mps = 0.5;
   double nonholonomic_vertical_sigma_mps = 1.0;
-  // The direction of travel in the IMU frame (NonholonomicModel::imu_from_vehicle): degrees
-  // above the IMU's x-y plane and from its x axis towards +y. 0, 0: the IMU's x axis is the
-  // car's. config/inekf.yaml holds KITTI's; inekf_offline --smooth reports a drive's own.
+  // The direction of travel (NonholonomicModel::imu_from_vehicle): degrees above base_link's
+  // x-y plane and from its x axis towards +y (the IMU's axes when it is mounted as base_link).
+  // 0, 0: base_link's x axis is the car's. config/inekf.yaml holds KITTI's; inekf_offline --smooth
+  // reports a drive's own.
   double nonholonomic_vehicle_pitch_deg = 0.0;
   double nonholonomic_vehicle_yaw_deg = 0.0;
   double nonholonomic_gate_mahalanobis_squared = 13.8;  // 2 dof: chi2 p = 1e-3

@@ -55,6 +55,10 @@ class OdometryOutput {
   // Empties the path and publishes the empty path (the filter was reset).
   void clearPath();
 
+  // The rotation of the IMU's axes in base_frame's: identity when the IMU is the base (or its
+  // messages name no frame), from tf otherwise; nullopt while tf has no such transform.
+  std::optional<Eigen::Matrix3d> imuMounting();
+
  private:
   // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
   // pose) when the IMU is the base or tf has no such transform (warned once). Looked up for
