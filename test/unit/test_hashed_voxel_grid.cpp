@@ -4,6 +4,7 @@
 // The real HDL-64 scans: test/data/test_hashed_voxel_grid_data.cpp.
 #include <gtest/gtest.h>
 #include <octomap/AbstractOcTree.h>
+#include <octomap/octomap_utils.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -17,6 +18,7 @@
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
+#include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "test_data.h"
 #include "voxel_agreement.h"
 
@@ -315,6 +317,39 @@ TEST(HashedVoxelGridSession, ConfigKeys) {
                std::exception);
 }
 
+TEST(HashedVoxelGrid, GridLogOddsStayWithinTheClampingBounds) {
+  HashedVoxelGridOptions options = gridOptions(0.2, 0.0, 0);
+  HashedVoxelGrid grid(options);
+  const ClassSet classes = ClassSet::cityscapes();
+  const LabeledScan scan = syntheticScan(1, {0, 0, 1.7f});
+  for (int i = 0; i < 10; ++i) grid.insertLabeledScan(scan, 30.0, classes);
+  const float lo = octomap::logodds(options.occupancy.clamping_min);
+  const float hi = octomap::logodds(options.occupancy.clamping_max);
+  std::size_t below = 0, above = 0;
+  grid.forEachVoxel([&](std::uint16_t, std::uint16_t, std::uint16_t, float l,
+                        const ClassSlotIndices&, const ClassSlotCounts&) {
+    below += l < lo - 1e-6f;
+    above += l > hi + 1e-6f;
+  });
+  EXPECT_EQ(below, 0u);
+  EXPECT_EQ(above, 0u);
+}
+
+TEST(HashedVoxelGrid, GridClassEvidenceGoesToOccupiedVoxelsOnly) {
+  HashedVoxelGrid grid(gridOptions(0.2, 0.0, 0));
+  const ClassSet classes = ClassSet::cityscapes();
+  LabeledScan hit;
+  hit.points_map.resize(3, 1);
+  hit.points_map.col(0) << 10.1f, 0.1f, 0.1f;
+  hit.sensor_origin_map = Eigen::Vector3f(0.1f, 0.1f, 0.1f);
+  grid.insertLabeledScan(hit, 0.0, classes);
+  LabeledScan labels;
+  labels.points_map.resize(3, 2);
+  labels.points_map.col(0) << 5.1f, 0.1f, 0.1f;   // on the ray: free
+  labels.points_map.col(1) << 10.1f, 0.1f, 0.1f;  // the hit: occupied
+  labels.label_ids = {cityscapes::kCar, cityscapes::kCar};
+  EXPECT_EQ(grid.addClassEvidence(labels, classes), 1u);
+}
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

@@ -449,6 +449,22 @@ TEST(Filters, PoseNeesIsWithinTheChiSquareBand) {
   }
 }
 
+TEST(Filters, ProcessNoiseOfAShortStepAtRestIsDensitySquaredTimesDt) {
+  const ImuNoise noise;
+  const double dt = 1e-3;
+  const Matrix15d q =
+      leftProcessNoise(Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), noise, 1.0, 1.0, dt);
+  const double gyro = noise.gyro_noise_density * noise.gyro_noise_density * dt;
+  const double accel = noise.accel_noise_density * noise.accel_noise_density * dt;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(q(i, i), gyro, 1e-3 * gyro) << i;
+    EXPECT_NEAR(q(3 + i, 3 + i), accel, 1e-3 * accel) << i;
+  }
+  const Matrix15d q2 =
+      leftProcessNoise(Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), noise, 2.0, 3.0, dt);
+  EXPECT_NEAR(q2(0, 0), 4.0 * gyro, 4e-3 * gyro);
+  EXPECT_NEAR(q2(3, 3), 9.0 * accel, 9e-3 * accel);
+}
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

@@ -791,6 +791,41 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
                    LocalizerConfig().imu_noise.accel_noise_density);
 }
 
+// The hold keeps the yaw's variance (it only drops its cross-covariances): after 10 s of fixes
+// the heading is still unknown.
+TEST(Localizer, HoldingAnUnknownYawKeepsItsVariance) {
+  LocalizerConfig config;
+  config.init_orientation_from_reference = false;
+  config.heading_align_max_sigma_deg = 1e-9;
+  config.heading_reopen_after_rejected_fixes = 0;
+  config.heading_nis_window_fixes = 0;
+  config.heading_hold_unknown_yaw = true;
+  Localizer localizer(config);
+  for (int k = 0; k <= 1000; ++k) {
+    const double t = 0.01 * k;
+    ImuSample sample = restingSample(t);
+    if (k > 0) sample.specific_force.x() = 1.0;
+    localizer.addImu(sample);
+    if (k % 100 == 0) {
+      const Eigen::Vector3d direction(std::cos(M_PI / 4), std::sin(M_PI / 4), 0.0);
+      localizer.addPositionFix(fixAt(t, 0.5 * t * t * direction, 1.5));
+    }
+  }
+  EXPECT_GT(localizer.yawSigma(), 90.0 * M_PI / 180.0);
+}
+
+// Only the NIS window can re-open a wrong heading here (track alignment and the rejected-in-a-row
+// trigger off, the gate wide open): it must.
+TEST(Localizer, TheNisWindowReopensAWrongHeading) {
+  LocalizerConfig config;
+  config.init_orientation_from_reference = false;
+  config.unknown_yaw_sigma_deg = config.initial_yaw_sigma_deg;  // yaw 0 claimed to 1 deg
+  config.heading_align_max_sigma_deg = 1e-9;
+  config.heading_reopen_after_rejected_fixes = 0;
+  config.gps_gate_mahalanobis_squared = 50.0;  // NIS clipped below 10 x the window's 6
+  const LazyStartOutcome outcome = lazyStartWhileDriving(config, false);
+  EXPECT_GE(outcome.statistics.heading_reopens, 1);
+}
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

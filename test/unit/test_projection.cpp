@@ -250,6 +250,23 @@ TEST(RasterizePointLabels, NearestLabelledPointWinsAndReadsBack) {
   EXPECT_THROW(rasterizePointLabels(projected, labels, 0, 3, 99, 0, &image), std::invalid_argument);
 }
 
+TEST(RejectOccludedPoints, OcclusionWindowReachesRadiusCellsToBothSides) {
+  const OcclusionOptions options;
+  for (int side : {-1, 1}) {
+    ProjectedPoints p;
+    p.u.resize(2);
+    p.v.resize(2);
+    p.depth.resize(2);
+    p.valid = {1, 1};
+    p.u << 200.f, 200.f + side * options.window_radius_x * options.cell_width_px;
+    p.v << 100.f, 100.f;
+    p.depth << 5.f, 20.f;
+    std::vector<std::uint32_t> labels{7, 7};
+    rejectOccludedPoints(p, 1220, 370, options, 0, &labels);
+    EXPECT_EQ(labels[0], 7u) << side;
+    EXPECT_EQ(labels[1], 0u) << side;
+  }
+}
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

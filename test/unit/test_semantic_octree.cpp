@@ -104,6 +104,19 @@ TEST(SemanticOcTreeNode, SlotsKeepTheMostObservedClassesAndSaturate) {
   EXPECT_EQ(saturated.mostLikelyClass(), 1);
   EXPECT_LE(saturated.totalCount(), 2u * SemanticOcTreeNode::kMaxCount);
   EXPECT_NEAR(static_cast<double>(saturated.slotCount(0)) / saturated.slotCount(1), 4.0, 0.01);
+
+  // A class seen once keeps a count through the halving (rounded up): a slot with a class and a
+  // count of 0 would be the first evicted though it was observed.
+  SemanticOcTreeNode rare;
+  rare.addClassEvidence(5);
+  rare.addClassEvidence(1, 60000);
+  rare.addClassEvidence(1, 20000);
+  int rare_slot = -1;
+  for (int s = 0; s < SemanticOcTreeNode::kSlots; ++s) {
+    if (rare.slotClass(s) == 5) rare_slot = s;
+  }
+  ASSERT_GE(rare_slot, 0);
+  EXPECT_EQ(rare.slotCount(rare_slot), 1u);
 }
 
 TEST(SemanticOcTree, FreeSpaceCarvingAndMaxRange) {
@@ -716,6 +729,59 @@ TEST(SemanticOcTreeFusion, NoisyLabelsFuseToHighVoxelMiou) {
   EXPECT_LE(ground_truth_voxels_not_occupied, truth_votes.size() / 5);
 }
 
+LabeledScan pointsScan(const std::vector<Eigen::Vector3f>& points, const Eigen::Vector3f& origin,
+                       std::uint32_t label) {
+  LabeledScan scan;
+  scan.points_map.resize(3, static_cast<Eigen::Index>(points.size()));
+  for (std::size_t i = 0; i < points.size(); ++i) scan.points_map.col(i) = points[i];
+  scan.label_ids.assign(points.size(), label);
+  scan.sensor_origin_map = origin;
+  return scan;
+}
+
+// A new obstacle inside free space already clamped (and pruned) must still be hit.
+TEST(SemanticOcTree, AHitInAClampedFreeBlockIsApplied) {
+  SemanticOcTree tree(0.2);
+  std::vector<Eigen::Vector3f> wall;
+  for (float y = -1.f; y <= 1.f; y += 0.025f)
+    for (float z = -1.f; z <= 1.f; z += 0.025f) wall.emplace_back(5.05f, y, z);
+  const Eigen::Vector3f origin(0.01f, 0.01f, 0.01f);
+  for (int i = 0; i < 10; ++i) tree.insertLabeledScan(pointsScan(wall, origin, cs::kBuilding), 0.0);
+  const octomap::point3d target(2.5f, 0.1f, 0.1f);
+  const SemanticOcTreeNode* before = tree.search(target);
+  ASSERT_NE(before, nullptr);
+  ASSERT_LE(before->getLogOdds(), tree.getClampingThresMinLog() + 1e-6f);
+  tree.insertLabeledScan(pointsScan({Eigen::Vector3f(2.5f, 0.1f, 0.1f)}, origin, cs::kCar), 0.0);
+  const SemanticOcTreeNode* after = tree.search(target);
+  ASSERT_NE(after, nullptr);
+  EXPECT_GT(after->getLogOdds(), tree.getClampingThresMinLog() + 0.5f);
+  EXPECT_EQ(after->totalCount(), 1u);
+}
+
+// addClassEvidence(scan) labels occupied voxels only.
+TEST(SemanticOcTree, ClassEvidenceGoesToOccupiedVoxelsOnly) {
+  SemanticOcTree tree(0.2);
+  tree.updateNode(octomap::point3d(1.1f, 1.1f, 1.1f), false);
+  tree.updateNode(octomap::point3d(3.1f, 1.1f, 1.1f), true);
+  const LabeledScan scan = pointsScan(
+      {Eigen::Vector3f(1.1f, 1.1f, 1.1f), Eigen::Vector3f(3.1f, 1.1f, 1.1f)}, {0, 0, 0}, cs::kCar);
+  EXPECT_EQ(tree.addClassEvidence(scan), 1u);
+  EXPECT_EQ(tree.search(1.1, 1.1, 1.1)->totalCount(), 0u);
+  EXPECT_EQ(tree.search(3.1, 1.1, 1.1)->totalCount(), 1u);
+}
+
+// A nearly level ray to a wall 20 m away loses at most a quarter of its length to the grazing
+// truncation (here 0.2 m / sin(1.15 deg) = 10 m uncapped): it still clears out to 15 m.
+TEST(SemanticOcTree, GrazingTruncationIsCappedOnNearlyLevelRays) {
+  SemanticOcTree tree(0.2);
+  tree.setGrazingRayTruncation(1.0);
+  tree.insertLabeledScan(pointsScan({Eigen::Vector3f(20.1f, 0.1f, 0.1f)},
+                                    Eigen::Vector3f(0.1f, 0.1f, 0.5f), cs::kBuilding),
+                         0.0);
+  const SemanticOcTreeNode* at_12m = tree.search(12.1, 0.1, 0.26);
+  ASSERT_NE(at_12m, nullptr);
+  EXPECT_FALSE(tree.isNodeOccupied(at_12m));
+}
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping
