@@ -38,8 +38,8 @@ if(CATKIN_ENABLE_TESTING)
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   add_rostest(test/ros/inekf_node_robustness.test
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
-  # The IMU mounted turned 90 deg in base_link (tf): the forward axis comes from tf.
-  add_rostest(test/ros/inekf_node_turned_imu.test
+  # Another robot's mounting from tf: the IMU turned 90 deg, the GPS antenna on a lever arm.
+  add_rostest(test/ros/inekf_node_mounting.test
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   # /diagnostics without fixes: WARN, then ERROR (seconds).
   add_rostest(test/ros/inekf_node_diagnostics.test DEPENDENCIES inekf_node)

@@ -234,7 +234,7 @@ CorrectionResult ImuFilterBase::correctNonholonomic(const NonholonomicModel& mod
 
 bool ImuFilterBase::finiteFix(const PositionFix& fix) {
   return std::isfinite(fix.stamp_s) && fix.position_map.allFinite() &&
-         fix.covariance_map.allFinite();
+         fix.covariance_map.allFinite() && fix.antenna_in_imu.allFinite();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -242,13 +242,17 @@ bool ImuFilterBase::finiteFix(const PositionFix& fix) {
 
 CorrectionResult LeftInvariantEkf::correctPosition(const PositionFix& fix, double gate) {
   if (!finiteFix(fix)) return rejectBadFix();
+  // y = p + R l (l: the antenna in the IMU frame) is a left-invariant observation (Barrau &
+  // Bonnabel 2017): with X = X_est Exp(xi), R_est^T (y - p_est) - l = xi_p - l^ xi_R.
   const Eigen::Matrix3d& r = state_.rotation;
-  const Eigen::Vector3d innovation = r.transpose() * (fix.position_map - state_.position_map);
+  const Eigen::Vector3d& l = fix.antenna_in_imu;
+  const Eigen::Vector3d innovation = r.transpose() * (fix.position_map - state_.position_map) - l;
   const Eigen::Matrix3d noise = r.transpose() * fix.covariance_map * r;
+  Eigen::Matrix<double, 3, 15> h = positionJacobian();
+  h.block<3, 3>(0, 0) = -lie::hat(l);
   Vector15d delta;
   ErrorCovariance updated;
-  CorrectionResult result =
-      kalmanUpdate<3>(innovation, positionJacobian(), noise, gate, &delta, &updated);
+  CorrectionResult result = kalmanUpdate<3>(innovation, h, noise, gate, &delta, &updated);
   if (!result.accepted) return result;
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }
@@ -269,9 +273,11 @@ Matrix15d LeftInvariantEkf::leftFromError(const NavState&) const { return Matrix
 
 CorrectionResult RightInvariantEkf::correctPosition(const PositionFix& fix, double gate) {
   if (!finiteFix(fix)) return rejectBadFix();
-  const Eigen::Vector3d innovation = fix.position_map - state_.position_map;
+  // With X = Exp(xi) X_est: y - (p_est + R_est l) = xi_p - (p_est + R_est l)^ xi_R.
+  const Eigen::Vector3d antenna = state_.position_map + state_.rotation * fix.antenna_in_imu;
+  const Eigen::Vector3d innovation = fix.position_map - antenna;
   Eigen::Matrix<double, 3, 15> h = positionJacobian();
-  h.block<3, 3>(0, 0) = -lie::hat(state_.position_map);
+  h.block<3, 3>(0, 0) = -lie::hat(antenna);
   Vector15d delta;
   ErrorCovariance updated;
   CorrectionResult result =
@@ -315,11 +321,16 @@ void QuaternionEskf::propagate(const ImuSample& sample, double dt) {
 
 CorrectionResult QuaternionEskf::correctPosition(const PositionFix& fix, double gate) {
   if (!finiteFix(fix)) return rejectBadFix();
-  const Eigen::Vector3d innovation = fix.position_map - state_.position_map;
+  // The attitude error is local (R = R_est Exp(dtheta)): y - (p_est + R_est l) = dp - R_est l^
+  // dtheta.
+  const Eigen::Vector3d& l = fix.antenna_in_imu;
+  const Eigen::Vector3d innovation = fix.position_map - state_.position_map - state_.rotation * l;
+  Eigen::Matrix<double, 3, 15> h = positionJacobian();
+  h.block<3, 3>(0, 0) = -state_.rotation * lie::hat(l);
   Vector15d delta;
   ErrorCovariance updated;
   CorrectionResult result =
-      kalmanUpdate<3>(innovation, positionJacobian(), fix.covariance_map, gate, &delta, &updated);
+      kalmanUpdate<3>(innovation, h, fix.covariance_map, gate, &delta, &updated);
   if (!result.accepted) return result;
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }

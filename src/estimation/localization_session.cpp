@@ -499,13 +499,14 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   if (!projection_) takeOrigin(event);
   PositionFix fix;
   fix.stamp_s = event.stamp_s;
+  fix.antenna_in_imu = event.antenna_in_imu;
   if (horizontal_only) {
     // The filter's own height (now: the fix may wait for its IMU sample) as the measured one,
     // with a variance that makes its weight nil (a gain of ~1e-6 on an innovation near zero): the
     // update is the horizontal one. Its d^2 has 2 degrees of freedom (horizontal_only: gated and
     // normalised as such).
     fix.position_map = projection_->toMap(event.lat_deg, event.lon_deg, 0.0);
-    fix.position_map.z() = state().position_map.z();
+    fix.position_map.z() = state().position_map.z() + (state().rotation * event.antenna_in_imu).z();
     fix.horizontal_only = true;
     ++statistics_.fixes_horizontal_only;
   } else {

@@ -295,7 +295,7 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
 CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
   CorrectionResult result;
   if (!std::isfinite(fix.stamp_s) || !fix.position_map.allFinite() ||
-      !fix.covariance_map.allFinite()) {
+      !fix.covariance_map.allFinite() || !fix.antenna_in_imu.allFinite()) {
     result.reason = "non-finite fix";
     ++statistics_.gps_rejected;
     return result;
@@ -319,7 +319,6 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
     }
     NavState initial;
     initial.stamp_s = fix.stamp_s;
-    initial.position_map = fix.position_map;
     bool velocity_known = false;
     if (reference_velocity_) {
       initial.velocity_map = *reference_velocity_;
@@ -336,9 +335,17 @@ CorrectionResult Localizer::addPositionFix(const PositionFix& fix) {
                           Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
                              .toRotationMatrix();
     }
+    // The IMU sits at the antenna minus its lever arm, turned by the start's attitude.
+    initial.position_map = fix.position_map - initial.rotation * fix.antenna_in_imu;
     ErrorCovariance world = initialWorldCovariance();
     world.block<3, 3>(6, 6) = used.covariance_map;
     const bool yaw_known = config_.init_orientation_from_reference && reference_rotation_;
+    if (!yaw_known) {
+      // A yaw of 0 guessed: the lever arm's horizontal part may point anywhere.
+      const double lever2 = fix.antenna_in_imu.head<2>().squaredNorm();
+      world(6, 6) += lever2;
+      world(7, 7) += lever2;
+    }
     if (yaw_known && reference_rotation_covariance_) {
       // The orientation's own stated covariance; an axis it states as 0 (sensor_msgs: "not
       // known") keeps the configured sigma.
@@ -395,10 +402,18 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   const double moved = filter_->state().velocity_map.norm() * std::abs(age);
   used.covariance_map += Eigen::Matrix3d::Identity() * moved * moved;
   used.stamp_s = filter_->state().stamp_s;
+  // Where the fix puts the IMU (the antenna minus its lever arm at the filter's attitude now): the
+  // heading monitor's track, the horizontal NIS and the jump check are of the IMU's position; the
+  // filter's update models the lever arm itself.
+  const auto imu_position = [this, &used] {
+    return Eigen::Vector3d(used.position_map - filter_->state().rotation * used.antenna_in_imu);
+  };
 
   // The heading monitor, before the correction: the track including this fix.
   if (config_.heading_from_track) {
-    addToTrack(used);
+    PositionFix at_imu = used;
+    at_imu.position_map = imu_position();
+    addToTrack(at_imu);
     const TrackHeading track = trackHeading();
     if (track.valid && track.sigma_rad <= config_.heading_align_max_sigma_deg * kDegToRad) {
       const double yaw_sigma = yawSigma();
@@ -432,7 +447,8 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   if (hold_yaw && !(yawSigma() <= config_.heading_align_above_sigma_deg * kDegToRad)) {
     decorrelateYaw();
   }
-  const Eigen::Vector3d innovation = used.position_map - filter_->state().position_map;
+  const Eigen::Vector3d fix_imu_position = imu_position();
+  const Eigen::Vector3d innovation = fix_imu_position - filter_->state().position_map;
   double horizontal_nis = 0.0;
   {
     const Eigen::Matrix2d s =
@@ -477,7 +493,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   const double since_last_fix_s = std::max(1.0, filter_->state().stamp_s - last_accepted_fix_s_);
   // Measured from the last accepted fix, not from the filter: a filter that runs away (a wrong
   // velocity from a bad start) would otherwise outrun this bound and refuse every fix for good.
-  const double fix_jump_m = (used.position_map - last_accepted_fix_position_).norm();
+  const double fix_jump_m = (fix_imu_position - last_accepted_fix_position_).norm();
   const bool receiver_jumped = fix_jump_m > config_.max_reacquisition_speed_mps * since_last_fix_s;
   if (!reopen_why.empty()) {
     if (receiver_jumped) {
@@ -521,7 +537,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     noteHeadingChange(heading_before);
     consecutive_rejected_fixes_ = 0;
     last_accepted_fix_s_ = filter_->state().stamp_s;
-    last_accepted_fix_position_ = used.position_map;
+    last_accepted_fix_position_ = fix_imu_position;
   }
   if (result.accepted) {
     ++statistics_.gps_used;

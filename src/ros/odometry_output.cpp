@@ -75,6 +75,17 @@ std::optional<Eigen::Matrix3d> OdometryOutput::imuMounting() {
   }
 }
 
+std::optional<Eigen::Vector3d> OdometryOutput::antennaInImu(const std::string& fix_frame) {
+  if (fix_frame.empty() || fix_frame == imu_frame_) return Eigen::Vector3d::Zero();
+  if (imu_frame_.empty()) return std::nullopt;
+  try {
+    return toIsometry(tf_buffer_.lookupTransform(imu_frame_, fix_frame, ros::Time(0)).transform)
+        .translation();
+  } catch (const tf2::TransformException&) {
+    return std::nullopt;
+  }
+}
+
 std::optional<Eigen::Isometry3d> OdometryOutput::baseFromImu() {
   if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
   try {

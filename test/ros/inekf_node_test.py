@@ -16,11 +16,12 @@ With ~source:=kitti_player the test publishes nothing: kitti_player (started pau
 
 With ~imu_mount_yaw_deg the IMU is mounted turned by that angle about base_link's z axis (frame
 imu_turned; the .test publishes the tf): its rates, accelerations, orientation and body-frame
-velocity are those of the turned axes.
+velocity are those of the turned axes. With ~antenna_in_base ([x, y, z] m) the fixes are of a GPS
+antenna there (frame gps_antenna; the .test publishes the tf), not of the IMU.
 
 Parameters (private): source (self | kitti_player), drive, first_frame, frames, rate, gps_every,
 gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames,
-imu_mount_yaw_deg.
+imu_mount_yaw_deg, antenna_in_base.
 """
 
 import math
@@ -115,6 +116,7 @@ class InekfNodeTest(unittest.TestCase):
         cls.mount_yaw = math.radians(rospy.get_param("~imu_mount_yaw_deg", 0.0))
         cls.imu_frame = "imu_turned" if cls.mount_yaw != 0.0 else "imu_link"
         cls.base_from_imu = rotation_rpy(0.0, 0.0, cls.mount_yaw)
+        cls.antenna_in_base = np.array(rospy.get_param("~antenna_in_base", [0.0, 0.0, 0.0]))
 
     def in_imu_axes(self, vector):
         return self.base_from_imu.T.dot(np.array(vector))
@@ -167,6 +169,10 @@ class InekfNodeTest(unittest.TestCase):
         message.header.stamp = stamp
         message.header.frame_id = "imu_link"
         lat, lon, alt = record[:3]
+        if self.antenna_in_base.any():
+            # The antenna, not the OXTS unit (base_link): its lever arm turned into east-north-up.
+            message.header.frame_id = "gps_antenna"
+            noise_m = np.asarray(noise_m) + rotation_rpy(*record[3:6]).dot(self.antenna_in_base)
         # Noise in metres (east, north, up) turned into degrees on the local sphere.
         message.latitude = lat + math.degrees(noise_m[1] / EARTH_RADIUS_M)
         message.longitude = lon + math.degrees(noise_m[0] / (EARTH_RADIUS_M * math.cos(math.radians(lat))))

@@ -256,6 +256,68 @@ TEST(Filters, PositionUpdateMovesTowardTheFixAndShrinksTheCovariance) {
   }
 }
 
+// A fix of an antenna 1.5 m ahead, 0.4 m right and 1.2 m above the IMU (y = p + R l): a precise
+// fix must move the estimate so that its own antenna lands on the fix, to first order, which
+// needs the lever arm's attitude terms in each filter's Jacobian (with the rotation block wrong
+// or missing, the attitude takes a share of the correction that does not move the antenna).
+TEST(Filters, AFixOfAnAntennaOnALeverArmIsMetByTheUpdatedPose) {
+  const Eigen::Vector3d lever(1.5, -0.4, 1.2);
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    const NavState s = someState();
+    Eigen::Matrix<double, 15, 1> sigma;
+    sigma << 0.05, 0.05, 0.2, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 0.05, 0.05, 0.05;
+    filter->initialize(s, filter->fromWorldCovariance(s, sigma.cwiseAbs2().asDiagonal()));
+    PositionFix fix = fixAt(
+        s.position_map + s.rotation * lever + Eigen::Vector3d(0.03, -0.02, 0.01), s.stamp_s, 1e-3);
+    fix.antenna_in_imu = lever;
+    const double before = (s.position_map + s.rotation * lever - fix.position_map).norm();
+    const CorrectionResult result = filter->correctPosition(fix, 1e12);
+    ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+    const NavState& after = filter->state();
+    const double residual = (after.position_map + after.rotation * lever - fix.position_map).norm();
+    EXPECT_LT(residual, 0.01 * before) << toString(type);
+    // The attitude took part: the update is not a pure shift of the IMU's position.
+    EXPECT_GT(lie::logSO3(s.rotation.transpose() * after.rotation).norm(), 1e-4) << toString(type);
+  }
+}
+
+// The drive with the fixes of that antenna, every second: told the lever arm, each filter stays
+// on the truth; taking the antenna for the IMU it is off by about the lever arm.
+TEST(Filters, FixesOfAnAntennaOnALeverArmKeepTheFilterOnTheDrive) {
+  const double dt = 0.1;
+  const SimulatedDrive drive = simulateDrive(300, dt);
+  const Eigen::Vector3d lever(1.5, -0.4, 1.2);
+  for (FilterType type : kAllFilters) {
+    for (const bool told : {true, false}) {
+      auto filter = makeFilter(type, ImuNoise());
+      Eigen::Matrix<double, 15, 1> sigma;
+      sigma << 0.01, 0.01, 0.05, 0.2, 0.2, 0.2, 0.5, 0.5, 0.5, 1e-3, 1e-3, 1e-3, 0.05, 0.05, 0.05;
+      filter->initialize(drive.truth[0], filter->fromWorldCovariance(
+                                             drive.truth[0], sigma.cwiseAbs2().asDiagonal()));
+      double worst_late_m = 0.0;
+      for (std::size_t k = 1; k < drive.imu.size(); ++k) {
+        filter->propagate(drive.imu[k], dt);
+        const NavState& truth = drive.truth[k];
+        if (k % 10 == 0) {
+          PositionFix fix = fixAt(truth.position_map + truth.rotation * lever, truth.stamp_s, 0.3);
+          if (told) fix.antenna_in_imu = lever;
+          ASSERT_TRUE(filter->correctPosition(fix, 1e9).accepted);
+        }
+        if (k >= 200) {
+          worst_late_m =
+              std::max(worst_late_m, (filter->state().position_map - truth.position_map).norm());
+        }
+      }
+      if (told) {
+        EXPECT_LT(worst_late_m, 0.1) << toString(type);
+      } else {
+        EXPECT_GT(worst_late_m, 0.8) << toString(type);
+      }
+    }
+  }
+}
+
 // A centimetre fix on a prior that knows the position only to 10,000 km, its errors correlated
 // with the velocity's and the attitude's: the update's covariance must stay positive definite
 // (the expanded form P - KHP... cancelled to negative variances at these scales).

@@ -119,6 +119,9 @@ struct GeodeticFixEvent {
   // East-north-up (= map axes), m^2; nullopt: the receiver gives none (the default sigmas).
   std::optional<Eigen::Matrix3d> covariance_enu;
   bool has_solution = true;  // false: the receiver has no fix (never used)
+  // m, the antenna in the IMU frame (inekf_node: tf IMU frame -> the fix's frame); zero: the
+  // fix is of the IMU.
+  Eigen::Vector3d antenna_in_imu = Eigen::Vector3d::Zero();
 };
 
 struct GpsVelocityEvent {

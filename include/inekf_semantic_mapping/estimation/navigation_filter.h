@@ -53,9 +53,10 @@ class NavigationFilter {
   // and interpolated samples. 1 = nominal.
   virtual void setProcessNoiseScale(double gyro_scale, double accel_scale) = 0;
 
-  // GPS position fix of the IMU in the map frame. Rejected (state unchanged) when the squared
-  // Mahalanobis distance of the innovation exceeds gate_mahalanobis_squared, when the input is
-  // not finite, or when the update would produce a non-finite state or covariance.
+  // GPS position fix in the map frame: of the IMU, or of an antenna at fix.antenna_in_imu
+  // (y = p + R l, the lever arm's attitude dependence in the Jacobian). Rejected (state unchanged)
+  // when the squared Mahalanobis distance of the innovation exceeds gate_mahalanobis_squared, when
+  // the input is not finite, or when the update would produce a non-finite state or covariance.
   virtual CorrectionResult correctPosition(const PositionFix& fix,
                                            double gate_mahalanobis_squared) = 0;
 

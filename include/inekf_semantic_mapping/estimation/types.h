@@ -21,8 +21,11 @@ struct ImuSample {
 
 struct PositionFix {
   double stamp_s = 0.0;
-  Eigen::Vector3d position_map = Eigen::Vector3d::Zero();        // m, map frame (IMU position)
+  // m, map frame: the antenna's position, position + R * antenna_in_imu of the IMU's pose.
+  Eigen::Vector3d position_map = Eigen::Vector3d::Zero();
   Eigen::Matrix3d covariance_map = Eigen::Matrix3d::Identity();  // m^2, map frame
+  // m, the GPS antenna in the IMU frame (its lever arm); zero: the fix is of the IMU.
+  Eigen::Vector3d antenna_in_imu = Eigen::Vector3d::Zero();
   // A fix without altitude (a receiver in a 2D mode): position_map.z() is the filter's own height
   // and covariance_map gives it a nil weight, so the innovation has 2 degrees of freedom, not 3
   // (the Localizer gates it at the same tail probability; diagnostics normalise by 2).

@@ -46,6 +46,7 @@ class OdometryOutput {
   // imu_frame parameter set it).
   void noteImuFrame(const std::string& frame_id);
   const std::string& baseFrame() const { return base_frame_; }
+  const std::string& imuFrame() const { return imu_frame_; }
 
   // One estimate, stamped with the message's own stamp: a double stamp loses the nanoseconds,
   // and consumers match our poses to their data by exact stamp.
@@ -58,6 +59,10 @@ class OdometryOutput {
   // The rotation of the IMU's axes in base_frame's: identity when the IMU is the base (or its
   // messages name no frame), from tf otherwise; nullopt while tf has no such transform.
   std::optional<Eigen::Matrix3d> imuMounting();
+  // Where a GPS fix's frame (the antenna) sits in the IMU's frame (tf IMU frame -> fix_frame):
+  // zero when the fix names no frame or the IMU's own; nullopt while the IMU frame is not known
+  // yet or tf has no such transform.
+  std::optional<Eigen::Vector3d> antennaInImu(const std::string& fix_frame);
 
  private:
   // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
