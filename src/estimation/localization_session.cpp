@@ -408,7 +408,8 @@ void LocalizationSession::handleImu(const ImuEvent& event, Update* out) {
     ++statistics_.imu_invalid;
     // Said, not only counted: an IMU whose every message has a NaN never starts the filter.
     std::ostringstream note;
-    note << "IMU sample at " << sample.stamp_s << " s dropped: "
+    note << std::fixed << std::setprecision(3) << "IMU sample at " << sample.stamp_s
+         << " s dropped: "
          << (!std::isfinite(sample.stamp_s)         ? "its stamp"
              : !sample.angular_velocity.allFinite() ? "its angular velocity"
                                                     : "its linear acceleration")
@@ -472,7 +473,7 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   if (!event.has_solution || !std::isfinite(event.stamp_s)) {
     ++statistics_.fixes_ignored;
     std::ostringstream note;
-    note << "GPS fix at " << event.stamp_s << " s ignored: "
+    note << std::fixed << std::setprecision(3) << "GPS fix at " << event.stamp_s << " s ignored: "
          << (event.has_solution ? "its stamp is not finite"
                                 : "the receiver reports no solution (status: no fix)");
     update.note = note.str();
@@ -485,8 +486,9 @@ void LocalizationSession::handleFix(const GeodeticFixEvent& event, Update* out) 
   if (!horizontal_only && !kitti::isGeodeticInRange(event.lat_deg, event.lon_deg, event.alt_m)) {
     ++statistics_.fixes_ignored;
     std::ostringstream note;
-    note << "GPS fix at " << event.stamp_s << " s ignored: latitude " << event.lat_deg
-         << ", longitude " << event.lon_deg << ", altitude " << event.alt_m;
+    note << std::fixed << std::setprecision(3) << "GPS fix at " << event.stamp_s
+         << " s ignored: latitude " << std::setprecision(9) << event.lat_deg << ", longitude "
+         << event.lon_deg << ", altitude " << std::setprecision(3) << event.alt_m;
     if (!std::isfinite(event.alt_m)) {
       note << " (no altitude, a receiver in a 2D mode: the filter starts from a 3D fix; once "
               "started it uses such fixes horizontally)";

@@ -15,6 +15,13 @@ namespace {
 
 using mapping::ClassIndex;
 
+std::string pointFieldTypeName(std::uint8_t datatype) {
+  static const char* const kNames[] = {"INT8",  "UINT8",  "INT16",   "UINT16",
+                                       "INT32", "UINT32", "FLOAT32", "FLOAT64"};
+  if (datatype >= 1 && datatype <= 8) return kNames[datatype - 1];
+  return std::to_string(datatype) + " (not a sensor_msgs/PointField type)";
+}
+
 struct FieldReader {
   std::uint32_t offset = 0;
   bool is_double = false;
@@ -29,7 +36,7 @@ FieldReader findCoordinate(const sensor_msgs::PointCloud2& cloud, const std::str
       reader.is_double = true;
     } else if (field.datatype != sensor_msgs::PointField::FLOAT32) {
       throw std::invalid_argument("field '" + name + "' has datatype " +
-                                  std::to_string(field.datatype) + ", need FLOAT32 or FLOAT64");
+                                  pointFieldTypeName(field.datatype) + ", need FLOAT32 or FLOAT64");
     }
     const std::uint64_t end = std::uint64_t{field.offset} + (reader.is_double ? 8 : 4);
     if (end > cloud.point_step) {

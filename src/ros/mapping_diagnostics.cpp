@@ -32,7 +32,16 @@ void readMappingDiagnosticsOptions(common::YamlReader* reader, MappingDiagnostic
 }
 
 MappingMonitor::MappingMonitor(MappingDiagnosticsOptions options)
-    : options_(options), scans_in_(options.window_s), scans_inserted_(options.window_s) {}
+    : options_(options),
+      scans_in_(options.window_s),
+      scans_inserted_(options.window_s),
+      scans_refused_(options.window_s) {}
+
+void MappingMonitor::noteScanRefused(double wall_s, const std::string& why) {
+  scans_refused_.add(wall_s);
+  ++scans_refused_total_;
+  last_refusal_ = why;
+}
 
 void MappingMonitor::noteScan(double stamp_s, double wall_s) {
   scans_in_.add(wall_s);
@@ -85,6 +94,7 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
                              diagnostic_updater::DiagnosticStatusWrapper* status) {
   scans_in_.expire(wall_s);
   scans_inserted_.expire(wall_s);
+  scans_refused_.expire(wall_s);
   const mapping::MappingStatistics& stats = session.statistics();
   const double p95_s = scans_inserted_.percentile(0.95);
   unsigned char level = DiagnosticStatus::OK;
@@ -119,6 +129,17 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
               std::to_string(without_pose) + " of the last " + std::to_string(received) +
               "; map -> sensor not in tf in time)";
   }
+  // Clouds the node could not read: nothing of them reaches the map (an Ouster's integer x/y/z
+  // left "waiting for scans" OK while every scan was refused).
+  const std::size_t refused = scans_refused_.count();
+  if (refused > 0) {
+    const bool most = 2 * refused > scans_in_.count();
+    const unsigned char refused_level = most ? DiagnosticStatus::ERROR : DiagnosticStatus::WARN;
+    level = std::max(level, refused_level);
+    message = std::string(most ? "most" : "some") + " scans refused (" + std::to_string(refused) +
+              " of the last " + std::to_string(std::max(refused, scans_in_.count())) +
+              "): " + last_refusal_;
+  }
   status->summary(level, message);
   status->addf("scan rate in (Hz)", "%.2f", scans_in_.rateOverWindowHz(wall_s));
   status->addf("scan rate into the map (Hz)", "%.2f", scans_inserted_.rateOverWindowHz(wall_s));
@@ -128,6 +149,8 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
   status->addf("oldest pending scan waiting (s)", "%.1f", waited_s);
   status->add("scans without pose", stats.scans_without_pose);
   status->add("scans rejected by the map", stats.scans_rejected);
+  status->add("scans refused (unreadable)", scans_refused_total_);
+  status->add("last refusal", last_refusal_.empty() ? "none" : last_refusal_);
   status->addf("insertion latency p50 (s)", "%.3f", scans_inserted_.percentile(0.5));
   status->addf("insertion latency p95 (s)", "%.3f", p95_s);
   status->add("map size", session.mapSizeText());

@@ -106,8 +106,8 @@ class SemanticOctomapNodeCore::Impl {
       }
       return pose;
     });
-    session_->setScanWarningCallback([](double stamp, const std::string& why) {
-      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
+    session_->setScanWarningCallback([this](double stamp, const std::string& why) {
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << cloudTopic() << " at "
                                                              << ros::Time(stamp)
                                                              << " not mapped: " << why);
     });
@@ -200,6 +200,11 @@ class SemanticOctomapNodeCore::Impl {
   }
 
  private:
+  // The cloud topic as resolved (remapped, in a namespace): the name a user looks for.
+  std::string cloudTopic() const {
+    return cloud_sub_ ? cloud_sub_.getTopic() : std::string(topics::kVelodyne);
+  }
+
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& cloud) {
     try {
       ScopedTimer timer("semantic_map/scan");
@@ -215,7 +220,8 @@ class SemanticOctomapNodeCore::Impl {
       if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);
       session_->addScan(cloud->header.stamp.toSec(), frame, pointsFromCloud(*cloud));
     } catch (const std::exception& e) {
-      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << topics::kVelodyne << " at "
+      monitor_->noteScanRefused(wallNow(), e.what());
+      ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << cloudTopic() << " at "
                                                              << cloud->header.stamp
                                                              << " ignored: " << e.what());
     }
@@ -271,7 +277,7 @@ class SemanticOctomapNodeCore::Impl {
     };
     warnIfGrew(s.scans_without_pose, &scans_without_pose_warned_,
                [&](std::ostream& out, std::size_t more) {
-                 out << more << " scans on " << topics::kVelodyne << " dropped without a pose ("
+                 out << more << " scans on " << cloudTopic() << " dropped without a pose ("
                      << s.scans_without_pose << " of " << s.scans_received
                      << " so far); the last tf lookup that failed: " << last_pose_error_;
                });
@@ -340,7 +346,7 @@ class SemanticOctomapNodeCore::Impl {
     const double offset_s = (now - stamp).toSec();
     if (std::abs(offset_s) < kClockMismatchWarnS) return;
     ROS_WARN_STREAM_THROTTLE(
-        10, "semantic_octomap_node: " << topics::kVelodyne << " stamped " << stamp << " is "
+        10, "semantic_octomap_node: " << cloudTopic() << " stamped " << stamp << " is "
                                       << std::fixed << std::setprecision(1) << std::abs(offset_s)
                                       << " s " << (offset_s > 0 ? "behind" : "ahead of")
                                       << " the clock (" << now

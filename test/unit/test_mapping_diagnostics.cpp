@@ -7,6 +7,7 @@
 #include <string>
 
 #include "inekf_semantic_mapping/mapping/semantic_mapping_session.h"
+#include "inekf_semantic_mapping/ros/mapping_conversions.h"
 #include "inekf_semantic_mapping/ros/mapping_diagnostics.h"
 
 namespace inekf_semantic_mapping {
@@ -100,6 +101,65 @@ TEST(MappingMonitor, MostLabelImagesRefusedIsAWarning) {
   monitor.fillLabels(session, /*labels_expected=*/true, 6.0, &status);
   EXPECT_EQ(status.level, DiagnosticStatus::WARN);
   EXPECT_NE(status.message.find("most label images refused"), std::string::npos) << status.message;
+}
+
+// Clouds the node cannot read (an Ouster-like driver's integer x/y/z): counted and said in the
+// map status while they last (it read "waiting for scans" OK with every scan refused).
+TEST(MappingMonitor, RefusedScansAreSaidWhileTheyLast) {
+  mapping::SemanticMappingSession session{mapping::SemanticMappingConfig{}};
+  MappingMonitor monitor{MappingDiagnosticsOptions{}};  // window 10 s
+  const auto statusAt = [&](double wall_s) {
+    diagnostic_updater::DiagnosticStatusWrapper status;
+    monitor.fillMap(session, SaveRecord{}, SaveRecord{}, wall_s, &status);
+    return status;
+  };
+  for (int k = 0; k < 10; ++k) {
+    monitor.noteScan(k * 0.1, k * 0.1);
+    if (k % 5 == 0) monitor.noteScanRefused(k * 0.1, "field 'x' has datatype INT32");
+  }
+  const diagnostic_updater::DiagnosticStatusWrapper some = statusAt(1.0);
+  EXPECT_EQ(some.level, DiagnosticStatus::WARN) << some.message;
+  EXPECT_NE(
+      some.message.find("some scans refused (2 of the last 10): field 'x' has datatype INT32"),
+      std::string::npos)
+      << some.message;
+  for (int k = 10; k < 20; ++k) {
+    monitor.noteScan(k * 0.1, k * 0.1);
+    monitor.noteScanRefused(k * 0.1, "no frame_id");
+  }
+  EXPECT_EQ(statusAt(2.0).level, DiagnosticStatus::ERROR);
+  EXPECT_EQ(statusAt(20.0).level, DiagnosticStatus::OK);  // over: the window forgot them
+  bool counted = false;
+  for (const auto& value : statusAt(20.0).values) {
+    if (value.key == "scans refused (unreadable)") counted = value.value == "12";
+  }
+  EXPECT_TRUE(counted);
+}
+
+// A coordinate field of another type is refused naming the field and its type by name.
+TEST(MappingConversions, ACoordinateOfAnotherTypeIsNamed) {
+  sensor_msgs::PointCloud2 cloud;
+  cloud.height = 1;
+  cloud.width = 1;
+  cloud.point_step = 12;
+  cloud.row_step = 12;
+  cloud.data.assign(12, 0);
+  for (const char* name : {"x", "y", "z"}) {
+    sensor_msgs::PointField field;
+    field.name = name;
+    field.offset = static_cast<std::uint32_t>(4 * cloud.fields.size());
+    field.datatype = sensor_msgs::PointField::INT32;
+    field.count = 1;
+    cloud.fields.push_back(field);
+  }
+  try {
+    pointsFromCloud(cloud);
+    FAIL() << "an INT32 x was read";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("field 'x' has datatype INT32, need FLOAT32"),
+              std::string::npos)
+        << error.what();
+  }
 }
 
 }  // namespace

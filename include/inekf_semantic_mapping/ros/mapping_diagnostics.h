@@ -48,6 +48,9 @@ class MappingMonitor {
  public:
   explicit MappingMonitor(MappingDiagnosticsOptions options);
   void noteScan(double stamp_s, double wall_s);
+  // A cloud the node could not read (a field's type, no frame_id, ...): counted, said in the
+  // status while it lasts (WARN; ERROR when most scans of the window are refused).
+  void noteScanRefused(double wall_s, const std::string& why);
   void noteInserted(double stamp_s, double wall_s);  // latency: since its scan arrived
   void noteLabelImage(double wall_s);
   // labels_expected: a label publisher is connected or label images came before.
@@ -72,7 +75,10 @@ class MappingMonitor {
 
   MappingDiagnosticsOptions options_;
   std::deque<DropCount> drop_counts_;
-  EventWindow scans_in_, scans_inserted_;    // wall times; inserted values: latency (s)
+  EventWindow scans_in_, scans_inserted_;  // wall times; inserted values: latency (s)
+  EventWindow scans_refused_;              // wall times
+  std::size_t scans_refused_total_ = 0;
+  std::string last_refusal_;
   std::map<double, double> arrival_wall_s_;  // by scan stamp, until inserted (bounded)
   double first_scan_wall_s_ = -1.0, last_scan_wall_s_ = -1.0, last_label_wall_s_ = -1.0;
 };
