@@ -59,6 +59,16 @@ TEST(KittiTimestamps, RejectsMalformedText) {
   EXPECT_THROW(parseKittiTimestampNs(""), KittiFormatError);
 }
 
+// A day the month does not have (the Gregorian leap rule: 2100 is no leap year, 2000 is).
+TEST(KittiTimestamps, RejectsDaysTheMonthDoesNotHave) {
+  EXPECT_THROW(parseKittiTimestampNs("2011-04-31 00:00:00"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs("2011-02-29 00:00:00"), KittiFormatError);
+  EXPECT_THROW(parseKittiTimestampNs("2100-02-29 00:00:00"), KittiFormatError);
+  EXPECT_EQ(
+      parseKittiTimestampNs("2000-03-01 00:00:00") - parseKittiTimestampNs("2000-02-29 00:00:00"),
+      86400LL * 1000000000LL);
+}
+
 // ---------------------------------------------------------------------------- OXTS
 // A stamp that goes back, or a jump of an hour: named by file and line (inekf_offline scored
 // such a drive at an ATE of 36,000 km; kitti2bag dropped the frame without a word).

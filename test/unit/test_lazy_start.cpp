@@ -143,6 +143,19 @@ TEST(LazyStart, AFastGpsDoesNotRestartTheWaitForAnOrientationThatNeverComes) {
   EXPECT_TRUE(with_velocity->orientation);
 }
 
+// A velocity offered before a reset is of the ended time line: not the next start's.
+TEST(LazyStart, ResetForgetsTheVelocity) {
+  LazyStart gate{LazyStart::Config()};
+  gate.offerVelocity(10.0, Eigen::Vector3d(1.0, 0.0, 0.0), /*in_body_frame=*/false);
+  gate.reset();
+  gate.offerOrientation(kHeading);
+  gate.offerFix(fixAt(10.0));
+  EXPECT_FALSE(gate.poll(10.0, /*velocity_source_exists=*/true));  // this fix's is still to come
+  const auto start = gate.poll(10.5, true);
+  ASSERT_TRUE(start);
+  EXPECT_FALSE(start->velocity_map);
+}
+
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping

@@ -826,6 +826,113 @@ TEST(Localizer, TheNisWindowReopensAWrongHeading) {
   const LazyStartOutcome outcome = lazyStartWhileDriving(config, false);
   EXPECT_GE(outcome.statistics.heading_reopens, 1);
 }
+
+// While a fix has failed the gate and none has been accepted since, the land-vehicle constraint
+// waits: it would only hold the heading the fixes disagree with.
+TEST(Localizer, TheLandVehicleConstraintWaitsWhileTheFixesAreRejected) {
+  Localizer localizer{withoutHeadingMonitor(LocalizerConfig())};
+  constexpr double kSpeed = 10.0;
+  NavState start = startState(0.0);
+  start.velocity_map = Eigen::Vector3d(kSpeed, 0.0, 0.0);
+  localizer.initialize(start);
+  const auto driveOneSecond = [&localizer](int second) {
+    for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(second - 1 + 0.1 * i));
+  };
+  driveOneSecond(1);
+  ASSERT_TRUE(localizer.addPositionFix(fixAt(1.0, Eigen::Vector3d(kSpeed, 0, 0))).accepted);
+  driveOneSecond(2);
+  ASSERT_FALSE(localizer.addPositionFix(fixAt(2.0, Eigen::Vector3d(2 * kSpeed, 50, 0))).accepted);
+  EXPECT_EQ(localizer.statistics().nonholonomic_suspended, 0);
+  EXPECT_EQ(localizer.statistics().nonholonomic_used, 20);
+  driveOneSecond(3);
+  EXPECT_EQ(localizer.statistics().nonholonomic_suspended, 10);
+  EXPECT_EQ(localizer.statistics().nonholonomic_used, 20);
+  // An accepted fix ends the suspension.
+  ASSERT_TRUE(localizer.addPositionFix(fixAt(3.0, Eigen::Vector3d(3 * kSpeed, 0, 0))).accepted);
+  driveOneSecond(4);
+  EXPECT_EQ(localizer.statistics().nonholonomic_suspended, 10);
+  EXPECT_EQ(localizer.statistics().nonholonomic_used, 30);
+}
+
+// The filter believes the car stands while it drives at 20 m/s: re-acquisition opens the
+// velocity as well as the position, so the fixes after the re-acquired one teach the speed and
+// are taken, not gated out until the next re-acquisition.
+TEST(Localizer, ReacquisitionOpensTheVelocityOfAMovingCar) {
+  LocalizerConfig config = withoutHeadingMonitor(LocalizerConfig());
+  config.max_consecutive_rejected_fixes = 3;
+  Localizer localizer(config);
+  localizer.initialize(startState(0.0));
+  constexpr double kSpeed = 20.0;
+  for (int k = 1; k <= 10; ++k) {
+    for (int i = 1; i <= 10; ++i) localizer.addImu(restingSample(k - 1 + 0.1 * i));
+    const CorrectionResult result =
+        localizer.addPositionFix(fixAt(k, Eigen::Vector3d(kSpeed * k, 0.0, 0.0)));
+    EXPECT_EQ(result.accepted, k >= 3) << "fix " << k << ": " << result.reason;
+  }
+  EXPECT_EQ(localizer.statistics().gps_reacquisitions, 1);
+  EXPECT_LT((localizer.state().velocity_map - Eigen::Vector3d(kSpeed, 0.0, 0.0)).norm(), 1.0)
+      << localizer.state().velocity_map.transpose();
+}
+
+// A fix that jumps 12 m sideways makes the chord ending at it disagree with the others by about
+// 30 deg: the track's heading leaves that chord out instead of averaging it in, and the unknown
+// heading of a start levelled from gravity is aligned to the true one.
+TEST(Localizer, TheGpsTrackLeavesOutAChordThatDisagrees) {
+  LocalizerConfig config;
+  config.init_orientation_from_reference = false;
+  constexpr double kSpeed = 10.0, kYaw = M_PI / 4, kDt = 0.01;
+  const Eigen::Vector3d direction(std::cos(kYaw), std::sin(kYaw), 0.0);
+  const Eigen::Vector3d left(-std::sin(kYaw), std::cos(kYaw), 0.0);
+  Localizer localizer(config);
+  double aligned_yaw_error_deg = -1.0;
+  for (int k = 0; k <= 1000 && aligned_yaw_error_deg < 0.0; ++k) {
+    const double t = kDt * k;
+    localizer.addImu(restingSample(t));
+    if (k % 100 != 0) continue;
+    const Eigen::Vector3d jump = k == 400 ? Eigen::Vector3d(12.0 * left) : Eigen::Vector3d::Zero();
+    localizer.addPositionFix(fixAt(t, kSpeed * t * direction + jump, 1.5));
+    if (localizer.statistics().heading_alignments > 0) {
+      const Eigen::Matrix3d& r = localizer.state().rotation;
+      aligned_yaw_error_deg = std::abs(std::atan2(r(1, 0), r(0, 0)) - kYaw) * 180.0 / M_PI;
+    }
+  }
+  ASSERT_GE(aligned_yaw_error_deg, 0.0) << "the heading was never aligned";
+  EXPECT_LT(aligned_yaw_error_deg, 3.0);
+}
+
+// A car at constant speed on a straight road whose heading is `yaw_error_deg` off, stated to
+// `yaw_sigma_deg` (no constraint: the fixes cannot observe it there), exact fixes once a second
+// for 30 s; `chord_floor_deg` sets the track's sigma. Returns the heading recoveries.
+std::int64_t headingRecoveriesOnAStraightRoad(double yaw_error_deg, double yaw_sigma_deg,
+                                              double chord_floor_deg) {
+  LocalizerConfig config;
+  config.nonholonomic = false;
+  config.initial_yaw_sigma_deg = yaw_sigma_deg;
+  config.heading_track_chord_floor_deg = chord_floor_deg;
+  Localizer localizer(config);
+  constexpr double kSpeed = 10.0, kYaw = 0.3;
+  NavState start;
+  start.rotation = lie::expSO3(Eigen::Vector3d(0.0, 0.0, kYaw + yaw_error_deg * M_PI / 180.0));
+  start.velocity_map = kSpeed * Eigen::Vector3d(std::cos(kYaw), std::sin(kYaw), 0.0);
+  localizer.initialize(start);
+  for (int k = 1; k <= 300; ++k) {
+    const double t = 0.1 * k;
+    localizer.addImu(restingSample(t));
+    if (k % 10 == 0) localizer.addPositionFix(fixAt(t, start.velocity_map * t, 1.5));
+  }
+  return localizer.statistics().heading_recoveries;
+}
+
+// The heading check combines both sigmas (4 x their root sum of squares): a disagreement that
+// only one of them would call significant is no recovery, one beyond the combined sigma is.
+TEST(Localizer, TheHeadingCheckCombinesTheFiltersAndTheTracksSigmas) {
+  // Filter sure (0.5 deg), track loose (about 3 deg): 8 deg off is within 4 combined sigmas.
+  EXPECT_EQ(headingRecoveriesOnAStraightRoad(8.0, 0.5, 12.0), 0);
+  // Filter loose (6 deg), track sure (1.5 to 3.7 deg): 18 deg off is within them too.
+  EXPECT_EQ(headingRecoveriesOnAStraightRoad(18.0, 6.0, 2.0), 0);
+  // 3 deg and 1.5 deg: 15.5 deg is beyond 4 x 3.4 deg (not beyond 4 x their sum).
+  EXPECT_GE(headingRecoveriesOnAStraightRoad(15.5, 3.0, 2.0), 1);
+}
 }  // namespace
 }  // namespace estimation
 }  // namespace inekf_semantic_mapping
