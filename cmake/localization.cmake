@@ -41,6 +41,9 @@ if(CATKIN_ENABLE_TESTING)
   # Another robot's mounting from tf: the IMU turned 90 deg, the GPS antenna on a lever arm.
   add_rostest(test/ros/inekf_node_mounting.test
     DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
+  # An IMU without orientation: the odometry from the start, tf once the heading is known.
+  add_rostest(test/ros/inekf_node_heading_unknown.test
+    DEPENDENCIES inekf_node ${PROJECT_NAME}_generate_messages_py)
   # /diagnostics without fixes: WARN, then ERROR (seconds).
   add_rostest(test/ros/inekf_node_diagnostics.test DEPENDENCIES inekf_node)
   add_rostest(test/ros/inekf_node_kitti_player.test ARGS shared_dir:=${ISM_SHARED_DIR}

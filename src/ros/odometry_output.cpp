@@ -3,6 +3,8 @@
 #include <ros/console.h>
 
 #include <algorithm>
+#include <cmath>
+#include <iomanip>
 
 #include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
@@ -14,6 +16,7 @@ namespace ros_conversions {
 OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader) {
   OdometryOutputOptions options;
   reader->read("publish_tf", &options.publish_tf);
+  reader->read("tf_max_heading_sigma_deg", &options.tf_max_heading_sigma_deg);
   reader->read("map_frame", &options.map_frame);
   reader->read("base_frame", &options.base_frame);
   reader->read("imu_frame", &options.imu_frame);
@@ -24,6 +27,7 @@ OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader) {
 
 OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions& options)
     : publish_tf_(options.publish_tf),
+      tf_max_heading_sigma_deg_(options.tf_max_heading_sigma_deg),
       base_frame_(options.base_frame),
       imu_frame_(options.imu_frame),
       max_path_length_(std::max(options.max_path_length, 1)),
@@ -49,7 +53,9 @@ void OdometryOutput::publish(const ros::Time& stamp,
     odometry = odometryOfBase(odometry, *T_base_imu, base_frame_);
   }
   odometry_publisher_.publish(odometry);
-  if (publish_tf_) tf_broadcaster_.sendTransform(transformOfOdometry(odometry));
+  if (publish_tf_ && !holdTf(odometry)) {
+    tf_broadcaster_.sendTransform(transformOfOdometry(odometry));
+  }
   appendToPath(odometry, static_cast<std::size_t>(max_path_length_), &path_);
   if (last_path_publish_.isZero() || stamp < last_path_publish_ ||
       (stamp - last_path_publish_).toSec() >= path_publish_period_s_) {
@@ -57,6 +63,30 @@ void OdometryOutput::publish(const ros::Time& stamp,
     path_publisher_.publish(path_);
     last_path_publish_ = stamp;
   }
+}
+
+bool OdometryOutput::holdTf(const nav_msgs::Odometry& odometry) {
+  if (!(tf_max_heading_sigma_deg_ > 0.0)) return false;
+  // The yaw about the map's z axis (ROS order x y z roll pitch yaw).
+  const double sigma_deg = std::sqrt(std::max(0.0, odometry.pose.covariance[35])) * 180.0 / M_PI;
+  const bool hold = !(sigma_deg <= tf_max_heading_sigma_deg_);
+  if (hold != tf_held_) {
+    if (hold) {
+      ROS_WARN_STREAM("inekf_node: tf " << path_.header.frame_id << " -> " << base_frame_
+                                        << " held back: the heading's sigma is " << std::fixed
+                                        << std::setprecision(0) << sigma_deg << " deg (above "
+                                        << "~tf_max_heading_sigma_deg, "
+                                        << tf_max_heading_sigma_deg_
+                                        << "); without an IMU orientation the GPS track gives "
+                                           "it once the car drives");
+    } else {
+      ROS_INFO_STREAM("inekf_node: heading known (sigma "
+                      << std::fixed << std::setprecision(1) << sigma_deg << " deg): tf "
+                      << path_.header.frame_id << " -> " << base_frame_ << " published");
+    }
+    tf_held_ = hold;
+  }
+  return hold;
 }
 
 void OdometryOutput::clearPath() {

@@ -14,9 +14,12 @@
 //   default_fix_sigma_horizontal_m, default_fix_sigma_vertical_m, time_jump_back_s (override the
 //     config's session.*); min_fix_sigma_m (overrides gps.min_sigma_m, the one fix floor)
 //   publish_tf (true), map_frame (map), base_frame (base_link)
+//   tf_max_heading_sigma_deg (10; <= 0: off): tf waits while the heading is more uncertain
 //   imu_frame (string, default: the IMU messages' frame_id): the filter estimates this frame's
 //     pose; odometry and tf are of base_frame, through the static base_frame -> imu_frame of tf
-//     (identity, with one warning, while tf has none: a bag whose IMU is the body)
+//     (identity, with one warning, while tf has none: a bag whose IMU is the body). Its rotation
+//     gives the car's forward axis (base_frame's x) to the land-vehicle constraint and the heading
+//     monitor; tf imu_frame -> a fix's frame_id gives the GPS antenna's lever arm.
 //   max_path_length (5000 poses), path_publish_period_s (1.0)
 //   diagnostics/* (over the config file's node.diagnostics.*, ros/localization_diagnostics.h)
 // /diagnostics: one status at 1 Hz (filter state, input rates, fix age and rejections, sigmas).

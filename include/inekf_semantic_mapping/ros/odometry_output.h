@@ -26,6 +26,10 @@ namespace ros_conversions {
 
 struct OdometryOutputOptions {
   bool publish_tf = true;
+  // tf map -> base waits while the heading's sigma is above this (deg): a start without an IMU
+  // orientation knows no heading until the car moves, and a map took its scans turned anywhere.
+  // The odometry (with its covariance) is published meanwhile. <= 0: tf whatever the heading.
+  double tf_max_heading_sigma_deg = 10.0;
   std::string map_frame = frames::kMap;
   std::string base_frame = frames::kBaseLink;
   std::string imu_frame;  // empty: the IMU messages' frame_id (see OdometryOutput::noteImuFrame)
@@ -33,8 +37,8 @@ struct OdometryOutputOptions {
   double path_publish_period_s = 1.0;
 };
 
-// The private parameters publish_tf, map_frame, base_frame, imu_frame, max_path_length and
-// path_publish_period_s (defaults above).
+// The private parameters publish_tf, tf_max_heading_sigma_deg, map_frame, base_frame, imu_frame,
+// max_path_length and path_publish_period_s (defaults above).
 OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader);
 
 class OdometryOutput {
@@ -69,8 +73,13 @@ class OdometryOutput {
   // pose) when the IMU is the base or tf has no such transform (warned once). Looked up for
   // every estimate: it is cheap, and a transform that arrives late is picked up.
   std::optional<Eigen::Isometry3d> baseFromImu();
+  // True while the odometry's heading sigma is above tf_max_heading_sigma_deg (said once at each
+  // change).
+  bool holdTf(const nav_msgs::Odometry& odometry);
 
   bool publish_tf_ = true;
+  double tf_max_heading_sigma_deg_ = 10.0;
+  bool tf_held_ = false;  // the heading was too uncertain at the last estimate
   std::string base_frame_, imu_frame_;
   int max_path_length_ = 5000;
   double path_publish_period_s_ = 1.0;
