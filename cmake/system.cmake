@@ -13,6 +13,10 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/e2e_synthetic.test ARGS nodelets:=true
     DEPENDENCIES ${ISM_PIPELINE_TARGETS} ${PROJECT_NAME}_nodelets evaluate_map)
   add_rostest(test/ros/e2e_real_oxts.test DEPENDENCIES kitti2bag inekf_node)
+  # launch/robot.launch on a simulated robot that is not KITTI's (mounting and lever arm from tf,
+  # an IMU without orientation, an Ouster-like cloud): needs no data.
+  add_rostest(test/ros/own_robot.test
+    DEPENDENCIES inekf_node semantic_octomap_node ${PROJECT_NAME}_generate_messages_py)
   # Two pipelines in two namespaces on one master, each on its own bag (occupancy only).
   add_rostest(test/ros/two_pipelines.test DEPENDENCIES ${ISM_PIPELINE_TARGETS})
   # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
