@@ -42,8 +42,7 @@ NonholonomicModel nonholonomicModel(const LocalizerConfig& config,
 }  // namespace
 
 double twoDofGateOfSameTail(double gate_3dof) {
-  if (!(gate_3dof > 0.0)) return gate_3dof;
-  if (!std::isfinite(gate_3dof)) return gate_3dof;
+  if (!(gate_3dof > 0.0) || !std::isfinite(gate_3dof)) return gate_3dof;
   const double tail = std::erfc(std::sqrt(0.5 * gate_3dof)) +
                       std::sqrt(2.0 * gate_3dof / M_PI) * std::exp(-0.5 * gate_3dof);
   // Beyond ~1500 the tail underflows to 0; the quantiles there differ by a negligible 2 ln g.
@@ -76,6 +75,7 @@ bool Localizer::setImuMounting(const Eigen::Matrix3d& base_from_imu) {
 double Localizer::vehicleHeading() const {
   return headingOf(filter_->state().rotation * forward_in_imu_);
 }
+
 ErrorCovariance Localizer::initialWorldCovariance() const {
   Eigen::Matrix<double, 15, 1> sigma;
   const double tilt = config_.initial_rotation_sigma_deg * kDegToRad;

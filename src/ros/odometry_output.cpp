@@ -28,8 +28,8 @@ OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader) {
 OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions& options)
     : publish_tf_(options.publish_tf),
       tf_max_heading_sigma_deg_(options.tf_max_heading_sigma_deg),
-      base_frame_(options.base_frame),
-      imu_frame_(options.imu_frame),
+      base_frame_(frames::tfFrameId(options.base_frame)),
+      imu_frame_(frames::tfFrameId(options.imu_frame)),
       max_path_length_(std::max(options.max_path_length, 1)),
       path_publish_period_s_(options.path_publish_period_s) {
   path_.header.frame_id = options.map_frame;
@@ -38,7 +38,7 @@ OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions&
 }
 
 void OdometryOutput::noteImuFrame(const std::string& frame_id) {
-  if (imu_frame_.empty() && !frame_id.empty()) imu_frame_ = frame_id;
+  if (imu_frame_.empty() && !frame_id.empty()) imu_frame_ = frames::tfFrameId(frame_id);
 }
 
 void OdometryOutput::publish(const ros::Time& stamp,
@@ -105,7 +105,8 @@ std::optional<Eigen::Matrix3d> OdometryOutput::imuMounting() {
   }
 }
 
-std::optional<Eigen::Vector3d> OdometryOutput::antennaInImu(const std::string& fix_frame) {
+std::optional<Eigen::Vector3d> OdometryOutput::antennaInImu(const std::string& fix_frame_id) {
+  const std::string fix_frame = frames::tfFrameId(fix_frame_id);
   if (fix_frame.empty() || fix_frame == imu_frame_) return Eigen::Vector3d::Zero();
   if (imu_frame_.empty()) return std::nullopt;
   try {

@@ -211,10 +211,8 @@ class SemanticOctomapNodeCore::Impl {
       detectClockJump();
       warnIfOffTheClock(cloud->header.stamp);
       monitor_->noteScan(cloud->header.stamp.toSec(), wallNow());
-      // tf2 refuses a frame with a leading slash (older drivers' "/velo_link"): every scan
-      // was dropped "without a pose".
-      std::string frame = cloud->header.frame_id;
-      if (!frame.empty() && frame.front() == '/') frame.erase(0, 1);
+      // A leading slash ("/velo_link"): every scan was dropped "without a pose".
+      const std::string frame = frames::tfFrameId(cloud->header.frame_id);
       if (frame.empty()) throw std::invalid_argument("no frame_id: its pose in tf needs one");
       label_camera_->setLidarFrame(frame);
       if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);

@@ -7,6 +7,7 @@
 
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/localization_diagnostics.h"
+#include "inekf_semantic_mapping/ros/names.h"
 
 namespace inekf_semantic_mapping {
 namespace ros_conversions {
@@ -297,6 +298,13 @@ std::string valueOf(const diagnostic_updater::DiagnosticStatusWrapper& status,
     if (value.key == key) return value.value;
   }
   return "(missing)";
+}
+
+// A frame_id with a leading slash (older drivers' "/gps") names the frame tf2 knows without it.
+TEST(Frames, ALeadingSlashIsNotPartOfTheTfFrame) {
+  EXPECT_EQ(frames::tfFrameId("/gps"), "gps");
+  EXPECT_EQ(frames::tfFrameId("gps"), "gps");
+  EXPECT_EQ(frames::tfFrameId(""), "");
 }
 
 TEST(LocalizationMonitor, WithoutFixesTheStatusTurnsWarnThenError) {

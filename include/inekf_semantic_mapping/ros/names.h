@@ -8,6 +8,8 @@
 // absolute names (bag_topics), the nodes' defaults are the same names without the leading slash.
 #pragma once
 
+#include <string>
+
 namespace inekf_semantic_mapping {
 namespace bag_topics {
 // The topics of a KITTI bag (this package's kitti2bag and the Python kitti2bag).
@@ -64,5 +66,11 @@ constexpr char kCameraGrayLeft[] = "camera_gray_left";
 constexpr char kCameraGrayRight[] = "camera_gray_right";
 constexpr char kCameraColorLeft[] = "camera_color_left";
 constexpr char kCameraColorRight[] = "camera_color_right";
+
+// A message's frame_id as tf2 names it: tf2 refuses a leading slash (older drivers' "/velo_link",
+// "/gps"), and every lookup of such a frame failed.
+inline std::string tfFrameId(const std::string& frame_id) {
+  return !frame_id.empty() && frame_id.front() == '/' ? frame_id.substr(1) : frame_id;
+}
 }  // namespace frames
 }  // namespace inekf_semantic_mapping
