@@ -112,6 +112,16 @@ TEST(PointLabelScore, AccuracyCoverageAndIouOverLabelledPoints) {
   EXPECT_NE(PointLabelScore().toJson().find("\"accuracy\":null"), std::string::npos);
 }
 
+// A predicted id above 255 (a class set's own ids) is a wrong label, never the class of its low
+// byte (263 is not road).
+TEST(PointLabelScore, APredictedIdAboveAByteIsWrongNotItsLowByte) {
+  PointLabelScore score;
+  score.add(cityscapes::kRoad, 256u + cityscapes::kRoad);
+  EXPECT_EQ(score.labelled(), 1u);
+  EXPECT_EQ(score.correct(), 0u);
+  EXPECT_EQ(score.predictedCount(cityscapes::kRoad), 0u);
+}
+
 TEST(RealSemantics, DefaultEnetLabellingPathMeetsAccuracyOnSemanticKitti) {
   ISM_REQUIRE_SHARED(kEnetModel);
   ISM_REQUIRE_SHARED(kSequences);

@@ -228,6 +228,18 @@ TEST_F(GridProjectionTest, RoadVoxelsDefineTheGroundWhereThereAreEnough) {
   EXPECT_EQ(cell(few.occupancy, 1.0, 0.25), kGridUnknown);
 }
 
+// Without a path sample or enough road to seed it, the ground is the plane ground_z (a map shown
+// in the sensor's frame, the ground below it), not z = 0.
+TEST_F(GridProjectionTest, WithoutSeedsTheGroundIsThePlaneGroundZ) {
+  config_.ground_z = -2.0;
+  occupied(0, 0, -2.25, cs::kRoad);  // one column of road: no seed, its top on the plane
+  occupied(1, 0, -1.25, cs::kCar);   // 0.75 m above the plane
+  const ProjectedGrids grids = project();
+  EXPECT_DOUBLE_EQ(grids.occupancy.origin_z, -2.0);
+  EXPECT_EQ(cell(grids.drivable, 0, 0), kGridFree);
+  EXPECT_EQ(cell(grids.occupancy, 1, 0), kGridOccupied);
+}
+
 TEST(GridProjection, TooLargeKnownSpaceIsRefusedBeforeAllocating) {
   SemanticOcTree tree(0.2, ClassSet::cityscapes(), FusionModel());
   tree.updateNode(octomap::point3d(0, 0, 0), true);

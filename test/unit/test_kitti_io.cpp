@@ -448,6 +448,50 @@ TEST(KittiVelodyne, BadSizeAndMissingFileNameTheFile) {
   fs::remove_all(dir);
 }
 
+// One point 10 m away at `azimuth` (rad, atan2(y, x)) and height z.
+void appendPoint(VelodyneScan* scan, double azimuth, float z) {
+  scan->xyzi.insert(scan->xyzi.end(), {static_cast<float>(10.0 * std::cos(azimuth)),
+                                       static_cast<float>(10.0 * std::sin(azimuth)), z, 0.5f});
+}
+
+// One laser's sweep as the scans store it: from straight ahead, azimuth rising in 10 degree steps
+// round to just before straight ahead again (atan2 wraps from +180 to -180 degrees at the rear).
+void appendSweep(VelodyneScan* scan, float z) {
+  for (int step = 0; step < 36; ++step) appendPoint(scan, step * M_PI / 18.0, z);
+}
+
+// More wraps than lasers (a merged or repeated cloud) keep the extra points on the last ring.
+TEST(KittiVelodyne, RingsBeyondTheLaserCountStayOnTheLastRing) {
+  VelodyneScan scan;
+  for (int laser = 0; laser < 4; ++laser) appendSweep(&scan, -1.0f - 0.1f * laser);
+  const std::vector<std::uint16_t> all = computeRings(scan, 64);
+  ASSERT_EQ(all.size(), 4u * 36u);
+  EXPECT_EQ(all[35], 0);
+  EXPECT_EQ(all[36], 1);
+  EXPECT_EQ(all.back(), 3);
+  const std::vector<std::uint16_t> clamped = computeRings(scan, 2);
+  ASSERT_EQ(clamped.size(), scan.size());
+  EXPECT_EQ(clamped[35], 0);
+  for (std::size_t i = 36; i < clamped.size(); ++i) ASSERT_EQ(clamped[i], 1) << "point " << i;
+}
+
+// A laser's azimuth dithering about straight ahead as its sweep begins starts no new ring: the
+// ring ends only after the sweep went round by the rear.
+TEST(KittiVelodyne, AzimuthJitterAroundStraightAheadStartsNoRing) {
+  VelodyneScan scan;
+  for (int laser = 0; laser < 3; ++laser) {
+    for (const double jitter : {0.0, -0.002, 0.001, -0.001, 0.003}) {
+      appendPoint(&scan, jitter, -1.0f - 0.1f * laser);
+    }
+    for (int step = 1; step < 36; ++step) appendPoint(&scan, step * M_PI / 18.0, -1.0f);
+  }
+  const std::vector<std::uint16_t> rings = computeRings(scan, 64);
+  ASSERT_EQ(rings.size(), 3u * 40u);
+  for (std::size_t i = 0; i < rings.size(); ++i) {
+    ASSERT_EQ(rings[i], i / 40) << "point " << i;
+  }
+}
+
 TEST(KittiRawDrive, AFileWithoutAStampIsLeftOutAndNamed) {
   const std::string dir = makeTempDir("kitti_drive") + "/2011_09_26_drive_0001_extract";
   writeFile(dir + "/velodyne_points/data/0000000000.bin", std::string(16, '\0'));

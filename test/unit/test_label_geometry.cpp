@@ -268,6 +268,17 @@ TEST(LabelGeometryTest, PointsOutOfRangeOrNotFiniteAreLeftAlone) {
   EXPECT_EQ(labels, scene.labels);
 }
 
+// A point on the lines through a cell's centre weighs nothing on the cells across them: with no
+// ground in its own cells it takes the nearest supported cell's ground, not none.
+TEST(LabelGeometryTest, APointOnACellCentreTakesTheNearestSupportedGround) {
+  Scene scene;
+  for (int i = 0; i < 5; ++i) scene.add(1.5f, 0.5f, -kSensorHeight, cityscapes::kRoad);
+  scene.add(0.5f, 0.5f, 0.27f, cityscapes::kCar);  // the centre of the empty cell beside them
+  const Eigen::VectorXf h = heightsOf(scene);
+  ASSERT_FALSE(std::isnan(h(5)));
+  EXPECT_NEAR(h(5), 2.0f, 1e-5f);
+}
+
 TEST(LabelGeometryTest, ClassesWithoutAKindAreNeverRejected) {
   const SurfaceKindTable& kinds = cityscapesSurfaceKinds();
   for (int id : {cityscapes::kRoad, cityscapes::kSidewalk, cityscapes::kParking,

@@ -93,6 +93,18 @@ TEST(MapLabelImageTest, FreeUnknownAndUnsureVoxelsLabelNothing) {
   EXPECT_GT(labelled, 120u);
 }
 
+// A voxel that had classes and was then seen through (a car that drove away) labels nothing.
+TEST(MapLabelImageTest, AClassedVoxelSeenFreeAgainLabelsNothing) {
+  SemanticMappingSession session = mappedWall();
+  // A wall twice as far and twice as wide: its rays cross every voxel of the first one.
+  Eigen::Matrix3Xf far = 2.0f * wall();
+  far.row(2).setConstant(20.05f);
+  for (int i = 0; i < 12; ++i) session.insertScan(far, Eigen::Isometry3d::Identity());
+  const OwnedLabelImage image = mapLabelImage(session.tree(), wall(), Eigen::Isometry3d::Identity(),
+                                              testCamera(), MapLabelImageOptions());
+  for (std::uint8_t p : image.pixels) ASSERT_EQ(p, 0);
+}
+
 TEST(MapLabelImageTest, TheSensorPoseMovesThePointsIntoTheMap) {
   SemanticMappingSession session = mappedWall();
   // The same wall seen from 4 m closer: points 6.05 m ahead of a sensor at z = 4.
@@ -103,6 +115,25 @@ TEST(MapLabelImageTest, TheSensorPoseMovesThePointsIntoTheMap) {
   std::size_t labelled = 0;
   for (std::uint8_t p : image.pixels) labelled += p != 0;
   EXPECT_GT(labelled, 120u);
+}
+
+// A class whose label id does not fit a byte (SemanticKITTI's moving-truck, 258) labels nothing,
+// rather than another class (258 written as 2).
+TEST(MapLabelImageTest, LabelIdsAboveAByteLabelNothing) {
+  SemanticMappingConfig config;
+  config.resolution_m = 0.1;
+  SemanticMappingSession session(config);
+  const Eigen::Matrix3Xf points = wall();
+  const std::vector<std::uint32_t> moving_truck(static_cast<std::size_t>(points.cols()), 258);
+  for (int i = 0; i < 3; ++i) {
+    session.insertScanWithPointLabels(points, Eigen::Isometry3d::Identity(), moving_truck, 0);
+  }
+  MapLabelImageStats stats;
+  const OwnedLabelImage image = mapLabelImage(session.tree(), points, Eigen::Isometry3d::Identity(),
+                                              testCamera(), MapLabelImageOptions(), &stats);
+  EXPECT_EQ(stats.points_in_view, static_cast<std::size_t>(points.cols()));
+  EXPECT_EQ(stats.labelled, 0u);
+  for (std::uint8_t p : image.pixels) ASSERT_EQ(p, 0);
 }
 
 TEST(MapLabelImageTest, ABadImageSizeOrNoneLabelIsAClearError) {

@@ -250,6 +250,19 @@ TEST(RasterizePointLabels, NearestLabelledPointWinsAndReadsBack) {
   EXPECT_THROW(rasterizePointLabels(projected, labels, 0, 3, 99, 0, &image), std::invalid_argument);
 }
 
+// The count is of pixels labelled: a nearer point overwriting a pixel adds none.
+TEST(RasterizePointLabels, ANearerPointOverwritingAPixelCountsItOnce) {
+  ProjectedPoints projected;
+  projected.u = Eigen::VectorXf::Constant(3, 1.f);
+  projected.v = Eigen::VectorXf::Constant(3, 1.f);
+  projected.depth = Eigen::VectorXf(3);
+  projected.depth << 5.f, 4.f, 3.f;  // each nearer than the one before
+  projected.valid = {1, 1, 1};
+  std::vector<std::uint32_t> image;
+  EXPECT_EQ(rasterizePointLabels(projected, {7, 8, 11}, 3, 3, 99, 0, &image), 1u);
+  EXPECT_EQ(image[1 * 3 + 1], 11u);
+}
+
 TEST(RejectOccludedPoints, OcclusionWindowReachesRadiusCellsToBothSides) {
   const OcclusionOptions options;
   for (int side : {-1, 1}) {

@@ -88,6 +88,30 @@ TEST(ScanLabelPairingTest, ALabelImageForAScanThatWentInAddsLateEvidenceOrWaitsI
   EXPECT_EQ(pairing.addLabels(labelsAt(0.03), late), ScanLabelPairing::LabelsPlace::kUnmatched);
 }
 
+// Segmentation lagging seconds behind (a loaded machine): its label image still reaches a scan
+// that went in without labels up to 10 s behind the newest one, and no scan older than that.
+TEST(ScanLabelPairingTest, ALateLabelImageReachesScansUpToTenSecondsBack) {
+  MappingStatistics stats;
+  ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);
+  const auto insert = [](PendingScan&) { return true; };
+  const auto keep = [&](double stamp) {
+    pairing.addScan(scanAt(stamp));
+    pairing.flush(insert);
+    pairing.keepForLateLabels(InsertedScan{stamp, Eigen::Matrix3Xf(3, 0), {}, "velo", false});
+  };
+  std::vector<double> applied;
+  const auto late = [&](PendingLabels&, InsertedScan& scan) {
+    applied.push_back(scan.stamp);
+    return true;
+  };
+  for (const double stamp : {0.0, 0.5, 9.5}) keep(stamp);
+  EXPECT_EQ(pairing.addLabels(labelsAt(0.01), late), ScanLabelPairing::LabelsPlace::kLate);
+  keep(10.8);  // 0.5 is now more than 10 s back
+  EXPECT_EQ(pairing.addLabels(labelsAt(0.51), late), ScanLabelPairing::LabelsPlace::kUnmatched);
+  ASSERT_EQ(applied.size(), 1u);
+  EXPECT_DOUBLE_EQ(applied[0], 0.0);
+}
+
 TEST(ScanLabelPairingTest, StampsThatGoBackByMoreThanASecondAreANewTimeline) {
   MappingStatistics stats;
   ScanLabelPairing pairing(PairingOptions{0.05, 1.0, 1.0}, &stats);

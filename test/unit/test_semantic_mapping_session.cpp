@@ -433,6 +433,22 @@ TEST(SemanticMappingSessionTest, NeighbouringScansBorrowALabelImageFromItsPose) 
   EXPECT_EQ(session.statistics().scans_with_neighbour_labels, 0u);
 }
 
+// A label image coming after a scan farther than the window from it lends that scan nothing.
+TEST(SemanticMappingSessionTest, ALabelImageLendsNothingToAScanFartherThanTheWindow) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig(/*label_wait_s=*/0.3);
+  config.label_neighbour_s = 0.1;
+  SemanticMappingSession session(config);
+  session.setPoseLookup([](double, const std::string&) { return Eigen::Isometry3d::Identity(); });
+  session.setCameraView(testCamera());
+  session.addScan(0.15, "velo", testScan());
+  session.advanceTo(1.0);  // in without labels: no label image is coming
+  session.addLabelImage(0.0, view, testCamera());
+  EXPECT_EQ(session.statistics().scans_inserted, 1u);
+  EXPECT_EQ(session.statistics().scans_with_neighbour_labels, 0u);
+}
+
 // Label images later than label_wait: their scans went in without labels, and the labels still
 // add class evidence (no second occupancy update).
 TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
@@ -891,6 +907,24 @@ TEST_F(SemanticMapFileTest, HeaderClassTableAndLeavesCannotStandForAnotherMap) {
   EXPECT_EQ(empty_again.tree().size(), 0u);
   // The intact file still loads.
   EXPECT_EQ(refusal(good_), "loaded");
+}
+
+// The reader's limits are where a map may really go: a pruned leaf of 256 voxels a side (free
+// space) loads, and a stored class index one past the class table is refused.
+TEST_F(SemanticMapFileTest, ALeafOfTheLargestSpanLoadsAndAClassIndexPastTheTableIsRefused) {
+  // Eight nodes with one child each, then a leaf at depth 8 of 16: 2^8 voxels a side.
+  std::string chain;
+  for (int level = 0; level < 8; ++level) chain += node(0.0f, 0x01);
+  const std::unique_ptr<SemanticOcTree> tree =
+      loadSemanticOcTree(write("span.ot", v1Header(9) + chain + node(-2.0f, 0)));
+  ASSERT_TRUE(tree);
+  EXPECT_EQ(tree->size(), 9u);
+  // The same leaf naming class 0 of a table without classes.
+  std::string classed = node(2.0f, 0);
+  classed[sizeof(float)] = '\0';
+  EXPECT_NE(
+      refusal(write("class.ot", v1Header(9) + chain + classed)).find("outside the class table"),
+      std::string::npos);
 }
 
 }  // namespace
