@@ -123,7 +123,10 @@ bool Localizer::propagate(const ImuStep& step) {
   predicted_state_ = filter_->state();
   predicted_covariance_ = filter_->covariance();
   if (config_.nonholonomic && step.dt > 0.0) {
-    const double heading_sigma_rad = std::sqrt(filter_->poseCovariance()(5, 5));
+    // About the map's z axis: the pose covariance's (5, 5) is about the IMU's own z, horizontal
+    // for an IMU board mounted upright (the constraint ran with the heading unknown and pinned
+    // it 19 deg off).
+    const double heading_sigma_rad = yawSigma();
     if (!(heading_sigma_rad <= config_.nonholonomic_max_heading_sigma_deg * kDegToRad)) {
       ++statistics_.nonholonomic_skipped;
       return true;

@@ -1001,13 +1001,16 @@ struct CurveRun {
   bool finite = true;
 };
 
-// The IMU's mounting on the car: turned by yaw_deg about the car's z axis, and whether the
+// The IMU's mounting on the car: turned by yaw_deg about the car's z axis, then pitched by
+// pitch_deg about the turned y axis (-90: the board upright, its x axis up), and whether the
 // session is told (setImuMounting).
 struct ImuMount {
-  double yaw_deg = 0.0;
+  double yaw_deg = 0.0, pitch_deg = 0.0;
   bool told = true;
   Eigen::Matrix3d baseFromImu() const {
-    return Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    return (Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()) *
+            Eigen::AngleAxisd(pitch_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()))
+        .toRotationMatrix();
   }
 };
 
@@ -1131,13 +1134,17 @@ TEST(LocalizationSession, WithoutAnOrientationTheHeadingIsAlignedFromTheGpsTrack
 // Found by review: an IMU mounted turned (90 deg: its x axis the car's left; 180: backwards), tf
 // saying so. The heading monitor and the land-vehicle constraint took the IMU's x axis for the
 // car's and held the heading that far off. Told the mounting, the levelled start aligns right.
+// Also a board mounted upright (its x axis up).
 TEST(LocalizationSession, AnImuMountedTurnedIsAlignedToTheCarsHeading) {
-  for (const double mount_yaw_deg : {90.0, 180.0, -120.0}) {
-    SCOPED_TRACE(mount_yaw_deg);
+  for (const auto& [mount_yaw_deg, mount_pitch_deg] :
+       {std::pair{90.0, 0.0}, {180.0, 0.0}, {-120.0, 0.0}, {0.0, -90.0}}) {
+    SCOPED_TRACE(std::to_string(mount_yaw_deg) + " / " + std::to_string(mount_pitch_deg));
     ImuMount mount;
     mount.yaw_deg = mount_yaw_deg;
+    mount.pitch_deg = mount_pitch_deg;
     const CurveRun run = runCurve(60.0, false, 0.0, 30.0, -1, 1, 100.0, mount);
     EXPECT_TRUE(run.finite);
+    EXPECT_EQ(run.statistics.filter.heading_alignments, 1);
     EXPECT_EQ(run.statistics.filter.heading_recoveries, 0);
     EXPECT_LT(run.worst_yaw_error_after_deg, 2.0);
     EXPECT_LT(run.worst_horizontal_error_after_m, 3.0);
