@@ -174,6 +174,10 @@ class InekfNodeCore::Impl {
   void onImu(const sensor_msgs::Imu::ConstPtr& message) {
     output_.noteImuFrame(message->header.frame_id);
     if (!mounting_taken_) takeImuMounting();
+    if (velocity_before_imu_) {
+      useVelocity(*velocity_before_imu_);
+      velocity_before_imu_.reset();
+    }
     remember(message->header.stamp, kRecentImuStamps, &recent_imu_stamps_);
     handle("inekf_node/imu", message->header.stamp,
            [&] { return session_.addImu(imuEvent(*message)); });
@@ -204,7 +208,9 @@ class InekfNodeCore::Impl {
   Eigen::Vector3d antennaInImu(const std::string& fix_frame) {
     const auto known = antenna_by_frame_.find(fix_frame);
     if (known != antenna_by_frame_.end()) return known->second;
-    const std::optional<Eigen::Vector3d> antenna = output_.antennaInImu(fix_frame);
+    const std::optional<Eigen::Isometry3d> fix_in_imu = output_.frameInImu(fix_frame);
+    const std::optional<Eigen::Vector3d> antenna =
+        fix_in_imu ? std::optional<Eigen::Vector3d>(fix_in_imu->translation()) : std::nullopt;
     if (!antenna) {
       // Before the first IMU message the IMU's frame is not known: nothing to say yet.
       if (!output_.imuFrame().empty() && warned_no_antenna_frame_.insert(fix_frame).second) {
@@ -226,10 +232,37 @@ class InekfNodeCore::Impl {
     return *antenna;
   }
 
+  // The GPS velocity (for the start): frame_id the map frame: east-north-up; the IMU's frame or
+  // none: the IMU's axes; another frame on the robot: turned into the IMU's axes through tf (a
+  // velocity in base_link's axes with the IMU mounted turned was taken in the IMU's, 4 m off).
   void onVelocity(const geometry_msgs::TwistStamped::ConstPtr& message) {
-    const auto velocity = gpsVelocity(*message);
+    const std::string frame = frames::tfFrameId(message->header.frame_id);
+    if (output_.imuFrame().empty() && !frame.empty() && frame != output_.mapFrame()) {
+      // The IMU's frame is not known before its first message: used right after it comes.
+      velocity_before_imu_ = message;
+      return;
+    }
+    useVelocity(*message);
+  }
+
+  void useVelocity(const geometry_msgs::TwistStamped& message) {
+    std::optional<estimation::GpsVelocityEvent> velocity = gpsVelocity(message);
     if (!velocity) return;
-    handle("inekf_node/gps_velocity", message->header.stamp,
+    const std::string frame = frames::tfFrameId(message.header.frame_id);
+    velocity->in_body_frame = frame != output_.mapFrame();
+    if (velocity->in_body_frame) {
+      const std::optional<Eigen::Isometry3d> frame_in_imu = output_.frameInImu(frame);
+      if (!frame_in_imu) {
+        ROS_WARN_STREAM_THROTTLE(10.0, "inekf_node: no tf from the IMU's frame to '"
+                                           << frame << "', the frame of the GPS velocity on "
+                                           << velocity_subscriber_.getTopic()
+                                           << ": not used (frame_id " << output_.mapFrame()
+                                           << " for east-north-up)");
+        return;
+      }
+      velocity->velocity = frame_in_imu->rotation() * velocity->velocity;
+    }
+    handle("inekf_node/gps_velocity", message.header.stamp,
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
@@ -282,7 +315,8 @@ class InekfNodeCore::Impl {
   ros::NodeHandle private_nh_;
   bool origin_kept_ = false;
   bool mounting_taken_ = false;
-  std::map<std::string, Eigen::Vector3d> antenna_by_frame_;  // fix frame -> lever arm (IMU frame)
+  geometry_msgs::TwistStamped::ConstPtr velocity_before_imu_;  // used at the first IMU message
+  std::map<std::string, Eigen::Vector3d> antenna_by_frame_;    // fix frame -> lever arm (IMU frame)
   std::set<std::string> warned_no_antenna_frame_;
 };
 

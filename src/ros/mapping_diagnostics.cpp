@@ -13,6 +13,8 @@ using diagnostic_msgs::DiagnosticStatus;
 constexpr std::size_t kMaxWaitingStamps = 500;
 // One scan in this many dropped without a pose over the window: WARN (half: ERROR).
 constexpr std::size_t kDropsWarnShare = 10;
+// Wall seconds without any pose (no scan in the map yet) before the status is an ERROR.
+constexpr double kFirstPoseErrorS = 30.0;
 
 std::string saveText(const SaveRecord& record, double wall_s) {
   if (record.wall_s < 0) return "never";
@@ -76,6 +78,16 @@ std::pair<std::size_t, std::size_t> MappingMonitor::recentDrops(
                                 stats.scans_without_pose < drop_counts_.back().without_pose)) {
     drop_counts_.clear();
   }
+  // Until a scan first goes in, drops are the wait for the first pose (fillMap says so); the
+  // window counts from the first status after it (the scans inserted by then came after them).
+  if (stats.scans_inserted == 0) {
+    drop_counts_.clear();
+    return {0, 0};
+  }
+  if (drop_counts_.empty()) {
+    drop_counts_.push_back(
+        {wall_s, stats.scans_received - stats.scans_inserted, stats.scans_without_pose});
+  }
   drop_counts_.push_back({wall_s, stats.scans_received, stats.scans_without_pose});
   while (drop_counts_.size() > 1 && drop_counts_[1].wall_s <= wall_s - options_.window_s) {
     drop_counts_.pop_front();
@@ -120,6 +132,23 @@ void MappingMonitor::fillMap(const mapping::SemanticMappingSession& session, con
   }
   // Over the window, not since the start: a share of drops is said while it lasts (a quarter of
   // a looping bag's scans went without a pose under "mapping" OK) and clears when it ends.
+  // No pose yet at all: the localization has not started or waits for its heading (inekf_node's
+  // tf does), or tf does not link the map to the sensor: WARN, ERROR after kFirstPoseErrorS (a
+  // normal start without an IMU orientation read ERROR "most scans dropped" for seconds).
+  if (stats.scans_inserted == 0 && stats.scans_without_pose > 0) {
+    if (waiting_for_pose_since_wall_s_ < 0) waiting_for_pose_since_wall_s_ = wall_s;
+    const double waited_s = wall_s - waiting_for_pose_since_wall_s_;
+    const unsigned char waiting_level =
+        waited_s > kFirstPoseErrorS ? DiagnosticStatus::ERROR : DiagnosticStatus::WARN;
+    level = std::max(level, waiting_level);
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "no scan has had a pose yet (%zu dropped over %.0f s: map -> sensor not in tf)",
+                  stats.scans_without_pose, waited_s);
+    message = text;
+  } else if (stats.scans_inserted > 0) {
+    waiting_for_pose_since_wall_s_ = -1.0;
+  }
   const auto [received, without_pose] = recentDrops(stats, wall_s);
   if (received >= 5 && without_pose * kDropsWarnShare > received) {
     const bool most = without_pose * 2 > received;

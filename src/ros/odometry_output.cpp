@@ -66,30 +66,34 @@ void OdometryOutput::publish(const ros::Time& stamp,
 }
 
 bool OdometryOutput::holdTf(const nav_msgs::Odometry& odometry) {
-  if (!(tf_max_heading_sigma_deg_ > 0.0)) return false;
+  if (heading_known_ || !(tf_max_heading_sigma_deg_ > 0.0)) return false;
   // The yaw about the map's z axis (ROS order x y z roll pitch yaw).
   const double sigma_deg = std::sqrt(std::max(0.0, odometry.pose.covariance[35])) * 180.0 / M_PI;
-  const bool hold = !(sigma_deg <= tf_max_heading_sigma_deg_);
-  if (hold != tf_held_) {
-    if (hold) {
-      ROS_WARN_STREAM("inekf_node: tf " << path_.header.frame_id << " -> " << base_frame_
-                                        << " held back: the heading's sigma is " << std::fixed
-                                        << std::setprecision(0) << sigma_deg << " deg (above "
-                                        << "~tf_max_heading_sigma_deg, "
-                                        << tf_max_heading_sigma_deg_
-                                        << "); without an IMU orientation the GPS track gives "
-                                           "it once the car drives");
-    } else {
+  if (sigma_deg <= tf_max_heading_sigma_deg_) {
+    heading_known_ = true;
+    if (said_held_) {
       ROS_INFO_STREAM("inekf_node: heading known (sigma "
                       << std::fixed << std::setprecision(1) << sigma_deg << " deg): tf "
                       << path_.header.frame_id << " -> " << base_frame_ << " published");
     }
-    tf_held_ = hold;
+    return false;
   }
-  return hold;
+  if (!said_held_) {
+    said_held_ = true;
+    ROS_WARN_STREAM("inekf_node: tf " << path_.header.frame_id << " -> " << base_frame_
+                                      << " held back: the heading's sigma is " << std::fixed
+                                      << std::setprecision(0) << sigma_deg
+                                      << " deg (above ~tf_max_heading_sigma_deg, "
+                                      << tf_max_heading_sigma_deg_
+                                      << "); without an IMU orientation the GPS track gives it "
+                                         "once the car drives");
+  }
+  return true;
 }
 
 void OdometryOutput::clearPath() {
+  heading_known_ = false;  // a new start: tf waits for its heading again
+  said_held_ = false;
   path_.poses.clear();
   path_publisher_.publish(path_);
   last_path_publish_ = ros::Time();
@@ -105,13 +109,12 @@ std::optional<Eigen::Matrix3d> OdometryOutput::imuMounting() {
   }
 }
 
-std::optional<Eigen::Vector3d> OdometryOutput::antennaInImu(const std::string& fix_frame_id) {
-  const std::string fix_frame = frames::tfFrameId(fix_frame_id);
-  if (fix_frame.empty() || fix_frame == imu_frame_) return Eigen::Vector3d::Zero();
+std::optional<Eigen::Isometry3d> OdometryOutput::frameInImu(const std::string& frame_id) {
+  const std::string frame = frames::tfFrameId(frame_id);
+  if (frame.empty() || frame == imu_frame_) return Eigen::Isometry3d::Identity();
   if (imu_frame_.empty()) return std::nullopt;
   try {
-    return toIsometry(tf_buffer_.lookupTransform(imu_frame_, fix_frame, ros::Time(0)).transform)
-        .translation();
+    return toIsometry(tf_buffer_.lookupTransform(imu_frame_, frame, ros::Time(0)).transform);
   } catch (const tf2::TransformException&) {
     return std::nullopt;
   }

@@ -16,14 +16,14 @@ With ~source:=kitti_player the test publishes nothing: kitti_player (started pau
 
 With ~imu_mount_yaw_deg the IMU is mounted turned by that angle about base_link's z axis (frame
 imu_turned; the .test publishes the tf): its rates, accelerations, orientation and body-frame
-velocity are those of the turned axes. With ~antenna_in_base ([x, y, z] m) the fixes are of a GPS
+velocity are those of the turned axes (the velocity's in base_link's with ~velocity_in_base). With ~antenna_in_base ([x, y, z] m) the fixes are of a GPS
 antenna there (frame gps_antenna; the .test publishes the tf), not of the IMU. With
 ~imu_orientation false the IMU messages carry no orientation (the heading is unknown until the GPS
 track aligns it): errors count after ~settle_s, and tf map -> base_link must wait for the heading.
 
 Parameters (private): source (self | kitti_player), drive, first_frame, frames, rate, gps_every,
 gps_sigma_h, gps_sigma_v, seed, max_rms_m, inject_faults, loop_frames, player_frames,
-imu_mount_yaw_deg, antenna_in_base, imu_orientation, settle_s.
+imu_mount_yaw_deg, antenna_in_base, velocity_in_base, imu_orientation, settle_s.
 """
 
 import math
@@ -120,6 +120,7 @@ class InekfNodeTest(unittest.TestCase):
         cls.base_from_imu = rotation_rpy(0.0, 0.0, cls.mount_yaw)
         cls.antenna_in_base = np.array(rospy.get_param("~antenna_in_base", [0.0, 0.0, 0.0]))
         cls.imu_orientation = rospy.get_param("~imu_orientation", True)
+        cls.velocity_in_base = rospy.get_param("~velocity_in_base", False)
 
     def in_imu_axes(self, vector):
         return self.base_from_imu.T.dot(np.array(vector))
@@ -196,6 +197,9 @@ class InekfNodeTest(unittest.TestCase):
         message.header.frame_id = self.imu_frame  # kitti2bag: body-frame vf, vl, vu
         (message.twist.linear.x, message.twist.linear.y,
          message.twist.linear.z) = self.in_imu_axes(record[8:11])
+        if self.velocity_in_base:  # the OXTS body is base_link
+            message.header.frame_id = "base_link"
+            message.twist.linear.x, message.twist.linear.y, message.twist.linear.z = record[8:11]
         return message
 
     def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False,

@@ -80,8 +80,10 @@ TEST(MappingMonitor, ScansDroppedWithoutAPoseAreSaidWhileTheyLastAndClearAfter) 
 // 22 ...)").
 TEST(MappingMonitor, AResetStartsTheDropCountAgain) {
   MonitoredScans scans;
+  scans.drop_every = 0;
+  EXPECT_EQ(scans.statusAfter(10).level, DiagnosticStatus::OK);
   scans.drop_every = 1;
-  EXPECT_EQ(scans.statusAfter(8).level, DiagnosticStatus::ERROR);
+  EXPECT_EQ(scans.statusAfter(12).level, DiagnosticStatus::ERROR);
   scans.session().reset();
   scans.drop_every = 0;
   const diagnostic_updater::DiagnosticStatusWrapper after = scans.statusAfter(30);
@@ -101,6 +103,22 @@ TEST(MappingMonitor, MostLabelImagesRefusedIsAWarning) {
   monitor.fillLabels(session, /*labels_expected=*/true, 6.0, &status);
   EXPECT_EQ(status.level, DiagnosticStatus::WARN);
   EXPECT_NE(status.message.find("most label images refused"), std::string::npos) << status.message;
+}
+
+// Before any scan has had a pose (a localization waiting for its heading holds tf back) the
+// drops are said as that, WARN, not "most scans dropped" ERROR; ERROR after 30 s of it. Once scans
+// go in, the window counts from there.
+TEST(MappingMonitor, NoPoseYetIsAWarningUntilItLasts) {
+  MonitoredScans scans;
+  scans.drop_every = 1;
+  const diagnostic_updater::DiagnosticStatusWrapper waiting = scans.statusAfter(20);
+  EXPECT_EQ(waiting.level, DiagnosticStatus::WARN) << waiting.message;
+  EXPECT_NE(waiting.message.find("no scan has had a pose yet (20 dropped"), std::string::npos)
+      << waiting.message;
+  EXPECT_EQ(scans.statusAfter(300).level, DiagnosticStatus::ERROR);  // 30 s more
+  scans.drop_every = 0;
+  const diagnostic_updater::DiagnosticStatusWrapper mapping = scans.statusAfter(20);
+  EXPECT_EQ(mapping.level, DiagnosticStatus::OK) << mapping.message;
 }
 
 // Clouds the node cannot read (an Ouster-like driver's integer x/y/z): counted and said in the

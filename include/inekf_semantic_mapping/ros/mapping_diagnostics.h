@@ -81,6 +81,7 @@ class MappingMonitor {
   std::string last_refusal_;
   std::map<double, double> arrival_wall_s_;  // by scan stamp, until inserted (bounded)
   double first_scan_wall_s_ = -1.0, last_scan_wall_s_ = -1.0, last_label_wall_s_ = -1.0;
+  double waiting_for_pose_since_wall_s_ = -1.0;  // < 0: a scan went in (or none dropped yet)
 };
 
 }  // namespace ros_conversions

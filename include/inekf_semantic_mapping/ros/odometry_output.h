@@ -26,9 +26,11 @@ namespace ros_conversions {
 
 struct OdometryOutputOptions {
   bool publish_tf = true;
-  // tf map -> base waits while the heading's sigma is above this (deg): a start without an IMU
-  // orientation knows no heading until the car moves, and a map took its scans turned anywhere.
-  // The odometry (with its covariance) is published meanwhile. <= 0: tf whatever the heading.
+  // After a start (and a reset), tf map -> base waits until the heading's sigma is first at or
+  // below this (deg): a start without an IMU orientation knows no heading until the car moves,
+  // and a map took its scans turned anywhere. The odometry (with its covariance) is published
+  // meanwhile. Not again later in the run: tf2 interpolates over a gap in tf, so a pause there
+  // would hold back nothing. <= 0: tf from the start.
   double tf_max_heading_sigma_deg = 10.0;
   std::string map_frame = frames::kMap;
   std::string base_frame = frames::kBaseLink;
@@ -57,29 +59,33 @@ class OdometryOutput {
   void publish(const ros::Time& stamp, const estimation::LocalizationSession::Estimate& estimate,
                const Eigen::Vector3d& angular_velocity);
 
-  // Empties the path and publishes the empty path (the filter was reset).
+  // Empties the path and publishes the empty path (the filter was reset); tf waits for the new
+  // start's heading (tf_max_heading_sigma_deg).
   void clearPath();
 
   // The rotation of the IMU's axes in base_frame's: identity when the IMU is the base (or its
   // messages name no frame), from tf otherwise; nullopt while tf has no such transform.
   std::optional<Eigen::Matrix3d> imuMounting();
-  // Where a GPS fix's frame (the antenna) sits in the IMU's frame (tf IMU frame -> fix_frame):
-  // zero when the fix names no frame or the IMU's own; nullopt while the IMU frame is not known
-  // yet or tf has no such transform.
-  std::optional<Eigen::Vector3d> antennaInImu(const std::string& fix_frame);
+  // A sensor frame's pose in the IMU's frame (tf IMU frame -> frame_id; a leading slash
+  // dropped): identity when the message names no frame or the IMU's own; nullopt while the IMU
+  // frame is not known yet or tf has no such transform. A GPS fix's frame: the antenna's lever
+  // arm (its translation); a GPS velocity's: the rotation into the IMU's axes.
+  std::optional<Eigen::Isometry3d> frameInImu(const std::string& frame_id);
+  const std::string& mapFrame() const { return path_.header.frame_id; }
 
  private:
   // The static base_frame -> imu_frame from tf; nullopt (the IMU pose is published as the base
   // pose) when the IMU is the base or tf has no such transform (warned once). Looked up for
   // every estimate: it is cheap, and a transform that arrives late is picked up.
   std::optional<Eigen::Isometry3d> baseFromImu();
-  // True while the odometry's heading sigma is above tf_max_heading_sigma_deg (said once at each
-  // change).
+  // True until the odometry's heading sigma is first at or below tf_max_heading_sigma_deg after
+  // a start (the wait and its end are said once).
   bool holdTf(const nav_msgs::Odometry& odometry);
 
   bool publish_tf_ = true;
   double tf_max_heading_sigma_deg_ = 10.0;
-  bool tf_held_ = false;  // the heading was too uncertain at the last estimate
+  bool heading_known_ = false;  // since the start: tf flows
+  bool said_held_ = false;      // the wait was said
   std::string base_frame_, imu_frame_;
   int max_path_length_ = 5000;
   double path_publish_period_s_ = 1.0;
