@@ -149,7 +149,8 @@ class OwnRobotTest(unittest.TestCase):
                       "pose, %d occupied voxels", clouds, last_info.scans_received,
                       last_info.scans_inserted, last_info.scans_without_pose,
                       last_info.occupied_voxels)
-        self.assertEqual(last_info.scans_received, clouds)
+        # A cloud or two may be lost before the map's subscription connects, or under load.
+        self.assertGreaterEqual(last_info.scans_received, 0.95 * clouds)
         # Those after the heading is known (tf waits for it) go in.
         self.assertGreater(last_info.scans_inserted, 0.5 * clouds)
         self.assertGreater(last_info.occupied_voxels, 1000)
