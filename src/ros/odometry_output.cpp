@@ -99,49 +99,48 @@ void OdometryOutput::clearPath() {
   last_path_publish_ = ros::Time();
 }
 
+std::optional<Eigen::Isometry3d> OdometryOutput::latestTransform(const std::string& target,
+                                                                 const std::string& source,
+                                                                 std::string* why) {
+  try {
+    return toIsometry(tf_buffer_.lookupTransform(target, source, ros::Time(0)).transform);
+  } catch (const tf2::TransformException& error) {
+    if (why) *why = error.what();
+    return std::nullopt;
+  }
+}
+
 std::optional<Eigen::Matrix3d> OdometryOutput::imuMounting() {
   if (imu_frame_.empty() || imu_frame_ == base_frame_) return Eigen::Matrix3d::Identity();
-  try {
-    return toIsometry(tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0)).transform)
-        .rotation();
-  } catch (const tf2::TransformException&) {
-    return std::nullopt;  // baseFromImu says so once
-  }
+  const std::optional<Eigen::Isometry3d> base_from_imu = latestTransform(base_frame_, imu_frame_);
+  if (!base_from_imu) return std::nullopt;  // baseFromImu says so once
+  return base_from_imu->rotation();
 }
 
 std::optional<Eigen::Isometry3d> OdometryOutput::frameInImu(const std::string& frame_id) {
   const std::string frame = frames::tfFrameId(frame_id);
   if (frame.empty() || frame == imu_frame_) return Eigen::Isometry3d::Identity();
   if (imu_frame_.empty()) return std::nullopt;
-  try {
-    return toIsometry(tf_buffer_.lookupTransform(imu_frame_, frame, ros::Time(0)).transform);
-  } catch (const tf2::TransformException&) {
-    return std::nullopt;
-  }
+  return latestTransform(imu_frame_, frame);
 }
 
 std::optional<Eigen::Isometry3d> OdometryOutput::baseFromImu() {
   if (imu_frame_.empty() || imu_frame_ == base_frame_) return std::nullopt;
-  try {
-    const geometry_msgs::TransformStamped T =
-        tf_buffer_.lookupTransform(base_frame_, imu_frame_, ros::Time(0));
-    if (!found_base_imu_) {
-      found_base_imu_ = true;
-      ROS_INFO_STREAM("inekf_node: the filter estimates " << imu_frame_ << "; publishing "
-                                                          << base_frame_ << " through tf "
-                                                          << base_frame_ << " -> " << imu_frame_);
-    }
-    return toIsometry(T.transform);
-  } catch (const tf2::TransformException& error) {
-    if (!warned_no_base_imu_) {
-      warned_no_base_imu_ = true;
-      ROS_WARN_STREAM("inekf_node: no tf " << base_frame_ << " -> " << imu_frame_ << " yet ("
-                                           << error.what() << "): publishing the pose of "
-                                           << imu_frame_ << " as " << base_frame_
-                                           << " until it comes");
-    }
-    return std::nullopt;
+  std::string why;
+  const std::optional<Eigen::Isometry3d> base_from_imu =
+      latestTransform(base_frame_, imu_frame_, &why);
+  if (base_from_imu && !found_base_imu_) {
+    found_base_imu_ = true;
+    ROS_INFO_STREAM("inekf_node: the filter estimates "
+                    << imu_frame_ << "; publishing " << base_frame_ << " through tf " << base_frame_
+                    << " -> " << imu_frame_);
+  } else if (!base_from_imu && !warned_no_base_imu_) {
+    warned_no_base_imu_ = true;
+    ROS_WARN_STREAM("inekf_node: no tf " << base_frame_ << " -> " << imu_frame_ << " yet (" << why
+                                         << "): publishing the pose of " << imu_frame_ << " as "
+                                         << base_frame_ << " until it comes");
   }
+  return base_from_imu;
 }
 
 }  // namespace ros_conversions

@@ -78,6 +78,10 @@ class OdometryOutput {
   // pose) when the IMU is the base or tf has no such transform (warned once). Looked up for
   // every estimate: it is cheap, and a transform that arrives late is picked up.
   std::optional<Eigen::Isometry3d> baseFromImu();
+  // tf's latest target <- source, nullopt (and why) when it has none.
+  std::optional<Eigen::Isometry3d> latestTransform(const std::string& target,
+                                                   const std::string& source,
+                                                   std::string* why = nullptr);
   // True until the odometry's heading sigma is first at or below tf_max_heading_sigma_deg after
   // a start (the wait and its end are said once).
   bool holdTf(const nav_msgs::Odometry& odometry);
