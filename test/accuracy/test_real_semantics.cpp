@@ -122,6 +122,17 @@ TEST(PointLabelScore, APredictedIdAboveAByteIsWrongNotItsLowByte) {
   EXPECT_EQ(score.predictedCount(cityscapes::kRoad), 0u);
 }
 
+// A point left without a label is never a correct one, whatever its truth: correct points are
+// labelled points, so accuracy stays within [0, 1].
+TEST(PointLabelScore, AnUnlabelledPointIsNeverCorrect) {
+  PointLabelScore score;
+  score.add(cityscapes::kUnlabeled, cityscapes::kUnlabeled);
+  score.add(cityscapes::kRoad, cityscapes::kRoad);
+  EXPECT_EQ(score.labelled(), 1u);
+  EXPECT_EQ(score.correct(), 1u);
+  EXPECT_DOUBLE_EQ(score.accuracy(), 1.0);
+}
+
 TEST(RealSemantics, DefaultEnetLabellingPathMeetsAccuracyOnSemanticKitti) {
   ISM_REQUIRE_SHARED(kEnetModel);
   ISM_REQUIRE_SHARED(kSequences);

@@ -53,6 +53,19 @@ TEST(InputValidation, OxtsLatitudeBeyondThePoles) {
                  {"f.txt:5", "lat"});
 }
 
+// The longitude and altitude have their ranges too (|lon| <= 180, |alt| <= 1e5 m).
+TEST(InputValidation, OxtsLongitudeAndAltitudeOutOfRange) {
+  const std::string rest =
+      " 0.03 0.01 0.9 1.0 2.0 3.0 0.1 0.0 0.1 0.2 9.8 0.1 0.2 9.8 0.01 0.02 0.03 0.01 0.02 0.03 "
+      "0.5 "
+      "0.1 4 9 4 4 4";
+  EXPECT_NO_THROW(kitti::parseOxtsLine("49.0 -180.0 99999.0" + rest, "f.txt", 1));
+  expectMentions(errorOf([&] { kitti::parseOxtsLine("49.0 181.0 116.4" + rest, "f.txt", 2); }),
+                 {"f.txt:2", "lat/lon/alt out of range"});
+  expectMentions(errorOf([&] { kitti::parseOxtsLine("49.0 8.4 -200000" + rest, "f.txt", 3); }),
+                 {"f.txt:3", "lat/lon/alt out of range"});
+}
+
 TEST(InputValidation, TimestampsMustBeRealCalendarDates) {
   EXPECT_NO_THROW(kitti::parseKittiTimestampNs("2012-02-29 10:00:00.5"));  // leap year
   expectMentions(errorOf([] { kitti::parseKittiTimestampNs("2011-02-31 10:00:00"); }),
@@ -94,6 +107,13 @@ TEST_F(CalibrationFiles, NonFiniteValuesAndNonRotationsAreRefused) {
                        "zero.txt", std::string(kOdometryCalib) + "Tr: 0 0 0 0 0 0 0 0 0 0 0 0\n"));
                  }),
                  {"zero.txt", "'Tr' is not a rotation"});
+  // Orthonormal but a reflection (det -1): no rotation either, never turned into one.
+  expectMentions(
+      errorOf([&] {
+        kitti::readObjectCalibration(
+            write("mirror.txt", std::string(kOdometryCalib) + "Tr: 0 -1 0 0 0 0 -1 0 -1 0 0 0\n"));
+      }),
+      {"mirror.txt", "'Tr' is not a rotation"});
   std::filesystem::create_directories(dir_ + "/a_directory");
   expectMentions(errorOf([&] { kitti::readObjectCalibration(dir_ + "/a_directory"); }),
                  {"a_directory", "is a directory"});
@@ -109,6 +129,9 @@ TEST_F(CalibrationFiles, RectifiedImageSizeMustBeAnImageSize) {
   write("calib_cam_to_cam.txt", camera + "S_rect_00: 1242 375\n");
   EXPECT_NO_THROW(kitti::readRawCalibration(dir_));
   write("calib_cam_to_cam.txt", camera + "S_rect_00: 1e30 375\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt", "S_rect_00"});
+  write("calib_cam_to_cam.txt", camera + "S_rect_00: 0 375\n");
   expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
                  {"calib_cam_to_cam.txt", "S_rect_00"});
 }
@@ -135,6 +158,15 @@ TEST_F(CalibrationFiles, CameraProjectionsAndRectifyingRotationsMustBeThat) {
                                      "Tr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"));
                  }),
                  {"r0.txt:5", "R0_rect", "not a rotation"});
+  // A reflection as R_rect, and a projection whose third row does not give the depth.
+  write("calib_cam_to_cam.txt",
+        head + "R_rect_00: -1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt:7", "R_rect_00", "not a rotation"});
+  write("calib_cam_to_cam.txt",
+        head + "R_rect_00: 1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 0 1\n");
+  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+                 {"calib_cam_to_cam.txt:8", "P_rect_00", "not a camera projection"});
   expectMentions(errorOf([&] {
                    kitti::readObjectCalibration(write("p2.txt",
                                                       "P0: 700 0 600 0 0 700 180 0 0 0 1 0\n"
@@ -156,6 +188,19 @@ TEST_F(CalibrationFiles, PosesWithExtraNumbersOrNoRotationAreRefused) {
                        write("zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n"));
                  }),
                  {"zero.txt:2", "not a rotation"});
+  // A reflection, and a matrix 1 % off a rotation (beyond the files' printing precision).
+  expectMentions(
+      errorOf([&] { kitti::readKittiPoses(write("mirror.txt", "-1 0 0 0 0 1 0 0 0 0 1 0\n")); }),
+      {"mirror.txt:1", "not a rotation"});
+  expectMentions(
+      errorOf([&] { kitti::readKittiPoses(write("scaled.txt", "1.01 0 0 0 0 1 0 0 0 0 1 0\n")); }),
+      {"scaled.txt:1", "not a rotation"});
+  // Lines of blanks only (a CRLF file's last line) are no poses, not errors.
+  EXPECT_EQ(kitti::readKittiPoses(write("blank.txt",
+                                        "1 0 0 0 0 1 0 0 0 0 1 0\r\n \t\r\n"
+                                        "1 0 0 1 0 1 0 0 0 0 1 0\r\n\r\n"))
+                .size(),
+            2u);
   // Found by review: "1.0abc" was read as 1.0 (and the rest as the next values), "nan" as
   // "got 0 numbers", and a folder as an empty file of 0 poses.
   expectMentions(

@@ -279,6 +279,35 @@ TEST(LabelGeometryTest, APointOnACellCentreTakesTheNearestSupportedGround) {
   EXPECT_NEAR(h(5), 2.0f, 1e-5f);
 }
 
+// The cone is the same in all eight directions: a low cell caps each of its neighbours at
+// slope * 1 cell straight across and slope * sqrt(2) cells diagonally, whichever side they are on.
+TEST(LabelGeometryTest, TheConeCapsEveryNeighbourByItsDistance) {
+  const GroundGridOptions options = withCone();  // 1 m cells, slope 0.5
+  Scene scene;
+  const float cx = 10.5f, cy = 0.5f;  // a cell centre
+  for (int i = 0; i < options.min_support; ++i) scene.add(cx, cy, 0.0f, cityscapes::kRoad);
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      if (dx == 0 && dy == 0) continue;
+      // A wall top 3 m up over each neighbour's centre, its ground unseen.
+      for (int i = 0; i < options.min_support; ++i)
+        scene.add(cx + dx, cy + dy, 3.0f, cityscapes::kWall);
+    }
+  }
+  const Eigen::VectorXf h = heightsOf(scene, options);
+  std::size_t i = static_cast<std::size_t>(options.min_support);
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      if (dx == 0 && dy == 0) continue;
+      const float distance = std::sqrt(static_cast<float>(dx * dx + dy * dy)) * options.cell_size_m;
+      for (int k = 0; k < options.min_support; ++k, ++i) {
+        ASSERT_NEAR(h(static_cast<Eigen::Index>(i)), 3.0f - options.max_slope * distance, 1e-4f)
+            << "dx " << dx << " dy " << dy;
+      }
+    }
+  }
+}
+
 TEST(LabelGeometryTest, ClassesWithoutAKindAreNeverRejected) {
   const SurfaceKindTable& kinds = cityscapesSurfaceKinds();
   for (int id : {cityscapes::kRoad, cityscapes::kSidewalk, cityscapes::kParking,

@@ -280,6 +280,25 @@ TEST(RejectOccludedPoints, OcclusionWindowReachesRadiusCellsToBothSides) {
     EXPECT_EQ(labels[1], 0u) << side;
   }
 }
+// A point is hidden only beyond local minimum * (1 + relative_margin) + absolute_margin_m: near
+// the camera the absolute margin dominates (2 m: 2.5 m), far away the relative one (40 m: 44.3 m).
+TEST(RejectOccludedPoints, APointWithinTheMarginsBehindTheNearestIsKept) {
+  const OcclusionOptions options;  // 10 % and 0.3 m
+  for (float nearest : {2.f, 40.f}) {
+    const float limit = nearest * (1.f + options.relative_margin) + options.absolute_margin_m;
+    ProjectedPoints p;
+    p.u = Eigen::VectorXf::Constant(3, 200.f);
+    p.v = Eigen::VectorXf::Constant(3, 100.f);
+    p.depth.resize(3);
+    p.depth << nearest, limit - 0.05f, limit + 0.05f;
+    p.valid = {1, 1, 1};
+    std::vector<std::uint32_t> labels{7, 7, 7};
+    std::size_t rejected = 0;
+    rejectOccludedPoints(p, 1220, 370, options, 0, &labels, &rejected);
+    EXPECT_EQ(labels, (std::vector<std::uint32_t>{7, 7, 0})) << "nearest " << nearest;
+    EXPECT_EQ(rejected, 1u) << "nearest " << nearest;
+  }
+}
 }  // namespace
 }  // namespace perception
 }  // namespace inekf_semantic_mapping

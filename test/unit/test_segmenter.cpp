@@ -7,9 +7,11 @@
 #include <fstream>
 #include <limits>
 #include <opencv2/core.hpp>
+#include <opencv2/dnn.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../../src/perception/segmenter_input.h"  // private to src/perception: its steps
 #include "inekf_semantic_mapping/perception/cityscapes.h"
 #include "inekf_semantic_mapping/perception/model_card.h"
 #include "inekf_semantic_mapping/perception/segmenter.h"
@@ -455,6 +457,73 @@ TEST(ModelCard, CheckModelCardReportsTheFirstValueOutOfRange) {
   bad = good;
   bad.tile_scale = -1.0;
   EXPECT_EQ(firstFailure(bad), "tile_scale");
+}
+
+// The ends of the documented ranges: a labelId past 33, a tile overlap of half the input width, a
+// confidence threshold of 1 (every pixel dropped) and tiles narrower than the input are refused.
+TEST(ModelCard, RangeEndsAreRefusedNamingTheField) {
+  const std::string tail = "output_label_ids: [7]\n";
+  EXPECT_EQ(cardError("input: {width: 10, height: 10}\noutput_label_ids: [0, 33]\n"), "");
+  EXPECT_NE(cardError("input: {width: 10, height: 10}\noutput_label_ids: [7, 34]\n").find("34"),
+            std::string::npos);
+  const std::string tiles = "input: {width: 32, height: 64}\nresize_policy: tiles\n";
+  EXPECT_EQ(cardError(tiles + "tile_overlap: 15\n" + tail), "");
+  EXPECT_NE(cardError(tiles + "tile_overlap: 16\n" + tail).find("tile_overlap"), std::string::npos);
+  EXPECT_EQ(cardError(tiles + "tile_max_width: 32\n" + tail), "");
+  EXPECT_NE(cardError(tiles + "tile_max_width: 31\n" + tail).find("tile_max_width"),
+            std::string::npos);
+  const std::string plain = "input: {width: 10, height: 10}\n";
+  EXPECT_EQ(cardError(plain + "label_filter: {min_confidence: 0.99}\n" + tail), "");
+  EXPECT_NE(
+      cardError(plain + "label_filter: {min_confidence: 1.0}\n" + tail).find("min_confidence"),
+      std::string::npos);
+}
+
+// Letterboxing: the image is centred, and its padding is the card's mean colour, so that the
+// padding becomes 0 in the blob (blobFromImage swaps R and B, then subtracts the mean).
+TEST(SegmenterInput, LetterboxCentresTheImageAndItsPaddingNormalizesToZero) {
+  for (bool swap_rb : {true, false}) {
+    ModelCard card;
+    card.input_width = 64;
+    card.input_height = 64;
+    card.resize_policy = ResizePolicy::kLetterbox;
+    card.mean = {10.0, 60.0, 200.0};
+    card.scale = 1.0;
+    card.swap_rb = swap_rb;
+    const cv::Mat image(32, 16, CV_8UC3, cv::Scalar(90, 120, 150));  // scaled 2x: 32 x 64
+    const detail::PreparedInput prepared = detail::prepareInput(image, card);
+    ASSERT_EQ(prepared.network_image.size(), cv::Size(64, 64));
+    EXPECT_EQ(prepared.valid_region, cv::Rect(16, 0, 32, 64)) << swap_rb;
+    cv::Mat blob =
+        cv::dnn::blobFromImage(prepared.network_image, card.scale, cv::Size(),
+                               cv::Scalar(card.mean[0], card.mean[1], card.mean[2]), swap_rb);
+    for (int c = 0; c < 3; ++c) {
+      const cv::Mat plane(64, 64, CV_32F, blob.ptr<float>(0, c));
+      EXPECT_EQ(plane.at<float>(10, 3), 0.f) << "left padding, channel " << c << " " << swap_rb;
+      EXPECT_EQ(plane.at<float>(10, 60), 0.f) << "right padding, channel " << c << " " << swap_rb;
+    }
+  }
+}
+
+// Standardization brings each channel's mean and spread to the card's, given in the network's
+// channel order (RGB when swap_rb); a flat channel (no spread to scale) takes the card's mean.
+TEST(SegmenterInput, StandardizedColorsTakeTheCardsStatisticsInNetworkOrder) {
+  ModelCard card;
+  card.swap_rb = true;
+  card.color_mean = {90.0, 120.0, 160.0};  // R, G, B
+  card.color_std = {20.0, 25.0, 30.0};
+  cv::Mat image(64, 64, CV_8UC3);
+  cv::RNG rng(7);
+  rng.fill(image, cv::RNG::NORMAL, cv::Scalar(60, 128, 200), cv::Scalar(10, 12, 8));
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(detail::standardizeColors(image, card), mean, stddev);
+  for (int c = 0; c < 3; ++c) {  // BGR channel c is RGB channel 2 - c
+    EXPECT_NEAR(mean[c], card.color_mean[2 - c], 1.0) << "channel " << c;
+    EXPECT_NEAR(stddev[c], card.color_std[2 - c], 1.0) << "channel " << c;
+  }
+  const cv::Mat flat(8, 8, CV_8UC3, cv::Scalar(40, 40, 40));
+  cv::meanStdDev(detail::standardizeColors(flat, card), mean, stddev);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], card.color_mean[2 - c], 1.0) << c;
 }
 
 // A 20 x 20 label image, road left of column 10 and car right of it, all confident but a 3 x 3
