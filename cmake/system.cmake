@@ -36,6 +36,8 @@ if(CATKIN_ENABLE_TESTING)
     DEPENDENCIES ${ISM_PIPELINE_TARGETS})
   add_rostest(test/ros/robustness_node_restart.test
     DEPENDENCIES ${ISM_PIPELINE_TARGETS})
+  add_rostest(test/ros/robustness_nodelet_restart.test
+    DEPENDENCIES ${ISM_PIPELINE_TARGETS})
   # Segmentation on a second host: two network namespaces (scripts/two_host_demo.sh; skips
   # loudly without root / ip netns).
   add_rostest(test/ros/two_host.test

@@ -186,8 +186,10 @@ class KittiPlayer {
 
   // A message published before its subscriber has connected is lost: the drive's first fix, and
   // the filter's start with it, or the first scans of the map. Waits until the IMU and the GPS
-  // fix have a subscriber each and every subscriber the master lists on a sensor topic is
-  // connected, for at most ~wait_for_subscribers_s (wall time).
+  // fix have a subscriber each (the velodyne cloud too with ~wait_for_cloud_subscriber: a map
+  // nodelet registers only once the manager has loaded the nodelets before it, a network's
+  // minutes) and every subscriber the master lists on a sensor topic is connected, for at most
+  // ~wait_for_subscribers_s (wall time).
   void waitForSubscribers() {
     const ros::WallTime deadline =
         ros::WallTime::now() + ros::WallDuration(options_.wait_for_subscribers_s);
@@ -197,8 +199,10 @@ class KittiPlayer {
       missing.clear();
       for (const auto& publisher : publishers_->sensorTopicConnections()) {
         const auto it = registered.find(publisher.topic);
-        const std::size_t wanted = std::max<std::size_t>(publisher.essential ? 1 : 0,
-                                                         it == registered.end() ? 0 : it->second);
+        const bool needed =
+            publisher.essential || (publisher.cloud && options_.wait_for_cloud_subscriber);
+        const std::size_t wanted =
+            std::max<std::size_t>(needed ? 1 : 0, it == registered.end() ? 0 : it->second);
         if (publisher.connected < wanted)
           missing += (missing.empty() ? "" : ", ") + publisher.topic;
       }

@@ -31,6 +31,7 @@ KittiPlayerOptions readKittiPlayerOptions(common::YamlReader* reader) {
   reader->read("paused", &options.paused);
   // An hour is beyond any start-up; far more overflows ros::WallDuration.
   reader->readInRange("wait_for_subscribers_s", &options.wait_for_subscribers_s, 0.0, 3600.0);
+  reader->read("wait_for_cloud_subscriber", &options.wait_for_cloud_subscriber);
   reader->read("publish_velodyne", &options.timeline.velodyne);
   reader->read("publish_camera", &options.timeline.cameras[2]);
   kitti::GpsDegradationOptions& gps = options.gps;
@@ -81,7 +82,7 @@ std::vector<DrivePublishers::TopicConnections> DrivePublishers::sensorTopicConne
   for (const ros::Publisher* publisher : {&imu_, &fix_, &velocity_, &velodyne_, &image_}) {
     if (*publisher) {
       connections.push_back({publisher->getTopic(), publisher->getNumSubscribers(),
-                             publisher == &imu_ || publisher == &fix_});
+                             publisher == &imu_ || publisher == &fix_, publisher == &velodyne_});
     }
   }
   return connections;

@@ -201,6 +201,29 @@ class KittiPlayerTest(unittest.TestCase):
         for key, messages in got.items():
             self.assertEqual([m.header.stamp.to_nsec() for m in messages], SYNTHETIC_STAMPS, key)
 
+    def test_with_the_cloud_waited_for_a_late_map_gets_the_first_scans(self):
+        """Needs no ../shared. Found by review: a map nodelet subscribes only once the manager
+        has loaded the nodelets before it (a network), after the filter's topics; the player
+        started on the IMU and the fix alone and the map lost the drive's first scans."""
+        got = {'imu': [], 'fix': [], 'cloud': []}
+        with synthetic_player('kitti_player_cloud', 'cloud', rate=2.0, exit_when_done='true',
+                              wait_for_subscribers_s=30.0,
+                              wait_for_cloud_subscriber='true') as player:
+            rospy.wait_for_service('/kitti_player_cloud/pause', timeout=30)
+            subscribers = [rospy.Subscriber('/cloud/imu', Imu, lambda m: got['imu'].append(m)),
+                           rospy.Subscriber('/cloud/fix', NavSatFix,
+                                            lambda m: got['fix'].append(m))]
+            time.sleep(2.0)  # the map registers late: without the wait its scans are gone
+            subscribers.append(rospy.Subscriber('/cloud/velo', PointCloud2,
+                                                lambda m: got['cloud'].append(m)))
+            self.assertTrue(self.wait_for(lambda: all(len(v) >= 3 for v in got.values()), 30.0),
+                            {k: len(v) for k, v in got.items()})
+            self.assertEqual(player.wait(timeout=30), 0)
+            for subscriber in subscribers:
+                subscriber.unregister()
+        self.assertEqual([m.header.stamp.to_nsec() for m in got['imu']], SYNTHETIC_STAMPS)
+        self.assertEqual(len(got['cloud']), 3)
+
     def test_a_second_clock_publisher_is_named_and_the_drive_still_plays(self):
         """Needs no ../shared. Two players (or a player and rosbag play --clock) on one master:
         time jumps back and forth and every node clears its tf buffer, with no word of why."""

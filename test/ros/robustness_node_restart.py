@@ -3,8 +3,9 @@
 
 A saver keeps calling ~save_map (.ot and .ply, always to the same two paths) while a checker
 keeps reading those paths: at no moment may a path hold a partial or corrupt file (the saves are
-atomic). semantic_octomap_node and inekf_node are killed half-way through the bag; roslaunch
-respawns them; both must publish again and the map must save again.
+atomic). semantic_octomap_node and inekf_node (~kill_nodes: with nodelets, the manager that runs
+the map) are killed half-way through the bag; roslaunch respawns them; both must publish again and
+the map must save again.
 """
 import os
 import tempfile
@@ -69,8 +70,8 @@ class NodeRestart(unittest.TestCase):
             time.sleep(e2e.CONNECT_DELAY_S + p("kill_after_s", 5.0))  # seconds into the bag
             clouds_before = monitor.summary()["topics"]["/semantic_map/labeled_cloud"]["messages"]
             odometry_before = monitor.summary()["topics"]["/inekf/odometry"]["messages"]
-            e2e.kill_node("/semantic_octomap_node")
-            e2e.kill_node("/inekf_node")
+            for node in p("kill_nodes", "/semantic_octomap_node /inekf_node").split():
+                e2e.kill_node(node)
             player.wait(timeout=10 * duration + 60)
             clock = e2e.ClockAfterBag(bag).__enter__()
             self.addCleanup(clock.__exit__)

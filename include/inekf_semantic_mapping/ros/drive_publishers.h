@@ -23,8 +23,10 @@ struct KittiPlayerOptions {
   std::string calib_dir;  // "": the drive's parent
   double rate = 1.0;
   bool loop = false, publish_clock = false, exit_when_done = false, paused = false;
-  // Before playing (unless paused): wait up to this long for the subscribers (KittiPlayer).
+  // Before playing (unless paused): wait up to this long for the subscribers (KittiPlayer),
+  // the velodyne cloud's too when wait_for_cloud_subscriber.
   double wait_for_subscribers_s = 10.0;
+  bool wait_for_cloud_subscriber = false;
   kitti::TimelineOptions timeline;  // start_offset_s, duration_s, publish_velodyne / _camera
   kitti::GpsDegradationOptions gps;
 };
@@ -46,11 +48,12 @@ class DrivePublishers {
 
   // A sensor topic it publishes (IMU, GPS fix and velocity, velodyne, camera image), with the
   // number of subscribers connected to it. essential: the IMU and the GPS fix, which a filter
-  // needs from the drive's first message on.
+  // needs from the drive's first message on; cloud: the velodyne's.
   struct TopicConnections {
     std::string topic;
     std::uint32_t connected = 0;
     bool essential = false;
+    bool cloud = false;
   };
   std::vector<TopicConnections> sensorTopicConnections() const;
 
