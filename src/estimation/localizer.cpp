@@ -137,8 +137,15 @@ bool Localizer::propagate(const ImuStep& step) {
       return true;
     }
     const double heading_before = vehicleHeading();
-    const CorrectionResult result = filter_->correctNonholonomic(
-        nonholonomic_model_, config_.nonholonomic_gate_mahalanobis_squared);
+    // The same information per second from a fast IMU's short steps.
+    NonholonomicModel model = nonholonomic_model_;
+    if (step.dt < config_.nonholonomic_min_step_s) {
+      const double scale = std::sqrt(config_.nonholonomic_min_step_s / step.dt);
+      model.lateral_sigma_mps *= scale;
+      model.vertical_sigma_mps *= scale;
+    }
+    const CorrectionResult result =
+        filter_->correctNonholonomic(model, config_.nonholonomic_gate_mahalanobis_squared);
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
     if (result.accepted) noteHeadingChange(heading_before);
   }

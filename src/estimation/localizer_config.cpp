@@ -69,6 +69,7 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   reader->read("nonholonomic.enabled", &config.nonholonomic);
   positive("nonholonomic.lateral_sigma_mps", &config.nonholonomic_lateral_sigma_mps);
   positive("nonholonomic.vertical_sigma_mps", &config.nonholonomic_vertical_sigma_mps);
+  non_negative("nonholonomic.min_step_s", &config.nonholonomic_min_step_s);
   positive("nonholonomic.gate_mahalanobis_squared", &config.nonholonomic_gate_mahalanobis_squared);
   angle("nonholonomic.max_heading_sigma_deg", &config.nonholonomic_max_heading_sigma_deg, false);
   // A mounting error, not another axis convention: an IMU turned further is described by tf

@@ -643,6 +643,36 @@ TEST(Localizer, TheLandVehicleConstraintHoldsTheHeadingOnAStraightRoad) {
   EXPECT_EQ(statistics.nonholonomic_skipped, 1200);
 }
 
+// The estimate's lateral velocity 0.3 s after a start 1 m/s off sideways (the car drives 15 m/s
+// along a straight road, no fixes), its IMU at `rate_hz`, the land-vehicle constraint at
+// min_step_s: how hard the constraint pulled it back.
+double lateralVelocityAfterAStartOff(double rate_hz, double min_step_s) {
+  LocalizerConfig config;
+  config.nonholonomic_min_step_s = min_step_s;
+  Localizer localizer(config);
+  NavState start;
+  start.velocity_map = Eigen::Vector3d(15.0, 1.0, 0.0);
+  localizer.initialize(start);
+  const int steps = static_cast<int>(std::lround(0.3 * rate_hz));
+  for (int k = 1; k <= steps; ++k) localizer.addImu(restingSample(k / rate_hz));
+  EXPECT_EQ(localizer.statistics().nonholonomic_used, steps);
+  return localizer.state().velocity_map.y();
+}
+
+// Found by review: the constraint was one measurement per IMU step, so a 100 Hz IMU held the
+// velocity ten times as hard per second as KITTI's 10 Hz OXTS its sigmas were tuned on. A short
+// step's variances are scaled by min_step_s / dt: the same information per second at any rate.
+TEST(Localizer, TheLandVehicleConstraintHoldsAsHardPerSecondAtAnyImuRate) {
+  const double at_10_hz = lateralVelocityAfterAStartOff(10.0, 0.1);
+  const double at_100_hz = lateralVelocityAfterAStartOff(100.0, 0.1);
+  const double at_100_hz_by_step = lateralVelocityAfterAStartOff(100.0, 0.0);
+  EXPECT_GT(at_10_hz, 0.1);  // pulled part of the way back in 0.3 s
+  EXPECT_NEAR(at_100_hz, at_10_hz, 0.2 * at_10_hz);
+  EXPECT_LT(at_100_hz_by_step, 0.75 * at_10_hz);  // the old way: every step as the sigmas say
+  // KITTI's steps (0.06 s and longer) are left as they were by the default 0.05.
+  EXPECT_EQ(lateralVelocityAfterAStartOff(10.0, 0.05), lateralVelocityAfterAStartOff(10.0, 0.0));
+}
+
 // A car on a level straight road whose IMU is mounted pitched: its x axis points
 // `mount_pitch_deg` below the direction of travel, so the velocity has an upward component in
 // the IMU's axes. GPS fixes as above. Returns the final pitch error of the IMU's attitude (deg).

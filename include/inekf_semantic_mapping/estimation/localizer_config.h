@@ -64,6 +64,11 @@ struct LocalizerConfig {
   bool nonholonomic = true;
   double nonholonomic_lateral_sigma_mps = 0.5;
   double nonholonomic_vertical_sigma_mps = 1.0;
+  // The sigmas are per IMU step of at least this long; a shorter step's variances are scaled by
+  // min_step / dt, so that a fast IMU's steps hold the velocity no harder per second (a 100 Hz IMU
+  // held it ten times as hard as KITTI's 10 Hz OXTS, whose steps, 0.06 s and longer, it leaves
+  // as they were).
+  double nonholonomic_min_step_s = 0.05;
   // The direction of travel (NonholonomicModel::imu_from_vehicle): degrees above base_link's
   // x-y plane and from its x axis towards +y (the IMU's axes when it is mounted as base_link).
   // 0, 0: base_link's x axis is the car's. config/inekf.yaml holds KITTI's; inekf_offline --smooth
