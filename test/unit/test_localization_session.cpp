@@ -1178,17 +1178,27 @@ TEST(LocalizationSession, AWrongReferenceHeadingIsNoticedAndRecovered) {
 }
 
 // A robot with a MEMS IMU (no orientation; turn-on biases of 0.3 deg/s and 0.1 m/s^2, white
-// noise) and 1 Hz fixes of 1.5 m, weaving along a 3 min drive at 4 or 1.5 m/s: the robot
-// template (config/robot_inekf.yaml, robot.launch's default) learns the gyro bias and holds the
-// heading; KITTI's file, made for a tactical-grade INS, pins the bias near zero (the heading
-// lags the turns by degrees) and at 1.5 m/s never aligns the heading.
+// noise) and 1 Hz fixes of 1.5 m, weaving along a 3 min drive at 4 or 1.5 m/s (at 1.5 m/s also
+// after standing a minute): the robot template (config/robot_inekf.yaml, robot.launch's default)
+// learns the gyro bias and holds the heading within 3 of its sigmas; KITTI's file, made for a
+// tactical-grade INS, pins the bias near zero (the heading lags the turns by degrees) and at
+// 1.5 m/s never aligns the heading.
 struct MemsRun {
   double worst_yaw_error_after_deg = 0.0, rms_horizontal_after_m = 0.0;
-  double gyro_bias_z_error = 0.0;  // rad/s, at the end
+  double gyro_bias_z_error = 0.0;        // rad/s, at the end
+  double worst_yaw_sigmas_after = 0.0;   // the yaw error over its sigma, after settling
+  double yaw_sigma_at_motion_deg = 0.0;  // after standing still, before the first metre
   bool finite = true;
 };
 
-MemsRun runMemsDrive(const std::string& config_file, double speed) {
+struct MemsDrive {
+  double speed = 4.0;         // m/s once moving
+  double standstill_s = 0.0;  // at the start
+  double fix_sigma_m = 1.5;   // horizontal, 1 Hz
+  double settle_s = 60.0;     // scored from this long after the robot starts moving
+};
+
+MemsRun runMemsDrive(const std::string& config_file, const MemsDrive& drive) {
   LocalizationSessionConfig config = LocalizationSessionConfig::fromYamlFile(config_file);
   config.origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
   LocalizationSession session(config);
@@ -1197,20 +1207,26 @@ MemsRun runMemsDrive(const std::string& config_file, double speed) {
   const Eigen::Vector3d gyro_bias(0.004, -0.003, 0.005), accel_bias(0.08, -0.06, 0.1);
   std::mt19937 random(5);
   std::normal_distribution<double> unit(0.0, 1.0);
-  const double rate_hz = 100.0, dt = 1.0 / rate_hz, settle_s = 60.0;
-  // Yaw rate: a slow weave, 0.15 rad/s peak over a 20 s period.
-  const auto yaw_rate = [](double t) { return 0.15 * std::sin(2.0 * M_PI * t / 20.0); };
+  const double rate_hz = 100.0, dt = 1.0 / rate_hz;
+  // Yaw rate: a slow weave, 0.15 rad/s peak over a 20 s period, once moving.
+  const auto moving = [&](double t) { return t >= drive.standstill_s; };
+  const auto yaw_rate = [&](double t) {
+    return moving(t) ? 0.15 * std::sin(2.0 * M_PI * (t - drive.standstill_s) / 20.0) : 0.0;
+  };
   double yaw = 0.7, x = 0.0, y = 0.0, sum_sq = 0.0;
   int scored = 0;
+  bool sigma_taken = false;
   MemsRun run;
   const double t0 = 100.0;
-  for (int k = 0; k <= static_cast<int>(180.0 * rate_hz); ++k) {
+  for (int k = 0; k <= static_cast<int>((drive.standstill_s + 180.0) * rate_hz); ++k) {
     const double t = k * dt;
+    const double speed = moving(t) ? drive.speed : 0.0;
     if (k > 0) {  // the truth over (t - dt, t]
       const double w = yaw_rate(t - 0.5 * dt);
       const double mid = yaw + 0.5 * w * dt;
-      x += speed * std::cos(mid) * dt;
-      y += speed * std::sin(mid) * dt;
+      const double v = moving(t - 0.5 * dt) ? drive.speed : 0.0;
+      x += v * std::cos(mid) * dt;
+      y += v * std::sin(mid) * dt;
       yaw += w * dt;
     }
     ImuEvent imu;
@@ -1223,21 +1239,33 @@ MemsRun runMemsDrive(const std::string& config_file, double speed) {
         0.02 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
     session.addImu(imu);
     if (k % 100 == 0) {
-      const Eigen::Vector3d p(x + 1.5 * unit(random), y + 1.5 * unit(random), 0.0);
+      const Eigen::Vector3d p(x + drive.fix_sigma_m * unit(random),
+                              y + drive.fix_sigma_m * unit(random), 0.0);
       GeodeticFixEvent fix;
       fix.stamp_s = t0 + t;
       projection.toGeodetic(p, &fix.lat_deg, &fix.lon_deg, &fix.alt_m);
-      fix.covariance_enu = Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal();
+      const double v = drive.fix_sigma_m * drive.fix_sigma_m;
+      fix.covariance_enu = Eigen::Vector3d(v, v, 4.0 * v).asDiagonal();
       session.addFix(fix);
     }
     if (!session.started()) continue;
     const NavState& state = session.state();
     run.finite = run.finite && state.rotation.allFinite() && state.position_map.allFinite();
-    if (t < settle_s) continue;
     const Eigen::Matrix3d& r = state.rotation;
-    run.worst_yaw_error_after_deg =
-        std::max(run.worst_yaw_error_after_deg,
-                 std::abs(wrapDeg((std::atan2(r(1, 0), r(0, 0)) - yaw) * 180.0 / M_PI)));
+    const double yaw_error_deg =
+        std::abs(wrapDeg((std::atan2(r(1, 0), r(0, 0)) - yaw) * 180.0 / M_PI));
+    // The yaw's sigma about the map z axis (the pose covariance's rotation block, body axes).
+    const Eigen::Matrix3d rotation_covariance =
+        r * session.poseCovariance().bottomRightCorner<3, 3>() * r.transpose();
+    const double yaw_sigma_deg = std::sqrt(rotation_covariance(2, 2)) * 180.0 / M_PI;
+    if (moving(t) && !sigma_taken) {
+      run.yaw_sigma_at_motion_deg = yaw_sigma_deg;
+      sigma_taken = true;
+    }
+    if (t < drive.standstill_s + drive.settle_s) continue;
+    run.worst_yaw_error_after_deg = std::max(run.worst_yaw_error_after_deg, yaw_error_deg);
+    run.worst_yaw_sigmas_after =
+        std::max(run.worst_yaw_sigmas_after, yaw_error_deg / std::max(1e-9, yaw_sigma_deg));
     sum_sq += (state.position_map.head<2>() - Eigen::Vector2d(x, y)).squaredNorm();
     ++scored;
   }
@@ -1247,22 +1275,29 @@ MemsRun runMemsDrive(const std::string& config_file, double speed) {
 }
 
 TEST(LocalizationSession, TheRobotTemplateLearnsAMemsImusBiases) {
-  for (const double speed : {4.0, 1.5}) {
-    const MemsRun robot = runMemsDrive(test::repoPath("config/robot_inekf.yaml"), speed);
-    const MemsRun kitti = runMemsDrive(test::repoPath("config/inekf.yaml"), speed);
+  for (const auto& [speed, standstill_s] : {std::pair{4.0, 0.0}, {1.5, 0.0}, {1.5, 60.0}}) {
+    SCOPED_TRACE(std::to_string(speed) + " m/s after standing " + std::to_string(standstill_s));
+    MemsDrive drive;
+    drive.speed = speed;
+    drive.standstill_s = standstill_s;
+    const MemsRun robot = runMemsDrive(test::repoPath("config/robot_inekf.yaml"), drive);
+    const MemsRun kitti = runMemsDrive(test::repoPath("config/inekf.yaml"), drive);
     std::printf(
-        "[ MEMS     ] robot template: worst yaw %.2f deg, RMS %.2f m, gyro z bias error "
-        "%.4f rad/s; KITTI's file: %.2f deg, %.2f m, %.4f rad/s\n",
-        robot.worst_yaw_error_after_deg, robot.rms_horizontal_after_m, robot.gyro_bias_z_error,
-        kitti.worst_yaw_error_after_deg, kitti.rms_horizontal_after_m, kitti.gyro_bias_z_error);
+        "[ MEMS     ] %.1f m/s, %.0f s standing: robot template: worst yaw %.2f deg (%.1f "
+        "sigma), RMS %.2f m, gyro z bias error %.4f rad/s; KITTI's file: %.2f deg, %.2f m, "
+        "%.4f rad/s\n",
+        speed, standstill_s, robot.worst_yaw_error_after_deg, robot.worst_yaw_sigmas_after,
+        robot.rms_horizontal_after_m, robot.gyro_bias_z_error, kitti.worst_yaw_error_after_deg,
+        kitti.rms_horizontal_after_m, kitti.gyro_bias_z_error);
     EXPECT_TRUE(robot.finite);
     EXPECT_TRUE(kitti.finite);
-    EXPECT_LT(robot.worst_yaw_error_after_deg, 3.0) << speed;
-    EXPECT_LT(robot.rms_horizontal_after_m, 1.5) << speed;
-    EXPECT_LT(std::abs(robot.gyro_bias_z_error), 1.5e-3) << speed;
+    EXPECT_LT(robot.worst_yaw_error_after_deg, 5.0);
+    EXPECT_LT(robot.worst_yaw_sigmas_after, 3.0);  // the yaw sigma it publishes covers its error
+    EXPECT_LT(robot.rms_horizontal_after_m, 1.5);
+    EXPECT_LT(std::abs(robot.gyro_bias_z_error), 1.5e-3);
     // What the template is for: KITTI's values on this IMU are far worse (at 1.5 m/s its 3 m/s
     // chords never align the heading).
-    EXPECT_GT(kitti.worst_yaw_error_after_deg, 3.0 * robot.worst_yaw_error_after_deg) << speed;
+    EXPECT_GT(kitti.worst_yaw_error_after_deg, 2.0 * robot.worst_yaw_error_after_deg);
   }
 }
 
