@@ -187,9 +187,9 @@ class KittiPlayer {
   // A message published before its subscriber has connected is lost: the drive's first fix, and
   // the filter's start with it, or the first scans of the map. Waits until the IMU and the GPS
   // fix have a subscriber each (the velodyne cloud too with ~wait_for_cloud_subscriber: a map
-  // nodelet registers only once the manager has loaded the nodelets before it, a network's
-  // minutes) and every subscriber the master lists on a sensor topic is connected, for at most
-  // ~wait_for_subscribers_s (wall time).
+  // nodelet registers only once the manager has loaded the nodelets before it, the segmentation
+  // network's load) and every subscriber the master lists on a sensor topic is connected, for at
+  // most ~wait_for_subscribers_s (wall time).
   void waitForSubscribers() {
     const ros::WallTime deadline =
         ros::WallTime::now() + ros::WallDuration(options_.wait_for_subscribers_s);

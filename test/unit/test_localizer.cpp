@@ -763,6 +763,7 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(loaded.nonholonomic_lateral_sigma_mps, defaults.nonholonomic_lateral_sigma_mps);
   EXPECT_DOUBLE_EQ(loaded.nonholonomic_vertical_sigma_mps,
                    defaults.nonholonomic_vertical_sigma_mps);
+  EXPECT_DOUBLE_EQ(loaded.nonholonomic_min_step_s, defaults.nonholonomic_min_step_s);
   EXPECT_DOUBLE_EQ(loaded.nonholonomic_gate_mahalanobis_squared,
                    defaults.nonholonomic_gate_mahalanobis_squared);
   EXPECT_DOUBLE_EQ(loaded.nonholonomic_max_heading_sigma_deg,

@@ -65,9 +65,9 @@ struct LocalizerConfig {
   double nonholonomic_lateral_sigma_mps = 0.5;
   double nonholonomic_vertical_sigma_mps = 1.0;
   // The sigmas are per IMU step of at least this long; a shorter step's variances are scaled by
-  // min_step / dt, so that a fast IMU's steps hold the velocity no harder per second (a 100 Hz IMU
-  // held it ten times as hard as KITTI's 10 Hz OXTS, whose steps, 0.06 s and longer, it leaves
-  // as they were).
+  // min_step / dt, so that a fast IMU holds the velocity at most as hard per second as steps of
+  // this length (a 100 Hz IMU held it ten times as hard as KITTI's 10 Hz OXTS). 0.05 leaves
+  // KITTI's steps (0.06 s and longer) as they were tuned; config/robot_inekf.yaml says 0.1.
   double nonholonomic_min_step_s = 0.05;
   // The direction of travel (NonholonomicModel::imu_from_vehicle): degrees above base_link's
   // x-y plane and from its x axis towards +y (the IMU's axes when it is mounted as base_link).
