@@ -144,13 +144,16 @@ TEST_F(CalibrationFiles, CameraProjectionsAndRectifyingRotationsMustBeThat) {
   const std::string head =
       "S_00: 1392 512\nK_00: 700 0 600 0 700 180 0 0 1\nD_00: 0 0 0 0 0\n"
       "R_00: 1 0 0 0 1 0 0 0 1\nT_00: 0 0 0\nS_rect_00: 1242 375\n";
-  write("calib_cam_to_cam.txt",
-        head + "R_rect_00: 1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 0 0 600 0 0 0 180 0 0 0 1 0\n");
-  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+  // calib_cam_to_cam.txt with this R_rect_00 (line 7) and P_rect_00 (line 8): the error read.
+  const auto rectifiedError = [&](const std::string& rect, const std::string& projection) {
+    write("calib_cam_to_cam.txt",
+          head + "R_rect_00: " + rect + "\n" + "P_rect_00: " + projection + "\n");
+    return errorOf([&] { kitti::readRawCalibration(dir_); });
+  };
+  const std::string identity = "1 0 0 0 1 0 0 0 1", camera = "700 0 600 0 0 700 180 0 0 0 1 0";
+  expectMentions(rectifiedError(identity, "0 0 600 0 0 0 180 0 0 0 1 0"),
                  {"calib_cam_to_cam.txt:8", "P_rect_00", "not a camera projection"});
-  write("calib_cam_to_cam.txt",
-        head + "R_rect_00: 5 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n");
-  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+  expectMentions(rectifiedError("5 0 0 0 1 0 0 0 1", camera),
                  {"calib_cam_to_cam.txt:7", "R_rect_00", "not a rotation"});
   expectMentions(errorOf([&] {
                    kitti::readObjectCalibration(write(
@@ -159,13 +162,9 @@ TEST_F(CalibrationFiles, CameraProjectionsAndRectifyingRotationsMustBeThat) {
                  }),
                  {"r0.txt:5", "R0_rect", "not a rotation"});
   // A reflection as R_rect, and a projection whose third row does not give the depth.
-  write("calib_cam_to_cam.txt",
-        head + "R_rect_00: -1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n");
-  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+  expectMentions(rectifiedError("-1 0 0 0 1 0 0 0 1", camera),
                  {"calib_cam_to_cam.txt:7", "R_rect_00", "not a rotation"});
-  write("calib_cam_to_cam.txt",
-        head + "R_rect_00: 1 0 0 0 1 0 0 0 1\n" + "P_rect_00: 700 0 600 0 0 700 180 0 0 0 0 1\n");
-  expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
+  expectMentions(rectifiedError(identity, "700 0 600 0 0 700 180 0 0 0 0 1"),
                  {"calib_cam_to_cam.txt:8", "P_rect_00", "not a camera projection"});
   expectMentions(errorOf([&] {
                    kitti::readObjectCalibration(write("p2.txt",

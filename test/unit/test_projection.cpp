@@ -280,6 +280,7 @@ TEST(RejectOccludedPoints, OcclusionWindowReachesRadiusCellsToBothSides) {
     EXPECT_EQ(labels[1], 0u) << side;
   }
 }
+
 // A point is hidden only beyond local minimum * (1 + relative_margin) + absolute_margin_m: near
 // the camera the absolute margin dominates (2 m: 2.5 m), far away the relative one (40 m: 44.3 m).
 TEST(RejectOccludedPoints, APointWithinTheMarginsBehindTheNearestIsKept) {
