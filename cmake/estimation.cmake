@@ -45,6 +45,8 @@ ism_add_gtest(test_loop_closure_data SOURCES test/data/test_loop_closure_data.cp
   LINK ${PROJECT_NAME}_registration ${PROJECT_NAME}_synthetic)
 ism_add_gtest(test_localizer SOURCES test/unit/test_localizer.cpp
   LINK ${PROJECT_NAME}_estimation)
+ism_add_gtest(test_standstill_detector SOURCES test/unit/test_standstill_detector.cpp
+  LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_lazy_start SOURCES test/unit/test_lazy_start.cpp
   LINK ${PROJECT_NAME}_estimation)
 ism_add_gtest(test_localization_session SOURCES test/unit/test_localization_session.cpp

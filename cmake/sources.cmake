@@ -21,6 +21,7 @@ set(ISM_LIE_SOURCES src/lie/so3.cpp src/lie/se23.cpp)
 set(ISM_ESTIMATION_SOURCES
   src/estimation/error_dynamics.cpp src/estimation/imu_filters.cpp
   src/estimation/localizer.cpp src/estimation/localizer_config.cpp
+  src/estimation/standstill_detector.cpp
   src/estimation/lazy_start.cpp
   src/estimation/smoother.cpp src/estimation/pose_graph.cpp
   src/estimation/selected_inverse.cpp)

@@ -107,6 +107,10 @@ std::string LocalizationSession::summary() const {
          << s.filter.nonholonomic_rejected << " rejected / " << s.filter.nonholonomic_skipped
          << " waiting for the heading; ";
   }
+  if (s.filter.standstill_used + s.filter.standstill_rejected > 0) {
+    line << "standstill " << s.filter.standstill_used << " used / " << s.filter.standstill_rejected
+         << " rejected; ";
+  }
   const std::int64_t heading_events =
       s.filter.heading_alignments + s.filter.heading_recoveries + s.filter.heading_reopens;
   if (heading_events > 0) {

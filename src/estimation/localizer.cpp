@@ -52,6 +52,7 @@ double twoDofGateOfSameTail(double gate_3dof) {
 Localizer::Localizer(LocalizerConfig config)
     : config_(std::move(config)),
       nonholonomic_model_(nonholonomicModel(config_, base_from_imu_)),
+      standstill_(config_.standstill),
       filter_(makeFilter(config_.filter_type, config_.imu_noise)) {}
 
 bool Localizer::setImuMounting(const Eigen::Matrix3d& base_from_imu) {
@@ -107,6 +108,7 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   chords_.clear();
   horizontal_nis_.clear();
   heading_confirmed_ = false;
+  standstill_.reset();
   recordStep(ImuStep());  // the initial state: dt 0, nothing to replay
 }
 
@@ -122,6 +124,18 @@ bool Localizer::propagate(const ImuStep& step) {
   // not in addImu, so that a late fix's replay of the history applies it again.
   predicted_state_ = filter_->state();
   predicted_covariance_ = filter_->covariance();
+  if (step.standstill) {
+    // A vehicle that stands still shows nothing of its heading, but the update would take some
+    // from the estimate's own errors (the horizontal specific force an unlearnt accelerometer
+    // bias leaves couples the yaw into the velocity): until the track has aligned it, the yaw
+    // is kept out of the update (its sigma 180 -> 3 deg in 10 s of standing without this).
+    if (!(yawSigma() <= config_.heading_align_above_sigma_deg * kDegToRad)) decorrelateYaw();
+    const double heading_before = vehicleHeading();
+    const CorrectionResult result =
+        filter_->correctStandstill(*step.standstill, config_.standstill.gate_mahalanobis_squared);
+    ++(result.accepted ? statistics_.standstill_used : statistics_.standstill_rejected);
+    if (result.accepted) noteHeadingChange(heading_before);
+  }
   if (config_.nonholonomic && step.dt > 0.0) {
     // About the map's z axis: the pose covariance's (5, 5) is about the IMU's own z, horizontal
     // for an IMU board mounted upright (the constraint ran with the heading unknown and pinned
@@ -196,6 +210,7 @@ CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdi
     // over the whole interval, so the two parts integrate to the same as the whole).
     ImuStep first_part = history_[step + 1].step;
     first_part.dt = into_next;
+    first_part.standstill.reset();  // it belongs to the end of the step, kept by the rest
     propagate(first_part);
     history_[step + 1].step.dt -= into_next;
     history_.insert(history_.begin() + step + 1,
@@ -285,7 +300,17 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   } else {
     interpolated_run_start_s_ = -1.0;
   }
-  const ImuStep step{sample, dt, gyro_scale, accel_scale};
+  ImuStep step{sample, dt, gyro_scale, accel_scale, std::nullopt};
+  if (config_.standstill.enabled) {
+    // Not across a gap or an interpolated sample (the IMU did not see that time), nor while the
+    // fixes reject the estimate.
+    if (gap || sample.interpolated || consecutive_rejected_fixes_ > 0) {
+      standstill_.reset();
+    } else {
+      step.standstill = standstill_.add(sample, dt, filter_->state(), horizontalVelocitySigma(),
+                                        trackSaysMoving(), config_.imu_noise.gyro_noise_density);
+    }
+  }
   if (!propagate(step)) {
     // Not an estimate at this stamp: reported as such (it was kUsed, and the node published the
     // old state under the new stamp).
@@ -597,6 +622,29 @@ std::string Localizer::takeHeadingEvent() {
   return event;
 }
 
+bool Localizer::trackSaysMoving() const {
+  // The fixes of the last 10 s (1 Hz fixes of 1.5 m: a speed sigma of about 0.15 m/s; a robot
+  // driving steadily at 1.5 m/s, its IMU quiet, while the filter's velocity is uncertain before
+  // the heading aligns), while they are current: a robot that drove into a garage and stopped
+  // there is not moving.
+  constexpr double kWindowS = 10.0, kCurrentS = 2.5;
+  if (track_fixes_.empty() ||
+      !(filter_->state().stamp_s - track_fixes_.back().stamp_s <= kCurrentS)) {
+    return false;
+  }
+  double variance = 0.0;
+  const double speed = trackVelocity(kWindowS, &variance).norm();
+  return std::isfinite(variance) &&
+         speed - 2.0 * std::sqrt(variance) > config_.standstill.max_speed_mps;
+}
+
+double Localizer::horizontalVelocitySigma() const {
+  // The body velocity's covariance (its first block of the twist) turned into the map.
+  const Eigen::Matrix3d& r = filter_->state().rotation;
+  const Eigen::Matrix3d map = r * filter_->twistCovariance().topLeftCorner<3, 3>() * r.transpose();
+  return std::sqrt(std::max({0.0, map(0, 0), map(1, 1)}));
+}
+
 double Localizer::yawSigma() const {
   if (!initialized_) return std::numeric_limits<double>::infinity();
   const Eigen::Matrix3d& r = filter_->state().rotation;
@@ -722,15 +770,15 @@ Localizer::TrackHeading Localizer::trackHeading() const {
   return track;
 }
 
-Eigen::Vector2d Localizer::trackVelocity(double* variance) const {
-  // Least-squares slope of the fixes of the last 3 s (constant velocity).
+Eigen::Vector2d Localizer::trackVelocity(double window_s, double* variance) const {
+  // Least-squares slope of the fixes of the last window_s (constant velocity).
   *variance = std::numeric_limits<double>::infinity();
   if (track_fixes_.size() < 2) return Eigen::Vector2d::Zero();
   const double newest = track_fixes_.back().stamp_s;
   double t_mean = 0.0, n = 0.0, noise = 0.0;
   Eigen::Vector2d p_mean = Eigen::Vector2d::Zero();
   for (const TrackFix& f : track_fixes_) {
-    if (f.stamp_s < newest - 3.0 - kDuplicateStampS) continue;
+    if (f.stamp_s < newest - window_s - kDuplicateStampS) continue;
     t_mean += f.stamp_s;
     p_mean += f.position;
     noise = std::max(noise, f.variance);
@@ -742,7 +790,7 @@ Eigen::Vector2d Localizer::trackVelocity(double* variance) const {
   double stt = 0.0;
   Eigen::Vector2d stp = Eigen::Vector2d::Zero();
   for (const TrackFix& f : track_fixes_) {
-    if (f.stamp_s < newest - 3.0 - kDuplicateStampS) continue;
+    if (f.stamp_s < newest - window_s - kDuplicateStampS) continue;
     stt += (f.stamp_s - t_mean) * (f.stamp_s - t_mean);
     stp += (f.stamp_s - t_mean) * (f.position - p_mean);
   }
@@ -770,7 +818,7 @@ void Localizer::realignHeading(const TrackHeading& track, const std::string& why
   world.block<3, 1>(0, 2).setZero();
   world(2, 2) = track.sigma_rad * track.sigma_rad;
   double velocity_variance = 0.0;
-  const Eigen::Vector2d velocity = trackVelocity(&velocity_variance);
+  const Eigen::Vector2d velocity = trackVelocity(3.0, &velocity_variance);
   const double floor = 1.0;  // m/s: the car's acceleration over the fitted seconds
   if (std::isfinite(velocity_variance)) {
     state.velocity_map.head<2>() = velocity;
@@ -829,6 +877,7 @@ void Localizer::reset() {
   reference_rotation_covariance_.reset();
   interpolated_run_start_s_ = -1.0;
   filter_ = makeFilter(config_.filter_type, config_.imu_noise);
+  standstill_.reset();
   clearHistory();
 }
 

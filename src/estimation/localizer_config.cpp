@@ -84,6 +84,16 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   };
   mounting_angle("nonholonomic.vehicle_pitch_deg", &config.nonholonomic_vehicle_pitch_deg);
   mounting_angle("nonholonomic.vehicle_yaw_deg", &config.nonholonomic_vehicle_yaw_deg);
+  StandstillOptions& still = config.standstill;
+  reader->read("standstill.enabled", &still.enabled);
+  positive("standstill.window_s", &still.window_s);
+  positive("standstill.max_acceleration_mps2", &still.max_acceleration_mps2);
+  angle("standstill.max_rate_degps", &still.max_rate_degps, false);
+  positive("standstill.max_speed_mps", &still.max_speed_mps);
+  positive("standstill.max_velocity_sigma_mps", &still.max_velocity_sigma_mps);
+  positive("standstill.velocity_sigma_mps", &still.velocity_sigma_mps);
+  positive("standstill.update_interval_s", &still.update_interval_s);
+  positive("standstill.gate_mahalanobis_squared", &still.gate_mahalanobis_squared);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   reader->read("heading.from_track", &config.heading_from_track);
   positive("heading.track_window_s", &config.heading_track_window_s);

@@ -412,12 +412,13 @@ int main(int argc, char** argv) {
       std::printf(
           "inekf_offline: heading monitor: %lld aligned from the GPS track, %lld recovered, %lld "
           "re-opened; land-vehicle constraint %lld used / %lld skipped (heading unknown) / %lld "
-          "suspended (fix rejected)\n",
+          "suspended (fix rejected); standstill %lld used / %lld rejected\n",
           static_cast<long long>(f.heading_alignments),
           static_cast<long long>(f.heading_recoveries), static_cast<long long>(f.heading_reopens),
           static_cast<long long>(f.nonholonomic_used),
           static_cast<long long>(f.nonholonomic_skipped),
-          static_cast<long long>(f.nonholonomic_suspended));
+          static_cast<long long>(f.nonholonomic_suspended),
+          static_cast<long long>(f.standstill_used), static_cast<long long>(f.standstill_rejected));
     }
     if (run.smoother_breaks > 0) {
       std::printf("inekf_offline: the smoother restarted at %d IMU steps it could not reproduce\n",

@@ -797,6 +797,16 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
                    defaults.interpolated_gyro_noise_scale_per_s);
   EXPECT_DOUBLE_EQ(loaded.interpolated_accel_noise_scale, defaults.interpolated_accel_noise_scale);
   EXPECT_EQ(loaded.init_orientation_from_reference, defaults.init_orientation_from_reference);
+  const StandstillOptions &still = loaded.standstill, &still_default = defaults.standstill;
+  EXPECT_EQ(still.enabled, still_default.enabled);
+  EXPECT_DOUBLE_EQ(still.window_s, still_default.window_s);
+  EXPECT_DOUBLE_EQ(still.max_acceleration_mps2, still_default.max_acceleration_mps2);
+  EXPECT_DOUBLE_EQ(still.max_rate_degps, still_default.max_rate_degps);
+  EXPECT_DOUBLE_EQ(still.max_speed_mps, still_default.max_speed_mps);
+  EXPECT_DOUBLE_EQ(still.max_velocity_sigma_mps, still_default.max_velocity_sigma_mps);
+  EXPECT_DOUBLE_EQ(still.velocity_sigma_mps, still_default.velocity_sigma_mps);
+  EXPECT_DOUBLE_EQ(still.update_interval_s, still_default.update_interval_s);
+  EXPECT_DOUBLE_EQ(still.gate_mahalanobis_squared, still_default.gate_mahalanobis_squared);
   EXPECT_DOUBLE_EQ(loaded.heading_track_min_chord_m, defaults.heading_track_min_chord_m);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_chord_s, defaults.heading_track_max_chord_s);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_turn_deg, defaults.heading_track_max_turn_deg);
@@ -830,6 +840,8 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("imu:\n  max_gap_s: [1, 2]\n", "imu.max_gap_s");
   expectError("gps:\n  min_sigma_m: {a: 1}\n", "gps.min_sigma_m");
   expectError("init_orientation_from_reference: [true]\n", "init_orientation_from_reference");
+  expectError("standstill:\n  window_s: 0\n", "standstill.window_s");
+  expectError("standstill:\n  max_rate_degps: 200\n", "standstill.max_rate_degps");
   expectError("a: [\n", "YAML syntax error");
   // A folder passed as the config file.
   try {
@@ -841,12 +853,15 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   // A node-only section and a partial file are fine.
   const std::string path = dir + "/ok.yaml";
   std::ofstream(path)
-      << "filter: ekf\nnode:\n  publish_tf: true\nimu_noise:\n  gyro_noise_density: 0.002\n";
+      << "filter: ekf\nnode:\n  publish_tf: true\nimu_noise:\n  gyro_noise_density: "
+         "0.002\nstandstill:\n  enabled: true\n  max_speed_mps: 0.1\n";
   const LocalizerConfig ok = LocalizerConfig::fromYamlFile(path);
   EXPECT_EQ(ok.filter_type, FilterType::kQuaternionEskf);
   EXPECT_DOUBLE_EQ(ok.imu_noise.gyro_noise_density, 0.002);
   EXPECT_DOUBLE_EQ(ok.imu_noise.accel_noise_density,
                    LocalizerConfig().imu_noise.accel_noise_density);
+  EXPECT_TRUE(ok.standstill.enabled);
+  EXPECT_DOUBLE_EQ(ok.standstill.max_speed_mps, 0.1);
 }
 
 // The hold keeps the yaw's variance (it only drops its cross-covariances): after 10 s of fixes

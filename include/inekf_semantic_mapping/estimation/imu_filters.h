@@ -31,6 +31,9 @@ class ImuFilterBase : public NavigationFilter {
   // Generic in the left-invariant error (H = R_iv^T [v_b^ I 0 0 0] rows y, z, with R_iv the
   // vehicle frame in the IMU's) mapped into this filter's coordinates through leftFromError().
   CorrectionResult correctNonholonomic(const NonholonomicModel& model, double gate) override;
+  // Generic in the left-invariant error as well, like the constraint.
+  CorrectionResult correctStandstill(const StandstillMeasurement& measurement,
+                                     double gate) override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

@@ -114,9 +114,11 @@ class Localizer {
     std::int64_t nonholonomic_rejected = 0;
     std::int64_t nonholonomic_skipped = 0;    // heading too uncertain (see the config)
     std::int64_t nonholonomic_suspended = 0;  // the last fix was gated out
-    std::int64_t heading_alignments = 0;      // unknown heading set from the GPS track
-    std::int64_t heading_recoveries = 0;      // a wrong heading re-initialised from the track
-    std::int64_t heading_reopens = 0;         // yaw variance re-opened (fixes kept disagreeing)
+    std::int64_t standstill_used = 0;         // zero-velocity / zero-rate updates
+    std::int64_t standstill_rejected = 0;
+    std::int64_t heading_alignments = 0;  // unknown heading set from the GPS track
+    std::int64_t heading_recoveries = 0;  // a wrong heading re-initialised from the track
+    std::int64_t heading_reopens = 0;     // yaw variance re-opened (fixes kept disagreeing)
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -193,6 +195,9 @@ class Localizer {
     ImuSample sample;
     double dt = 0.0;  // 0: the initial state (nothing to replay)
     double gyro_noise_scale = 1.0, accel_noise_scale = 1.0;
+    // The standstill update after the step, decided when the sample arrived (a replay applies
+    // the same one).
+    std::optional<StandstillMeasurement> standstill;
   };
   // A step and the filter after it: what a rewind restores and replays.
   struct HistoryStep {
@@ -235,7 +240,11 @@ class Localizer {
   // The heading monitor's parts (see the class comment).
   void addToTrack(const PositionFix& fix);
   TrackHeading trackHeading() const;
-  Eigen::Vector2d trackVelocity(double* variance) const;
+  // The track's velocity over its fixes of the last window_s (variance per axis, infinite when
+  // fewer than two).
+  Eigen::Vector2d trackVelocity(double window_s, double* variance) const;
+  // The current fixes move faster than the standstill's max_speed_mps by two of their sigmas.
+  bool trackSaysMoving() const;
   void realignHeading(const TrackHeading& track, const std::string& why);
   void reopenHeading(const Eigen::Vector3d& innovation, const std::string& why);
   void noteHeadingEvent(const std::string& what);
@@ -247,11 +256,14 @@ class Localizer {
   void noteHeadingChange(double heading_before_rad);
   // The azimuth of the car's forward axis (base_link's x) in the map frame.
   double vehicleHeading() const;
+  // The map-frame horizontal velocity's sigma (m/s, the larger axis).
+  double horizontalVelocitySigma() const;
 
   LocalizerConfig config_;
   Eigen::Matrix3d base_from_imu_ = Eigen::Matrix3d::Identity();  // setImuMounting
   Eigen::Vector3d forward_in_imu_ = Eigen::Vector3d::UnitX();    // base_link's x axis
   NonholonomicModel nonholonomic_model_;                         // from config_ and the mounting
+  StandstillDetector standstill_;
   std::unique_ptr<NavigationFilter> filter_;
   bool initialized_ = false;
   std::optional<ImuSample> last_imu_;  // latest sample, also before initialization

@@ -4,6 +4,7 @@
 
 #include <string>
 
+#include "inekf_semantic_mapping/estimation/standstill_detector.h"
 #include "inekf_semantic_mapping/estimation/types.h"
 
 namespace inekf_semantic_mapping {
@@ -79,6 +80,10 @@ struct LocalizerConfig {
   // The constraint cannot tell forward from backward: with the heading this uncertain (1 sigma
   // about the body z axis) it would as soon turn the car around as converge. Skipped until then.
   double nonholonomic_max_heading_sigma_deg = 10.0;
+
+  // Zero-velocity and zero-rate updates while the vehicle stands still (StandstillDetector).
+  // Off by default: KITTI's OXTS holds its biases itself (config/robot_inekf.yaml turns it on).
+  StandstillOptions standstill;
 
   // Lazy initialization (LocalizationSession's start): take rotation and velocity from
   // setInitialReference() (the orientation of the first Imu message that has one) instead of

@@ -30,6 +30,14 @@ struct NonholonomicModel {
   Eigen::Matrix3d imu_from_vehicle = Eigen::Matrix3d::Identity();
 };
 
+// What a standstill measures (NavigationFilter::correctStandstill, StandstillDetector): the
+// body velocity is zero, and the gyro's mean over the still interval is its bias.
+struct StandstillMeasurement {
+  double velocity_sigma_mps = 0.02;
+  Eigen::Vector3d mean_angular_velocity = Eigen::Vector3d::Zero();      // rad/s, raw, body frame
+  Eigen::Vector3d angular_velocity_variance = Eigen::Vector3d::Zero();  // (rad/s)^2 per axis
+};
+
 // imu_from_vehicle for a direction of travel at `pitch_rad` above the IMU's x-y plane (towards
 // +z) and `yaw_rad` from its x axis towards +y, with no roll between the two frames.
 Eigen::Matrix3d vehicleFrameInImu(double pitch_rad, double yaw_rad);
@@ -67,6 +75,12 @@ class NavigationFilter {
   // or result, sigmas not positive).
   virtual CorrectionResult correctNonholonomic(const NonholonomicModel& model,
                                                double gate_mahalanobis_squared) = 0;
+
+  // Zero-velocity and zero-rate update at a standstill: the body velocity is zero and the
+  // measured mean rate is the gyro bias (6 dof: H = [0 I 0 0 0; 0 0 0 I 0] in the
+  // left-invariant error, linearised at zero velocity). Rejected as correctPosition is.
+  virtual CorrectionResult correctStandstill(const StandstillMeasurement& measurement,
+                                             double gate_mahalanobis_squared) = 0;
 
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
