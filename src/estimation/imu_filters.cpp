@@ -232,37 +232,47 @@ CorrectionResult ImuFilterBase::correctNonholonomic(const NonholonomicModel& mod
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }
 
-CorrectionResult ImuFilterBase::correctStandstill(const StandstillMeasurement& measurement,
-                                                  double gate) {
+CorrectionResult ImuFilterBase::correctZeroVelocity(double sigma, double gate) {
   CorrectionResult result;
-  const double sigma = measurement.velocity_sigma_mps;
-  const Eigen::Vector3d& rate_variance = measurement.angular_velocity_variance;
-  if (!(sigma > 0.0) || !std::isfinite(sigma) || !measurement.mean_angular_velocity.allFinite() ||
-      !rate_variance.allFinite() || !(rate_variance.minCoeff() > 0.0)) {
-    result.reason = "standstill sigmas must be positive and finite, the rate finite";
+  if (!(sigma > 0.0) || !std::isfinite(sigma)) {
+    result.reason = "the zero-velocity sigma must be positive and finite";
     return result;
   }
   // The body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R (as in correctNonholonomic),
-  // measured 0; the mean rate w = b_g + noise at rest, the bias error additive (true - estimate).
-  // Linearised at the velocity the measurement says is true, zero: there the attitude does not
-  // enter (v_b^ = 0). Taken at the estimate's few tenths of a m/s of noise, v_b^ xi_R let each
-  // update "observe" the yaw of a robot that had never moved (its sigma 180 -> 1.6 deg in 30 s,
-  // gtest AMemsRobotStandingWithoutFixes...).
-  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
+  // measured 0, linearised at the velocity the measurement says is true, zero: there the
+  // attitude does not enter (v_b^ = 0). Taken at the estimate's few tenths of a m/s of noise,
+  // v_b^ xi_R let each update "observe" the yaw of a robot that had never moved (its sigma 180
+  // -> 2.6 deg, gtest AMemsRobotStandingWithoutFixes...).
   NavState at_rest = state_;
   at_rest.velocity_map.setZero();
-  Eigen::Matrix<double, 6, 15> h_left = Eigen::Matrix<double, 6, 15>::Zero();
+  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
   h_left.block<3, 3>(0, 3).setIdentity();
-  h_left.block<3, 3>(3, 9).setIdentity();
-  const Eigen::Matrix<double, 6, 15> h = h_left * leftFromError(at_rest);
-  Eigen::Matrix<double, 6, 1> innovation;
-  innovation << -body_velocity, measurement.mean_angular_velocity - state_.gyro_bias;
-  Eigen::Matrix<double, 6, 1> variances;
-  variances << Eigen::Vector3d::Constant(sigma * sigma), rate_variance;
-  const Eigen::Matrix<double, 6, 6> noise = variances.asDiagonal();
+  const Eigen::Matrix<double, 3, 15> h = h_left * leftFromError(at_rest);
+  const Eigen::Vector3d innovation = -(state_.rotation.transpose() * state_.velocity_map);
+  const Eigen::Matrix3d noise = Eigen::Matrix3d::Identity() * sigma * sigma;
   Vector15d delta;
   ErrorCovariance updated;
-  result = kalmanUpdate<6>(innovation, h, noise, gate, &delta, &updated);
+  result = kalmanUpdate<3>(innovation, h, noise, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
+CorrectionResult ImuFilterBase::correctZeroRate(const Eigen::Vector3d& mean_rate,
+                                                const Eigen::Vector3d& variance, double gate) {
+  CorrectionResult result;
+  if (!mean_rate.allFinite() || !variance.allFinite() || !(variance.minCoeff() > 0.0)) {
+    result.reason = "the zero-rate measurement must be finite, its variances positive";
+    return result;
+  }
+  // At rest the gyro reads w = b_g + noise; the bias error is additive (true - estimate).
+  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
+  h_left.block<3, 3>(0, 9).setIdentity();
+  const Eigen::Matrix<double, 3, 15> h = h_left * leftFromError(state_);
+  const Eigen::Vector3d innovation = mean_rate - state_.gyro_bias;
+  const Eigen::Matrix3d noise = variance.asDiagonal();
+  Vector15d delta;
+  ErrorCovariance updated;
+  result = kalmanUpdate<3>(innovation, h, noise, gate, &delta, &updated);
   if (!result.accepted) return result;
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }

@@ -109,7 +109,7 @@ std::string LocalizationSession::summary() const {
   }
   if (s.filter.standstill_used + s.filter.standstill_rejected > 0) {
     line << "standstill " << s.filter.standstill_used << " used / " << s.filter.standstill_rejected
-         << " rejected; ";
+         << " rejected (zero rate " << s.filter.standstill_rate_rejected << " rejected); ";
   }
   const std::int64_t heading_events =
       s.filter.heading_alignments + s.filter.heading_recoveries + s.filter.heading_reopens;

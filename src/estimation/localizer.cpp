@@ -131,10 +131,16 @@ bool Localizer::propagate(const ImuStep& step) {
     // is kept out of the update (its sigma 180 -> 3 deg in 10 s of standing without this).
     if (!(yawSigma() <= config_.heading_align_above_sigma_deg * kDegToRad)) decorrelateYaw();
     const double heading_before = vehicleHeading();
-    const CorrectionResult result =
-        filter_->correctStandstill(*step.standstill, config_.standstill.gate_mahalanobis_squared);
-    ++(result.accepted ? statistics_.standstill_used : statistics_.standstill_rejected);
-    if (result.accepted) noteHeadingChange(heading_before);
+    const double gate = config_.standstill.gate_mahalanobis_squared;
+    // Each part on its own: a gyro shaken beyond its configured noise must not take the zero
+    // velocity down with the rate (a 3x noisier gyro: 9.2 km of drift with one 6-dof update).
+    const CorrectionResult velocity =
+        filter_->correctZeroVelocity(step.standstill->velocity_sigma_mps, gate);
+    ++(velocity.accepted ? statistics_.standstill_used : statistics_.standstill_rejected);
+    const CorrectionResult rate = filter_->correctZeroRate(
+        step.standstill->mean_angular_velocity, step.standstill->angular_velocity_variance, gate);
+    if (!rate.accepted) ++statistics_.standstill_rate_rejected;
+    if (velocity.accepted || rate.accepted) noteHeadingChange(heading_before);
   }
   if (config_.nonholonomic && step.dt > 0.0) {
     // About the map's z axis: the pose covariance's (5, 5) is about the IMU's own z, horizontal
@@ -307,8 +313,13 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
     if (gap || sample.interpolated || consecutive_rejected_fixes_ > 0) {
       standstill_.reset();
     } else {
-      step.standstill = standstill_.add(sample, dt, filter_->state(), horizontalVelocitySigma(),
-                                        trackSaysMoving(), config_.imu_noise.gyro_noise_density);
+      StandstillDetector::Context context;
+      context.velocity_sigma_mps = horizontalVelocitySigma();
+      context.gyro_bias_sigma_radps =
+          std::sqrt(std::max(0.0, filter_->covariance().block<3, 3>(9, 9).trace()));
+      context.fixes = trackVerdict();
+      context.gyro_noise_density = config_.imu_noise.gyro_noise_density;
+      step.standstill = standstill_.add(sample, dt, filter_->state(), context);
     }
   }
   if (!propagate(step)) {
@@ -444,11 +455,14 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
     return Eigen::Vector3d(used.position_map - filter_->state().rotation * used.antenna_in_imu);
   };
 
-  // The heading monitor, before the correction: the track including this fix.
-  if (config_.heading_from_track) {
+  // The heading monitor, before the correction: the track including this fix (kept for the
+  // standstill too: trackVerdict).
+  if (config_.heading_from_track || config_.standstill.enabled) {
     PositionFix at_imu = used;
     at_imu.position_map = imu_position();
     addToTrack(at_imu);
+  }
+  if (config_.heading_from_track) {
     const TrackHeading track = trackHeading();
     if (track.valid && track.sigma_rad <= config_.heading_align_max_sigma_deg * kDegToRad) {
       const double yaw_sigma = yawSigma();
@@ -622,20 +636,32 @@ std::string Localizer::takeHeadingEvent() {
   return event;
 }
 
-bool Localizer::trackSaysMoving() const {
-  // The fixes of the last 10 s (1 Hz fixes of 1.5 m: a speed sigma of about 0.15 m/s; a robot
-  // driving steadily at 1.5 m/s, its IMU quiet, while the filter's velocity is uncertain before
-  // the heading aligns), while they are current: a robot that drove into a garage and stopped
-  // there is not moving.
-  constexpr double kWindowS = 10.0, kCurrentS = 2.5;
+StandstillDetector::Fixes Localizer::trackVerdict() const {
+  // The fixes of the last kFixesWindowS, while they are current: a robot that drove into a garage
+  // and stopped there is not moving; fixes that have stopped coming say nothing.
+  using Fixes = StandstillDetector::Fixes;
+  constexpr double kWindowS = StandstillDetector::kFixesWindowS, kCurrentS = 2.5;
+  constexpr int kMinFixes = 5;
   if (track_fixes_.empty() ||
       !(filter_->state().stamp_s - track_fixes_.back().stamp_s <= kCurrentS)) {
-    return false;
+    return Fixes::kUnknown;
   }
   double variance = 0.0;
   const double speed = trackVelocity(kWindowS, &variance).norm();
-  return std::isfinite(variance) &&
-         speed - 2.0 * std::sqrt(variance) > config_.standstill.max_speed_mps;
+  if (!std::isfinite(variance)) return Fixes::kUnknown;
+  const double sigma = std::sqrt(variance), max_speed = config_.standstill.max_speed_mps;
+  if (speed - 2.0 * sigma > max_speed) return Fixes::kMoving;
+  // Standing: a track over (most of) the window, slower than the limit by two of its sigmas.
+  const double newest = track_fixes_.back().stamp_s;
+  int fixes = 0;
+  double oldest = newest;
+  for (const TrackFix& f : track_fixes_) {
+    if (f.stamp_s < newest - kWindowS - kDuplicateStampS) continue;
+    ++fixes;
+    oldest = std::min(oldest, f.stamp_s);
+  }
+  const bool covers = fixes >= kMinFixes && newest - oldest >= 0.8 * kWindowS;
+  return covers && speed + 2.0 * sigma <= max_speed ? Fixes::kStanding : Fixes::kUnknown;
 }
 
 double Localizer::horizontalVelocitySigma() const {
@@ -723,7 +749,11 @@ void Localizer::addToTrack(const PositionFix& fix) {
     break;
   }
   track_fixes_.push_back(current);
-  const double oldest = current.stamp_s - config_.heading_track_window_s;
+  // The standstill's verdict reads the fixes of its own window too.
+  const double kept_s = config_.standstill.enabled ? std::max(config_.heading_track_window_s,
+                                                              StandstillDetector::kFixesWindowS)
+                                                   : config_.heading_track_window_s;
+  const double oldest = current.stamp_s - kept_s;
   while (!track_fixes_.empty() && track_fixes_.front().stamp_s < oldest) track_fixes_.pop_front();
   while (!chords_.empty() && chords_.front().stamp_s < oldest) chords_.pop_front();
 }

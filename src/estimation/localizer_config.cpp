@@ -90,7 +90,6 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("standstill.max_acceleration_mps2", &still.max_acceleration_mps2);
   angle("standstill.max_rate_degps", &still.max_rate_degps, false);
   positive("standstill.max_speed_mps", &still.max_speed_mps);
-  positive("standstill.max_velocity_sigma_mps", &still.max_velocity_sigma_mps);
   positive("standstill.velocity_sigma_mps", &still.velocity_sigma_mps);
   positive("standstill.update_interval_s", &still.update_interval_s);
   positive("standstill.gate_mahalanobis_squared", &still.gate_mahalanobis_squared);

@@ -1,7 +1,8 @@
 // StandstillDetector: a sliding window of the IMU's levelled acceleration and bias-corrected
-// rate, gated by the filter's velocity.
+// rate, gated by the filter's velocity and the GPS track.
 #include "inekf_semantic_mapping/estimation/standstill_detector.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -26,7 +27,6 @@ void validate(const StandstillOptions& options) {
   requirePositive(options.max_acceleration_mps2, "max_acceleration_mps2");
   requirePositive(options.max_rate_degps, "max_rate_degps");
   requirePositive(options.max_speed_mps, "max_speed_mps");
-  requirePositive(options.max_velocity_sigma_mps, "max_velocity_sigma_mps");
   requirePositive(options.velocity_sigma_mps, "velocity_sigma_mps");
   requirePositive(options.update_interval_s, "update_interval_s");
   requirePositive(options.gate_mahalanobis_squared, "gate_mahalanobis_squared");
@@ -40,30 +40,34 @@ void StandstillDetector::reset() {
   window_.clear();
   acceleration_sum_.setZero();
   rate_sum_.setZero();
+  raw_force_sum_.setZero();
+  raw_rate_sum_.setZero();
   window_duration_s_ = 0.0;
+  steady_s_ = 0.0;
   raw_rate_integral_.setZero();
+  raw_rate_count_ = 0;
   still_duration_s_ = 0.0;
   still_ = false;
 }
 
 std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sample, double dt,
                                                              const NavState& state,
-                                                             double velocity_sigma_mps,
-                                                             bool fixes_say_moving,
-                                                             double gyro_noise_density) {
+                                                             const Context& context) {
   if (!(dt > 0.0) || !std::isfinite(dt)) return std::nullopt;
   WindowSample entry;
-  entry.stamp_s = sample.stamp_s;
   entry.dt = dt;
   // At rest the bias-corrected specific force rotated into the map is gravity's reaction, (0, 0,
   // g): its horizontal part is the acceleration (and the filter's tilt error times g, which the
   // zero-velocity updates themselves remove).
-  entry.acceleration =
-      (state.rotation * (sample.specific_force - state.accel_bias)).head<2>();
+  entry.acceleration = (state.rotation * (sample.specific_force - state.accel_bias)).head<2>();
   entry.rate = sample.angular_velocity - state.gyro_bias;
+  entry.raw_force = sample.specific_force;
+  entry.raw_rate = sample.angular_velocity;
   window_.push_back(entry);
   acceleration_sum_ += entry.acceleration * dt;
   rate_sum_ += entry.rate * dt;
+  raw_force_sum_ += entry.raw_force * dt;
+  raw_rate_sum_ += entry.raw_rate * dt;
   window_duration_s_ += dt;
   // Keep the newest samples that cover window_s (the oldest one dropped only while the rest
   // still cover it).
@@ -71,36 +75,89 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
     const WindowSample& old = window_.front();
     acceleration_sum_ -= old.acceleration * old.dt;
     rate_sum_ -= old.rate * old.dt;
+    raw_force_sum_ -= old.raw_force * old.dt;
+    raw_rate_sum_ -= old.raw_rate * old.dt;
     window_duration_s_ -= old.dt;
     window_.pop_front();
   }
+  const bool full = window_duration_s_ >= options_.window_s - 1e-9;
+  const double max_rate =
+      options_.max_rate_degps * kDegToRad + 3.0 * std::max(0.0, context.gyro_bias_sigma_radps);
+  const bool not_turning = full && (rate_sum_ / window_duration_s_).norm() <= max_rate;
+  const bool quiet = not_turning && (acceleration_sum_ / window_duration_s_).norm() <=
+                                        options_.max_acceleration_mps2;
+  // Steady: the raw readings' window mean stays near their mean since the steady time began (no
+  // acceleration and no turn began, whatever the filter's tilt and biases, which make a MEMS
+  // filter's own acceleration wander at rest), within the limits plus three sigmas of the window
+  // mean's own noise (from the window's scatter: the IMU's noise and vibration).
+  const Eigen::Vector3d force_mean = raw_force_sum_ / window_duration_s_;
+  const Eigen::Vector3d rate_mean = raw_rate_sum_ / window_duration_s_;
+  bool steady = false;
+  if (full && steady_s_ > 0.0) {
+    Eigen::Vector3d force_scatter = Eigen::Vector3d::Zero(), rate_scatter = force_scatter;
+    for (const WindowSample& w : window_) {
+      force_scatter += (w.raw_force - force_mean).cwiseAbs2();
+      rate_scatter += (w.raw_rate - rate_mean).cwiseAbs2();
+    }
+    const double n = static_cast<double>(window_.size());
+    const double force_noise = std::sqrt(force_scatter.sum() / std::max(1.0, n - 1.0) / n);
+    const double rate_noise = std::sqrt(rate_scatter.sum() / std::max(1.0, n - 1.0) / n);
+    steady =
+        (force_mean - steady_force_).norm() <= options_.max_acceleration_mps2 + 3.0 * force_noise &&
+        (rate_mean - steady_rate_).norm() <= options_.max_rate_degps * kDegToRad + 3.0 * rate_noise;
+  }
+  if (steady) {
+    // The reference: the mean of the window means since the steady time began.
+    steady_s_ += dt;
+    steady_force_ += (force_mean - steady_force_) * (dt / steady_s_);
+    steady_rate_ += (rate_mean - steady_rate_) * (dt / steady_s_);
+  } else if (full) {
+    steady_force_ = force_mean;
+    steady_rate_ = rate_mean;
+    steady_s_ = dt;  // begins now
+  }
   const double speed = state.velocity_map.head<2>().norm();
   const double max_speed = options_.max_speed_mps;
-  // The filter knows the vehicle stands; or it cannot tell (standing is within two sigmas) and
-  // the fixes do not say it moves.
-  const bool known_still = speed <= max_speed && velocity_sigma_mps <= max_speed;
-  const bool maybe_still = speed <= max_speed + 2.0 * velocity_sigma_mps &&
-                           velocity_sigma_mps <= options_.max_velocity_sigma_mps &&
-                           !fixes_say_moving;
-  still_ = window_duration_s_ >= options_.window_s - 1e-9 &&
-           (acceleration_sum_ / window_duration_s_).norm() <= options_.max_acceleration_mps2 &&
-           (rate_sum_ / window_duration_s_).norm() <= options_.max_rate_degps * kDegToRad &&
-           (known_still || maybe_still);
+  // The filter's speed is below the limit by two of its sigmas (and the fixes do not say it
+  // moves); or the fixes have stood for their window and the IMU been steady as long. Standing
+  // within the velocity's sigmas is no evidence: a robot driving steadily at 1.5 m/s through an
+  // outage, its velocity sigma grown to 0.6 m/s, was held at zero for 46 m; a robot pulling away
+  // gently to 0.4 m/s, its first 0.2 s of acceleration still in a quiet window, was held at zero
+  // again by a speed estimate of 0.3 +- 0.05.
+  const bool known_still = quiet && speed + 2.0 * context.velocity_sigma_mps <= max_speed &&
+                           context.fixes != Fixes::kMoving;
+  const bool fixes_stood =
+      not_turning && context.fixes == Fixes::kStanding && steady_s_ >= kFixesWindowS - 1e-9;
+  still_ = known_still || fixes_stood;
   if (!still_) {
     raw_rate_integral_.setZero();
+    raw_rate_count_ = 0;
     still_duration_s_ = 0.0;
     return std::nullopt;
   }
   raw_rate_integral_ += sample.angular_velocity * dt;
+  ++raw_rate_count_;
   still_duration_s_ += dt;
   if (still_duration_s_ < options_.update_interval_s - 1e-9) return std::nullopt;
   StandstillMeasurement measurement;
   measurement.velocity_sigma_mps = options_.velocity_sigma_mps;
   measurement.mean_angular_velocity = raw_rate_integral_ / still_duration_s_;
-  // White noise of density d averaged over T seconds: variance d^2 / T per axis.
-  measurement.angular_velocity_variance =
-      Eigen::Vector3d::Constant(gyro_noise_density * gyro_noise_density / still_duration_s_);
+  // White noise of density d averaged over T seconds: d^2 / T per axis. Vibration beyond the
+  // configured density shows as the window's scatter of the samples (s^2 per sample; s^2 / n for
+  // the mean of the interval's n); the larger of the two.
+  const double density = context.gyro_noise_density;
+  Eigen::Vector3d variance = Eigen::Vector3d::Constant(density * density / still_duration_s_);
+  if (window_.size() >= 2) {
+    const double n = static_cast<double>(window_.size());
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero(), squares = Eigen::Vector3d::Zero();
+    for (const WindowSample& w : window_) mean += w.rate;
+    mean /= n;
+    for (const WindowSample& w : window_) squares += (w.rate - mean).cwiseAbs2();
+    variance = variance.cwiseMax(squares / (n - 1.0) / raw_rate_count_);
+  }
+  measurement.angular_velocity_variance = variance;
   raw_rate_integral_.setZero();
+  raw_rate_count_ = 0;
   still_duration_s_ = 0.0;
   return measurement;
 }

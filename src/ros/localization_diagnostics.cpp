@@ -172,8 +172,10 @@ void LocalizationMonitor::fill(const estimation::LocalizationSession& session, d
               std::to_string(filter.nonholonomic_rejected) + " / " +
                   std::to_string(filter.nonholonomic_skipped) + " / " +
                   std::to_string(filter.nonholonomic_suspended));
-  status->add("standstill updates used / rejected", std::to_string(filter.standstill_used) + " / " +
-                                                        std::to_string(filter.standstill_rejected));
+  status->add("standstill updates used / rejected / zero-rate rejected",
+              std::to_string(filter.standstill_used) + " / " +
+                  std::to_string(filter.standstill_rejected) + " / " +
+                  std::to_string(filter.standstill_rate_rejected));
   status->add("heading alignments", filter.heading_alignments);
   status->add("heading recoveries", filter.heading_recoveries + filter.heading_reopens);
   status->add("resets", statistics.resets);

@@ -437,51 +437,57 @@ TEST(Filters, NonholonomicUpdateMeasuresInTheVehicleFrame) {
   }
 }
 
-// At rest the velocity is zero and the gyro reads its bias: one standstill update takes a
-// vague velocity to zero and the bias to the measured mean rate, the same in all three filters.
-TEST(Filters, AStandstillUpdateZeroesTheVelocityAndTakesTheRateAsTheGyroBias) {
+// At rest the velocity is zero and the gyro reads its bias: the zero-velocity update takes a
+// vague velocity to zero, the zero-rate one the bias to the measured mean rate, the same in all
+// three filters; each is gated on its own.
+TEST(Filters, StandstillUpdatesZeroTheVelocityAndTakeTheRateAsTheGyroBias) {
   NavState estimate;
   estimate.stamp_s = 2.0;
   estimate.rotation = lie::expSO3(Eigen::Vector3d(0.02, -0.01, 1.1));
   estimate.velocity_map = Eigen::Vector3d(0.15, -0.1, 0.02);
   Eigen::Matrix<double, 15, 1> sigma;
   sigma << 0.01, 0.01, 0.05, 0.3, 0.3, 0.3, 1.0, 1.0, 1.0, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1;
-  StandstillMeasurement still;
-  still.velocity_sigma_mps = 0.01;
-  still.mean_angular_velocity = Eigen::Vector3d(0.004, -0.003, 0.005);
-  still.angular_velocity_variance = Eigen::Vector3d::Constant(1e-4 * 1e-4);
+  const Eigen::Vector3d mean_rate(0.004, -0.003, 0.005);
+  const Eigen::Vector3d rate_variance = Eigen::Vector3d::Constant(1e-4 * 1e-4);
   std::vector<Eigen::Vector3d> biases;
   for (FilterType type : kAllFilters) {
     auto filter = makeFilter(type, ImuNoise());
     filter->initialize(estimate,
                        filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
     const double speed_variance_before = filter->twistCovariance()(0, 0);
-    const CorrectionResult result = filter->correctStandstill(still, 100.0);
-    ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+    const CorrectionResult velocity = filter->correctZeroVelocity(0.01, 100.0);
+    ASSERT_TRUE(velocity.accepted) << toString(type) << ": " << velocity.reason;
     EXPECT_LT(filter->state().velocity_map.norm(), 0.01) << toString(type);
-    EXPECT_LT((filter->state().gyro_bias - still.mean_angular_velocity).norm(), 2e-4)
-        << toString(type);
     EXPECT_LT(filter->twistCovariance()(0, 0), 0.01 * speed_variance_before) << toString(type);
+    const CorrectionResult rate = filter->correctZeroRate(mean_rate, rate_variance, 100.0);
+    ASSERT_TRUE(rate.accepted) << toString(type) << ": " << rate.reason;
+    EXPECT_LT((filter->state().gyro_bias - mean_rate).norm(), 2e-4) << toString(type);
     // The bias's variance is the measurement's now (it was 1e-4).
     EXPECT_LT(filter->covariance()(11, 11), 2e-8) << toString(type);
     Eigen::LLT<ErrorCovariance> llt(filter->covariance());
     EXPECT_EQ(llt.info(), Eigen::Success);
     biases.push_back(filter->state().gyro_bias);
-    // A vehicle that is moving fails the gate; bad sigmas are refused.
+    // A vehicle that is moving fails the velocity's gate, and the rate is still taken; bad
+    // sigmas are refused.
     NavState moving = estimate;
     moving.velocity_map = Eigen::Vector3d(5.0, 0.0, 0.0);
     filter->initialize(moving, filter->fromWorldCovariance(moving, sigma.cwiseAbs2().asDiagonal()));
-    EXPECT_FALSE(filter->correctStandstill(still, 22.5).accepted) << toString(type);
+    EXPECT_FALSE(filter->correctZeroVelocity(0.01, 16.3).accepted) << toString(type);
     EXPECT_EQ(filter->state().velocity_map, moving.velocity_map);
-    StandstillMeasurement bad = still;
-    bad.velocity_sigma_mps = 0.0;
-    EXPECT_FALSE(filter->correctStandstill(bad, 100.0).accepted);
-    bad = still;
-    bad.angular_velocity_variance.x() = 0.0;
-    EXPECT_FALSE(filter->correctStandstill(bad, 100.0).accepted);
-    bad = still;
-    bad.mean_angular_velocity.y() = std::nan("");
-    EXPECT_FALSE(filter->correctStandstill(bad, 100.0).accepted);
+    EXPECT_TRUE(filter->correctZeroRate(mean_rate, rate_variance, 16.3).accepted);
+    // A rate far off the bias fails its own gate (a turn), the velocity is still taken.
+    filter->initialize(estimate,
+                       filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
+    EXPECT_FALSE(
+        filter->correctZeroRate(Eigen::Vector3d(0.0, 0.0, 0.2), rate_variance, 16.3).accepted);
+    EXPECT_TRUE(filter->correctZeroVelocity(0.01, 16.3).accepted);
+    EXPECT_FALSE(filter->correctZeroVelocity(0.0, 100.0).accepted);
+    EXPECT_FALSE(filter->correctZeroVelocity(std::nan(""), 100.0).accepted);
+    EXPECT_FALSE(
+        filter->correctZeroRate(mean_rate, Eigen::Vector3d(0.0, 1e-8, 1e-8), 100.0).accepted);
+    EXPECT_FALSE(
+        filter->correctZeroRate(Eigen::Vector3d(0.0, std::nan(""), 0.0), rate_variance, 100.0)
+            .accepted);
   }
   EXPECT_LT((biases[0] - biases[1]).norm(), 1e-6);
   EXPECT_LT((biases[0] - biases[2]).norm(), 1e-6);

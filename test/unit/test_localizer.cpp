@@ -803,7 +803,6 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(still.max_acceleration_mps2, still_default.max_acceleration_mps2);
   EXPECT_DOUBLE_EQ(still.max_rate_degps, still_default.max_rate_degps);
   EXPECT_DOUBLE_EQ(still.max_speed_mps, still_default.max_speed_mps);
-  EXPECT_DOUBLE_EQ(still.max_velocity_sigma_mps, still_default.max_velocity_sigma_mps);
   EXPECT_DOUBLE_EQ(still.velocity_sigma_mps, still_default.velocity_sigma_mps);
   EXPECT_DOUBLE_EQ(still.update_interval_s, still_default.update_interval_s);
   EXPECT_DOUBLE_EQ(still.gate_mahalanobis_squared, still_default.gate_mahalanobis_squared);

@@ -32,8 +32,9 @@ class ImuFilterBase : public NavigationFilter {
   // vehicle frame in the IMU's) mapped into this filter's coordinates through leftFromError().
   CorrectionResult correctNonholonomic(const NonholonomicModel& model, double gate) override;
   // Generic in the left-invariant error as well, like the constraint.
-  CorrectionResult correctStandstill(const StandstillMeasurement& measurement,
-                                     double gate) override;
+  CorrectionResult correctZeroVelocity(double sigma_mps, double gate) override;
+  CorrectionResult correctZeroRate(const Eigen::Vector3d& mean_rate_radps,
+                                   const Eigen::Vector3d& variance, double gate) override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

@@ -114,11 +114,12 @@ class Localizer {
     std::int64_t nonholonomic_rejected = 0;
     std::int64_t nonholonomic_skipped = 0;    // heading too uncertain (see the config)
     std::int64_t nonholonomic_suspended = 0;  // the last fix was gated out
-    std::int64_t standstill_used = 0;         // zero-velocity / zero-rate updates
+    std::int64_t standstill_used = 0;         // zero-velocity updates (a zero-rate one with each)
     std::int64_t standstill_rejected = 0;
-    std::int64_t heading_alignments = 0;  // unknown heading set from the GPS track
-    std::int64_t heading_recoveries = 0;  // a wrong heading re-initialised from the track
-    std::int64_t heading_reopens = 0;     // yaw variance re-opened (fixes kept disagreeing)
+    std::int64_t standstill_rate_rejected = 0;  // the zero-rate part alone
+    std::int64_t heading_alignments = 0;        // unknown heading set from the GPS track
+    std::int64_t heading_recoveries = 0;        // a wrong heading re-initialised from the track
+    std::int64_t heading_reopens = 0;           // yaw variance re-opened (fixes kept disagreeing)
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -243,8 +244,9 @@ class Localizer {
   // The track's velocity over its fixes of the last window_s (variance per axis, infinite when
   // fewer than two).
   Eigen::Vector2d trackVelocity(double window_s, double* variance) const;
-  // The current fixes move faster than the standstill's max_speed_mps by two of their sigmas.
-  bool trackSaysMoving() const;
+  // What the current fixes of the last StandstillDetector::kFixesWindowS say: moving (faster than
+  // the standstill's max_speed_mps by two sigmas), standing, or nothing.
+  StandstillDetector::Fixes trackVerdict() const;
   void realignHeading(const TrackHeading& track, const std::string& why);
   void reopenHeading(const Eigen::Vector3d& innovation, const std::string& why);
   void noteHeadingEvent(const std::string& what);

@@ -76,11 +76,15 @@ class NavigationFilter {
   virtual CorrectionResult correctNonholonomic(const NonholonomicModel& model,
                                                double gate_mahalanobis_squared) = 0;
 
-  // Zero-velocity and zero-rate update at a standstill: the body velocity is zero and the
-  // measured mean rate is the gyro bias (6 dof: H = [0 I 0 0 0; 0 0 0 I 0] in the
-  // left-invariant error, linearised at zero velocity). Rejected as correctPosition is.
-  virtual CorrectionResult correctStandstill(const StandstillMeasurement& measurement,
-                                             double gate_mahalanobis_squared) = 0;
+  // At a standstill (StandstillDetector), two updates gated each on its own 3 dof and rejected
+  // as correctPosition is. Zero velocity: the body velocity is 0 +- sigma (H = [0 I 0 0 0] in the
+  // left-invariant error, linearised at the zero velocity it measures). Zero rate: the mean
+  // measured rate over a still interval is the gyro bias (H = [0 0 0 I 0]).
+  virtual CorrectionResult correctZeroVelocity(double sigma_mps,
+                                               double gate_mahalanobis_squared) = 0;
+  virtual CorrectionResult correctZeroRate(const Eigen::Vector3d& mean_rate_radps,
+                                           const Eigen::Vector3d& variance,
+                                           double gate_mahalanobis_squared) = 0;
 
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
