@@ -1177,6 +1177,44 @@ TEST(LocalizationSession, AWrongReferenceHeadingIsNoticedAndRecovered) {
   }
 }
 
+// The simulated MEMS IMU and receiver of the robot tests below: turn-on biases of 0.3 deg/s and
+// 0.1 m/s^2, white noise of 1e-3 rad/s/sqrt(Hz) and 0.02 m/s^2/sqrt(Hz) at 100 Hz; fixes of a
+// horizontal sigma (vertical twice it).
+class MemsSensors {
+ public:
+  static constexpr double kRateHz = 100.0;
+  const Eigen::Vector3d gyro_bias{0.004, -0.003, 0.005}, accel_bias{0.08, -0.06, 0.1};
+
+  explicit MemsSensors(unsigned seed) : random_(seed) {}
+
+  // The sample of a body turning at `rate` under the specific force `force` (body axes).
+  ImuEvent imu(double stamp_s, const Eigen::Vector3d& rate, const Eigen::Vector3d& force) {
+    ImuEvent event;
+    event.sample.stamp_s = stamp_s;
+    event.sample.angular_velocity = rate + gyro_bias + 1.0e-3 * std::sqrt(kRateHz) * noise();
+    event.sample.specific_force = force + accel_bias + 0.02 * std::sqrt(kRateHz) * noise();
+    return event;
+  }
+  // A fix of the point (x, y, 0) of the map.
+  GeodeticFixEvent fix(double stamp_s, double x, double y, double sigma) {
+    GeodeticFixEvent event;
+    event.stamp_s = stamp_s;
+    const Eigen::Vector3d p(x + sigma * unit_(random_), y + sigma * unit_(random_), 0.0);
+    projection_.toGeodetic(p, &event.lat_deg, &event.lon_deg, &event.alt_m);
+    const double v = sigma * sigma;
+    event.covariance_enu = Eigen::Vector3d(v, v, 4.0 * v).asDiagonal();
+    return event;
+  }
+
+ private:
+  Eigen::Vector3d noise() {
+    return Eigen::Vector3d(unit_(random_), unit_(random_), unit_(random_));
+  }
+  std::mt19937 random_;
+  std::normal_distribution<double> unit_{0.0, 1.0};
+  const kitti::MercatorProjection projection_{kLat0, kLon0, kAlt0};
+};
+
 // A robot with a MEMS IMU (no orientation; turn-on biases of 0.3 deg/s and 0.1 m/s^2, white
 // noise) and 1 Hz fixes of 1.5 m, weaving along a 3 min drive at 4 or 1.5 m/s (at 1.5 m/s also
 // after standing a minute): the robot template (config/robot_inekf.yaml, robot.launch's default)
@@ -1202,11 +1240,8 @@ MemsRun runMemsDrive(LocalizationSessionConfig config, const MemsDrive& drive) {
   config.origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
   LocalizationSession session(config);
   session.setGpsVelocityExpected(false);
-  const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
-  const Eigen::Vector3d gyro_bias(0.004, -0.003, 0.005), accel_bias(0.08, -0.06, 0.1);
-  std::mt19937 random(5);
-  std::normal_distribution<double> unit(0.0, 1.0);
-  const double rate_hz = 100.0, dt = 1.0 / rate_hz;
+  MemsSensors sensors(5);
+  const double rate_hz = MemsSensors::kRateHz, dt = 1.0 / rate_hz;
   // Yaw rate: a slow weave, 0.15 rad/s peak over a 20 s period, once moving.
   const auto moving = [&](double t) { return t >= drive.standstill_s; };
   constexpr double kAcceleration = 0.5;  // after a standstill
@@ -1236,32 +1271,16 @@ MemsRun runMemsDrive(LocalizationSessionConfig config, const MemsDrive& drive) {
       y += v * std::sin(mid) * dt;
       yaw += w * dt;
     }
-    ImuEvent imu;
-    imu.sample.stamp_s = t0 + t;
-    imu.sample.angular_velocity =
-        Eigen::Vector3d(0.0, 0.0, yaw_rate(t)) + gyro_bias +
-        1.0e-3 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
-    imu.sample.specific_force =
-        Eigen::Vector3d(acceleration_at(t), speed * yaw_rate(t), 9.81) + accel_bias +
-        0.02 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
     const std::int64_t standstill_before = session.statistics().filter.standstill_used;
-    session.addImu(imu);
+    session.addImu(sensors.imu(t0 + t, Eigen::Vector3d(0.0, 0.0, yaw_rate(t)),
+                               Eigen::Vector3d(acceleration_at(t), speed * yaw_rate(t), 9.81)));
     // Faster than the template's standstill.max_speed_mps (pulling away, the first 0.1 s of
     // 0.5 m/s^2 still fits the 0.5 s window's mean: an update at 0.05 m/s is expected).
     if (speed > 0.3) {
       run.standstill_updates_moving +=
           session.statistics().filter.standstill_used - standstill_before;
     }
-    if (k % 100 == 0) {
-      const Eigen::Vector3d p(x + drive.fix_sigma_m * unit(random),
-                              y + drive.fix_sigma_m * unit(random), 0.0);
-      GeodeticFixEvent fix;
-      fix.stamp_s = t0 + t;
-      projection.toGeodetic(p, &fix.lat_deg, &fix.lon_deg, &fix.alt_m);
-      const double v = drive.fix_sigma_m * drive.fix_sigma_m;
-      fix.covariance_enu = Eigen::Vector3d(v, v, 4.0 * v).asDiagonal();
-      session.addFix(fix);
-    }
+    if (k % 100 == 0) session.addFix(sensors.fix(t0 + t, x, y, drive.fix_sigma_m));
     if (!session.started()) continue;
     const NavState& state = session.state();
     run.finite = run.finite && state.rotation.allFinite() && state.position_map.allFinite();
@@ -1280,7 +1299,7 @@ MemsRun runMemsDrive(LocalizationSessionConfig config, const MemsDrive& drive) {
     ++scored;
   }
   run.rms_horizontal_after_m = std::sqrt(sum_sq / std::max(1, scored));
-  run.gyro_bias_z_error = session.state().gyro_bias.z() - gyro_bias.z();
+  run.gyro_bias_z_error = session.state().gyro_bias.z() - sensors.gyro_bias.z();
   return run;
 }
 
@@ -1332,7 +1351,7 @@ TEST(LocalizationSession, TheStandstillUpdatesNeverFireWhileTheRobotDrives) {
   }
 }
 
-// A MEMS robot (runMemsDrive's IMU) on a drive of segments (duration, acceleration along its
+// A MEMS robot (MemsSensors) on a drive of segments (duration, acceleration along its
 // heading, yaw rate), 1.5 m fixes once a second outside the outages: the standstill updates made
 // while it drove faster than the template's standstill.max_speed_mps (0.3 m/s), and its worst
 // horizontal error from `score_from_s` on, with the updates and without.
@@ -1352,10 +1371,7 @@ SegmentRun runMemsSegments(const std::vector<Segment>& segments, double initial_
   config.localizer.standstill.enabled = standstill;
   LocalizationSession session(config);
   session.setGpsVelocityExpected(false);
-  const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
-  const Eigen::Vector3d gyro_bias(0.004, -0.003, 0.005), accel_bias(0.08, -0.06, 0.1);
-  std::mt19937 random(5);
-  std::normal_distribution<double> unit(0.0, 1.0);
+  MemsSensors sensors(5);
   const auto segmentAt = [&](double t) {
     for (const Segment& s : segments) {
       if (t < s.duration_s) return s;
@@ -1365,7 +1381,7 @@ SegmentRun runMemsSegments(const std::vector<Segment>& segments, double initial_
   };
   double total_s = 0.0;
   for (const Segment& s : segments) total_s += s.duration_s;
-  const double rate_hz = 100.0, dt = 1.0 / rate_hz, t0 = 100.0;
+  const double rate_hz = MemsSensors::kRateHz, dt = 1.0 / rate_hz, t0 = 100.0;
   double yaw = 0.7, x = 0.0, y = 0.0, speed = initial_speed;
   SegmentRun run;
   for (int k = 0; k <= static_cast<int>(total_s * rate_hz); ++k) {
@@ -1380,27 +1396,13 @@ SegmentRun runMemsSegments(const std::vector<Segment>& segments, double initial_
       yaw += s.yaw_rate * dt;
     }
     const Segment s = segmentAt(t);
-    ImuEvent imu;
-    imu.sample.stamp_s = t0 + t;
-    imu.sample.angular_velocity =
-        Eigen::Vector3d(0.0, 0.0, s.yaw_rate) + gyro_bias +
-        1.0e-3 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
-    imu.sample.specific_force =
-        Eigen::Vector3d(s.acceleration, speed * s.yaw_rate, 9.81) + accel_bias +
-        0.02 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
     const std::int64_t before = session.statistics().filter.standstill_used;
-    session.addImu(imu);
+    session.addImu(sensors.imu(t0 + t, Eigen::Vector3d(0.0, 0.0, s.yaw_rate),
+                               Eigen::Vector3d(s.acceleration, speed * s.yaw_rate, 9.81)));
     if (speed > 0.3) run.updates_moving += session.statistics().filter.standstill_used - before;
     bool out = false;
     for (const auto& [from, to] : outages) out = out || (t >= from && t < to);
-    if (k % 100 == 0 && !out) {
-      GeodeticFixEvent fix;
-      fix.stamp_s = t0 + t;
-      projection.toGeodetic(Eigen::Vector3d(x + 1.5 * unit(random), y + 1.5 * unit(random), 0.0),
-                            &fix.lat_deg, &fix.lon_deg, &fix.alt_m);
-      fix.covariance_enu = Eigen::Vector3d(2.25, 2.25, 9.0).asDiagonal();
-      session.addFix(fix);
-    }
+    if (k % 100 == 0 && !out) session.addFix(sensors.fix(t0 + t, x, y, 1.5));
     if (!session.started() || t < score_from_s) continue;
     const double error = (session.state().position_map.head<2>() - Eigen::Vector2d(x, y)).norm();
     run.worst_error_m = std::max(run.worst_error_m, error);
@@ -1446,7 +1448,7 @@ TEST(LocalizationSession, TheStandstillUpdatesNeverHoldADrivingRobot) {
   }
 }
 
-// A MEMS robot (the biases and noise of runMemsDrive's IMU) standing still for 2.5 min: fixes of
+// A MEMS robot (MemsSensors) standing still for 2.5 min: fixes of
 // 1.5 m once a second for the first 30 s, then none for 2 min (a garage, a covered yard). With
 // the template's standstill updates it stays where it stands and learns its gyro bias (nothing
 // else observes it before the robot drives); without them the accelerometer's bias, which tilt
@@ -1464,35 +1466,15 @@ MemsStand runMemsStand(LocalizationSessionConfig config) {
   config.origin = GeodeticOrigin{kLat0, kLon0, kAlt0};
   LocalizationSession session(config);
   session.setGpsVelocityExpected(false);
-  const kitti::MercatorProjection projection(kLat0, kLon0, kAlt0);
-  const Eigen::Vector3d gyro_bias(0.004, -0.003, 0.005), accel_bias(0.08, -0.06, 0.1);
-  std::mt19937 random(8);
-  std::normal_distribution<double> unit(0.0, 1.0);
-  const double rate_hz = 100.0, t0 = 100.0, fix_sigma = 1.5, outage_from_s = 30.0;
+  MemsSensors sensors(8);
+  const double rate_hz = MemsSensors::kRateHz, t0 = 100.0, outage_from_s = 30.0;
   MemsStand stand;
   double yaw_at_outage = kNaN;
   const auto yawOf = [](const Eigen::Matrix3d& r) { return std::atan2(r(1, 0), r(0, 0)); };
   for (int k = 0; k <= static_cast<int>(150.0 * rate_hz); ++k) {
     const double t = k / rate_hz;
-    ImuEvent imu;
-    imu.sample.stamp_s = t0 + t;
-    imu.sample.angular_velocity =
-        gyro_bias +
-        1.0e-3 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
-    imu.sample.specific_force =
-        Eigen::Vector3d(0.0, 0.0, 9.81) + accel_bias +
-        0.02 * std::sqrt(rate_hz) * Eigen::Vector3d(unit(random), unit(random), unit(random));
-    session.addImu(imu);
-    if (k % 100 == 0 && t < outage_from_s) {
-      GeodeticFixEvent fix;
-      fix.stamp_s = t0 + t;
-      projection.toGeodetic(
-          Eigen::Vector3d(fix_sigma * unit(random), fix_sigma * unit(random), 0.0), &fix.lat_deg,
-          &fix.lon_deg, &fix.alt_m);
-      const double v = fix_sigma * fix_sigma;
-      fix.covariance_enu = Eigen::Vector3d(v, v, 4.0 * v).asDiagonal();
-      session.addFix(fix);
-    }
+    session.addImu(sensors.imu(t0 + t, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.0, 0.0, 9.81)));
+    if (k % 100 == 0 && t < outage_from_s) session.addFix(sensors.fix(t0 + t, 0.0, 0.0, 1.5));
     if (!session.started()) continue;
     const NavState& state = session.state();
     stand.finite = stand.finite && state.rotation.allFinite() && state.position_map.allFinite();
@@ -1501,7 +1483,7 @@ MemsStand runMemsStand(LocalizationSessionConfig config) {
   const NavState& state = session.state();
   stand.drift_m = state.position_map.head<2>().norm();
   stand.yaw_change_deg = std::abs(wrapDeg((yawOf(state.rotation) - yaw_at_outage) * 180.0 / M_PI));
-  stand.gyro_bias_z_error = state.gyro_bias.z() - gyro_bias.z();
+  stand.gyro_bias_z_error = state.gyro_bias.z() - sensors.gyro_bias.z();
   const Eigen::Matrix3d rotation_covariance = state.rotation *
                                               session.poseCovariance().bottomRightCorner<3, 3>() *
                                               state.rotation.transpose();
