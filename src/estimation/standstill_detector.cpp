@@ -92,20 +92,23 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
   // mean's own noise (from the window's scatter: the IMU's noise and vibration).
   const Eigen::Vector3d force_mean = raw_force_sum_ / window_duration_s_;
   const Eigen::Vector3d rate_mean = raw_rate_sum_ / window_duration_s_;
-  bool steady = false;
-  if (full && steady_s_ > 0.0) {
-    Eigen::Vector3d force_scatter = Eigen::Vector3d::Zero(), rate_scatter = force_scatter;
+  // Per axis, the samples' variance about the window mean.
+  Eigen::Vector3d force_scatter = Eigen::Vector3d::Zero(), rate_scatter = force_scatter;
+  const double n = static_cast<double>(window_.size());
+  if (full && n >= 2.0) {
     for (const WindowSample& w : window_) {
       force_scatter += (w.raw_force - force_mean).cwiseAbs2();
       rate_scatter += (w.raw_rate - rate_mean).cwiseAbs2();
     }
-    const double n = static_cast<double>(window_.size());
-    const double force_noise = std::sqrt(force_scatter.sum() / std::max(1.0, n - 1.0) / n);
-    const double rate_noise = std::sqrt(rate_scatter.sum() / std::max(1.0, n - 1.0) / n);
-    steady =
-        (force_mean - steady_force_).norm() <= options_.max_acceleration_mps2 + 3.0 * force_noise &&
-        (rate_mean - steady_rate_).norm() <= options_.max_rate_degps * kDegToRad + 3.0 * rate_noise;
+    force_scatter /= n - 1.0;
+    rate_scatter /= n - 1.0;
   }
+  const bool steady =
+      full && steady_s_ > 0.0 &&
+      (force_mean - steady_force_).norm() <=
+          options_.max_acceleration_mps2 + 3.0 * std::sqrt(force_scatter.sum() / n) &&
+      (rate_mean - steady_rate_).norm() <=
+          options_.max_rate_degps * kDegToRad + 3.0 * std::sqrt(rate_scatter.sum() / n);
   if (steady) {
     // The reference: the mean of the window means since the steady time began.
     steady_s_ += dt;
@@ -143,18 +146,11 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
   measurement.velocity_sigma_mps = options_.velocity_sigma_mps;
   measurement.mean_angular_velocity = raw_rate_integral_ / still_duration_s_;
   // White noise of density d averaged over T seconds: d^2 / T per axis. Vibration beyond the
-  // configured density shows as the window's scatter of the samples (s^2 per sample; s^2 / n for
-  // the mean of the interval's n); the larger of the two.
+  // configured density shows as the window's scatter (s^2 per sample, s^2 / n for the mean of the
+  // interval's n samples); the larger of the two.
   const double density = context.gyro_noise_density;
-  Eigen::Vector3d variance = Eigen::Vector3d::Constant(density * density / still_duration_s_);
-  if (window_.size() >= 2) {
-    const double n = static_cast<double>(window_.size());
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero(), squares = Eigen::Vector3d::Zero();
-    for (const WindowSample& w : window_) mean += w.rate;
-    mean /= n;
-    for (const WindowSample& w : window_) squares += (w.rate - mean).cwiseAbs2();
-    variance = variance.cwiseMax(squares / (n - 1.0) / raw_rate_count_);
-  }
+  const Eigen::Vector3d variance = Eigen::Vector3d::Constant(density * density / still_duration_s_)
+                                       .cwiseMax(rate_scatter / raw_rate_count_);
   measurement.angular_velocity_variance = variance;
   raw_rate_integral_.setZero();
   raw_rate_count_ = 0;
