@@ -136,10 +136,12 @@ bool Localizer::propagate(const ImuStep& step) {
     // velocity down with the rate (a 3x noisier gyro: 9.2 km of drift with one 6-dof update).
     const CorrectionResult velocity =
         filter_->correctZeroVelocity(step.standstill->velocity_sigma_mps, gate);
-    ++(velocity.accepted ? statistics_.standstill_used : statistics_.standstill_rejected);
     const CorrectionResult rate = filter_->correctZeroRate(
         step.standstill->mean_angular_velocity, step.standstill->angular_velocity_variance, gate);
-    if (!rate.accepted) ++statistics_.standstill_rate_rejected;
+    if (!replaying_) {  // counted once, when the sample came (a late fix replays it)
+      ++(velocity.accepted ? statistics_.standstill_used : statistics_.standstill_rejected);
+      if (!rate.accepted) ++statistics_.standstill_rate_rejected;
+    }
     if (velocity.accepted || rate.accepted) noteHeadingChange(heading_before);
   }
   if (config_.nonholonomic && step.dt > 0.0) {
@@ -208,6 +210,7 @@ std::ptrdiff_t Localizer::lateFixStep(double stamp_s) const {
 }
 
 CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdiff_t step) {
+  replaying_ = true;
   filter_->initialize(history_[step].state, history_[step].covariance);
   heading_correction_rad_ = history_[step].heading_correction_rad;
   const double into_next = fix.stamp_s - history_[step].state.stamp_s;
@@ -233,6 +236,7 @@ CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdi
     history_[k].covariance = filter_->covariance();
     history_[k].heading_correction_rad = heading_correction_rad_;
   }
+  replaying_ = false;
   return result;
 }
 

@@ -81,15 +81,18 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
     window_.pop_front();
   }
   const bool full = window_duration_s_ >= options_.window_s - 1e-9;
+  // Widened by three sigmas of the gyro bias (a turn-on bias not yet learnt), at most to three
+  // times the limit: beyond, a slow turn on the spot would be taken for the bias.
+  const double limit = options_.max_rate_degps * kDegToRad;
   const double max_rate =
-      options_.max_rate_degps * kDegToRad + 3.0 * std::max(0.0, context.gyro_bias_sigma_radps);
+      limit + std::min(2.0 * limit, 3.0 * std::max(0.0, context.gyro_bias_sigma_radps));
   const bool not_turning = full && (rate_sum_ / window_duration_s_).norm() <= max_rate;
   const bool quiet = not_turning && (acceleration_sum_ / window_duration_s_).norm() <=
                                         options_.max_acceleration_mps2;
   // Steady: the raw readings' window mean stays near their mean since the steady time began (no
   // acceleration and no turn began, whatever the filter's tilt and biases, which make a MEMS
-  // filter's own acceleration wander at rest), within the limits plus three sigmas of the window
-  // mean's own noise (from the window's scatter: the IMU's noise and vibration).
+  // filter's own acceleration wander at rest), within the limits, or three sigmas of the window
+  // mean's own noise where that is larger (the window's scatter: the IMU's noise, vibration).
   const Eigen::Vector3d force_mean = raw_force_sum_ / window_duration_s_;
   const Eigen::Vector3d rate_mean = raw_rate_sum_ / window_duration_s_;
   // Per axis, the samples' variance about the window mean.
@@ -106,9 +109,9 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
   const bool steady =
       full && steady_s_ > 0.0 &&
       (force_mean - steady_force_).norm() <=
-          options_.max_acceleration_mps2 + 3.0 * std::sqrt(force_scatter.sum() / n) &&
+          std::max(options_.max_acceleration_mps2, 3.0 * std::sqrt(force_scatter.sum() / n)) &&
       (rate_mean - steady_rate_).norm() <=
-          options_.max_rate_degps * kDegToRad + 3.0 * std::sqrt(rate_scatter.sum() / n);
+          std::max(options_.max_rate_degps * kDegToRad, 3.0 * std::sqrt(rate_scatter.sum() / n));
   if (steady) {
     // The reference: the mean of the window means since the steady time began.
     steady_s_ += dt;
@@ -126,8 +129,11 @@ std::optional<StandstillMeasurement> StandstillDetector::add(const ImuSample& sa
   // within the velocity's sigmas is no evidence: a robot driving steadily at 1.5 m/s through an
   // outage, its velocity sigma grown to 0.6 m/s, was held at zero for 46 m; a robot pulling away
   // gently to 0.4 m/s, its first 0.2 s of acceleration still in a quiet window, was held at zero
-  // again by a speed estimate of 0.3 +- 0.05.
-  const bool known_still = quiet && speed + 2.0 * context.velocity_sigma_mps <= max_speed &&
+  // again by a speed estimate of 0.3 +- 0.05. The raw readings must have been steady for
+  // kSettleS too: the filter's own speed and acceleration, which the updates pin, confirmed a
+  // standstill after a gentle pull-away (0.3 m/s^2) and held the robot for 8 s, 12 m.
+  const bool known_still = quiet && steady && steady_s_ >= kSettleS &&
+                           speed + 2.0 * context.velocity_sigma_mps <= max_speed &&
                            context.fixes != Fixes::kMoving;
   const bool fixes_stood =
       not_turning && context.fixes == Fixes::kStanding && steady_s_ >= kFixesWindowS - 1e-9;

@@ -1410,10 +1410,11 @@ SegmentRun runMemsSegments(const std::vector<Segment>& segments, double initial_
   return run;
 }
 
-// Found by review: an IMU as quiet driving steadily as standing, and a filter that could not
+// Found by reviews: an IMU as quiet driving steadily as standing, and a filter that could not
 // tell its speed from zero, held robots at zero velocity while they drove: 46 m off through a
 // 30 s outage at 1.5 m/s, 9 m after a stop and go at 0.8 m/s, 41 m creeping at 0.4 m/s after
-// pulling away gently (its first 0.2 s of acceleration still in a quiet window).
+// pulling away gently (its first 0.2 s of acceleration still in a quiet window); then, with the
+// filter's own pinned speed confirming the standstill, 12 m after a 40 s stop left at 0.3 m/s^2.
 TEST(LocalizationSession, TheStandstillUpdatesNeverHoldADrivingRobot) {
   struct Case {
     const char* name;
@@ -1435,6 +1436,16 @@ TEST(LocalizationSession, TheStandstillUpdatesNeverHoldADrivingRobot) {
        {}},
       {"pulling away gently to 0.4 m/s",
        {{30.0, 0.0, 0.0}, {0.8, 0.5, 0.0}, {120.0, 0.0, 0.0}},
+       0.0,
+       {}},
+      {"a 40 s stop, then 0.3 m/s^2 to 1.5 m/s",
+       {{30.0, 0.0, 0.0},
+        {3.0, 0.5, 0.0},
+        {60.0, 0.0, 0.05},
+        {3.0, -0.5, 0.0},
+        {40.0, 0.0, 0.0},
+        {5.0, 0.3, 0.0},
+        {30.0, 0.0, 0.0}},
        0.0,
        {}},
   };

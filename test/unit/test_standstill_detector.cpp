@@ -75,11 +75,13 @@ TEST(StandstillDetector, AStillImuGivesTheGyroBiasOncePerIntervalAfterAFullWindo
   StandstillOptions options;
   options.enabled = true;
   StandstillDetector detector(options);
-  const Outcome still = run(&detector, Motion(), 3.0);
+  const Outcome still = run(&detector, Motion(), 5.0);
   EXPECT_TRUE(detector.still());
-  // The first after the 0.5 s window and a 0.1 s interval, then every 0.1 s: (3 - 0.5) / 0.1.
-  EXPECT_NEAR(still.first_at_s, 0.6, 0.015);
-  EXPECT_NEAR(still.measurements, 25, 1);
+  // The first after the 0.5 s window, the raw readings steady for kSettleS and a 0.1 s interval,
+  // then every 0.1 s.
+  const double first_s = 0.5 + StandstillDetector::kSettleS + 0.1;
+  EXPECT_NEAR(still.first_at_s, first_s, 0.03);
+  EXPECT_NEAR(still.measurements, (5.0 - first_s) / 0.1 + 1.0, 1.0);
   // The mean of 10 samples of 0.01 rad/s noise: within 4 sigma of the bias.
   EXPECT_LT((still.last_mean_rate - Motion().gyro_bias).cwiseAbs().maxCoeff(),
             4.0 * 0.01 / std::sqrt(10.0));
@@ -156,10 +158,10 @@ TEST(StandstillDetector, AnUnlearntGyroBiasWidensTheRateLimit) {
   Motion biased;
   biased.gyro_bias = Eigen::Vector3d(0.024, -0.018, 0.030);
   StandstillDetector without_sigma(options);
-  EXPECT_EQ(run(&without_sigma, biased, 2.0).measurements, 0);
+  EXPECT_EQ(run(&without_sigma, biased, 4.0).measurements, 0);
   biased.gyro_bias_sigma = 0.01 * std::sqrt(3.0);
   StandstillDetector with_sigma(options);
-  const Outcome outcome = run(&with_sigma, biased, 2.0);
+  const Outcome outcome = run(&with_sigma, biased, 4.0);
   EXPECT_GT(outcome.measurements, 10);
   EXPECT_LT((outcome.last_mean_rate - biased.gyro_bias).norm(), 0.01);
 }
@@ -172,7 +174,7 @@ TEST(StandstillDetector, AVibratingGyroGivesTheVarianceItShows) {
   Motion shaken;
   shaken.gyro_noise_scale = 3.0;
   StandstillDetector detector(options);
-  const Outcome outcome = run(&detector, shaken, 3.0);
+  const Outcome outcome = run(&detector, shaken, 5.0);
   const double nominal = kGyroDensity * kGyroDensity / 0.1;
   EXPECT_GT(outcome.last_variance.minCoeff(), 4.0 * nominal);
   EXPECT_LT(outcome.last_variance.maxCoeff(), 20.0 * nominal);
@@ -182,18 +184,20 @@ TEST(StandstillDetector, AJoltEmptiesTheWindowAndAResetForgetsIt) {
   StandstillOptions options;
   options.enabled = true;
   StandstillDetector detector(options);
-  Motion jolt;  // 0.2 s of 2 m/s^2 at t = 2 s (a door shut, a bump)
+  Motion jolt;  // 0.2 s of 2 m/s^2 at t = 4 s (a door shut, a bump)
   jolt.acceleration_body = [](double t) {
-    return Eigen::Vector3d(t > 2.0 && t <= 2.2 ? 2.0 : 0.0, 0.0, 0.0);
+    return Eigen::Vector3d(t > 4.0 && t <= 4.2 ? 2.0 : 0.0, 0.0, 0.0);
   };
-  const Outcome outcome = run(&detector, jolt, 2.0);
+  const Outcome outcome = run(&detector, jolt, 4.0);
   EXPECT_GT(outcome.measurements, 0);
-  // From the jolt on, nothing until a window without it has passed.
-  const Outcome after = run(&detector, jolt, 1.0, 2.0);
-  EXPECT_GT(after.first_at_s, 0.2 + 0.5 - 0.02);
+  // From the jolt on, nothing until a window without it has passed and the raw readings have
+  // been steady again for kSettleS.
+  const Outcome after = run(&detector, jolt, 4.0, 4.0);
+  EXPECT_GT(after.first_at_s, 0.2 + 0.5 + StandstillDetector::kSettleS - 0.05);
   detector.reset();
   EXPECT_FALSE(detector.still());
-  EXPECT_NEAR(run(&detector, Motion(), 1.0, 10.0).first_at_s, 0.6, 0.015);
+  EXPECT_NEAR(run(&detector, Motion(), 4.0, 10.0).first_at_s,
+              0.5 + StandstillDetector::kSettleS + 0.1, 0.03);
 }
 
 TEST(StandstillDetector, OptionsOutOfRangeAreNamed) {

@@ -286,6 +286,7 @@ class Localizer {
   // before it expired and are erased in bulk).
   std::vector<HistoryStep> history_;
   std::size_t history_begin_ = 0;
+  bool replaying_ = false;  // inside applyFixInHistory
   // The heading monitor.
   double heading_correction_rad_ = 0.0;  // sum of every yaw change the corrections made
   std::deque<TrackFix> track_fixes_;     // the window's fixes (the velocity fit)

@@ -18,7 +18,8 @@ struct StandstillOptions {
   // The IMU must have been quiet this long: the window's mean levelled horizontal specific force
   // (bias-corrected, gravity removed: the acceleration) below max_acceleration_mps2, and its mean
   // bias-corrected rate below max_rate_degps plus three sigmas of the gyro bias (a turn-on bias
-  // not yet learnt). A car or robot leaving a standstill accelerates at 0.3-3 m/s^2.
+  // not yet learnt; at most three times max_rate_degps in all). A car or robot leaving a
+  // standstill accelerates at 0.3-3 m/s^2.
   double window_s = 0.5;
   double max_acceleration_mps2 = 0.2;
   double max_rate_degps = 1.0;
@@ -47,6 +48,8 @@ class StandstillDetector {
   // 20 s of 1.5 m fixes once a second: the track's speed to 0.05 m/s (10 s: 0.14, which let
   // robots creeping at 0.4-0.8 m/s pass for standing now and then).
   static constexpr double kFixesWindowS = 20.0;
+  // How long the raw readings must have been steady before the filter's own speed may say still.
+  static constexpr double kSettleS = 2.0;
 
   // What the fixes of the last kFixesWindowS say (the caller's fit of the GPS track).
   enum class Fixes { kUnknown, kStanding, kMoving };
