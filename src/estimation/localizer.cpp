@@ -689,6 +689,10 @@ void Localizer::addToTrack(const PositionFix& fix) {
   current.position = fix.position_map.head<2>();
   current.variance = 0.5 * fix.covariance_map.topLeftCorner<2, 2>().trace();
   current.gyro_heading_rad = vehicleHeading() - heading_correction_rad_;
+  if (heading_confirmed_) {
+    const NavState& now = filter_->state();
+    current.forward_speed_mps = now.velocity_map.dot(now.rotation * forward_in_imu_);
+  }
   if (!current.position.allFinite() || !std::isfinite(current.variance)) return;
   // A chord from an earlier fix to this one, at least two fix intervals and
   // heading_track_min_chord_m long (1.5 m fixes: a 12 m chord is worth ~10 deg, a 6 m one ~20;
@@ -741,12 +745,13 @@ void Localizer::addToTrack(const PositionFix& fix) {
     Chord c;
     c.stamp_s = current.stamp_s;
     c.offset_rad = wrapRad(std::atan2(chord.y(), chord.x()) - middle_heading);
-    // A confirmed heading with the velocity backwards along the body x axis: reversing (the
-    // chord is at least heading_track_min_speed_mps on average: no stop inside it).
-    const NavState& now = filter_->state();
-    if (heading_confirmed_ && now.velocity_map.dot(now.rotation * forward_in_imu_) < 0.0) {
+    // Reversing: the filter's velocity along the confirmed heading, integrated over the chord's
+    // fixes, went backwards most of its length. Not the velocity at its last fix alone: a chord
+    // may end at a stop (it spans up to heading_track_max_chord_s), where that velocity is
+    // noise about zero, and half the chords of the stop's first seconds would point backwards;
+    // once the chords before the stop left the window, they turned the heading round.
+    if (forwardDistance(k - 2, current) < -0.5 * length)
       c.offset_rad = wrapRad(c.offset_rad + M_PI);
-    }
     c.variance = (start.variance + current.variance) / (length * length) + floor * floor +
                  std::pow(config_.heading_track_turn_weight * turn, 2);
     chords_.push_back(c);
@@ -760,6 +765,20 @@ void Localizer::addToTrack(const PositionFix& fix) {
   const double oldest = current.stamp_s - kept_s;
   while (!track_fixes_.empty() && track_fixes_.front().stamp_s < oldest) track_fixes_.pop_front();
   while (!chords_.empty() && chords_.front().stamp_s < oldest) chords_.pop_front();
+}
+
+double Localizer::forwardDistance(std::size_t first, const TrackFix& current) const {
+  // The trapezoid rule over the fixes from track_fixes_[first] to `current`; 0 when a speed is
+  // unknown (the heading was not confirmed at a fix): the chord counts as driven forwards.
+  double distance = 0.0;
+  for (std::size_t j = first; j < track_fixes_.size(); ++j) {
+    const TrackFix& a = track_fixes_[j];
+    const TrackFix& b = j + 1 < track_fixes_.size() ? track_fixes_[j + 1] : current;
+    const double step = 0.5 * (a.forward_speed_mps + b.forward_speed_mps) * (b.stamp_s - a.stamp_s);
+    if (!std::isfinite(step)) return 0.0;
+    distance += step;
+  }
+  return distance;
 }
 
 Localizer::TrackHeading Localizer::trackHeading() const {

@@ -68,6 +68,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -213,6 +214,9 @@ class Localizer {
     Eigen::Vector2d position = Eigen::Vector2d::Zero();
     double variance = 0.0;  // horizontal, per axis (m^2)
     double gyro_heading_rad = 0.0;
+    // The filter's speed along the vehicle's forward axis at the fix, once the track has
+    // confirmed the heading (NaN before: a heading not yet checked may point backwards).
+    double forward_speed_mps = std::numeric_limits<double>::quiet_NaN();
   };
   struct Chord {
     double stamp_s = 0.0;
@@ -241,6 +245,9 @@ class Localizer {
   // The heading monitor's parts (see the class comment).
   void addToTrack(const PositionFix& fix);
   TrackHeading trackHeading() const;
+  // The filter's distance driven forwards from track_fixes_[first] to `current`, from the speeds
+  // the fixes recorded.
+  double forwardDistance(std::size_t first, const TrackFix& current) const;
   // The track's velocity over its fixes of the last window_s (variance per axis, infinite when
   // fewer than two).
   Eigen::Vector2d trackVelocity(double window_s, double* variance) const;
