@@ -277,6 +277,33 @@ CorrectionResult ImuFilterBase::correctZeroRate(const Eigen::Vector3d& mean_rate
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }
 
+CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& model,
+                                                    double speed_mps, double sigma_mps,
+                                                    double gate) {
+  CorrectionResult result;
+  if (!std::isfinite(speed_mps) || !(sigma_mps > 0.0) || !std::isfinite(sigma_mps) ||
+      !model.imu_from_vehicle.allFinite()) {
+    result.reason = "the forward speed must be finite, its sigma positive and finite";
+    return result;
+  }
+  // The vehicle frame's body velocity R_iv^T (v_b + xi_v + v_b^ xi_R), as in correctNonholonomic;
+  // its x row. Along the direction of travel the attitude hardly enters (v_b^ xi_R is
+  // perpendicular to v_b): the speed corrects the velocity's magnitude, the fixes its direction.
+  const Eigen::Matrix3d vehicle_from_imu = model.imu_from_vehicle.transpose();
+  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
+  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
+  h_left.block<3, 3>(0, 0) = vehicle_from_imu * lie::hat(body_velocity);
+  h_left.block<3, 3>(0, 3) = vehicle_from_imu;
+  const Eigen::Matrix<double, 1, 15> h = h_left.topRows<1>() * leftFromError(state_);
+  const Eigen::Matrix<double, 1, 1> innovation(speed_mps - (vehicle_from_imu * body_velocity).x());
+  const Eigen::Matrix<double, 1, 1> noise(sigma_mps * sigma_mps);
+  Vector15d delta;
+  ErrorCovariance updated;
+  result = kalmanUpdate<1>(innovation, h, noise, gate, &delta, &updated);
+  if (!result.accepted) return result;
+  return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
 bool ImuFilterBase::finiteFix(const PositionFix& fix) {
   return std::isfinite(fix.stamp_s) && fix.position_map.allFinite() &&
          fix.covariance_map.allFinite() && fix.antenna_in_imu.allFinite();

@@ -111,6 +111,11 @@ std::string LocalizationSession::summary() const {
     line << "standstill " << s.filter.standstill_used << " used / " << s.filter.standstill_rejected
          << " rejected (zero rate " << s.filter.standstill_rate_rejected << " rejected); ";
   }
+  if (s.filter.wheel_speed_used + s.filter.wheel_speed_rejected + s.filter.wheel_speed_stale > 0) {
+    line << "wheel speed " << s.filter.wheel_speed_used << " used / "
+         << s.filter.wheel_speed_rejected << " rejected / " << s.filter.wheel_speed_stale
+         << " stale; ";
+  }
   const std::int64_t heading_events =
       s.filter.heading_alignments + s.filter.heading_recoveries + s.filter.heading_reopens;
   if (heading_events > 0) {
@@ -402,6 +407,27 @@ LocalizationSession::Update LocalizationSession::addFix(const GeodeticFixEvent& 
 LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocityEvent& event) {
   // Checked like the others: after a bag loop the velocity may be the first message back.
   return process(event.stamp_s, event);
+}
+
+LocalizationSession::Update LocalizationSession::addWheelSpeed(const WheelSpeedEvent& event) {
+  Update update;
+  const std::int64_t stale_before = localizer_.statistics().wheel_speed_stale;
+  const CorrectionResult result =
+      localizer_.addWheelSpeed(event.stamp_s, event.speed_mps, event.sigma_mps);
+  // No new_estimate: the estimate is at the last IMU sample's stamp, already published; the
+  // next sample's carries the correction.
+  if (result.accepted) {
+    wheel_speed_stale_noted_ = false;
+  } else if (localizer_.statistics().wheel_speed_stale > stale_before &&
+             !wheel_speed_stale_noted_) {
+    wheel_speed_stale_noted_ = true;
+    std::ostringstream note;
+    note << std::fixed << std::setprecision(3) << "wheel speed at " << event.stamp_s
+         << " s not used: " << result.reason << "; later stale ones are counted until one is used";
+    update.note = note.str();
+  }
+  guardSound(&update);
+  return update;
 }
 
 void LocalizationSession::handleImu(const ImuEvent& event, Update* out) {

@@ -144,6 +144,12 @@ bool Localizer::propagate(const ImuStep& step) {
     }
     if (velocity.accepted || rate.accepted) noteHeadingChange(heading_before);
   }
+  constrainToVehicle(step);
+  for (const auto& [speed, sigma] : step.wheel_speeds) applyWheelSpeed(speed, sigma);
+  return true;
+}
+
+void Localizer::constrainToVehicle(const ImuStep& step) {
   if (config_.nonholonomic && step.dt > 0.0) {
     // About the map's z axis: the pose covariance's (5, 5) is about the IMU's own z, horizontal
     // for an IMU board mounted upright (the constraint ran with the heading unknown and pinned
@@ -151,12 +157,12 @@ bool Localizer::propagate(const ImuStep& step) {
     const double heading_sigma_rad = yawSigma();
     if (!(heading_sigma_rad <= config_.nonholonomic_max_heading_sigma_deg * kDegToRad)) {
       ++statistics_.nonholonomic_skipped;
-      return true;
+      return;
     }
     if (consecutive_rejected_fixes_ > 0) {
       // The fixes reject this heading: the constraint would only hold it.
       ++statistics_.nonholonomic_suspended;
-      return true;
+      return;
     }
     const double heading_before = vehicleHeading();
     // The same information per second from a fast IMU's short steps.
@@ -171,7 +177,60 @@ bool Localizer::propagate(const ImuStep& step) {
     ++(result.accepted ? statistics_.nonholonomic_used : statistics_.nonholonomic_rejected);
     if (result.accepted) noteHeadingChange(heading_before);
   }
-  return true;
+}
+
+CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, double sigma_mps) {
+  CorrectionResult result;
+  const LocalizerConfig::WheelSpeedOptions& options = config_.wheel_speed;
+  if (!options.enabled || !initialized_) {
+    ++statistics_.wheel_speed_ignored;
+    result.reason = options.enabled ? "the filter has not started" : "wheel_speed.enabled is false";
+    return result;
+  }
+  const double age_s = std::abs(filter_->state().stamp_s - stamp_s);
+  if (!(age_s <= options.max_age_s)) {
+    ++statistics_.wheel_speed_stale;
+    char text[160];
+    std::snprintf(text, sizeof(text),
+                  "stale: stamped %.3f s from the filter's time (wheel_speed.max_age_s %.3f)",
+                  filter_->state().stamp_s - stamp_s, options.max_age_s);
+    result.reason = text;
+    return result;
+  }
+  // As the constraint: with the heading unknown the body velocity's direction is a guess, and a
+  // speed along it would turn the heading as much as correct the speed (a MEMS robot aligned
+  // 86 deg off with every wheel speed applied from its start); while the fixes reject the
+  // heading, it would hold the wrong one.
+  if (!(yawSigma() <= config_.nonholonomic_max_heading_sigma_deg * kDegToRad) ||
+      consecutive_rejected_fixes_ > 0) {
+    ++statistics_.wheel_speed_ignored;
+    result.reason = "the heading is not known yet (or the fixes reject it)";
+    return result;
+  }
+  const double stated =
+      sigma_mps > 0.0 && std::isfinite(sigma_mps) ? sigma_mps : options.default_sigma_mps;
+  const double floor = std::max(stated, options.min_sigma_mps);
+  const double sigma = std::hypot(floor, options.max_acceleration_mps2 * age_s);
+  result = applyWheelSpeed(speed_mps, sigma);
+  if (result.accepted && !history_.empty()) {
+    // Kept with the step it followed: a late fix's replay applies it again after that step.
+    HistoryStep& newest = history_.back();
+    newest.step.wheel_speeds.emplace_back(speed_mps, sigma);
+    newest.state = filter_->state();
+    newest.covariance = filter_->covariance();
+    newest.heading_correction_rad = heading_correction_rad_;
+  }
+  return result;
+}
+
+CorrectionResult Localizer::applyWheelSpeed(double speed_mps, double sigma_mps) {
+  const double heading_before = vehicleHeading();
+  const CorrectionResult result = filter_->correctForwardSpeed(
+      nonholonomic_model_, speed_mps, sigma_mps, config_.wheel_speed.gate_mahalanobis_squared);
+  if (!replaying_)
+    ++(result.accepted ? statistics_.wheel_speed_used : statistics_.wheel_speed_rejected);
+  if (result.accepted) noteHeadingChange(heading_before);
+  return result;
 }
 
 void Localizer::recordStep(const ImuStep& step) {
@@ -219,7 +278,8 @@ CorrectionResult Localizer::applyFixInHistory(const PositionFix& fix, std::ptrdi
     // over the whole interval, so the two parts integrate to the same as the whole).
     ImuStep first_part = history_[step + 1].step;
     first_part.dt = into_next;
-    first_part.standstill.reset();  // it belongs to the end of the step, kept by the rest
+    first_part.standstill.reset();    // it belongs to the end of the step, kept by the rest
+    first_part.wheel_speeds.clear();  // as do these
     propagate(first_part);
     history_[step + 1].step.dt -= into_next;
     history_.insert(history_.begin() + step + 1,
@@ -310,7 +370,7 @@ Localizer::ImuStatus Localizer::addImu(const ImuSample& sample) {
   } else {
     interpolated_run_start_s_ = -1.0;
   }
-  ImuStep step{sample, dt, gyro_scale, accel_scale, std::nullopt};
+  ImuStep step{sample, dt, gyro_scale, accel_scale, std::nullopt, {}};
   if (config_.standstill.enabled) {
     // Not across a gap or an interpolated sample (the IMU did not see that time), nor while the
     // fixes reject the estimate.

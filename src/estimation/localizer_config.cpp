@@ -93,6 +93,13 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   positive("standstill.velocity_sigma_mps", &still.velocity_sigma_mps);
   positive("standstill.update_interval_s", &still.update_interval_s);
   positive("standstill.gate_mahalanobis_squared", &still.gate_mahalanobis_squared);
+  LocalizerConfig::WheelSpeedOptions& wheel = config.wheel_speed;
+  reader->read("wheel_speed.enabled", &wheel.enabled);
+  positive("wheel_speed.default_sigma_mps", &wheel.default_sigma_mps);
+  positive("wheel_speed.min_sigma_mps", &wheel.min_sigma_mps);
+  non_negative("wheel_speed.max_age_s", &wheel.max_age_s);
+  non_negative("wheel_speed.max_acceleration_mps2", &wheel.max_acceleration_mps2);
+  positive("wheel_speed.gate_mahalanobis_squared", &wheel.gate_mahalanobis_squared);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   reader->read("heading.from_track", &config.heading_from_track);
   positive("heading.track_window_s", &config.heading_track_window_s);

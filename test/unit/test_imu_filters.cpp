@@ -493,6 +493,55 @@ TEST(Filters, StandstillUpdatesZeroTheVelocityAndTakeTheRateAsTheGyroBias) {
   EXPECT_LT((biases[0] - biases[2]).norm(), 1e-6);
 }
 
+// Wheel odometry's speed along the vehicle's direction of travel: taken by all three filters
+// alike, the velocity's magnitude along the vehicle axis moves to it (the axis pitched against the
+// IMU's, as on KITTI's rig), the lateral velocity is left alone; a wheel speed far off the estimate
+// fails the gate, bad input is refused.
+TEST(Filters, TheForwardSpeedCorrectsTheVelocityAlongTheVehicleAxis) {
+  NavState estimate;
+  estimate.stamp_s = 2.0;
+  estimate.rotation = lie::expSO3(Eigen::Vector3d(0.02, -0.01, 1.1));
+  NonholonomicModel model;
+  model.imu_from_vehicle = vehicleFrameInImu(0.02, 0.0);  // travel 1.1 deg up in the IMU frame
+  const Eigen::Vector3d travel_in_map = estimate.rotation * model.imu_from_vehicle.col(0);
+  const Eigen::Vector3d side_in_map = estimate.rotation * model.imu_from_vehicle.col(1);
+  estimate.velocity_map = 5.0 * travel_in_map + 0.2 * side_in_map;
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << 0.01, 0.01, 0.05, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1;
+  std::vector<Eigen::Vector3d> velocities;
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(estimate,
+                       filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
+    const CorrectionResult result = filter->correctForwardSpeed(model, 5.6, 0.02, 16.3);
+    ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
+    EXPECT_NEAR(result.mahalanobis_squared, 0.36 / (0.25 + 0.0004), 0.05) << toString(type);
+    const Eigen::Vector3d v = filter->state().velocity_map;
+    EXPECT_NEAR(v.dot(travel_in_map), 5.6, 0.02) << toString(type);
+    EXPECT_NEAR(v.dot(side_in_map), 0.2, 0.02) << toString(type);
+    Eigen::LLT<ErrorCovariance> llt(filter->covariance());
+    EXPECT_EQ(llt.info(), Eigen::Success);
+    velocities.push_back(v);
+    // Reversing: a negative speed is a speed like any other.
+    NavState reversing = estimate;
+    reversing.velocity_map = -3.2 * travel_in_map;
+    filter->initialize(reversing,
+                       filter->fromWorldCovariance(reversing, sigma.cwiseAbs2().asDiagonal()));
+    ASSERT_TRUE(filter->correctForwardSpeed(model, -3.0, 0.02, 16.3).accepted) << toString(type);
+    EXPECT_NEAR(filter->state().velocity_map.dot(travel_in_map), -3.0, 0.02) << toString(type);
+    // 5 m/s off at 0.5 m/s of velocity sigma: an outlier, the state kept.
+    filter->initialize(estimate,
+                       filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 10.0, 0.02, 16.3).accepted) << toString(type);
+    EXPECT_EQ(filter->state().velocity_map, estimate.velocity_map);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, std::nan(""), 0.02, 16.3).accepted);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, 0.0, 16.3).accepted);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, std::nan(""), 16.3).accepted);
+  }
+  EXPECT_LT((velocities[0] - velocities[1]).norm(), 1e-3);
+  EXPECT_LT((velocities[0] - velocities[2]).norm(), 1e-3);
+}
+
 TEST(Filters, GateRejectsAnOutlierAndKeepsTheState) {
   for (FilterType type : kAllFilters) {
     auto filter = makeFilter(type, ImuNoise());

@@ -837,6 +837,14 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(still.velocity_sigma_mps, still_default.velocity_sigma_mps);
   EXPECT_DOUBLE_EQ(still.update_interval_s, still_default.update_interval_s);
   EXPECT_DOUBLE_EQ(still.gate_mahalanobis_squared, still_default.gate_mahalanobis_squared);
+  const LocalizerConfig::WheelSpeedOptions &wheel = loaded.wheel_speed,
+                                           &wheel_default = defaults.wheel_speed;
+  EXPECT_EQ(wheel.enabled, wheel_default.enabled);
+  EXPECT_DOUBLE_EQ(wheel.default_sigma_mps, wheel_default.default_sigma_mps);
+  EXPECT_DOUBLE_EQ(wheel.min_sigma_mps, wheel_default.min_sigma_mps);
+  EXPECT_DOUBLE_EQ(wheel.max_age_s, wheel_default.max_age_s);
+  EXPECT_DOUBLE_EQ(wheel.max_acceleration_mps2, wheel_default.max_acceleration_mps2);
+  EXPECT_DOUBLE_EQ(wheel.gate_mahalanobis_squared, wheel_default.gate_mahalanobis_squared);
   EXPECT_DOUBLE_EQ(loaded.heading_track_min_chord_m, defaults.heading_track_min_chord_m);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_chord_s, defaults.heading_track_max_chord_s);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_turn_deg, defaults.heading_track_max_turn_deg);
@@ -872,6 +880,9 @@ TEST(LocalizerConfig, BadFilesNameTheFileAndTheKey) {
   expectError("init_orientation_from_reference: [true]\n", "init_orientation_from_reference");
   expectError("standstill:\n  window_s: 0\n", "standstill.window_s");
   expectError("standstill:\n  max_rate_degps: 200\n", "standstill.max_rate_degps");
+  expectError("wheel_speed:\n  min_sigma_mps: 0\n", "wheel_speed.min_sigma_mps");
+  expectError("wheel_speed:\n  max_age_s: -1\n", "wheel_speed.max_age_s");
+  expectError("wheel_speed:\n  enable: true\n", "wheel_speed.enable");
   expectError("a: [\n", "YAML syntax error");
   // A folder passed as the config file.
   try {

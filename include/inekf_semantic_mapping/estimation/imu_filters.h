@@ -35,6 +35,9 @@ class ImuFilterBase : public NavigationFilter {
   CorrectionResult correctZeroVelocity(double sigma_mps, double gate) override;
   CorrectionResult correctZeroRate(const Eigen::Vector3d& mean_rate_radps,
                                    const Eigen::Vector3d& variance, double gate) override;
+  // The constraint's row x (H = e_x^T R_iv^T [v_b^ I 0 0 0]), with a measured value.
+  CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
+                                       double sigma_mps, double gate) override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

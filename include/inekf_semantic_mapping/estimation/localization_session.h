@@ -58,6 +58,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <variant>
@@ -130,6 +131,14 @@ struct GpsVelocityEvent {
   bool in_body_frame = false;  // else in the map frame
 };
 
+// Wheel odometry: the vehicle's speed along its direction of travel (base_link's x axis, up to
+// nonholonomic.vehicle_pitch/yaw_deg), negative when reversing.
+struct WheelSpeedEvent {
+  double stamp_s = 0.0;
+  double speed_mps = 0.0;
+  double sigma_mps = std::numeric_limits<double>::quiet_NaN();  // NaN: wheel_speed.default_sigma
+};
+
 class LocalizationSession {
  public:
   struct Statistics {
@@ -189,6 +198,11 @@ class LocalizationSession {
   Update addImu(const ImuEvent& event);
   Update addFix(const GeodeticFixEvent& event);
   Update addGpsVelocity(const GpsVelocityEvent& event);
+  // Applied at the filter's newest IMU time (Localizer::addWheelSpeed), outside the ordering of
+  // the other streams: a wheel speed too far from the filter's time (wheel_speed.max_age_s: a
+  // jump, a loop, another clock) is stale and only counted, so it never moves the session's time.
+  // The note says the first stale one after a used one.
+  Update addWheelSpeed(const WheelSpeedEvent& event);
   // Whether a GPS velocity source exists (default true): without one the start does not wait.
   void setGpsVelocityExpected(bool expected) { gps_velocity_expected_ = expected; }
   // The IMU's axes in base_link's (Localizer::setImuMounting); false: not a rotation, not taken.
@@ -305,6 +319,7 @@ class LocalizationSession {
   double offset_candidate_since_s_ = 0.0;
   std::optional<double> gps_clock_offset_s_;  // confirmed: GPS messages at it are dropped
   bool gps_velocity_expected_ = true;
+  bool wheel_speed_stale_noted_ = false;  // since the last wheel speed used
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
   int last_innovation_dof_ = 3;

@@ -33,9 +33,10 @@
 //    slow car), of a car moving at heading_track_min_speed_mps or more, points along its
 //    heading (base_link's x axis: setImuMounting) at the chord's middle instant (a land vehicle
 //    drives forward; on a circular arc the chord is parallel to the tangent at its midpoint). Once
-//    the track has confirmed the filter's heading, a chord taken while the filter's own velocity
-//    points backwards (the car reversing: the filter's yaw came continuously from a confirmed one)
-//    is turned by 180 deg; before that (a start, an alignment, a re-open) the forward rule holds.
+//    the track has confirmed the filter's heading, a chord along which the filter's own velocity
+//    went backwards (its forward speed at the chord's fixes integrated: more than half the chord;
+//    the car reversing, its yaw came continuously from a confirmed one) is turned by 180 deg;
+//    before that (a start, an alignment, a re-open) the forward rule holds.
 //    Against the filter's "gyro heading" (its yaw minus every change its corrections made to it)
 //    each chord measures one constant offset; their robust weighted circular mean over
 //    heading_track_window_s is the track's heading estimate for now. It is used three ways:
@@ -72,6 +73,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "inekf_semantic_mapping/estimation/localizer_config.h"
@@ -118,9 +120,13 @@ class Localizer {
     std::int64_t standstill_used = 0;         // zero-velocity updates (a zero-rate one with each)
     std::int64_t standstill_rejected = 0;
     std::int64_t standstill_rate_rejected = 0;  // the zero-rate part alone
-    std::int64_t heading_alignments = 0;        // unknown heading set from the GPS track
-    std::int64_t heading_recoveries = 0;        // a wrong heading re-initialised from the track
-    std::int64_t heading_reopens = 0;           // yaw variance re-opened (fixes kept disagreeing)
+    std::int64_t wheel_speed_used = 0;          // forward speeds from wheel odometry
+    std::int64_t wheel_speed_rejected = 0;      // gated out, or not finite
+    std::int64_t wheel_speed_stale = 0;    // further than wheel_speed.max_age_s from the filter
+    std::int64_t wheel_speed_ignored = 0;  // before the start, or wheel_speed.enabled false
+    std::int64_t heading_alignments = 0;   // unknown heading set from the GPS track
+    std::int64_t heading_recoveries = 0;   // a wrong heading re-initialised from the track
+    std::int64_t heading_reopens = 0;      // yaw variance re-opened (fixes kept disagreeing)
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -161,6 +167,12 @@ class Localizer {
 
   ImuStatus addImu(const ImuSample& sample);
   CorrectionResult addPositionFix(const PositionFix& fix);
+  // Wheel odometry: the vehicle's speed along its direction of travel at stamp_s (negative when
+  // reversing), +- sigma_mps (NaN or not positive: wheel_speed.default_sigma_mps). Applied at the
+  // filter's newest IMU time when stamp_s is within wheel_speed.max_age_s of it, the sigma grown
+  // by max_acceleration_mps2 times the age; kept with that IMU step, so that a late fix's replay
+  // applies it again. Before the start, stale or with wheel_speed.enabled false: not applied.
+  CorrectionResult addWheelSpeed(double stamp_s, double speed_mps, double sigma_mps);
 
   // The IMU's mounting: its axes in base_link's (the rotation of tf base_link -> the IMU's frame;
   // identity by default: the IMU's x axis points forward). The land-vehicle constraint and the
@@ -200,6 +212,9 @@ class Localizer {
     // The standstill update after the step, decided when the sample arrived (a replay applies
     // the same one).
     std::optional<StandstillMeasurement> standstill;
+    // The wheel speeds applied after the step (after the standstill and the constraint), as
+    // (speed, sigma) in the order they came.
+    std::vector<std::pair<double, double>> wheel_speeds;
   };
   // A step and the filter after it: what a rewind restores and replays.
   struct HistoryStep {
@@ -232,6 +247,10 @@ class Localizer {
   // The filter over one step (the same path for live and replayed samples); false when the
   // filter refused it (the state unchanged).
   bool propagate(const ImuStep& step);
+  // propagate's land-vehicle constraint after a step.
+  void constrainToVehicle(const ImuStep& step);
+  // One wheel speed on the current state (counted unless replaying).
+  CorrectionResult applyWheelSpeed(double speed_mps, double sigma_mps);
   void recordStep(const ImuStep& step);
   void clearHistory();
   // The history step to rewind to for a fix stamped stamp_s (the last step at or before it), or

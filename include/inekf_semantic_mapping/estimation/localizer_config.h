@@ -85,6 +85,17 @@ struct LocalizerConfig {
   // Off by default: KITTI's OXTS holds its biases itself (config/robot_inekf.yaml turns it on).
   StandstillOptions standstill;
 
+  // Wheel odometry's forward speed (Localizer::addWheelSpeed): the speed along the direction of
+  // travel (the constraint's vehicle x axis), applied at the filter's newest IMU time.
+  struct WheelSpeedOptions {
+    bool enabled = true;                 // off: every wheel speed is counted and ignored
+    double default_sigma_mps = 0.1;      // where the message states no variance
+    double min_sigma_mps = 0.02;         // the floor of every sigma (wheel slip, tyre radius)
+    double max_age_s = 0.1;              // from the filter's time, either way; older ones are stale
+    double max_acceleration_mps2 = 3.0;  // an aged speed's sigma grows by this times its age
+    double gate_mahalanobis_squared = 10.8;  // 1 dof: chi2 p = 1e-3
+  } wheel_speed;
+
   // Lazy initialization (LocalizationSession's start): take rotation and velocity from
   // setInitialReference() (the orientation of the first Imu message that has one) instead of
   // levelling with yaw 0 and zero speed. The reference rotation's covariance is the one the

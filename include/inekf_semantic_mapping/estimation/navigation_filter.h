@@ -86,6 +86,13 @@ class NavigationFilter {
                                            const Eigen::Vector3d& variance,
                                            double gate_mahalanobis_squared) = 0;
 
+  // Wheel odometry: the vehicle's speed along its direction of travel (the model's vehicle x
+  // axis: lateral and vertical are the constraint's), measured `speed_mps` +- sigma_mps; negative
+  // when reversing. Gated on its 1 dof and rejected as correctPosition is.
+  virtual CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
+                                               double sigma_mps,
+                                               double gate_mahalanobis_squared) = 0;
+
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
 
