@@ -2,6 +2,7 @@
 #include "inekf_semantic_mapping/ros/inekf_node_core.h"
 
 #include <geometry_msgs/TwistStamped.h>
+#include <nav_msgs/Odometry.h>
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Imu.h>
@@ -79,6 +80,8 @@ class InekfNodeCore::Impl {
         nh.subscribe(topics::kImu, 400, &Impl::onImu, this, ros::TransportHints().tcpNoDelay());
     fix_subscriber_ = nh.subscribe(topics::kGpsFix, 50, &Impl::onFix, this);
     velocity_subscriber_ = nh.subscribe(topics::kGpsVelocity, 10, &Impl::onVelocity, this);
+    wheel_subscriber_ = nh.subscribe(topics::kWheelOdometry, 100, &Impl::onWheelOdometry, this,
+                                     ros::TransportHints().tcpNoDelay());
     ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " filter, config "
                                    << config_file_ << ", waiting for IMU on "
                                    << imu_subscriber_.getTopic() << " and GPS on "
@@ -266,6 +269,50 @@ class InekfNodeCore::Impl {
            [&] { return session_.addGpsVelocity(*velocity); });
   }
 
+  // Wheel odometry: the speed along base_link's x axis (the twist is in the child frame; another
+  // child frame than base_link is turned into base_link's axes through tf).
+  void onWheelOdometry(const nav_msgs::Odometry::ConstPtr& message) {
+    if (!wheel_logged_) {
+      wheel_logged_ = true;
+      ROS_INFO_STREAM(
+          "inekf_node: wheel odometry on "
+          << wheel_subscriber_.getTopic() << " (child frame '" << message->child_frame_id
+          << "'): its forward speed goes into the filter (wheel_speed in " << config_file_ << ")");
+    }
+    const std::optional<Eigen::Matrix3d> base_from_child =
+        wheelFrameInBase(message->child_frame_id);
+    if (!base_from_child) return;
+    const std::optional<estimation::WheelSpeedEvent> speed = wheelSpeed(*message, *base_from_child);
+    if (!speed) {
+      ROS_WARN_STREAM_THROTTLE(10.0, "inekf_node: wheel odometry on "
+                                         << wheel_subscriber_.getTopic() << " at "
+                                         << message->header.stamp
+                                         << " has a non-finite linear velocity: not used");
+      return;
+    }
+    handle("inekf_node/wheel_speed", message->header.stamp,
+           [&] { return session_.addWheelSpeed(*speed); });
+  }
+
+  // The child frame's axes in base_link's: identity for base_link itself or no frame; else
+  // base_link -> IMU (the mounting) times IMU -> child, from tf. nullopt (warned) while tf lacks
+  // it or before the IMU's frame is known.
+  std::optional<Eigen::Matrix3d> wheelFrameInBase(const std::string& child_frame_id) {
+    const std::string frame = frames::tfFrameId(child_frame_id);
+    if (frame.empty() || frame == output_.baseFrame()) return Eigen::Matrix3d::Identity();
+    const std::optional<Eigen::Matrix3d> base_from_imu = output_.imuMounting();
+    const std::optional<Eigen::Isometry3d> child_in_imu =
+        output_.imuFrame().empty() ? std::nullopt : output_.frameInImu(frame);
+    if (!base_from_imu || !child_in_imu) {
+      ROS_WARN_STREAM_THROTTLE(10.0, "inekf_node: no tf from "
+                                         << output_.baseFrame() << " to '" << frame
+                                         << "', the child frame of the wheel odometry on "
+                                         << wheel_subscriber_.getTopic() << " (yet): not used");
+      return std::nullopt;
+    }
+    return *base_from_imu * child_in_imu->rotation();
+  }
+
   static void remember(const ros::Time& stamp, std::size_t keep, std::deque<ros::Time>* recent) {
     recent->push_back(stamp);
     while (recent->size() > keep) recent->pop_front();
@@ -309,7 +356,8 @@ class InekfNodeCore::Impl {
   std::deque<ros::Time> recent_fix_stamps_;  // of the latest fixes received
   std::deque<ros::Time> recent_imu_stamps_;  // of the latest IMU samples received
   ros::Publisher status_publisher_;
-  ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_;
+  ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_, wheel_subscriber_;
+  bool wheel_logged_ = false;
   LocalizationMonitor monitor_;
   NodeDiagnostics diagnostics_;
   ros::NodeHandle private_nh_;

@@ -123,6 +123,21 @@ std::optional<estimation::GpsVelocityEvent> gpsVelocity(
   return velocity;
 }
 
+std::optional<estimation::WheelSpeedEvent> wheelSpeed(const nav_msgs::Odometry& message,
+                                                      const Eigen::Matrix3d& base_from_child) {
+  const Eigen::Vector3d velocity = base_from_child * toEigen(message.twist.twist.linear);
+  if (!velocity.allFinite()) return std::nullopt;
+  estimation::WheelSpeedEvent event;
+  event.stamp_s = message.header.stamp.toSec();
+  event.speed_mps = velocity.x();
+  const Eigen::Matrix3d linear = Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(
+                                     message.twist.covariance.data())
+                                     .topLeftCorner<3, 3>();
+  const double variance = (base_from_child * linear * base_from_child.transpose())(0, 0);
+  if (variance > 0.0 && std::isfinite(variance)) event.sigma_mps = std::sqrt(variance);
+  return event;
+}
+
 estimation::ImuEvent imuEvent(const sensor_msgs::Imu& message) {
   estimation::ImuEvent event;
   event.sample.stamp_s = message.header.stamp.toSec();

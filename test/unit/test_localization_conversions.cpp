@@ -183,6 +183,34 @@ TEST(Velocity, MapFrameOrBodyFrameByFrameId) {
   EXPECT_FALSE(gpsVelocity(message).has_value());
 }
 
+// nav_msgs/Odometry's twist is in its child frame: the speed is along base_link's x axis, turned
+// from the child frame's, its variance along that axis from the twist covariance.
+TEST(WheelOdometry, ForwardSpeedAlongBaseLinkAndItsVariance) {
+  nav_msgs::Odometry message;
+  message.header.stamp = ros::Time(20, 250000000);
+  message.twist.twist.linear.x = 3.0;
+  message.twist.twist.linear.y = 0.4;
+  message.twist.covariance[0] = 0.01;  // x
+  message.twist.covariance[7] = 0.04;  // y
+  auto speed = wheelSpeed(message, Eigen::Matrix3d::Identity());
+  ASSERT_TRUE(speed.has_value());
+  EXPECT_DOUBLE_EQ(speed->stamp_s, 20.25);
+  EXPECT_DOUBLE_EQ(speed->speed_mps, 3.0);
+  EXPECT_DOUBLE_EQ(speed->sigma_mps, 0.1);
+  // A child frame turned -90 deg about base_link's z (its y axis is base_link's x): the speed
+  // and the variance are its y's.
+  const Eigen::Matrix3d base_from_child = yawRotation(-M_PI / 2.0);
+  speed = wheelSpeed(message, base_from_child);
+  ASSERT_TRUE(speed.has_value());
+  EXPECT_NEAR(speed->speed_mps, 0.4, 1e-12);
+  EXPECT_NEAR(speed->sigma_mps, 0.2, 1e-12);
+  // No variance stated: NaN (the session's default sigma applies); a NaN velocity: none.
+  message.twist.covariance[0] = 0.0;
+  EXPECT_TRUE(std::isnan(wheelSpeed(message, Eigen::Matrix3d::Identity())->sigma_mps));
+  message.twist.twist.linear.z = kNaN;
+  EXPECT_FALSE(wheelSpeed(message, Eigen::Matrix3d::Identity()).has_value());
+}
+
 TEST(Imu, SampleAndOrientation) {
   sensor_msgs::Imu message;
   message.header.stamp = ros::Time(1317386425, 663884440);

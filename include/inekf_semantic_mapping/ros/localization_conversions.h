@@ -57,6 +57,14 @@ std::optional<Eigen::Matrix3d> fixCovarianceEnu(const sensor_msgs::NavSatFix& fi
 // body frame. nullopt when not finite.
 std::optional<estimation::GpsVelocityEvent> gpsVelocity(const geometry_msgs::TwistStamped& message);
 
+// Wheel odometry (nav_msgs/Odometry): the speed along base_link's x axis of the twist's linear
+// velocity, which the message gives in its child_frame_id; `base_from_child` turns that frame's
+// axes into base_link's (identity when the child frame is base_link). Its variance along that
+// axis from the twist covariance's linear block, NaN when not positive and finite (the session's
+// default applies). nullopt when the velocity is not finite.
+std::optional<estimation::WheelSpeedEvent> wheelSpeed(const nav_msgs::Odometry& message,
+                                                      const Eigen::Matrix3d& base_from_child);
+
 // The session's events, unfiltered: the session counts and drops unusable ones.
 estimation::ImuEvent imuEvent(const sensor_msgs::Imu& message);
 estimation::GeodeticFixEvent fixEvent(const sensor_msgs::NavSatFix& message);

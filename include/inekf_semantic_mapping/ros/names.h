@@ -31,6 +31,8 @@ constexpr const char* kGroundTruthOdometry = &bag_topics::kGroundTruthOdometry[1
 constexpr const char* kVelodyne = &bag_topics::kVelodyne[1];
 constexpr const char* kCameraColorLeftImage = &bag_topics::kCameraColorLeftImage[1];
 constexpr const char* kCameraColorLeftInfo = &bag_topics::kCameraColorLeftInfo[1];
+// Wheel odometry into inekf_node (nav_msgs/Odometry; none in a KITTI bag): remap to yours.
+constexpr char kWheelOdometry[] = "wheel_odom";
 // Localization (inekf_node).
 constexpr char kOdometry[] = "inekf/odometry";
 constexpr char kPath[] = "inekf/path";
