@@ -6,6 +6,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -208,6 +209,8 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
   const kitti::MercatorProjection& projection = *session.projection();
   std::vector<ForwardEpoch> epochs;  // one per reported frame from the start on (smoothing)
   kitti::GpsDegrader degrader(options.gps);
+  std::mt19937_64 wheel_random(options.gps.seed + 1);  // its own stream: the fixes stay the same
+  std::normal_distribution<double> wheel_noise(0.0, 1.0);
   OxtsRunResult& run = pass.run;
   pass.filtered.reserve(frames.size());
   run.states.reserve(frames.size());
@@ -290,6 +293,11 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
       epoch = recordStep(epochs.back().filtered, imu.sample, session,
                          config.localizer.imu_noise.gravity_mps2);
       if (!epoch.has_step) ++run.smoother_breaks;
+    }
+    if (options.wheel_speed_sigma_mps > 0.0) {
+      const double sigma = options.wheel_speed_sigma_mps;
+      note(session.addWheelSpeed(
+          {stamp_s, frames[k].record.vf + sigma * wheel_noise(wheel_random), sigma}));
     }
     if (has_attitude) {
       GpsVelocityEvent velocity;

@@ -40,7 +40,8 @@ constexpr char kUsage[] =
     "                     [--gps-every N] [--filter left|right|ekf] [--config FILE]\n"
     "                     [--init-yaw-sigma-deg DEG] [--init-yaw-error-deg DEG]\n"
     "                     [--gps-sigma-h M] [--gps-sigma-v M] [--gps-outage START:DURATION]...\n"
-    "                     [--seed S] [--imu-gps-only] [--smooth [--single-pass]]\n"
+    "                     [--seed S] [--imu-gps-only] [--wheel-speed-sigma M]\n"
+    "                     [--smooth [--single-pass]]\n"
     "                     [--loop-closure [--scans DIR] [--loop-config FILE]\n"
     "                     [--output-loops LOOPS.csv]]\n"
     "  --oxts            a KITTI raw oxts/ folder (data/%010d.txt + timestamps.txt)\n"
@@ -60,6 +61,8 @@ constexpr char kUsage[] =
     "                    starts levelled from gravity with an unknown yaw (as for a frame whose\n"
     "                    attitude and velocity columns are all zero) and the heading monitor\n"
     "                    aligns it from the GPS track\n"
+    "  --wheel-speed-sigma  simulated wheel odometry: each frame's OXTS forward velocity vf\n"
+    "                    plus N(0, M) as a wheel speed (what wheels would add; seeded by --seed)\n"
     "  --smooth          after the causal run, a Rauch-Tung-Striebel pass on the left-invariant\n"
     "                    error (filter left): every --output-* holds the smoothed estimate.\n"
     "                    A start without a known heading (--imu-gps-only, or a wrong one the\n"
@@ -168,7 +171,7 @@ int main(int argc, char** argv) {
         ism::tools::withGpsValueFlags({"--oxts", "--output-kitti", "--output-tum", "--output-truth",
                                        "--output-states", "--filter", "--config",
                                        "--init-yaw-sigma-deg", "--init-yaw-error-deg", "--scans",
-                                       "--loop-config", "--output-loops"}),
+                                       "--loop-config", "--output-loops", "--wheel-speed-sigma"}),
         {"--smooth", "--single-pass", "--loop-closure", "--imu-gps-only"},
         ism::tools::kGpsRepeatableFlags);
     if (cli.helpRequested()) return ism::common::printUsage(kUsage);
@@ -220,6 +223,11 @@ int main(int argc, char** argv) {
       ism::tools::readGpsDegradationFlags(cli, &options.gps);
       options.smooth = cli.has("--smooth");
       options.imu_gps_only = cli.has("--imu-gps-only");
+      options.wheel_speed_sigma_mps = cli.getDouble("--wheel-speed-sigma", 0.0);
+      if (cli.has("--wheel-speed-sigma") &&
+          !(options.wheel_speed_sigma_mps > 0.0 && std::isfinite(options.wheel_speed_sigma_mps))) {
+        throw UsageError("--wheel-speed-sigma must be a positive number of m/s");
+      }
       options.second_pass = !cli.has("--single-pass");
       if (cli.has("--single-pass") && !options.smooth) {
         throw UsageError("--single-pass applies to --smooth");
@@ -419,6 +427,16 @@ int main(int argc, char** argv) {
           static_cast<long long>(f.nonholonomic_skipped),
           static_cast<long long>(f.nonholonomic_suspended),
           static_cast<long long>(f.standstill_used), static_cast<long long>(f.standstill_rejected));
+    }
+    if (options.wheel_speed_sigma_mps > 0.0) {
+      const auto& f = run.statistics.filter;
+      std::printf(
+          "inekf_offline: wheel speeds (simulated, sigma %.3f m/s): %lld used / %lld rejected / "
+          "%lld stale / %lld ignored (before the start or the heading known)\n",
+          options.wheel_speed_sigma_mps, static_cast<long long>(f.wheel_speed_used),
+          static_cast<long long>(f.wheel_speed_rejected),
+          static_cast<long long>(f.wheel_speed_stale),
+          static_cast<long long>(f.wheel_speed_ignored));
     }
     if (run.smoother_breaks > 0) {
       std::printf("inekf_offline: the smoother restarted at %d IMU steps it could not reproduce\n",

@@ -60,6 +60,25 @@ TEST_F(InekfOfflineTest, LocalizesASyntheticDrive) {
 
 // Every frame without a GPS solution (posmode 0): the filter never starts. It used to write the
 // unstarted defaults for every frame and print "ATE 0.000 m".
+// Simulated wheel odometry: the speeds are used once the heading is known and said in the log;
+// a sigma that is not a positive number is refused.
+TEST_F(InekfOfflineTest, SimulatedWheelSpeedsAreUsedAndCounted) {
+  const std::string poses = dir_ + "/poses_wheels.txt";
+  const auto [status, output] =
+      run("--oxts " + oxts_ + " --output-kitti " + poses + " --wheel-speed-sigma 0.1");
+  ASSERT_EQ(status, 0) << output;
+  const std::size_t at = output.find("wheel speeds (simulated, sigma 0.100 m/s): ");
+  ASSERT_NE(at, std::string::npos) << output;
+  const int used = std::stoi(output.substr(at + 43));
+  EXPECT_GT(used, 0.8 * static_cast<double>(lineCount(oxts_ + "/timestamps.txt"))) << output;
+  for (const char* bad : {"0", "-1", "nan"}) {
+    const auto [bad_status, bad_output] =
+        run("--oxts " + oxts_ + " --output-kitti " + poses + " --wheel-speed-sigma " + bad);
+    EXPECT_NE(bad_status, 0) << bad;
+    EXPECT_NE(bad_output.find("--wheel-speed-sigma"), std::string::npos) << bad_output;
+  }
+}
+
 TEST_F(InekfOfflineTest, ADriveWithoutAnyGpsFixIsAnError) {
   const fs::path no_fix = fs::path(dir_) / "no_fix" / "oxts";
   fs::create_directories(no_fix.parent_path());

@@ -33,6 +33,10 @@ struct OxtsRunOptions {
   // The OXTS solution's attitude and velocity columns are dropped (zeroed) before the session
   // sees them: only the IMU and the GPS position are left (inekf_offline --imu-gps-only).
   bool imu_gps_only = false;
+  // > 0: simulated wheel odometry, each frame's OXTS forward velocity vf plus N(0, this) as a
+  // wheel speed after its IMU sample (seeded by gps.seed; kept with imu_gps_only: the wheels do
+  // not come from the INS solution). 0: none, as on KITTI.
+  double wheel_speed_sigma_mps = 0.0;
   // After the causal run, a Rauch-Tung-Striebel pass over it (estimation/smoother.h): states and
   // pose covariances become the smoothed ones. Needs the left-invariant filter.
   bool smooth = false;
