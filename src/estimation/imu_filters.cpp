@@ -204,6 +204,20 @@ CorrectionResult ImuFilterBase::kalmanUpdate(const Eigen::Matrix<double, M, 1>& 
   return result;
 }
 
+Eigen::Matrix<double, 3, 15> ImuFilterBase::vehicleVelocityJacobian(
+    const NonholonomicModel& model, Eigen::Vector3d* vehicle_velocity) const {
+  // Left-invariant error xi (X_true = X exp(xi)): R_true = R (I + xi_R^), v_true = v + R xi_v,
+  // so the body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R to first order; the vehicle
+  // frame's velocity is R_iv^T times that.
+  const Eigen::Matrix3d vehicle_from_imu = model.imu_from_vehicle.transpose();
+  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
+  *vehicle_velocity = vehicle_from_imu * body_velocity;
+  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
+  h_left.block<3, 3>(0, 0) = vehicle_from_imu * lie::hat(body_velocity);
+  h_left.block<3, 3>(0, 3) = vehicle_from_imu;
+  return h_left * leftFromError(state_);
+}
+
 CorrectionResult ImuFilterBase::correctNonholonomic(const NonholonomicModel& model, double gate) {
   CorrectionResult result;
   const double lateral = model.lateral_sigma_mps, vertical = model.vertical_sigma_mps;
@@ -212,17 +226,11 @@ CorrectionResult ImuFilterBase::correctNonholonomic(const NonholonomicModel& mod
     result.reason = "non-holonomic sigmas must be positive and finite, the vehicle frame finite";
     return result;
   }
-  // Left-invariant error xi (X_true = X exp(xi)): R_true = R (I + xi_R^), v_true = v + R xi_v,
-  // so the body velocity R_true^T v_true = v_b + xi_v + v_b^ xi_R to first order; the vehicle
-  // frame's velocity is R_iv^T times that.
-  const Eigen::Matrix3d vehicle_from_imu = model.imu_from_vehicle.transpose();
-  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
-  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
-  h_left.block<3, 3>(0, 0) = vehicle_from_imu * lie::hat(body_velocity);
-  h_left.block<3, 3>(0, 3) = vehicle_from_imu;
-  const Eigen::Matrix<double, 2, 15> h = h_left.bottomRows<2>() * leftFromError(state_);
+  Eigen::Vector3d vehicle_velocity;
+  const Eigen::Matrix<double, 3, 15> jacobian = vehicleVelocityJacobian(model, &vehicle_velocity);
+  const Eigen::Matrix<double, 2, 15> h = jacobian.bottomRows<2>();
   // Measured: 0 lateral, 0 vertical in the vehicle frame.
-  const Eigen::Vector2d innovation = -(vehicle_from_imu * body_velocity).tail<2>();
+  const Eigen::Vector2d innovation = -vehicle_velocity.tail<2>();
   const Eigen::Matrix2d noise =
       Eigen::Vector2d(lateral * lateral, vertical * vertical).asDiagonal();
   Vector15d delta;
@@ -286,16 +294,13 @@ CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& mod
     result.reason = "the forward speed must be finite, its sigma positive and finite";
     return result;
   }
-  // The vehicle frame's body velocity R_iv^T (v_b + xi_v + v_b^ xi_R), as in correctNonholonomic;
-  // its x row. Along the direction of travel the attitude hardly enters (v_b^ xi_R is
-  // perpendicular to v_b): the speed corrects the velocity's magnitude, the fixes its direction.
-  const Eigen::Matrix3d vehicle_from_imu = model.imu_from_vehicle.transpose();
-  const Eigen::Vector3d body_velocity = state_.rotation.transpose() * state_.velocity_map;
-  Eigen::Matrix<double, 3, 15> h_left = Eigen::Matrix<double, 3, 15>::Zero();
-  h_left.block<3, 3>(0, 0) = vehicle_from_imu * lie::hat(body_velocity);
-  h_left.block<3, 3>(0, 3) = vehicle_from_imu;
-  const Eigen::Matrix<double, 1, 15> h = h_left.topRows<1>() * leftFromError(state_);
-  const Eigen::Matrix<double, 1, 1> innovation(speed_mps - (vehicle_from_imu * body_velocity).x());
+  // The vehicle-frame velocity's x row. Along the direction of travel the attitude hardly enters
+  // (v_b^ xi_R is perpendicular to v_b): the speed corrects the velocity's magnitude, the fixes
+  // its direction.
+  Eigen::Vector3d vehicle_velocity;
+  const Eigen::Matrix<double, 3, 15> jacobian = vehicleVelocityJacobian(model, &vehicle_velocity);
+  const Eigen::Matrix<double, 1, 15> h = jacobian.topRows<1>();
+  const Eigen::Matrix<double, 1, 1> innovation(speed_mps - vehicle_velocity.x());
   const Eigen::Matrix<double, 1, 1> noise(sigma_mps * sigma_mps);
   Vector15d delta;
   ErrorCovariance updated;

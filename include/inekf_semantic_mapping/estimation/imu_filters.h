@@ -44,6 +44,10 @@ class ImuFilterBase : public NavigationFilter {
   virtual Matrix15d leftFromError(const NavState& state) const = 0;
 
  protected:
+  // The vehicle frame's velocity R_iv^T R^T v (the model's R_iv) and its Jacobian in this
+  // filter's error coordinates: the constraint's and the forward speed's rows.
+  Eigen::Matrix<double, 3, 15> vehicleVelocityJacobian(const NonholonomicModel& model,
+                                                       Eigen::Vector3d* vehicle_velocity) const;
   // Accepts the candidate state and covariance if all finite; returns false otherwise.
   bool commit(const NavState& state, const ErrorCovariance& covariance);
   // Shared Kalman algebra: innovation nu (M), Jacobian H (Mx15), noise N (MxM). Fills the
