@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/lie/se23.h"
@@ -287,11 +288,14 @@ CorrectionResult ImuFilterBase::correctZeroRate(const Eigen::Vector3d& mean_rate
 
 CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& model,
                                                     double speed_mps, double sigma_mps,
-                                                    double gate) {
+                                                    double gate_sigma_mps, double gate) {
   CorrectionResult result;
   if (!std::isfinite(speed_mps) || !(sigma_mps > 0.0) || !std::isfinite(sigma_mps) ||
+      !(gate_sigma_mps > 0.0) || !(gate_sigma_mps <= sigma_mps) ||
       !model.imu_from_vehicle.allFinite()) {
-    result.reason = "the forward speed must be finite, its sigma positive and finite";
+    result.reason =
+        "the forward speed must be finite, its sigmas positive and finite (the gate's at most "
+        "the update's)";
     return result;
   }
   // The vehicle-frame velocity's x row. Along the direction of travel the attitude hardly enters
@@ -301,12 +305,35 @@ CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& mod
   const Eigen::Matrix<double, 3, 15> jacobian = vehicleVelocityJacobian(model, &vehicle_velocity);
   const Eigen::Matrix<double, 1, 15> h = jacobian.topRows<1>();
   const Eigen::Matrix<double, 1, 1> innovation(speed_mps - vehicle_velocity.x());
+  // The gate: this measurement on its own noise.
+  const double gated = forwardSpeedMahalanobisSquared(model, speed_mps, gate_sigma_mps);
+  if (!(gated <= gate)) {
+    char text[128];
+    std::snprintf(text, sizeof(text), "outlier: Mahalanobis^2 %.1f > gate %.1f", gated, gate);
+    result.mahalanobis_squared = gated;
+    result.reason = std::isfinite(gated) ? text : "innovation not finite";
+    return result;
+  }
   const Eigen::Matrix<double, 1, 1> noise(sigma_mps * sigma_mps);
   Vector15d delta;
   ErrorCovariance updated;
-  result = kalmanUpdate<1>(innovation, h, noise, gate, &delta, &updated);
+  result = kalmanUpdate<1>(innovation, h, noise, std::numeric_limits<double>::infinity(), &delta,
+                           &updated);
+  result.mahalanobis_squared = gated;
   if (!result.accepted) return result;
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
+}
+
+double ImuFilterBase::forwardSpeedMahalanobisSquared(const NonholonomicModel& model,
+                                                     double speed_mps,
+                                                     double gate_sigma_mps) const {
+  Eigen::Vector3d vehicle_velocity;
+  const Eigen::Matrix<double, 1, 15> h =
+      vehicleVelocityJacobian(model, &vehicle_velocity).topRows<1>();
+  const double innovation = speed_mps - vehicle_velocity.x();
+  const double variance = (h * covariance_ * h.transpose())(0, 0) + gate_sigma_mps * gate_sigma_mps;
+  const double d2 = innovation * innovation / variance;
+  return std::isfinite(d2) && variance > 0.0 ? d2 : std::numeric_limits<double>::quiet_NaN();
 }
 
 bool ImuFilterBase::finiteFix(const PositionFix& fix) {

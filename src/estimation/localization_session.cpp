@@ -113,8 +113,8 @@ std::string LocalizationSession::summary() const {
   }
   if (s.filter.wheel_speed_used + s.filter.wheel_speed_rejected + s.filter.wheel_speed_stale > 0) {
     line << "wheel speed " << s.filter.wheel_speed_used << " used / "
-         << s.filter.wheel_speed_rejected << " rejected / " << s.filter.wheel_speed_stale
-         << " stale; ";
+         << s.filter.wheel_speed_rejected << " rejected (" << s.filter.wheel_speed_suspensions
+         << " suspensions) / " << s.filter.wheel_speed_stale << " stale; ";
   }
   const std::int64_t heading_events =
       s.filter.heading_alignments + s.filter.heading_recoveries + s.filter.heading_reopens;
@@ -412,11 +412,17 @@ LocalizationSession::Update LocalizationSession::addGpsVelocity(const GpsVelocit
 LocalizationSession::Update LocalizationSession::addWheelSpeed(const WheelSpeedEvent& event) {
   Update update;
   const std::int64_t stale_before = localizer_.statistics().wheel_speed_stale;
+  const std::int64_t suspensions_before = localizer_.statistics().wheel_speed_suspensions;
   const CorrectionResult result =
       localizer_.addWheelSpeed(event.stamp_s, event.speed_mps, event.sigma_mps);
   // No new_estimate: the estimate is at the last IMU sample's stamp, already published; the
   // next sample's carries the correction.
-  if (result.accepted) {
+  if (localizer_.statistics().wheel_speed_suspensions > suspensions_before) {
+    std::ostringstream note;  // once per suspension
+    note << std::fixed << std::setprecision(3) << "wheel speed at " << event.stamp_s
+         << " s: " << result.reason << " (a slip, or the wheels' scale or sign wrong)";
+    update.note = note.str();
+  } else if (result.accepted) {
     wheel_speed_stale_noted_ = false;
   } else if (localizer_.statistics().wheel_speed_stale > stale_before &&
              !wheel_speed_stale_noted_) {

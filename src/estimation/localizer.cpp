@@ -99,6 +99,10 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   predicted_covariance_ = filter_->covariance();
   initialized_ = true;
   consecutive_rejected_fixes_ = 0;
+  consecutive_rejected_wheel_speeds_ = 0;
+  wheel_speeds_suspended_ = false;
+  agreeing_wheel_speeds_ = 0;
+  last_wheel_speed_stamp_s_.reset();
   last_accepted_fix_s_ = initial.stamp_s;
   last_accepted_fix_position_ = initial.position_map;
   clearHistory();
@@ -145,7 +149,7 @@ bool Localizer::propagate(const ImuStep& step) {
     if (velocity.accepted || rate.accepted) noteHeadingChange(heading_before);
   }
   constrainToVehicle(step);
-  for (const auto& [speed, sigma] : step.wheel_speeds) applyWheelSpeed(speed, sigma);
+  for (const ImuStep::WheelSpeed& speed : step.wheel_speeds) applyWheelSpeed(speed);
   return true;
 }
 
@@ -210,12 +214,55 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
   const double stated =
       sigma_mps > 0.0 && std::isfinite(sigma_mps) ? sigma_mps : options.default_sigma_mps;
   const double floor = std::max(stated, options.min_sigma_mps);
-  const double sigma = std::hypot(floor, options.max_acceleration_mps2 * age_s);
-  result = applyWheelSpeed(speed_mps, sigma);
+  ImuStep::WheelSpeed speed{speed_mps, 0.0, 0.0};
+  speed.gate_sigma_mps = std::sqrt(floor * floor + std::pow(options.scale_sigma * speed_mps, 2) +
+                                   std::pow(options.max_acceleration_mps2 * age_s, 2));
+  if (wheel_speeds_suspended_) {
+    // Until a fix is accepted, or as many in a row agree with the filter again (a slip over).
+    const double d2 = filter_->forwardSpeedMahalanobisSquared(nonholonomic_model_, speed_mps,
+                                                              speed.gate_sigma_mps);
+    agreeing_wheel_speeds_ =
+        d2 <= options.gate_mahalanobis_squared ? agreeing_wheel_speeds_ + 1 : 0;
+    if (agreeing_wheel_speeds_ < options.max_rejected_in_a_row) {
+      ++statistics_.wheel_speed_ignored;
+      last_wheel_speed_stamp_s_ = stamp_s;
+      result.mahalanobis_squared = d2;
+      result.reason = "suspended after " + std::to_string(options.max_rejected_in_a_row) +
+                      " gated out in a row, until a fix is accepted or as many agree again";
+      return result;
+    }
+    wheel_speeds_suspended_ = false;
+  }
+  // Speeds faster than one per min_interval_s carry, together, the information of one: their
+  // errors (slip, bumps, the scale) are shared, not independent. Each is still gated on its own
+  // sigma: weakened, a slip's speeds passed the gate one by one and pulled the filter.
+  const double interval_s = last_wheel_speed_stamp_s_
+                                ? std::abs(stamp_s - *last_wheel_speed_stamp_s_)
+                                : options.min_interval_s;
+  last_wheel_speed_stamp_s_ = stamp_s;
+  speed.sigma_mps = speed.gate_sigma_mps;
+  if (interval_s < options.min_interval_s) {
+    speed.sigma_mps *= std::sqrt(options.min_interval_s / std::max(interval_s, 1e-3));
+  }
+  result = applyWheelSpeed(speed);
+  if (result.accepted) {
+    consecutive_rejected_wheel_speeds_ = 0;
+  } else if (result.mahalanobis_squared > options.gate_mahalanobis_squared &&
+             options.max_rejected_in_a_row > 0 &&
+             ++consecutive_rejected_wheel_speeds_ >= options.max_rejected_in_a_row) {
+    // The wheels and the filter keep disagreeing: a slip, or a wrong scale or sign. Taken on,
+    // they would pull the filter once its sigma had grown enough (then reject the true speeds).
+    wheel_speeds_suspended_ = true;
+    consecutive_rejected_wheel_speeds_ = 0;
+    agreeing_wheel_speeds_ = 0;
+    ++statistics_.wheel_speed_suspensions;
+    result.reason += "; " + std::to_string(options.max_rejected_in_a_row) +
+                     " in a row: wheel speeds suspended until a fix is accepted";
+  }
   if (result.accepted && !history_.empty()) {
     // Kept with the step it followed: a late fix's replay applies it again after that step.
     HistoryStep& newest = history_.back();
-    newest.step.wheel_speeds.emplace_back(speed_mps, sigma);
+    newest.step.wheel_speeds.push_back(speed);
     newest.state = filter_->state();
     newest.covariance = filter_->covariance();
     newest.heading_correction_rad = heading_correction_rad_;
@@ -223,10 +270,11 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
   return result;
 }
 
-CorrectionResult Localizer::applyWheelSpeed(double speed_mps, double sigma_mps) {
+CorrectionResult Localizer::applyWheelSpeed(const ImuStep::WheelSpeed& speed) {
   const double heading_before = vehicleHeading();
   const CorrectionResult result = filter_->correctForwardSpeed(
-      nonholonomic_model_, speed_mps, sigma_mps, config_.wheel_speed.gate_mahalanobis_squared);
+      nonholonomic_model_, speed.speed_mps, speed.sigma_mps, speed.gate_sigma_mps,
+      config_.wheel_speed.gate_mahalanobis_squared);
   if (!replaying_)
     ++(result.accepted ? statistics_.wheel_speed_used : statistics_.wheel_speed_rejected);
   if (result.accepted) noteHeadingChange(heading_before);
@@ -649,6 +697,7 @@ CorrectionResult Localizer::applyFix(const PositionFix& fix) {
   if (result.accepted) {
     noteHeadingChange(heading_before);
     consecutive_rejected_fixes_ = 0;
+    wheel_speeds_suspended_ = false;  // the fix anchors the velocity again
     last_accepted_fix_s_ = filter_->state().stamp_s;
     last_accepted_fix_position_ = fix_imu_position;
   }

@@ -97,9 +97,13 @@ LocalizerConfig LocalizerConfig::fromYaml(common::YamlReader* reader) {
   reader->read("wheel_speed.enabled", &wheel.enabled);
   positive("wheel_speed.default_sigma_mps", &wheel.default_sigma_mps);
   positive("wheel_speed.min_sigma_mps", &wheel.min_sigma_mps);
+  non_negative("wheel_speed.scale_sigma", &wheel.scale_sigma);
+  non_negative("wheel_speed.min_interval_s", &wheel.min_interval_s);
   non_negative("wheel_speed.max_age_s", &wheel.max_age_s);
   non_negative("wheel_speed.max_acceleration_mps2", &wheel.max_acceleration_mps2);
   positive("wheel_speed.gate_mahalanobis_squared", &wheel.gate_mahalanobis_squared);
+  reader->readInRange("wheel_speed.max_rejected_in_a_row", &wheel.max_rejected_in_a_row, 0,
+                      1000000);
   reader->read("init_orientation_from_reference", &config.init_orientation_from_reference);
   reader->read("heading.from_track", &config.heading_from_track);
   positive("heading.track_window_s", &config.heading_track_window_s);

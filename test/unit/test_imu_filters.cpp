@@ -513,7 +513,7 @@ TEST(Filters, TheForwardSpeedCorrectsTheVelocityAlongTheVehicleAxis) {
     auto filter = makeFilter(type, ImuNoise());
     filter->initialize(estimate,
                        filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
-    const CorrectionResult result = filter->correctForwardSpeed(model, 5.6, 0.02, 16.3);
+    const CorrectionResult result = filter->correctForwardSpeed(model, 5.6, 0.02, 0.02, 16.3);
     ASSERT_TRUE(result.accepted) << toString(type) << ": " << result.reason;
     EXPECT_NEAR(result.mahalanobis_squared, 0.36 / (0.25 + 0.0004), 0.05) << toString(type);
     const Eigen::Vector3d v = filter->state().velocity_map;
@@ -527,16 +527,32 @@ TEST(Filters, TheForwardSpeedCorrectsTheVelocityAlongTheVehicleAxis) {
     reversing.velocity_map = -3.2 * travel_in_map;
     filter->initialize(reversing,
                        filter->fromWorldCovariance(reversing, sigma.cwiseAbs2().asDiagonal()));
-    ASSERT_TRUE(filter->correctForwardSpeed(model, -3.0, 0.02, 16.3).accepted) << toString(type);
+    ASSERT_TRUE(filter->correctForwardSpeed(model, -3.0, 0.02, 0.02, 16.3).accepted)
+        << toString(type);
     EXPECT_NEAR(filter->state().velocity_map.dot(travel_in_map), -3.0, 0.02) << toString(type);
     // 5 m/s off at 0.5 m/s of velocity sigma: an outlier, the state kept.
     filter->initialize(estimate,
                        filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
-    EXPECT_FALSE(filter->correctForwardSpeed(model, 10.0, 0.02, 16.3).accepted) << toString(type);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 10.0, 0.02, 0.02, 16.3).accepted)
+        << toString(type);
     EXPECT_EQ(filter->state().velocity_map, estimate.velocity_map);
-    EXPECT_FALSE(filter->correctForwardSpeed(model, std::nan(""), 0.02, 16.3).accepted);
-    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, 0.0, 16.3).accepted);
-    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, std::nan(""), 16.3).accepted);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, std::nan(""), 0.02, 0.02, 16.3).accepted);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, 0.0, 0.0, 16.3).accepted);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, std::nan(""), 0.02, 16.3).accepted);
+  }
+  // A speed weighed as a share of a correlated stream (sigma 1 m/s) is still gated on its own
+  // sigma: 1.5 m/s off at 0.5 m/s of velocity sigma and 0.1 m/s of its own is an outlier, though
+  // at 1 m/s it would pass.
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    filter->initialize(estimate,
+                       filter->fromWorldCovariance(estimate, sigma.cwiseAbs2().asDiagonal()));
+    const CorrectionResult slip = filter->correctForwardSpeed(model, 6.5, 1.0, 0.1, 6.63);
+    EXPECT_FALSE(slip.accepted) << toString(type);
+    EXPECT_NEAR(slip.mahalanobis_squared, 2.25 / (0.25 + 0.01), 0.1) << toString(type);
+    EXPECT_TRUE(filter->correctForwardSpeed(model, 6.5, 1.0, 1.0, 6.63).accepted) << toString(type);
+    EXPECT_FALSE(filter->correctForwardSpeed(model, 5.0, 0.1, 0.2, 6.63).accepted)
+        << "a gate sigma above the update's";
   }
   EXPECT_LT((velocities[0] - velocities[1]).norm(), 1e-3);
   EXPECT_LT((velocities[0] - velocities[2]).norm(), 1e-3);

@@ -845,6 +845,9 @@ TEST(LocalizerConfig, RepositoryYamlEqualsTheBuiltInDefaults) {
   EXPECT_DOUBLE_EQ(wheel.max_age_s, wheel_default.max_age_s);
   EXPECT_DOUBLE_EQ(wheel.max_acceleration_mps2, wheel_default.max_acceleration_mps2);
   EXPECT_DOUBLE_EQ(wheel.gate_mahalanobis_squared, wheel_default.gate_mahalanobis_squared);
+  EXPECT_DOUBLE_EQ(wheel.scale_sigma, wheel_default.scale_sigma);
+  EXPECT_DOUBLE_EQ(wheel.min_interval_s, wheel_default.min_interval_s);
+  EXPECT_EQ(wheel.max_rejected_in_a_row, wheel_default.max_rejected_in_a_row);
   EXPECT_DOUBLE_EQ(loaded.heading_track_min_chord_m, defaults.heading_track_min_chord_m);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_chord_s, defaults.heading_track_max_chord_s);
   EXPECT_DOUBLE_EQ(loaded.heading_track_max_turn_deg, defaults.heading_track_max_turn_deg);

@@ -37,7 +37,10 @@ class ImuFilterBase : public NavigationFilter {
                                    const Eigen::Vector3d& variance, double gate) override;
   // The constraint's row x (H = e_x^T R_iv^T [v_b^ I 0 0 0]), with a measured value.
   CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
-                                       double sigma_mps, double gate) override;
+                                       double sigma_mps, double gate_sigma_mps,
+                                       double gate) override;
+  double forwardSpeedMahalanobisSquared(const NonholonomicModel& model, double speed_mps,
+                                        double gate_sigma_mps) const override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

@@ -122,11 +122,12 @@ class Localizer {
     std::int64_t standstill_rate_rejected = 0;  // the zero-rate part alone
     std::int64_t wheel_speed_used = 0;          // forward speeds from wheel odometry
     std::int64_t wheel_speed_rejected = 0;      // gated out, or not finite
-    std::int64_t wheel_speed_stale = 0;    // further than wheel_speed.max_age_s from the filter
-    std::int64_t wheel_speed_ignored = 0;  // before the start, or wheel_speed.enabled false
-    std::int64_t heading_alignments = 0;   // unknown heading set from the GPS track
-    std::int64_t heading_recoveries = 0;   // a wrong heading re-initialised from the track
-    std::int64_t heading_reopens = 0;      // yaw variance re-opened (fixes kept disagreeing)
+    std::int64_t wheel_speed_stale = 0;        // further than wheel_speed.max_age_s from the filter
+    std::int64_t wheel_speed_ignored = 0;      // before the start, or wheel_speed.enabled false
+    std::int64_t wheel_speed_suspensions = 0;  // max_rejected_in_a_row reached (see the config)
+    std::int64_t heading_alignments = 0;       // unknown heading set from the GPS track
+    std::int64_t heading_recoveries = 0;       // a wrong heading re-initialised from the track
+    std::int64_t heading_reopens = 0;          // yaw variance re-opened (fixes kept disagreeing)
     double last_mahalanobis_squared = 0.0;
   };
 
@@ -169,9 +170,12 @@ class Localizer {
   CorrectionResult addPositionFix(const PositionFix& fix);
   // Wheel odometry: the vehicle's speed along its direction of travel at stamp_s (negative when
   // reversing), +- sigma_mps (NaN or not positive: wheel_speed.default_sigma_mps). Applied at the
-  // filter's newest IMU time when stamp_s is within wheel_speed.max_age_s of it, the sigma grown
-  // by max_acceleration_mps2 times the age; kept with that IMU step, so that a late fix's replay
-  // applies it again. Before the start, stale or with wheel_speed.enabled false: not applied.
+  // filter's newest IMU time when stamp_s is within wheel_speed.max_age_s of it; the sigma floored
+  // at min_sigma_mps, with scale_sigma times the speed and max_acceleration_mps2 times the age
+  // added, and scaled up for speeds closer than min_interval_s to the previous one; kept with that
+  // IMU step, so that a late fix's replay applies it again. Not applied before the start, while
+  // the heading is unknown or the fixes reject it, when stale, after max_rejected_in_a_row gated
+  // out until a fix is accepted, or with wheel_speed.enabled false.
   CorrectionResult addWheelSpeed(double stamp_s, double speed_mps, double sigma_mps);
 
   // The IMU's mounting: its axes in base_link's (the rotation of tf base_link -> the IMU's frame;
@@ -212,9 +216,12 @@ class Localizer {
     // The standstill update after the step, decided when the sample arrived (a replay applies
     // the same one).
     std::optional<StandstillMeasurement> standstill;
-    // The wheel speeds applied after the step (after the standstill and the constraint), as
-    // (speed, sigma) in the order they came.
-    std::vector<std::pair<double, double>> wheel_speeds;
+    // The wheel speeds applied after the step (after the standstill and the constraint), in the
+    // order they came.
+    struct WheelSpeed {
+      double speed_mps, sigma_mps, gate_sigma_mps;
+    };
+    std::vector<WheelSpeed> wheel_speeds;
   };
   // A step and the filter after it: what a rewind restores and replays.
   struct HistoryStep {
@@ -250,7 +257,7 @@ class Localizer {
   // propagate's land-vehicle constraint after a step.
   void constrainToVehicle(const ImuStep& step);
   // One wheel speed on the current state (counted unless replaying).
-  CorrectionResult applyWheelSpeed(double speed_mps, double sigma_mps);
+  CorrectionResult applyWheelSpeed(const ImuStep::WheelSpeed& speed);
   void recordStep(const ImuStep& step);
   void clearHistory();
   // The history step to rewind to for a fix stamped stamp_s (the last step at or before it), or
@@ -303,6 +310,11 @@ class Localizer {
   ErrorCovariance predicted_covariance_ = ErrorCovariance::Identity();
   double interpolated_run_start_s_ = -1.0;  // < 0: not inside a run of interpolated samples
   int consecutive_rejected_fixes_ = 0;
+  // Wheel speeds: gated out in a row, suspended until a fix is accepted, the last one's stamp.
+  int consecutive_rejected_wheel_speeds_ = 0;
+  bool wheel_speeds_suspended_ = false;
+  int agreeing_wheel_speeds_ = 0;  // while suspended, in a row
+  std::optional<double> last_wheel_speed_stamp_s_;
   double last_accepted_fix_s_ = 0.0;
   // Where the last accepted fix (or the start) put the car: a fix farther from it than a car
   // moves in the time since is a jump of the receiver, wherever the filter has drifted.

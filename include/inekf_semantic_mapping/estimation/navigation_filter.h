@@ -88,10 +88,15 @@ class NavigationFilter {
 
   // Wheel odometry: the vehicle's speed along its direction of travel (the model's vehicle x
   // axis: lateral and vertical are the constraint's), measured `speed_mps` +- sigma_mps; negative
-  // when reversing. Gated on its 1 dof and rejected as correctPosition is.
+  // when reversing. Gated on its 1 dof with the measurement's own gate_sigma_mps (<= sigma_mps:
+  // one of a stream of speeds that share their errors is weighed as a share of them, sigma_mps,
+  // but tested as the measurement it is) and rejected as correctPosition is.
   virtual CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
-                                               double sigma_mps,
+                                               double sigma_mps, double gate_sigma_mps,
                                                double gate_mahalanobis_squared) = 0;
+  // The Mahalanobis^2 that correctForwardSpeed gates on, without correcting (NaN for bad input).
+  virtual double forwardSpeedMahalanobisSquared(const NonholonomicModel& model, double speed_mps,
+                                                double gate_sigma_mps) const = 0;
 
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
