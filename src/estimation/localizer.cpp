@@ -257,7 +257,8 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
     agreeing_wheel_speeds_ = 0;
     ++statistics_.wheel_speed_suspensions;
     result.reason += "; " + std::to_string(options.max_rejected_in_a_row) +
-                     " in a row: wheel speeds suspended until a fix is accepted";
+                     " in a row: wheel speeds suspended until a fix is accepted or as many "
+                     "agree again";
   }
   if (result.accepted && !history_.empty()) {
     // Kept with the step it followed: a late fix's replay applies it again after that step.
