@@ -306,7 +306,10 @@ CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& mod
   const Eigen::Matrix<double, 1, 15> h = jacobian.topRows<1>();
   const Eigen::Matrix<double, 1, 1> innovation(speed_mps - vehicle_velocity.x());
   // The gate: this measurement on its own noise.
-  const double gated = forwardSpeedMahalanobisSquared(model, speed_mps, gate_sigma_mps);
+  double predicted_variance = 0.0;
+  const double predicted = predictedForwardSpeed(model, &predicted_variance);
+  const double gated = (speed_mps - predicted) * (speed_mps - predicted) /
+                       (predicted_variance + gate_sigma_mps * gate_sigma_mps);
   if (!(gated <= gate)) {
     char text[128];
     std::snprintf(text, sizeof(text), "outlier: Mahalanobis^2 %.1f > gate %.1f", gated, gate);
@@ -324,16 +327,13 @@ CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& mod
   return applyCorrection(delta, updated) ? result : rejectNonFinite(result);
 }
 
-double ImuFilterBase::forwardSpeedMahalanobisSquared(const NonholonomicModel& model,
-                                                     double speed_mps,
-                                                     double gate_sigma_mps) const {
+double ImuFilterBase::predictedForwardSpeed(const NonholonomicModel& model,
+                                            double* variance_m2ps2) const {
   Eigen::Vector3d vehicle_velocity;
   const Eigen::Matrix<double, 1, 15> h =
       vehicleVelocityJacobian(model, &vehicle_velocity).topRows<1>();
-  const double innovation = speed_mps - vehicle_velocity.x();
-  const double variance = (h * covariance_ * h.transpose())(0, 0) + gate_sigma_mps * gate_sigma_mps;
-  const double d2 = innovation * innovation / variance;
-  return std::isfinite(d2) && variance > 0.0 ? d2 : std::numeric_limits<double>::quiet_NaN();
+  *variance_m2ps2 = (h * covariance_ * h.transpose())(0, 0);
+  return vehicle_velocity.x();
 }
 
 bool ImuFilterBase::finiteFix(const PositionFix& fix) {

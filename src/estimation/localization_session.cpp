@@ -417,10 +417,17 @@ LocalizationSession::Update LocalizationSession::addWheelSpeed(const WheelSpeedE
       localizer_.addWheelSpeed(event.stamp_s, event.speed_mps, event.sigma_mps);
   // No new_estimate: the estimate is at the last IMU sample's stamp, already published; the
   // next sample's carries the correction.
-  if (localizer_.statistics().wheel_speed_suspensions > suspensions_before) {
-    std::ostringstream note;  // once per suspension
+  const std::int64_t suspensions = localizer_.statistics().wheel_speed_suspensions;
+  if (suspensions > suspensions_before &&
+      (!last_suspension_note_s_ || event.stamp_s - *last_suspension_note_s_ >= 60.0 ||
+       event.stamp_s < *last_suspension_note_s_)) {
+    // The first, then at most one a minute: wheels whose sign is wrong are suspended again after
+    // every fix that lifts it.
+    last_suspension_note_s_ = event.stamp_s;
+    std::ostringstream note;
     note << std::fixed << std::setprecision(3) << "wheel speed at " << event.stamp_s
-         << " s: " << result.reason << " (a slip, or the wheels' scale or sign wrong)";
+         << " s: " << result.reason << " (a slip, or the wheels' scale or sign wrong; "
+         << suspensions << " suspensions so far)";
     update.note = note.str();
   } else if (result.accepted) {
     wheel_speed_stale_noted_ = false;

@@ -102,6 +102,8 @@ void Localizer::initialize(const NavState& initial, const ErrorCovariance& world
   consecutive_rejected_wheel_speeds_ = 0;
   wheel_speeds_suspended_ = false;
   agreeing_wheel_speeds_ = 0;
+  wheel_agreement_since_s_.reset();
+  wheel_sign_checked_ = false;
   last_wheel_speed_stamp_s_.reset();
   last_accepted_fix_s_ = initial.stamp_s;
   last_accepted_fix_position_ = initial.position_map;
@@ -217,18 +219,48 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
   ImuStep::WheelSpeed speed{speed_mps, 0.0, 0.0};
   speed.gate_sigma_mps = std::sqrt(floor * floor + std::pow(options.scale_sigma * speed_mps, 2) +
                                    std::pow(options.max_acceleration_mps2 * age_s, 2));
+  double predicted_variance = 0.0;
+  const double predicted = filter_->predictedForwardSpeed(nonholonomic_model_, &predicted_variance);
+  // After a start, an alignment or a re-open (the velocity sigma 1 m/s or more) the wheels' sign
+  // is checked against the filter's own speed before they are taken: a reversed encoder's (or a
+  // robot's backing out against a heading aligned forwards) -1.5 m/s passed the gate, turned the
+  // filter's velocity round and agreed with it from then on (25-35 heading re-opens in 150 s).
+  // Until then only slow speeds (whose sign does not matter) go in, and only where the filter
+  // knows its own speed as well; a faster one checks the sign when the filter's speed is clear of
+  // zero by two sigmas, on the same side.
+  const double predicted_sigma = std::sqrt(predicted_variance);
+  bool checks_sign = false;
+  if (!wheel_sign_checked_) {
+    const bool slow = std::abs(speed_mps) <= kWheelSignSigmaFloorMps &&
+                      predicted_sigma <= kWheelSignSigmaFloorMps;
+    const bool agrees = predicted * speed_mps > 0.0 && std::abs(predicted) >= 2.0 * predicted_sigma;
+    if (!slow && !agrees) {
+      ++statistics_.wheel_speed_ignored;
+      result.reason = "the wheels' sign is not checked against the filter's speed yet";
+      return result;
+    }
+    checks_sign = agrees;
+  }
+  const double d2 = (speed_mps - predicted) * (speed_mps - predicted) /
+                    (predicted_variance + speed.gate_sigma_mps * speed.gate_sigma_mps);
   if (wheel_speeds_suspended_) {
-    // Until a fix is accepted, or as many in a row agree with the filter again (a slip over).
-    const double d2 = filter_->forwardSpeedMahalanobisSquared(nonholonomic_model_, speed_mps,
-                                                              speed.gate_sigma_mps);
-    agreeing_wheel_speeds_ =
-        d2 <= options.gate_mahalanobis_squared ? agreeing_wheel_speeds_ + 1 : 0;
-    if (agreeing_wheel_speeds_ < options.max_rejected_in_a_row) {
+    // Until a fix is accepted, or they agree closely with the filter (p = 0.05) for
+    // min_interval_s and max_rejected_in_a_row speeds: 5 speeds at the gate's edge (0.1 s at
+    // 50 Hz) let a long slip back in.
+    if (!(d2 <= kWheelResumeMahalanobisSquared)) {
+      agreeing_wheel_speeds_ = 0;
+      wheel_agreement_since_s_.reset();
+    } else {
+      ++agreeing_wheel_speeds_;
+      if (!wheel_agreement_since_s_) wheel_agreement_since_s_ = stamp_s;
+    }
+    if (agreeing_wheel_speeds_ < options.max_rejected_in_a_row || !wheel_agreement_since_s_ ||
+        stamp_s - *wheel_agreement_since_s_ < options.min_interval_s) {
       ++statistics_.wheel_speed_ignored;
       last_wheel_speed_stamp_s_ = stamp_s;
       result.mahalanobis_squared = d2;
       result.reason = "suspended after " + std::to_string(options.max_rejected_in_a_row) +
-                      " gated out in a row, until a fix is accepted or as many agree again";
+                      " gated out in a row, until a fix is accepted or they agree again";
       return result;
     }
     wheel_speeds_suspended_ = false;
@@ -247,6 +279,7 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
   result = applyWheelSpeed(speed);
   if (result.accepted) {
     consecutive_rejected_wheel_speeds_ = 0;
+    if (checks_sign) wheel_sign_checked_ = true;
   } else if (result.mahalanobis_squared > options.gate_mahalanobis_squared &&
              options.max_rejected_in_a_row > 0 &&
              ++consecutive_rejected_wheel_speeds_ >= options.max_rejected_in_a_row) {
@@ -255,10 +288,11 @@ CorrectionResult Localizer::addWheelSpeed(double stamp_s, double speed_mps, doub
     wheel_speeds_suspended_ = true;
     consecutive_rejected_wheel_speeds_ = 0;
     agreeing_wheel_speeds_ = 0;
+    wheel_agreement_since_s_.reset();
     ++statistics_.wheel_speed_suspensions;
     result.reason += "; " + std::to_string(options.max_rejected_in_a_row) +
-                     " in a row: wheel speeds suspended until a fix is accepted or as many "
-                     "agree again";
+                     " in a row: wheel speeds suspended until a fix is accepted or they agree "
+                     "again";
   }
   if (result.accepted && !history_.empty()) {
     // Kept with the step it followed: a late fix's replay applies it again after that step.
@@ -963,6 +997,7 @@ Eigen::Vector2d Localizer::trackVelocity(double window_s, double* variance) cons
 }
 
 void Localizer::realignHeading(const TrackHeading& track, const std::string& why) {
+  wheel_sign_checked_ = false;  // the velocity is re-initialised: check the wheels' sign again
   const NavState before = filter_->state();
   const double delta = wrapRad(track.offset_rad - heading_correction_rad_);
   const Eigen::Matrix3d turn =
@@ -1007,6 +1042,7 @@ void Localizer::realignHeading(const TrackHeading& track, const std::string& why
 }
 
 void Localizer::reopenHeading(const Eigen::Vector3d& innovation, const std::string& why) {
+  wheel_sign_checked_ = false;
   const NavState& state = filter_->state();
   const double since_last_fix_s = std::max(1.0, state.stamp_s - last_accepted_fix_s_);
   // A rotation about the map z axis through the current position, in the filter's own error

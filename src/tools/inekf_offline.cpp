@@ -432,7 +432,8 @@ int main(int argc, char** argv) {
       const auto& f = run.statistics.filter;
       std::printf(
           "inekf_offline: wheel speeds (simulated, sigma %.3f m/s): %lld used / %lld rejected / "
-          "%lld stale / %lld ignored (before the start or the heading known)\n",
+          "%lld stale / %lld ignored (before the start, while the heading or the filter's speed is "
+          "too uncertain, or suspended)\n",
           options.wheel_speed_sigma_mps, static_cast<long long>(f.wheel_speed_used),
           static_cast<long long>(f.wheel_speed_rejected),
           static_cast<long long>(f.wheel_speed_stale),

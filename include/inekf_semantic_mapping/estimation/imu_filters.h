@@ -39,8 +39,8 @@ class ImuFilterBase : public NavigationFilter {
   CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
                                        double sigma_mps, double gate_sigma_mps,
                                        double gate) override;
-  double forwardSpeedMahalanobisSquared(const NonholonomicModel& model, double speed_mps,
-                                        double gate_sigma_mps) const override;
+  double predictedForwardSpeed(const NonholonomicModel& model,
+                               double* variance_m2ps2) const override;
 
   // Linear map from the left-invariant error at `state` to this filter's error (first order).
   virtual Matrix15d errorFromLeft(const NavState& state) const = 0;

@@ -319,7 +319,8 @@ class LocalizationSession {
   double offset_candidate_since_s_ = 0.0;
   std::optional<double> gps_clock_offset_s_;  // confirmed: GPS messages at it are dropped
   bool gps_velocity_expected_ = true;
-  bool wheel_speed_stale_noted_ = false;  // since the last wheel speed used
+  bool wheel_speed_stale_noted_ = false;          // since the last wheel speed used
+  std::optional<double> last_suspension_note_s_;  // data time of the last one noted
   Eigen::Vector3d latest_angular_velocity_ = Eigen::Vector3d::Zero();
   double last_mahalanobis_squared_ = 0.0;
   int last_innovation_dof_ = 3;

@@ -102,6 +102,11 @@ class Localizer {
   };
   // Stamps closer than this are the same instant (a duplicate sample, a fix at a sample).
   static constexpr double kDuplicateStampS = 1e-6;
+  // Wheel speeds: before their sign is checked (Localizer::addWheelSpeed), speeds up to this
+  // are taken where the filter's forward-speed sigma is this or less; a suspension ends on
+  // speeds within this Mahalanobis^2 of the filter's (1 dof, p = 0.05).
+  static constexpr double kWheelSignSigmaFloorMps = 0.3;
+  static constexpr double kWheelResumeMahalanobisSquared = 3.84;
 
   struct Statistics {
     std::int64_t imu_used = 0;
@@ -314,6 +319,10 @@ class Localizer {
   int consecutive_rejected_wheel_speeds_ = 0;
   bool wheel_speeds_suspended_ = false;
   int agreeing_wheel_speeds_ = 0;  // while suspended, in a row
+  std::optional<double> wheel_agreement_since_s_;
+  // Since the start, the last alignment or re-open: a wheel speed's sign was checked against the
+  // filter's speed.
+  bool wheel_sign_checked_ = false;
   std::optional<double> last_wheel_speed_stamp_s_;
   double last_accepted_fix_s_ = 0.0;
   // Where the last accepted fix (or the start) put the car: a fix farther from it than a car

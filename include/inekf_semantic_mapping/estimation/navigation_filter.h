@@ -94,9 +94,10 @@ class NavigationFilter {
   virtual CorrectionResult correctForwardSpeed(const NonholonomicModel& model, double speed_mps,
                                                double sigma_mps, double gate_sigma_mps,
                                                double gate_mahalanobis_squared) = 0;
-  // The Mahalanobis^2 that correctForwardSpeed gates on, without correcting (NaN for bad input).
-  virtual double forwardSpeedMahalanobisSquared(const NonholonomicModel& model, double speed_mps,
-                                                double gate_sigma_mps) const = 0;
+  // The filter's own speed along the model's vehicle x axis and its variance (first order): what
+  // correctForwardSpeed gates a measured speed against.
+  virtual double predictedForwardSpeed(const NonholonomicModel& model,
+                                       double* variance_m2ps2) const = 0;
 
   virtual const NavState& state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
