@@ -300,9 +300,10 @@ class InekfNodeCore::Impl {
   std::optional<Eigen::Matrix3d> wheelFrameInBase(const std::string& child_frame_id) {
     const std::string frame = frames::tfFrameId(child_frame_id);
     if (frame.empty() || frame == output_.baseFrame()) return Eigen::Matrix3d::Identity();
+    // Before the first IMU message its frame is not known: the filter has not started either.
+    if (output_.imuFrame().empty()) return std::nullopt;
     const std::optional<Eigen::Matrix3d> base_from_imu = output_.imuMounting();
-    const std::optional<Eigen::Isometry3d> child_in_imu =
-        output_.imuFrame().empty() ? std::nullopt : output_.frameInImu(frame);
+    const std::optional<Eigen::Isometry3d> child_in_imu = output_.frameInImu(frame);
     if (!base_from_imu || !child_in_imu) {
       ROS_WARN_STREAM_THROTTLE(10.0, "inekf_node: no tf from "
                                          << output_.baseFrame() << " to '" << frame
