@@ -300,8 +300,20 @@ class InekfNodeCore::Impl {
   std::optional<Eigen::Matrix3d> wheelFrameInBase(const std::string& child_frame_id) {
     const std::string frame = frames::tfFrameId(child_frame_id);
     if (frame.empty() || frame == output_.baseFrame()) return Eigen::Matrix3d::Identity();
-    // Before the first IMU message its frame is not known: the filter has not started either.
-    if (output_.imuFrame().empty()) return std::nullopt;
+    // Before the first IMU message its frame is not known (the filter has not started either);
+    // IMU messages without a frame_id leave it unknown for good.
+    if (output_.imuFrame().empty()) {
+      if (session_.started()) {
+        ROS_WARN_STREAM_THROTTLE(10.0,
+                                 "inekf_node: the IMU messages name no frame_id, so the "
+                                 "wheel odometry's child frame '"
+                                     << frame << "' (" << wheel_subscriber_.getTopic()
+                                     << ") cannot be turned into base_link's axes: not "
+                                        "used (give it child_frame_id "
+                                     << output_.baseFrame() << ")");
+      }
+      return std::nullopt;
+    }
     const std::optional<Eigen::Matrix3d> base_from_imu = output_.imuMounting();
     const std::optional<Eigen::Isometry3d> child_in_imu = output_.frameInImu(frame);
     if (!base_from_imu || !child_in_imu) {
