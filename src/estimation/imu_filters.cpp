@@ -306,10 +306,9 @@ CorrectionResult ImuFilterBase::correctForwardSpeed(const NonholonomicModel& mod
   const Eigen::Matrix<double, 1, 15> h = jacobian.topRows<1>();
   const Eigen::Matrix<double, 1, 1> innovation(speed_mps - vehicle_velocity.x());
   // The gate: this measurement on its own noise.
-  double predicted_variance = 0.0;
-  const double predicted = predictedForwardSpeed(model, &predicted_variance);
-  const double gated = (speed_mps - predicted) * (speed_mps - predicted) /
-                       (predicted_variance + gate_sigma_mps * gate_sigma_mps);
+  const double predicted_variance = (h * covariance_ * h.transpose())(0, 0);
+  const double gated =
+      innovation(0) * innovation(0) / (predicted_variance + gate_sigma_mps * gate_sigma_mps);
   if (!(gated <= gate)) {
     char text[128];
     std::snprintf(text, sizeof(text), "outlier: Mahalanobis^2 %.1f > gate %.1f", gated, gate);

@@ -176,11 +176,12 @@ void LocalizationMonitor::fill(const estimation::LocalizationSession& session, d
               std::to_string(filter.standstill_used) + " / " +
                   std::to_string(filter.standstill_rejected) + " / " +
                   std::to_string(filter.standstill_rate_rejected));
-  status->add("wheel speeds used / rejected / stale / ignored",
+  status->add("wheel speeds used / rejected / stale / ignored / suspensions",
               std::to_string(filter.wheel_speed_used) + " / " +
                   std::to_string(filter.wheel_speed_rejected) + " / " +
                   std::to_string(filter.wheel_speed_stale) + " / " +
-                  std::to_string(filter.wheel_speed_ignored));
+                  std::to_string(filter.wheel_speed_ignored) + " / " +
+                  std::to_string(filter.wheel_speed_suspensions));
   status->add("heading alignments", filter.heading_alignments);
   status->add("heading recoveries", filter.heading_recoveries + filter.heading_reopens);
   status->add("resets", statistics.resets);

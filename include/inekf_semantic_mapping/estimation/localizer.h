@@ -127,8 +127,9 @@ class Localizer {
     std::int64_t standstill_rate_rejected = 0;  // the zero-rate part alone
     std::int64_t wheel_speed_used = 0;          // forward speeds from wheel odometry
     std::int64_t wheel_speed_rejected = 0;      // gated out, or not finite
-    std::int64_t wheel_speed_stale = 0;        // further than wheel_speed.max_age_s from the filter
-    std::int64_t wheel_speed_ignored = 0;      // before the start, or wheel_speed.enabled false
+    std::int64_t wheel_speed_stale = 0;  // further than wheel_speed.max_age_s from the filter
+    // Not tried: before the start, the heading or the wheels' sign unknown, suspended, disabled.
+    std::int64_t wheel_speed_ignored = 0;
     std::int64_t wheel_speed_suspensions = 0;  // max_rejected_in_a_row reached (see the config)
     std::int64_t heading_alignments = 0;       // unknown heading set from the GPS track
     std::int64_t heading_recoveries = 0;       // a wrong heading re-initialised from the track
@@ -179,8 +180,10 @@ class Localizer {
   // at min_sigma_mps, with scale_sigma times the speed and max_acceleration_mps2 times the age
   // added, and scaled up for speeds closer than min_interval_s to the previous one; kept with that
   // IMU step, so that a late fix's replay applies it again. Not applied before the start, while
-  // the heading is unknown or the fixes reject it, when stale, after max_rejected_in_a_row gated
-  // out until a fix is accepted, or with wheel_speed.enabled false.
+  // the heading is unknown or the fixes reject it, after a start, alignment or re-open until a
+  // speed's sign agrees with the filter's (slow speeds excepted), when stale, after
+  // max_rejected_in_a_row gated out until a fix is accepted or they agree again, or with
+  // wheel_speed.enabled false.
   CorrectionResult addWheelSpeed(double stamp_s, double speed_mps, double sigma_mps);
 
   // The IMU's mounting: its axes in base_link's (the rotation of tf base_link -> the IMU's frame;
