@@ -105,14 +105,24 @@ std::size_t saveMapInto(SemanticOcTree& tree, const std::string& path, MapFormat
   switch (format) {
     case MapFormat::kSemanticOt: {
       writeAtomically(
-          path, [&](std::ostream& out) { tree.write(out); }, set);
+          path,
+          [&](std::ostream& out) {
+            out.precision(17);  // octomap writes "res" as text: all of a double's digits
+            tree.write(out);
+          },
+          set);
       return countOccupiedFinestVoxels(tree);
     }
     case MapFormat::kColorOt: {
       MirrorColorOcTree color(tree.getResolution());
       color.mirror(tree);
       writeAtomically(
-          path, [&](std::ostream& out) { color.write(out); }, set);
+          path,
+          [&](std::ostream& out) {
+            out.precision(17);
+            color.write(out);
+          },
+          set);
       return countOccupiedFinestVoxels(tree);
     }
     case MapFormat::kPly: {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 #include "inekf_semantic_mapping/common/timing.h"
@@ -429,7 +430,7 @@ void SemanticMappingSession::insertPending(const PendingScan& scan, const Eigen:
     if (config_.label_neighbour_s > 0.0) borrowFromNeighbours(&inserted);
     pairing_.keepForLateLabels(std::move(inserted));
   }
-  if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_);
+  if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_, MapUpdate::kScanInserted);
 }
 
 bool SemanticMappingSession::applyLateLabels(PendingLabels& labels, InsertedScan& scan) {
@@ -444,7 +445,7 @@ bool SemanticMappingSession::applyLateLabels(PendingLabels& labels, InsertedScan
   ++statistics_.label_images_late;
   ++statistics_.scans_with_labels;
   last_scan_ = std::move(labeled);
-  if (inserted_callback_) inserted_callback_(labels.stamp, last_scan_);
+  if (inserted_callback_) inserted_callback_(scan.stamp, last_scan_, MapUpdate::kLateLabels);
   return true;
 }
 
@@ -504,6 +505,7 @@ LabeledScan SemanticMappingSession::addImageEvidence(const PendingLabels& labels
   LabeledScan labeled;
   labeled.label_ids = labelPointsFromCamera(points_sensor, labels.view, *labels.camera, &in_image);
   labeled.points_map = std::move(points_map);
+  labeled.sensor_origin_map = T_map_sensor.translation().cast<float>();
   labeled.unknown_label_id = kNoLabel;
   statistics_.points_with_class +=
       grid_ ? gridForInsertion().addClassEvidence(labeled, tree_->classSet())
@@ -522,11 +524,16 @@ std::size_t SemanticMappingSession::save(const std::string& path, MapFormat form
 
 void SemanticMappingSession::load(const std::string& path) {
   std::unique_ptr<SemanticOcTree> loaded = loadSemanticOcTree(path);
-  if (std::abs(loaded->getResolution() - config_.resolution_m) > 1e-9) {
-    throw MapIoError(path + ": map resolution " + std::to_string(loaded->getResolution()) +
-                     " m differs from the configured " + std::to_string(config_.resolution_m) +
-                     " m");
+  // Maps are saved with the resolution's every digit; earlier ones with 6 significant digits,
+  // which a relative tolerance of 1e-5 still takes (then the configured value holds).
+  if (std::abs(loaded->getResolution() - config_.resolution_m) > 1e-5 * config_.resolution_m) {
+    std::ostringstream why;
+    why.precision(10);
+    why << path << ": map resolution " << loaded->getResolution()
+        << " m differs from the configured " << config_.resolution_m << " m";
+    throw MapIoError(why.str());
   }
+  if (loaded->getResolution() != config_.resolution_m) loaded->setResolution(config_.resolution_m);
   // The class indices the map stores stand for its own table's label ids, and the labels to come
   // are in the configured set's: the configured set must be where the map's table begins (the
   // map may have added ids it met since, never reordered). A SemanticKITTI map loaded into a

@@ -66,6 +66,11 @@ void MapDisplay::scanInserted(const mapping::LabeledScan& scan) {
   ground_trace_.addSensorOrigin(scan.sensor_origin_map.cast<double>());
 }
 
+void MapDisplay::classesChanged() {
+  map_changed_ = true;
+  grids_changed_ = true;
+}
+
 void MapDisplay::mapReplaced() {
   map_changed_ = true;
   grids_changed_ = true;  // until published (the grids' projection may fail)

@@ -111,9 +111,14 @@ class SemanticOctomapNodeCore::Impl {
                                                              << ros::Time(stamp)
                                                              << " not mapped: " << why);
     });
-    session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan) {
-      monitor_->noteInserted(stamp, wallNow());
-      display_->scanInserted(scan);
+    session_->setInsertedCallback([this](double stamp, const mapping::LabeledScan& scan,
+                                         mapping::SemanticMappingSession::MapUpdate update) {
+      if (update == mapping::SemanticMappingSession::MapUpdate::kScanInserted) {
+        monitor_->noteInserted(stamp, wallNow());
+        display_->scanInserted(scan);
+      } else {
+        display_->classesChanged();  // the same voxels, new class evidence: no ground sample
+      }
       // Not after ROS has shut down (the scans flushed at shutdown): the publisher is invalid.
       if (!cloud_pub_ || cloud_pub_.getNumSubscribers() == 0) return;
       cloud_pub_.publish(labeledCloudMessage(scan, session_->classSet(), options_.display.map_frame,

@@ -93,8 +93,18 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
   if (cli.has("--config")) {
     config = mapping::loadSemanticMappingConfig(cli.get("--config"));
   }
+  // The label ids come from the label source (SemanticKITTI's in --labels, a Cityscapes model's
+  // otherwise): its class set, not the node's YAML, says what they mean.
+  const mapping::MapClassSet from_config = config.class_set;
   config.class_set = cli.has("--labels") ? mapping::MapClassSet::kSemanticKitti
                                          : mapping::MapClassSet::kCityscapes;
+  if (cli.has("--config") && !cli.has("--classes") && from_config != config.class_set) {
+    std::cerr << "[semantic_map_offline] " << cli.get("--config") << ": class_set "
+              << mapping::mapClassSetName(from_config) << " is not the label source's; the map "
+              << "uses " << mapping::mapClassSetName(config.class_set)
+              << " (--classes chooses; a node must be configured with the map's set to load it)"
+              << std::endl;
+  }
   config.resolution_m = cli.getDouble("--resolution", config.resolution_m);
   config.max_range_m = cli.getDouble("--max-range", config.max_range_m);
   config.fusion.correct_probability =

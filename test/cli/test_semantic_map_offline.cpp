@@ -64,6 +64,26 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesOtAndPly) {
   EXPECT_FALSE(std::filesystem::exists(dir_ + "/z.ot"));
 }
 
+// The label source decides the class set; a --config that says otherwise is named (it was
+// overridden without a word, and a node configured with it then refused the map).
+TEST_F(OfflineMappingTest, AConfigsClassSetOtherThanTheLabelSourcesIsNamed) {
+  const std::string config = dir_ + "/cityscapes.yaml";
+  std::ofstream(config) << "class_set: cityscapes\n";
+  const auto [status, output] = test::runCommand(
+      std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ + "/velodyne --labels " + dir_ +
+      "/labels --poses " + dir_ + "/poses.txt --calib " + dir_ + "/calib.txt --output " + dir_ +
+      "/sk.ot --max-scans 1 --config " + config);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find(config + ": class_set cityscapes is not the label source's; the map uses "
+                                 "semantickitti"),
+            std::string::npos)
+      << output;
+  const ClassSet semantickitti = ClassSet::semanticKitti();
+  ASSERT_NE(semantickitti.info(2).name, ClassSet::cityscapes().info(2).name);
+  EXPECT_EQ(loadSemanticOcTree(dir_ + "/sk.ot")->classSet().info(2).name,
+            semantickitti.info(2).name);
+}
+
 // --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.
 TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   std::vector<Eigen::Vector3d> origins;

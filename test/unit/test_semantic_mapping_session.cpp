@@ -488,6 +488,55 @@ TEST(SemanticMappingSessionTest, LateLabelImagesAddClassEvidenceToTheirScans) {
   EXPECT_EQ(session.statistics().label_images_unmatched, 1u);
 }
 
+// The session's callback tells an insertion from late class evidence: the node counts and traces
+// the ground from insertions only (a late label image once added a sample at the map's origin and
+// a second "insertion" of its scan). Late evidence reports its scan's stamp and lidar origin.
+TEST(SemanticMappingSessionTest, LateLabelsAreReportedAsClassEvidenceNotAsAnInsertion) {
+  const std::vector<std::uint8_t> pixels = testLabels();
+  const LabelImageView view{pixels.data(), 100, 100, 100};
+  SemanticMappingConfig config = testConfig();
+  config.label_wait_s = 0.3;
+  SemanticMappingSession session(config);
+  const Eigen::Vector3d origin(100.0, 50.0, 10.0);
+  session.setPoseLookup([&origin](double stamp, const std::string&) {
+    return Eigen::Isometry3d(Eigen::Translation3d(origin + Eigen::Vector3d(stamp, 0, 0)));
+  });
+  session.setCameraView(testCamera());
+  struct Update {
+    double stamp;
+    Eigen::Vector3f sensor_origin;
+    SemanticMappingSession::MapUpdate kind;
+  };
+  std::vector<Update> updates;
+  session.setInsertedCallback(
+      [&updates](double stamp, const LabeledScan& scan, SemanticMappingSession::MapUpdate kind) {
+        updates.push_back({stamp, scan.sensor_origin_map, kind});
+      });
+  session.addLabelImage(0.0, view, testCamera());
+  session.addScan(0.0, "velo", testScan());
+  session.addScan(1.0, "velo", testScan());
+  session.addScan(1.5, "velo", testScan());         // 1.0 goes in unlabelled
+  session.addLabelImage(1.02, view, testCamera());  // within the stamp tolerance of 1.0: late
+  ASSERT_EQ(session.statistics().label_images_late, 1u);
+  using Kind = SemanticMappingSession::MapUpdate;
+  std::size_t insertions = 0, late = 0;
+  for (const Update& update : updates) {
+    if (update.kind == Kind::kScanInserted) {
+      ++insertions;
+      EXPECT_TRUE(update.sensor_origin.isApprox(
+          (origin + Eigen::Vector3d(update.stamp, 0, 0)).cast<float>()))
+          << update.stamp << ": " << update.sensor_origin.transpose();
+      continue;
+    }
+    ++late;
+    EXPECT_EQ(update.stamp, 1.0);  // the scan's stamp, not the label image's
+    EXPECT_TRUE(update.sensor_origin.isApprox(Eigen::Vector3f(101.0f, 50.0f, 10.0f)))
+        << update.sensor_origin.transpose();
+  }
+  EXPECT_EQ(insertions, session.statistics().scans_inserted);
+  EXPECT_EQ(late, 1u);
+}
+
 // The clock stops (a bag ended or paused): data time will not end the label wait. The scans whose
 // pose is known go in now, a scan without one waits on, and a label image that comes later still
 // reaches its scan.
@@ -726,6 +775,33 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
   session.reset();
   EXPECT_EQ(session.tree().size(), 0u);
   EXPECT_EQ(session.statistics().scans_inserted, 0u);
+  std::filesystem::remove_all(dir);
+}
+
+// A map saved at a resolution of more digits than a stream prints by default (6) loads back into
+// the session that saved it (it was refused: "0.123457 m differs from the configured 0.123457 m").
+TEST(SemanticMappingSessionTest, AMapAtAnyResolutionLoadsBackAndAnotherIsNamed) {
+  SemanticMappingConfig config = testConfig();
+  config.resolution_m = 0.1234567;
+  SemanticMappingSession session(config);
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity());
+  const std::string dir = test::makeTempDir("session_resolution");
+  ASSERT_GT(session.save(dir + "/map.ot", MapFormat::kSemanticOt), 0u);
+  SemanticMappingSession resumed(config);
+  ASSERT_NO_THROW(resumed.load(dir + "/map.ot"));
+  EXPECT_EQ(resumed.tree().getResolution(), 0.1234567);
+  EXPECT_EQ(serialized(resumed), serialized(session));
+  EXPECT_EQ(loadSemanticOcTree(dir + "/map.ot")->getResolution(), 0.1234567);
+  config.resolution_m = 0.12346;  // differs in the fifth digit: another map's resolution
+  SemanticMappingSession other(config);
+  try {
+    other.load(dir + "/map.ot");
+    ADD_FAILURE() << "a map of 0.1234567 m was loaded at 0.12346 m";
+  } catch (const MapIoError& e) {
+    EXPECT_NE(std::string(e.what()).find("0.1234567 m differs from the configured 0.12346 m"),
+              std::string::npos)
+        << e.what();
+  }
   std::filesystem::remove_all(dir);
 }
 

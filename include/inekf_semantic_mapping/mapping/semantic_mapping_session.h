@@ -74,8 +74,13 @@ class SemanticMappingSession {
   // True while the lookup is asked ahead, for a scan that still waits for its label image: a
   // failure then is no drop (the node does not name it as the reason of one).
   bool lookingUpAhead() const { return looking_up_ahead_; }
-  // Called after each streamed scan went in, with its stamp and the scan as inserted (map frame).
-  using InsertedCallback = std::function<void(double stamp, const LabeledScan& scan)>;
+  // Called after each streamed scan went in (kScanInserted), with its stamp and the scan as
+  // inserted (map frame), and again when a label image that came after its scan went in adds
+  // class evidence to it (kLateLabels: the scan's stamp, points and sensor origin, the new labels;
+  // no occupancy update, so not a second insertion).
+  enum class MapUpdate { kScanInserted, kLateLabels };
+  using InsertedCallback =
+      std::function<void(double stamp, const LabeledScan& scan, MapUpdate update)>;
   void setInsertedCallback(InsertedCallback callback) { inserted_callback_ = std::move(callback); }
   std::size_t addScan(double stamp, const std::string& frame, Eigen::Matrix3Xf points_sensor);
   // The image is copied. Throws std::invalid_argument for a view that does not fit `camera`.

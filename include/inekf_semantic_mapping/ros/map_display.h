@@ -40,6 +40,8 @@ class MapDisplay {
 
   // A scan went in: the display is due, its lidar origin traces the ground for the grids.
   void scanInserted(const mapping::LabeledScan& scan);
+  // Class evidence was added to voxels already in (a late label image): the display is due.
+  void classesChanged();
   // The map was replaced (load, reset): its path is unknown, the grids use the plane ground_z.
   // Published at once: a later subscriber's latched map would be the old one.
   void mapReplaced();

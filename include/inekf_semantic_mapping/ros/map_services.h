@@ -1,6 +1,6 @@
 // semantic_octomap_node's services on its map, in its private namespace: ~save_map (SaveMap:
-// .ot / .bt / .ply by format or extension), ~load_map (LoadMap: the current map is kept when the
-// file is refused), ~reset (std_srvs/Empty); and the autosave to autosave_path: every
+// .ot / .ply by format or extension, .bt refused), ~load_map (LoadMap: the current map is kept when
+// the file is refused), ~reset (std_srvs/Empty); and the autosave to autosave_path: every
 // autosave_period_s, and once more when the node finishes (finalAutosave). Every save is atomic, so
 // a crash never leaves a broken file; a failure is reported in the response and the node keeps
 // running. ROS-facing (src/ros): only nodes include this header.
