@@ -912,6 +912,10 @@ def main(argv=None):
     standardize = not args.no_standardize
     base = base_networks.get(args.base)
     shared = os.path.abspath(args.shared)
+    output = os.path.realpath(args.output)
+    if os.path.commonpath([output, os.path.realpath(shared)]) == os.path.realpath(shared):
+        raise SystemExit(f"--output {args.output}: inside --shared {args.shared}, the third-party "
+                         "data (read-only; the model is written elsewhere, e.g. output/models/kitti)")
     limit = args.max_images or None
     # Built before the data is loaded, which draws no random numbers: --init is checked against
     # it before minutes of loading.
@@ -923,6 +927,11 @@ def main(argv=None):
         raise SystemExit(f"--output {args.output}: cannot make the folder: {e.strerror}")
     if not os.access(args.output, os.W_OK):
         raise SystemExit(f"--output {args.output}: the folder is not writable")
+    compared = datasets.refuse_evaluation_frames(shared)
+    log(f"evaluation frames refused by content: {compared} images of SemanticKITTI "
+        f"{' and '.join(datasets.EVALUATION_SEQUENCES)} compared with" if compared else
+        f"no SemanticKITTI 05 / 08 images under {shared}: the evaluation frames are refused by "
+        "their sequence and drive names only")
 
     if args.semantickitti:
         use_semantickitti_download(args)  # its sequences are checked by load_samples

@@ -14,11 +14,67 @@ import labels
 import preprocess
 
 EVALUATION_SEQUENCES = ("05", "08")
+# The KITTI raw drives SemanticKITTI 05 and 08 were made from (its odometry sequences' sources).
+EVALUATION_RAW_DRIVES = ("2011_09_30_drive_0018", "2011_09_30_drive_0028")
 SPARSE_SEQUENCES = ("01", "02", "03", "06", "09")
 
 
 class DatasetError(RuntimeError):
     pass
+
+
+def _thumbnail(image):
+    """A 64x20 grey thumbnail (area averaging): the same picture re-encoded, resized or cut by a
+    few pixels stays within a few grey levels of it; another frame of a drive is 7-17 away on
+    average, another scene 38 or more (measured on ../shared)."""
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return cv2.resize(grey, (64, 20), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+class EvaluationFrames:
+    """Refuses the evaluation frames under any name: an image from a folder of the raw drives of
+    SemanticKITTI 05 / 08, or whose picture is one of the evaluation images in shared (a mean
+    grey difference below `threshold` on the thumbnail). Folder names alone let them through
+    renamed (make_camera_labels writes any sequence under any number) or as pseudo-label
+    images."""
+
+    def __init__(self, shared, threshold=5.0):
+        self.threshold = threshold
+        self.frames = {}
+        for seq in EVALUATION_SEQUENCES:
+            for path in sorted(glob.glob(os.path.join(shared, "data", "semantickitti", "sequences",
+                                                      seq, "image_2", "*.png"))):
+                image = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+                if image is not None:
+                    self.frames[path] = _thumbnail(image)
+
+    def check(self, path, image):
+        real = os.path.realpath(path)
+        for drive in EVALUATION_RAW_DRIVES:
+            if drive in real:
+                raise DatasetError(f"{path}: an image of the raw drive {drive}, which SemanticKITTI "
+                                   f"{EVALUATION_SEQUENCES[EVALUATION_RAW_DRIVES.index(drive)]} "
+                                   "was made from: the evaluation frames are never trained on")
+        if not self.frames:
+            return
+        thumb = _thumbnail(image)
+        nearest, distance = min(((p, float(np.abs(thumb - t).mean())) for p, t in
+                                 self.frames.items()), key=lambda pair: pair[1])
+        if distance < self.threshold:
+            raise DatasetError(f"{path}: the same picture as the evaluation frame {nearest} "
+                               f"(mean grey difference {distance:.1f} of 255): SemanticKITTI 05 "
+                               "and 08 are never trained on")
+
+
+_evaluation_frames = None
+
+
+def refuse_evaluation_frames(shared):
+    """From now on every image read for training or validation is checked (EvaluationFrames).
+    Returns how many evaluation images it compares with (0: only the drive names)."""
+    global _evaluation_frames
+    _evaluation_frames = EvaluationFrames(shared)
+    return len(_evaluation_frames.frames)
 
 
 def sequence_id(seq):
@@ -49,6 +105,8 @@ def _read_image(path):
     image = cv2.imread(path, cv2.IMREAD_COLOR)
     if image is None:
         raise DatasetError(f"cannot read image {path}")
+    if _evaluation_frames is not None:
+        _evaluation_frames.check(path, image)
     return image
 
 

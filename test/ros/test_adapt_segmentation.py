@@ -125,6 +125,68 @@ class PseudoLabels(unittest.TestCase):
                                      32, 32, 0.7, True)
 
 
+class EvaluationFramesRefused(unittest.TestCase):
+    """SemanticKITTI 05 / 08 are never trained on, under any name: by their raw drives' folder
+    names and by the picture itself (they were refused by their sequence folder's name only, so a
+    renamed copy or pseudo-label images of their drive were trained on)."""
+
+    def tearDown(self):
+        datasets._evaluation_frames = None  # the other tests read without the check
+
+    def pseudo_pair(self, root, image):
+        import cv2
+
+        os.makedirs(os.path.join(root, "labels"))
+        os.makedirs(os.path.join(root, "images"), exist_ok=True)
+        label = np.zeros(image.shape[:2], np.uint8)
+        label[-10, 10] = 7
+        cv2.imwrite(os.path.join(root, "labels", "0000000003.png"), label)
+        cv2.imwrite(os.path.join(root, "images", "0000000003.png"), image)
+        return os.path.join(root, "labels"), os.path.join(root, "images")
+
+    def test_a_re_encoded_evaluation_frame_is_refused_and_a_training_frame_is_not(self):
+        import cv2
+
+        frame = os.path.join(shared_dir(), "data", "semantickitti", "sequences", "05", "image_2",
+                             "000000.png")
+        dense = os.path.join(shared_dir(), "data", "kitti_semantics", "training", "image_2",
+                             "000005_10.jpg")
+        if not (os.path.exists(frame) and os.path.exists(dense)):
+            skip_loudly(self, f"{frame} or {dense} not there")
+        self.assertEqual(datasets.refuse_evaluation_frames(shared_dir()), 20)
+        _, jpeg = cv2.imencode(".jpg", cv2.imread(frame), [cv2.IMWRITE_JPEG_QUALITY, 85])
+        copy = cv2.resize(cv2.imdecode(jpeg, cv2.IMREAD_COLOR), (1242, 375))
+        with tempfile.TemporaryDirectory() as tmp:
+            labels_dir, images_dir = self.pseudo_pair(os.path.join(tmp, "copy"), copy)
+            with self.assertRaisesRegex(datasets.DatasetError,
+                                        r"0000000003\.png: the same picture as the evaluation "
+                                        r"frame .*05/image_2/000000\.png"):
+                datasets.load_pseudo(labels_dir, images_dir, 160, 64, 0.7, True)
+            labels_dir, images_dir = self.pseudo_pair(os.path.join(tmp, "other"),
+                                                      cv2.imread(dense))
+            self.assertEqual(len(datasets.load_pseudo(labels_dir, images_dir, 160, 64, 0.7, True)),
+                             1)
+
+    def test_images_of_the_evaluation_drives_are_refused_by_their_folder(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            datasets.refuse_evaluation_frames(tmp)  # no evaluation images there: names only
+            drive = os.path.join(tmp, "2011_09_30", "2011_09_30_drive_0028_sync", "image_02")
+            labels_dir, images_dir = self.pseudo_pair(drive, np.full((40, 80, 3), 90, np.uint8))
+            with self.assertRaisesRegex(datasets.DatasetError,
+                                        "raw drive 2011_09_30_drive_0028, which SemanticKITTI 08"):
+                datasets.load_pseudo(labels_dir, images_dir, 160, 64, 0.7, True)
+
+    def test_an_output_inside_shared_is_refused_before_anything_is_written(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            result = subprocess.run(
+                ["/usr/bin/python3", os.path.join(REPO_ROOT, "training", "adapt_segmentation.py"),
+                 "--shared", tmp, "--output", os.path.join(tmp, "models", "x")],
+                capture_output=True, text=True)
+            self.assertNotEqual(result.returncode, 0)
+            self.assertIn(f"--output {tmp}/models/x: inside --shared {tmp}", result.stderr)
+            self.assertEqual(os.listdir(tmp), [])
+
+
 class SparseLidarLabels(unittest.TestCase):
     """The projected SemanticKITTI lidar labels (semantickitti_train) as sparse training labels."""
 
