@@ -62,6 +62,12 @@ void checkModelCard(const ModelCard& card, const ModelCardCheckFailure& fail) {
   if (card.resize_policy != ResizePolicy::kPadToMultiple &&
       (card.input_width == 0 || card.input_height == 0))
     fail("input", "needs width and height > 0 for resize, letterbox and tiles");
+  // pad_to_multiple takes a fixed size only with both (one alone was ignored without a word).
+  if ((card.input_width == 0) != (card.input_height == 0))
+    fail("input",
+         "must have width and height both 0 (any size, padded to pad_multiple) or both "
+         "> 0 (a fixed input size), not " +
+             std::to_string(card.input_width) + "x" + std::to_string(card.input_height));
   // Network strides are up to 64; a larger multiple pads the image into a canvas OpenCV cannot
   // allocate (1e9 asked for 3e18 bytes).
   if (card.pad_multiple < 1 || card.pad_multiple > 1024)

@@ -23,6 +23,13 @@ namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
 
+// The network itself failed on its input (a shape it cannot take), as opposed to an output that
+// does not fit the card: only this one is a question of the input size.
+class ForwardPassError : public SegmentationError {
+ public:
+  using SegmentationError::SegmentationError;
+};
+
 using detail::applyGamma;
 using detail::PreparedInput;
 using detail::prepareInput;
@@ -222,8 +229,13 @@ Segmenter::Segmenter(const std::string& model_path, const ModelCard& card, int n
       card_.input_height > 0 ? card_.input_height : odd_multiple * card_.pad_multiple;
   try {
     segment(cv::Mat(probe_height, probe_width, CV_8UC3, cv::Scalar(127, 127, 127)));
-  } catch (const SegmentationError& e) {
-    if (card_.input_width > 0 && card_.input_height > 0) throw;
+  } catch (const ForwardPassError& e) {
+    if (card_.input_width > 0 && card_.input_height > 0) {
+      throw SegmentationError(std::string(e.what()) + " (the input size " +
+                              std::to_string(card_.input_width) + "x" +
+                              std::to_string(card_.input_height) + " is its card " + card_.source +
+                              "'s: is it the size the model was exported at?)");
+    }
     throw SegmentationError(std::string(e.what()) + " (a probe of the input sizes its card " +
                             card_.source + " allows: is pad_multiple " +
                             std::to_string(card_.pad_multiple) +
@@ -267,9 +279,9 @@ cv::Mat Segmenter::forward(const cv::Mat& network_image) {
     output = card_.output_name.empty() ? network_->net.forward()
                                        : network_->net.forward(card_.output_name);
   } catch (const cv::Exception& e) {
-    throw SegmentationError("forward pass of " + model_path_ + " on a " +
-                            std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
-                            " input failed: " + e.what());
+    throw ForwardPassError("forward pass of " + model_path_ + " on a " +
+                           std::to_string(blob.size[3]) + "x" + std::to_string(blob.size[2]) +
+                           " input failed: " + e.what());
   }
   const int channels = output.dims == 4 ? output.size[1] : -1;
   if (output.dims != 4 || output.size[0] != 1 || channels != card_.numOutputChannels()) {

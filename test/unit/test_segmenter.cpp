@@ -52,6 +52,39 @@ TEST(SegmenterUnet, CommittedModelSegmentsWideKittiSizedImagesAtInputResolution)
   }
 }
 
+// A load that fails names what is wrong: a class count that does not fit is not blamed on the
+// stride (the hint came with every failure of a 0 x 0 card), and a fixed input size the network
+// cannot take names the card that set it.
+TEST(SegmenterUnet, LoadErrorsBlameTheRightPartOfTheCard) {
+  const std::string model = repoPath("models/unet_synthetic.onnx");
+  if (!fs::exists(model)) GTEST_SKIP() << "models/unet_synthetic.onnx not committed yet";
+  ModelCard card = defaultModelCardFor(model);
+  ASSERT_EQ(card.input_width, 0);
+  card.output_label_ids = {7, 8, 11};
+  card.source = "three_classes.yaml";
+  try {
+    Segmenter segmenter(model, card);
+    ADD_FAILURE() << "a 10-channel network loaded with a 3-class card";
+  } catch (const SegmentationError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("outputs 10 channels"), std::string::npos) << what;
+    EXPECT_EQ(what.find("stride"), std::string::npos) << what;
+  }
+  card = defaultModelCardFor(model);
+  card.input_width = 17;  // too small for the network's four poolings, not padded
+  card.input_height = 9;
+  card.pad_multiple = 1;
+  card.source = "fixed_size.yaml";
+  try {
+    Segmenter segmenter(model, card);
+    ADD_FAILURE() << "the network took a 17x9 input";
+  } catch (const SegmentationError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("the input size 17x9 is its card fixed_size.yaml's"), std::string::npos)
+        << what;
+  }
+}
+
 // A mirrored image's labels with flip_average are the mirror of the image's: both average the
 // same two passes. The network alone is not mirror-symmetric, so a card whose flip_average did
 // nothing on the single-pass path fails here.
@@ -152,6 +185,14 @@ TEST(ModelCard, BadCardsAreRejectedNamingTheField) {
             std::string::npos);
   EXPECT_NE(cardError("resize_policy: resize\noutput_label_ids: [7]\n").find("input"),
             std::string::npos);
+  // pad_to_multiple with one side only: that side was ignored without a word.
+  const std::string one_side =
+      "resize_policy: pad_to_multiple\ninput: {width: 640, height: 0}\noutput_label_ids: [7]\n";
+  EXPECT_NE(cardError(one_side).find("'input' must have width and height both 0 (any size, "
+                                     "padded to pad_multiple) or both > 0 (a fixed input size), "
+                                     "not 640x0"),
+            std::string::npos)
+      << cardError(one_side);
   EXPECT_NE(cardError("input: {width: 10, height: 10}\nscale: abc\noutput_label_ids: [7]\n")
                 .find("scale"),
             std::string::npos);
