@@ -33,14 +33,19 @@ namespace {
 // V1: class table, then octomap's node data. V2 adds an integrity record before the node data:
 // node count, byte length and an FNV-1a checksum, so a corrupt file is refused, never loaded as
 // a silently different map.
-// V1: no integrity record. V2: an integrity record whose checksum covers the node data. V3 (what
-// is written): the checksum covers the fusion model and the class table too (a flipped bit in a
-// label id loaded as a map of another class).
+// V1: no integrity record. V2: an integrity record whose checksum covers the node data. V3: the
+// checksum covers the fusion model and the class table too (a flipped bit in a label id loaded as
+// a map of another class). V4 (what is written): the resolution follows the class table, in
+// binary and under the checksum; octomap's text header ("res 0.2") is outside it and was loaded
+// as whatever it said (an edited 0.3 gave a map 1.5 times the size, 1e-30 one nothing could
+// search). The text must agree to its printed digits, and the exact value holds.
 constexpr char kSemanticHeaderMagicV1[] = "ISM_SEMANTIC_OCTREE_V1";
 constexpr char kSemanticHeaderMagicV2[] = "ISM_SEMANTIC_OCTREE_V2";
 constexpr char kSemanticHeaderMagicV3[] = "ISM_SEMANTIC_OCTREE_V3";
+constexpr char kSemanticHeaderMagicV4[] = "ISM_SEMANTIC_OCTREE_V4";
 static_assert(sizeof(kSemanticHeaderMagicV1) == sizeof(kSemanticHeaderMagicV2) &&
-              sizeof(kSemanticHeaderMagicV2) == sizeof(kSemanticHeaderMagicV3));
+              sizeof(kSemanticHeaderMagicV2) == sizeof(kSemanticHeaderMagicV3) &&
+              sizeof(kSemanticHeaderMagicV3) == sizeof(kSemanticHeaderMagicV4));
 // Bytes of one node in octomap's full format: value, class slots, counts, child bits.
 constexpr std::size_t kSerializedNodeBytes =
     sizeof(float) + SemanticOcTreeNode::kSlots * (sizeof(ClassIndex) + sizeof(std::uint16_t)) + 1;
@@ -143,8 +148,9 @@ static_assert(sizeof(ClassSlotIndices) == sizeof(ClassIndex) * SemanticOcTreeNod
 // The class table and fusion model go before octomap's node data, so a loaded map knows which
 // label id each stored class index stands for.
 std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
-  s.write(kSemanticHeaderMagicV3, sizeof(kSemanticHeaderMagicV3));
-  const std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+  s.write(kSemanticHeaderMagicV4, sizeof(kSemanticHeaderMagicV4));
+  std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+  fusion_and_classes.append(reinterpret_cast<const char*>(&resolution), sizeof(resolution));
   s.write(fusion_and_classes.data(), static_cast<std::streamsize>(fusion_and_classes.size()));
   // The integrity record goes before the node data. Its length follows from the node count;
   // the checksum is patched in after one pass over the tree where the stream can seek (files),
@@ -192,7 +198,8 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
   read_error_.clear();
   char magic[sizeof(kSemanticHeaderMagicV3)] = {};
   if (!s.read(magic, sizeof(magic))) return refuse(s, "truncated header");
-  const bool v3 = std::memcmp(magic, kSemanticHeaderMagicV3, sizeof(magic)) == 0;
+  const bool v4 = std::memcmp(magic, kSemanticHeaderMagicV4, sizeof(magic)) == 0;
+  const bool v3 = v4 || std::memcmp(magic, kSemanticHeaderMagicV3, sizeof(magic)) == 0;
   const bool v2 = std::memcmp(magic, kSemanticHeaderMagicV2, sizeof(magic)) == 0;
   if (!v3 && !v2 && std::memcmp(magic, kSemanticHeaderMagicV1, sizeof(magic)) != 0) {
     return refuse(s, "not a semantic octree (bad magic)");
@@ -229,6 +236,8 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
   }
   fusion.rule = static_cast<FusionRule>(rule);
   fusion_ = fusion;
+  double recorded_resolution = resolution;  // before V4: the text header's
+  if (v4 && !readPod(s, &recorded_resolution)) return refuse(s, "truncated resolution");
 
   std::string bytes;
   std::uint64_t node_count = 0;
@@ -256,7 +265,11 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
     }
     Fnv1a hash;
     if (v3) {
-      const std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+      std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
+      if (v4) {
+        fusion_and_classes.append(reinterpret_cast<const char*>(&recorded_resolution),
+                                  sizeof(recorded_resolution));
+      }
       hash.add(fusion_and_classes.data(), fusion_and_classes.size());
     }
     hash.add(bytes.data(), bytes.size());
@@ -264,6 +277,16 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
       return refuse(s, v3 ? "checksum mismatch: the class table or the node data is corrupt"
                           : "checksum mismatch: the node data is corrupt");
     }
+    // The text carries at least 6 significant digits (octomap's stream default).
+    if (!(recorded_resolution > 0 && std::isfinite(recorded_resolution) &&
+          std::abs(resolution - recorded_resolution) <= 1e-5 * recorded_resolution)) {
+      std::ostringstream why;
+      why.precision(10);
+      why << "octomap header's res " << resolution << " differs from the map's resolution "
+          << recorded_resolution << " (the header was edited or is corrupt)";
+      return refuse(s, why.str());
+    }
+    if (recorded_resolution != resolution) setResolution(recorded_resolution);
   } else {
     // V1 files carry no length: the rest of the stream is node data.
     bytes.assign(std::istreambuf_iterator<char>(s), std::istreambuf_iterator<char>());

@@ -360,23 +360,53 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
     return fnv;
   };
   const std::size_t magic_at = seekable.find("\ndata\n") + 6;
-  const std::size_t table_at = magic_at + sizeof("ISM_SEMANTIC_OCTREE_V3");
-  ASSERT_EQ(seekable.substr(magic_at, 22), "ISM_SEMANTIC_OCTREE_V3");
+  const std::size_t table_at = magic_at + sizeof("ISM_SEMANTIC_OCTREE_V4");
+  ASSERT_EQ(seekable.substr(magic_at, 22), "ISM_SEMANTIC_OCTREE_V4");
+  // The fusion model and class table, then the resolution in binary, all under the checksum.
   const std::string table = seekable.substr(table_at, record - table_at);
+  double recorded_resolution = 0.0;
+  std::memcpy(&recorded_resolution, seekable.data() + record - 8, 8);
+  EXPECT_EQ(recorded_resolution, tree.getResolution());
   EXPECT_EQ(checksum, fnv1a(table + expected_nodes));
   // A bit flipped in a class's name (as well in a label id): refused, the table is checked too.
   std::string renamed = seekable;
-  renamed[record - 1] = static_cast<char>(renamed[record - 1] ^ 0x20);
+  renamed[record - 9] = static_cast<char>(renamed[record - 9] ^ 0x20);
   std::istringstream renamed_file(renamed);
   std::unique_ptr<octomap::AbstractOcTree> refused(octomap::AbstractOcTree::read(renamed_file));
   ASSERT_NE(dynamic_cast<SemanticOcTree*>(refused.get()), nullptr);
   EXPECT_NE(dynamic_cast<SemanticOcTree*>(refused.get())->readError().find("class table"),
             std::string::npos);
-  // A file of the previous format (V2: the checksum of the node data alone) still loads.
-  std::string v2 = seekable;
+  // octomap's text header edited to another resolution: refused (it was loaded as a map 1.5
+  // times the size).
+  const std::size_t res_at = seekable.find("\nres ") + 5;
+  const std::size_t res_end = seekable.find('\n', res_at);
+  ASSERT_EQ(seekable.substr(res_at, res_end - res_at), "0.25");
+  const std::string edited = seekable.substr(0, res_at) + "0.375" + seekable.substr(res_end);
+  std::istringstream edited_file(edited);
+  std::unique_ptr<octomap::AbstractOcTree> rescaled(octomap::AbstractOcTree::read(edited_file));
+  ASSERT_NE(dynamic_cast<SemanticOcTree*>(rescaled.get()), nullptr);
+  EXPECT_NE(dynamic_cast<SemanticOcTree*>(rescaled.get())
+                ->readError()
+                .find("res 0.375 differs from the map's resolution 0.25"),
+            std::string::npos)
+      << dynamic_cast<SemanticOcTree*>(rescaled.get())->readError();
+  // Files of the previous formats still load: V3 (no resolution under the checksum) and V2 (the
+  // checksum of the node data alone).
+  std::string v3 = seekable;
+  v3.erase(record - 8, 8);
+  v3.replace(magic_at, 22, "ISM_SEMANTIC_OCTREE_V3");
+  const std::uint64_t without_resolution =
+      fnv1a(table.substr(0, table.size() - 8) + expected_nodes);
+  std::memcpy(&v3[record - 8 + 16], &without_resolution, 8);
+  std::istringstream v3_file(v3);
+  std::unique_ptr<octomap::AbstractOcTree> v3_format(octomap::AbstractOcTree::read(v3_file));
+  ASSERT_NE(dynamic_cast<SemanticOcTree*>(v3_format.get()), nullptr);
+  EXPECT_EQ(dynamic_cast<SemanticOcTree*>(v3_format.get())->readError(), "");
+  EXPECT_EQ(v3_format->size(), tree.size());
+  std::string v2 = v3;
   v2.replace(magic_at, 22, "ISM_SEMANTIC_OCTREE_V2");
   const std::uint64_t nodes_only = fnv1a(expected_nodes);
-  std::memcpy(&v2[record + 16], &nodes_only, 8);
+  std::memcpy(&v2[record - 8 + 16], &nodes_only, 8);
   std::istringstream v2_file(v2);
   std::unique_ptr<octomap::AbstractOcTree> old_format(octomap::AbstractOcTree::read(v2_file));
   ASSERT_NE(dynamic_cast<SemanticOcTree*>(old_format.get()), nullptr);
