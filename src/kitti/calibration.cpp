@@ -167,8 +167,10 @@ void CameraProjection::checkRectifiedImageSize(const std::string& image_path, in
 
 CameraProjection RawCalibration::projection(int camera_index) const {
   if (camera_index < 0 || camera_index >= 4 || !cameras[camera_index].present) {
-    throw std::out_of_range("RawCalibration::projection: camera " + std::to_string(camera_index) +
-                            " is not in calib_cam_to_cam.txt");
+    throw std::out_of_range(
+        (cam_to_cam_path.empty() ? std::string("calib_cam_to_cam.txt") : cam_to_cam_path) +
+        ": camera " + std::to_string(camera_index) + " is not there (no P_rect_0" +
+        std::to_string(camera_index) + " line)");
   }
   const CameraCalibration& camera = cameras[camera_index];
   CameraProjection projection;
@@ -201,6 +203,7 @@ RawCalibration readRawCalibration(const std::string& date_dir) {
   orthonormalizeRead(&calib.T_cam0_velo, velo_to_cam.path, "R");
 
   const KeyValues cam_to_cam = readKeyValues(date_dir + "/calib_cam_to_cam.txt");
+  calib.cam_to_cam_path = cam_to_cam.path;
   bool any_camera = false;
   for (int i = 0; i < 4; ++i) {
     char suffix[8];

@@ -257,8 +257,8 @@ void mapSequence(const OfflineSequence& sequence, SemanticMappingSession* sessio
   }
   finishRun(session, progress);
   if (progress) {
-    *progress << "[semantic_map_offline] inserted " << total_points << " points from "
-              << scans.size() << " scans\n";
+    *progress << "[semantic_map_offline] read " << total_points << " points from " << scans.size()
+              << " scans\n";
   }
 }
 

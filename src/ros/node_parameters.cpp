@@ -51,12 +51,17 @@ YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh) {
 }
 
 std::string parameterSource(const ros::NodeHandle& private_nh) {
+  std::string file;
+  if (private_nh.getParam("loaded_from", file) && !file.empty()) {
+    return "ROS parameters of " + private_nh.getNamespace() + " (loaded from " + file + ")";
+  }
   return "ROS parameters of " + private_nh.getNamespace();
 }
 
 common::YamlReader privateParameterReader(const ros::NodeHandle& private_nh) {
   common::YamlReader reader(parameterSource(private_nh), privateParametersAsYaml(private_nh));
   reader.allow("diagnostic_period");  // diagnostic_updater's own (ros/diagnostics.h)
+  reader.allow("loaded_from");        // the launch's YAML file, named in every message
   return reader;
 }
 

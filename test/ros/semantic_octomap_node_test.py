@@ -330,7 +330,11 @@ class SemanticOctomapNodeTest(unittest.TestCase):
                  ({"log_period": 0}, "'log_period' (now 'log_period_s') must be in (0, "),
                  ({"marker_depth": 40}, "'marker_depth' must be an integer in [1, 16]"),
                  ({"camera_index": 7}, "'camera_index' must be an integer in [0, 3]"),
-                 ({"max_display_cpu_fraction": -3}, "'max_display_cpu_fraction' must be in [0, 1]")]
+                 ({"max_display_cpu_fraction": -3}, "'max_display_cpu_fraction' must be in [0, 1]"),
+                 # The launch files load the node's YAML with rosparam and name it in
+                 # ~loaded_from: a key misspelt there is reported with the file.
+                 ({"loaded_from": "/home/user/my_mapping.yaml", "label_wiat_s": 2},
+                  "(loaded from /home/user/my_mapping.yaml): key 'label_wiat_s' is not a known key")]
         for i, (parameters, message) in enumerate(cases):
             # A node of its own for each: private parameters stay on the server after a node.
             code, output = run_with_parameters("semantic_octomap_node",

@@ -128,6 +128,11 @@ TEST_F(CalibrationFiles, RectifiedImageSizeMustBeAnImageSize) {
       "P_rect_00: 700 0 600 0 0 700 180 0 0 0 1 0\n";
   write("calib_cam_to_cam.txt", camera + "S_rect_00: 1242 375\n");
   EXPECT_NO_THROW(kitti::readRawCalibration(dir_));
+  // A camera the file lacks is named with the file's path (it said "calib_cam_to_cam.txt").
+  const std::string missing = errorOf([&] { kitti::readRawCalibration(dir_).projection(2); });
+  EXPECT_NE(missing.find(dir_ + "/calib_cam_to_cam.txt: camera 2 is not there (no P_rect_02 line)"),
+            std::string::npos)
+      << missing;
   write("calib_cam_to_cam.txt", camera + "S_rect_00: 1e30 375\n");
   expectMentions(errorOf([&] { kitti::readRawCalibration(dir_); }),
                  {"calib_cam_to_cam.txt", "S_rect_00"});

@@ -58,6 +58,7 @@ struct RawCalibration {
   Eigen::Isometry3d T_velo_imu = Eigen::Isometry3d::Identity();   // calib_imu_to_velo.txt
   Eigen::Isometry3d T_cam0_velo = Eigen::Isometry3d::Identity();  // calib_velo_to_cam.txt
   std::array<CameraCalibration, 4> cameras;                       // calib_cam_to_cam.txt
+  std::string cam_to_cam_path;  // where the cameras were read (named when one is missing)
 
   // P_rect_i, R_rect_00, T_cam0_velo, size S_rect_i. Throws std::out_of_range for a bad index
   // or a camera absent from the file.

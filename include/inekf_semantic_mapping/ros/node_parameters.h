@@ -20,7 +20,9 @@ namespace ros_conversions {
 // warnings (common::setConfigWarningHandler) to ROS_WARN.
 YAML::Node privateParametersAsYaml(const ros::NodeHandle& private_nh);
 
-// "ROS parameters of /node_name": the source every message names.
+// "ROS parameters of /node_name": the source every message names; with "(loaded from FILE)"
+// when ~loaded_from says which YAML file the launch loaded into the namespace (rosparam load
+// leaves the node no other way to know it).
 std::string parameterSource(const ros::NodeHandle& private_nh);
 
 // A reader of the node's private parameters. The node reads each key it knows, then calls
