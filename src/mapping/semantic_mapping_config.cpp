@@ -80,15 +80,17 @@ const std::vector<std::string>& semanticMappingNodeKeys() {
   // grid.*: readGridProjectionConfig checks it; diagnostics.*: the node does. marker_rate,
   // autosave_period and log_period are old names the node still accepts (with a warning; it
   // reads them, not this reader). diagnostic_period
-  // is diagnostic_updater's own, read from every node's private namespace.
-  static const std::vector<std::string> keys = {"map_frame",     "marker_rate_hz",
-                                                "marker_rate",   "max_display_cpu_fraction",
-                                                "marker_depth",  "calib_dir",
-                                                "camera_index",  "map_file",
-                                                "autosave_path", "autosave_period_s",
-                                                "log_period_s",  "autosave_period",
-                                                "log_period",    "grid.*",
-                                                "diagnostics.*", "diagnostic_period"};
+  // is diagnostic_updater's own, read from every node's private namespace; loaded_from names the
+  // YAML file a launch loaded (ros/node_parameters.h).
+  static const std::vector<std::string> keys = {"map_frame",        "marker_rate_hz",
+                                                "marker_rate",      "max_display_cpu_fraction",
+                                                "marker_depth",     "calib_dir",
+                                                "camera_index",     "map_file",
+                                                "autosave_path",    "autosave_period_s",
+                                                "log_period_s",     "autosave_period",
+                                                "log_period",       "grid.*",
+                                                "diagnostics.*",    "diagnostic_period",
+                                                "map_origin_param", "loaded_from"};
   return keys;
 }
 

@@ -233,6 +233,7 @@ void SemanticMappingSession::insertScanWithPointLabels(const Eigen::Matrix3Xf& p
 std::size_t SemanticMappingSession::addScan(double stamp, const std::string& frame,
                                             Eigen::Matrix3Xf points_sensor) {
   if (!std::isfinite(stamp)) throw std::invalid_argument("addScan: stamp is not finite");
+  if (!origin_refusal_.empty()) throw std::invalid_argument(origin_refusal_);
   ++statistics_.scans_received;
   if (pairing_.wentBack(stamp)) {  // a bag loop: what is pending goes in, the clock restarts
     flush();
@@ -561,11 +562,44 @@ void SemanticMappingSession::load(const std::string& path) {
     grid_released_ = true;
   }
   tree_ = std::move(loaded);
+  map_from_file_ = true;
+  origin_refusal_.clear();
   statistics_ = MappingStatistics();
+}
+
+std::string SemanticMappingSession::agreeOnGeodeticOrigin(const GeodeticOrigin& localization) {
+  const std::optional<GeodeticOrigin>& map = tree_->geodeticOrigin();
+  if (!map) {
+    // Built here (in the localization's frame): it takes the origin. Loaded without one: where
+    // it lies is not known, and no origin is made up for it.
+    if (!map_from_file_) tree_->setGeodeticOrigin(localization);
+    return "";
+  }
+  const Eigen::Vector3d offset = enuOffset(*map, localization);
+  if (offset.norm() <= config_.resolution_m) {
+    origin_refusal_.clear();
+    return "";
+  }
+  std::ostringstream why;
+  why.precision(10);
+  why << "the map was saved with its frame at lat " << map->lat_deg << ", lon " << map->lon_deg
+      << ", alt " << map->alt_m << "; the localization's map frame is ";
+  why.precision(3);
+  why << offset.norm() << " m away (east " << offset.x() << ", north " << offset.y() << ", up "
+      << offset.z() << "): its scans would be mapped a second time, shifted. ";
+  why.precision(10);
+  why << "Start the localization at the map's origin (origin_lat:=" << map->lat_deg
+      << " origin_lon:=" << map->lon_deg << " origin_alt:=" << map->alt_m
+      << "), or reset or replace the map";
+  origin_refusal_ = why.str();
+  pairing_.clear();  // the scans waiting would take their poses in the other frame
+  return origin_refusal_;
 }
 
 void SemanticMappingSession::reset() {
   tree_ = makeTree();
+  map_from_file_ = false;
+  origin_refusal_.clear();
   grid_ = makeGrid();
   grid_released_ = false;
   pairing_.clear();

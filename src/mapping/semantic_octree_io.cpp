@@ -38,7 +38,8 @@ namespace {
 // a map of another class). V4 (what is written): the resolution follows the class table, in
 // binary and under the checksum; octomap's text header ("res 0.2") is outside it and was loaded
 // as whatever it said (an edited 0.3 gave a map 1.5 times the size, 1e-30 one nothing could
-// search). The text must agree to its printed digits, and the exact value holds.
+// search). The text must agree to its printed digits, and the exact value holds. Then the
+// geodetic origin: a byte (1: known) and latitude, longitude, altitude as doubles.
 constexpr char kSemanticHeaderMagicV1[] = "ISM_SEMANTIC_OCTREE_V1";
 constexpr char kSemanticHeaderMagicV2[] = "ISM_SEMANTIC_OCTREE_V2";
 constexpr char kSemanticHeaderMagicV3[] = "ISM_SEMANTIC_OCTREE_V3";
@@ -57,6 +58,16 @@ void writePod(std::ostream& s, const T& value) {
 template <typename T>
 bool readPod(std::istream& s, T* value) {
   return static_cast<bool>(s.read(reinterpret_cast<char*>(value), sizeof(T)));
+}
+
+// V4's origin record: 1 byte (known or not) and three doubles (zeros when unknown).
+std::string originBytes(const std::optional<GeodeticOrigin>& origin) {
+  const GeodeticOrigin value = origin.value_or(GeodeticOrigin());
+  std::string bytes(1, origin ? '\1' : '\0');
+  for (const double d : {value.lat_deg, value.lon_deg, value.alt_m}) {
+    bytes.append(reinterpret_cast<const char*>(&d), sizeof(d));
+  }
+  return bytes;
 }
 
 // FNV-1a, 64 bit, fed piecewise (the writer streams the node data, the reader has it whole).
@@ -151,6 +162,7 @@ std::ostream& SemanticOcTree::writeData(std::ostream& s) const {
   s.write(kSemanticHeaderMagicV4, sizeof(kSemanticHeaderMagicV4));
   std::string fusion_and_classes = fusionAndClassBytes(fusion_, classes_);
   fusion_and_classes.append(reinterpret_cast<const char*>(&resolution), sizeof(resolution));
+  fusion_and_classes += originBytes(geodetic_origin_);
   s.write(fusion_and_classes.data(), static_cast<std::streamsize>(fusion_and_classes.size()));
   // The integrity record goes before the node data. Its length follows from the node count;
   // the checksum is patched in after one pass over the tree where the stream can seek (files),
@@ -237,7 +249,21 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
   fusion.rule = static_cast<FusionRule>(rule);
   fusion_ = fusion;
   double recorded_resolution = resolution;  // before V4: the text header's
-  if (v4 && !readPod(s, &recorded_resolution)) return refuse(s, "truncated resolution");
+  std::optional<GeodeticOrigin> origin;
+  if (v4) {
+    std::uint8_t known = 0;
+    GeodeticOrigin read_origin;
+    if (!(readPod(s, &recorded_resolution) && readPod(s, &known) &&
+          readPod(s, &read_origin.lat_deg) && readPod(s, &read_origin.lon_deg) &&
+          readPod(s, &read_origin.alt_m))) {
+      return refuse(s, "truncated resolution and origin");
+    }
+    if (known > 1 || !(std::abs(read_origin.lat_deg) <= 90 &&
+                       std::abs(read_origin.lon_deg) <= 180 && std::isfinite(read_origin.alt_m))) {
+      return refuse(s, "bad geodetic origin");
+    }
+    if (known) origin = read_origin;
+  }
 
   std::string bytes;
   std::uint64_t node_count = 0;
@@ -269,6 +295,7 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
       if (v4) {
         fusion_and_classes.append(reinterpret_cast<const char*>(&recorded_resolution),
                                   sizeof(recorded_resolution));
+        fusion_and_classes += originBytes(origin);
       }
       hash.add(fusion_and_classes.data(), fusion_and_classes.size());
     }
@@ -287,6 +314,7 @@ std::istream& SemanticOcTree::readData(std::istream& s) {
       return refuse(s, why.str());
     }
     if (recorded_resolution != resolution) setResolution(recorded_resolution);
+    geodetic_origin_ = origin;
   } else {
     // V1 files carry no length: the rest of the stream is node data.
     bytes.assign(std::istreambuf_iterator<char>(s), std::istreambuf_iterator<char>());

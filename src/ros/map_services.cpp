@@ -111,6 +111,7 @@ bool MapServices::onLoad(LoadMap::Request& request, LoadMap::Response& response)
   try {
     session_.load(request.path);
     display_.mapReplaced();
+    if (map_replaced_) map_replaced_();
     response.success = true;
     response.nodes = session_.tree().size();
     response.message = "loaded " + request.path + " (" + std::to_string(response.nodes) + " nodes)";
@@ -127,6 +128,7 @@ bool MapServices::onLoad(LoadMap::Request& request, LoadMap::Response& response)
 bool MapServices::onReset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   session_.reset();
   display_.mapReplaced();
+  if (map_replaced_) map_replaced_();
   ROS_INFO("semantic_octomap_node: map reset");
   return true;
 }

@@ -46,7 +46,10 @@ struct NodeOptions {
   double marker_rate_hz = 1.0;
   std::string calib_dir;
   int camera_index = 2;
-  std::string map_file;       // loaded at start when set
+  std::string map_file;  // loaded at start when set
+  // Where the localization says its map frame lies on the Earth (lat, lon, alt under it):
+  // inekf_node's. Saved with the map; a resumed map saved under another origin takes no scans.
+  std::string map_origin_param = "inekf_node/map_origin_in_use";
   std::string autosave_path;  // saved every autosave_period and at shutdown when set
   double autosave_period_s = 30.0;
   double log_period_s = 10.0;
@@ -74,6 +77,7 @@ class SemanticOctomapNodeCore::Impl {
     reader.read("calib_dir", &options_.calib_dir);
     reader.readInRange("camera_index", &options_.camera_index, 0, 3);
     reader.read("map_file", &options_.map_file);
+    reader.read("map_origin_param", &options_.map_origin_param);
     reader.read("autosave_path", &options_.autosave_path);
     if (!options_.autosave_path.empty()) {
       // Checked now: a mistyped folder was found at the end, when the whole map was lost.
@@ -147,6 +151,10 @@ class SemanticOctomapNodeCore::Impl {
     labels_sub_ = nh_.subscribe(topics::kSegmentationLabels, kInputQueue, &Impl::onLabels, this);
     services_ = std::make_unique<MapServices>(nh_, pnh_, *session_, *display_,
                                               options_.autosave_path, options_.autosave_period_s);
+    services_->setMapReplacedCallback([this] {
+      origin_decided_ = false;  // the new map's origin (or none) is checked at the next scan
+      last_origin_query_ = ros::WallTime();
+    });
     // Pending scans go in when their wait is over, also after the last message of a bag.
     clock_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &Impl::onTick, this);
     if (options_.marker_rate_hz > 0) {
@@ -221,12 +229,47 @@ class SemanticOctomapNodeCore::Impl {
       if (frame.empty()) throw std::invalid_argument("no frame_id: its pose in tf needs one");
       label_camera_->setLidarFrame(frame);
       if (!session_->hasCameraView()) label_camera_->setCameraViewOf(*session_);
+      checkGeodeticOrigin();
       session_->addScan(cloud->header.stamp.toSec(), frame, pointsFromCloud(*cloud));
     } catch (const std::exception& e) {
       monitor_->noteScanRefused(wallNow(), e.what());
       ROS_ERROR_STREAM_THROTTLE(5, "semantic_octomap_node: " << cloudTopic() << " at "
                                                              << cloud->header.stamp
                                                              << " ignored: " << e.what());
+    }
+  }
+
+  // Once the localization has published its map origin: the map takes it, or (a resumed map
+  // saved under another one) refuses scans until it is reset or replaced.
+  void checkGeodeticOrigin() {
+    if (origin_decided_ || options_.map_origin_param.empty()) return;
+    // Asked of the master (a cached value lagged a change made just before a ~load_map) until it
+    // is there: at each scan for a map that has an origin to check (the scans waiting meanwhile
+    // would go in under the other one), else at most once a second.
+    const ros::WallTime now = ros::WallTime::now();
+    if (!session_->geodeticOrigin() && !last_origin_query_.isZero() &&
+        (now - last_origin_query_).toSec() < 1.0) {
+      return;
+    }
+    last_origin_query_ = now;
+    mapping::GeodeticOrigin origin;
+    const std::string& param = options_.map_origin_param;
+    if (!(nh_.getParam(param + "/lat", origin.lat_deg) &&
+          nh_.getParam(param + "/lon", origin.lon_deg) &&
+          nh_.getParam(param + "/alt", origin.alt_m))) {
+      return;  // not yet (or another localization): the map keeps what it has
+    }
+    origin_decided_ = true;
+    const std::string refusal = session_->agreeOnGeodeticOrigin(origin);
+    if (!refusal.empty()) {
+      ROS_ERROR_STREAM("semantic_octomap_node: scans are not mapped: " << refusal << " (" << param
+                                                                       << ")");
+    } else if (session_->geodeticOrigin()) {
+      const mapping::GeodeticOrigin& in_map = *session_->geodeticOrigin();
+      ROS_INFO_STREAM(std::setprecision(10)
+                      << "semantic_octomap_node: map frame at lat " << in_map.lat_deg << ", lon "
+                      << in_map.lon_deg << ", alt " << in_map.alt_m << " (" << param
+                      << "), saved with the map");
     }
   }
 
@@ -393,6 +436,8 @@ class SemanticOctomapNodeCore::Impl {
   ros::Subscriber camera_info_sub_, cloud_sub_, labels_sub_;
   ros::Publisher cloud_pub_;
   std::unique_ptr<MapServices> services_;
+  bool origin_decided_ = false;
+  ros::WallTime last_origin_query_;
   std::unique_ptr<NodeDiagnostics> diagnostics_;
   ros::WallTimer clock_timer_, display_timer_, log_timer_;
   ros::Time last_clock_;

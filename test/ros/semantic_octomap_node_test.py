@@ -28,6 +28,11 @@ NODE = "/semantic_octomap_node"
 WIDTH, HEIGHT = 200, 100
 BUILDING, CAR = 11, 26  # Cityscapes labelIds
 MAP_Y_OFFSET = 2.0  # map -> velo_link translation along y
+# Where the localization's map frame lies (inekf_node's ~map_origin_in_use): the first launch's,
+# and another launch's own first fix 3.7 m away.
+ORIGIN_PARAM = "/inekf_node/map_origin_in_use"
+ORIGIN_A = {"lat": 49.0131623, "lon": 8.4378408, "alt": 117.818}
+ORIGIN_B = {"lat": 49.013137, "lon": 8.4378193, "alt": 115.934}
 
 
 def transform(parent, child, translation, quaternion_xyzw):
@@ -131,6 +136,7 @@ class SemanticOctomapNodeTest(unittest.TestCase):
                 and rospy.Time.now() < deadline:
             rospy.sleep(0.1)
         cls.info_pub.publish(camera_info())
+        rospy.set_param(ORIGIN_PARAM, ORIGIN_A)
         rospy.sleep(0.5)
         for i in range(3):
             stamp = rospy.Time.now()
@@ -341,6 +347,35 @@ class SemanticOctomapNodeTest(unittest.TestCase):
                                                "checked_parameter_node_%d" % i, parameters)
             self.assertNotEqual(code, 0, output)
             self.assertIn(message, output)
+
+    def publish_scans(self, count):
+        for _ in range(count):
+            stamp = rospy.Time.now()
+            self.cloud_pub.publish(wall_cloud(stamp))
+            self.labels_pub.publish(label_image(stamp))
+            rospy.sleep(0.5)
+
+    def test_9_a_map_resumed_under_another_origin_maps_no_scans(self):
+        # The map took the localization's origin A (setUpClass) and saves it. A new launch takes
+        # its own first fix as origin B: the resumed map's scans would be mapped again, shifted.
+        saved = os.path.join(self.out_dir, "origin_a.ot")
+        self.assertTrue(self.save(saved, "ot").success)
+        rospy.set_param(ORIGIN_PARAM, ORIGIN_B)
+        try:
+            loaded = self.load(saved)
+            self.assertTrue(loaded.success, loaded.message)
+            self.assertTrue(self.wait_for(lambda: self.info.scans_inserted == 0), self.info)
+            self.publish_scans(3)
+            rospy.sleep(2.0)  # past label_wait_s: they would be in by now
+            with self.lock:
+                self.assertEqual(self.info.scans_inserted, 0, "scans went into a map of origin A")
+            # An empty map takes origin B, and maps again.
+            self.reset()
+            self.publish_scans(2)
+            self.assertTrue(self.wait_for(lambda: self.info.scans_inserted >= 1),
+                            "no scan mapped after the reset: %s" % self.info)
+        finally:
+            rospy.set_param(ORIGIN_PARAM, ORIGIN_A)
 
 
 if __name__ == "__main__":

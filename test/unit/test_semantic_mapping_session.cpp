@@ -778,6 +778,68 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(GeodeticOrigin, OffsetsAreEastNorthUpInMetres) {
+  const GeodeticOrigin karlsruhe{49.0, 8.4, 110.0};
+  const Eigen::Vector3d north = enuOffset(karlsruhe, {49.0 + 1e-5, 8.4, 110.0});
+  EXPECT_NEAR(north.y(), 1.1117, 0.001);  // a degree of latitude is 111.2 km there
+  EXPECT_NEAR(north.x(), 0.0, 1e-9);
+  const Eigen::Vector3d east = enuOffset(karlsruhe, {49.0, 8.4 + 1e-5, 112.5});
+  EXPECT_NEAR(east.x(), 0.7310, 0.001);  // shrunk by cos(49 deg)
+  EXPECT_NEAR(east.z(), 2.5, 1e-12);
+  EXPECT_NEAR(enuOffset({0.0, 179.99999, 0.0}, {0.0, -179.99999, 0.0}).x(), 2.2264, 0.001);
+}
+
+// A map remembers where its frame lies on the Earth: a map built here takes the localization's
+// origin and saves it; resumed under another origin (a new launch starts at its own first fix),
+// its scans would be mapped a second time a few metres off, so the session says why they must
+// not go in and which origin to start the localization with.
+TEST(SemanticMappingSessionTest, AResumedMapRefusesAnotherGeodeticOrigin) {
+  const GeodeticOrigin first{49.0131623, 8.4378408, 117.818};
+  SemanticMappingSession session(testConfig());
+  EXPECT_EQ(session.agreeOnGeodeticOrigin(first), "");
+  ASSERT_TRUE(session.geodeticOrigin());
+  session.insertScan(testScan(), Eigen::Isometry3d::Identity());
+  const std::string dir = test::makeTempDir("session_origin");
+  ASSERT_GT(session.save(dir + "/map.ot", MapFormat::kSemanticOt), 0u);
+
+  SemanticMappingSession same(testConfig());
+  same.load(dir + "/map.ot");
+  ASSERT_TRUE(same.geodeticOrigin());
+  EXPECT_EQ(same.geodeticOrigin()->lat_deg, first.lat_deg);
+  EXPECT_EQ(same.agreeOnGeodeticOrigin(first), "");
+
+  SemanticMappingSession other(testConfig());
+  other.load(dir + "/map.ot");
+  const GeodeticOrigin second{49.013137, 8.4378193, 115.934};  // 2.8 m S, 1.6 m W, 1.9 m down
+  const std::string refusal = other.agreeOnGeodeticOrigin(second);
+  EXPECT_NE(refusal.find(" 3.7"), std::string::npos) << refusal;
+  EXPECT_NE(refusal.find("origin_lat:=49.0131623 origin_lon:=8.4378408 origin_alt:=117.818"),
+            std::string::npos)
+      << refusal;
+  EXPECT_EQ(other.geodeticOrigin()->lat_deg, first.lat_deg);  // the map keeps its own
+  try {
+    other.addScan(1.0, "velo", testScan());
+    ADD_FAILURE() << "a scan was taken under another origin";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), refusal);
+  }
+  EXPECT_EQ(other.statistics().scans_received, 0u);
+  other.reset();  // an empty map takes the new origin
+  EXPECT_EQ(other.agreeOnGeodeticOrigin(second), "");
+  EXPECT_EQ(other.geodeticOrigin()->lat_deg, second.lat_deg);
+  EXPECT_NO_THROW(other.addScan(1.0, "velo", testScan()));
+
+  // A map loaded without an origin (saved before one was known) stays unknown: nothing is made up.
+  SemanticMappingSession unknown(testConfig());
+  unknown.insertScan(testScan(), Eigen::Isometry3d::Identity());
+  ASSERT_GT(unknown.save(dir + "/unknown.ot", MapFormat::kSemanticOt), 0u);
+  SemanticMappingSession resumed(testConfig());
+  resumed.load(dir + "/unknown.ot");
+  EXPECT_EQ(resumed.agreeOnGeodeticOrigin(second), "");
+  EXPECT_FALSE(resumed.geodeticOrigin());
+  std::filesystem::remove_all(dir);
+}
+
 // A map saved at a resolution of more digits than a stream prints by default (6) loads back into
 // the session that saved it (it was refused: "0.123457 m differs from the configured 0.123457 m").
 TEST(SemanticMappingSessionTest, AMapAtAnyResolutionLoadsBackAndAnotherIsNamed) {

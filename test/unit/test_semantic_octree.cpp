@@ -364,13 +364,17 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
   ASSERT_EQ(seekable.substr(magic_at, 22), "ISM_SEMANTIC_OCTREE_V4");
   // The fusion model and class table, then the resolution in binary, all under the checksum.
   const std::string table = seekable.substr(table_at, record - table_at);
+  // ... then the resolution and the geodetic origin record (1 + 3 x 8 bytes; none here).
+  constexpr std::size_t kOriginBytes = 25;
   double recorded_resolution = 0.0;
-  std::memcpy(&recorded_resolution, seekable.data() + record - 8, 8);
+  std::memcpy(&recorded_resolution, seekable.data() + record - kOriginBytes - 8, 8);
   EXPECT_EQ(recorded_resolution, tree.getResolution());
+  EXPECT_EQ(seekable[record - kOriginBytes], '\0');
   EXPECT_EQ(checksum, fnv1a(table + expected_nodes));
   // A bit flipped in a class's name (as well in a label id): refused, the table is checked too.
   std::string renamed = seekable;
-  renamed[record - 9] = static_cast<char>(renamed[record - 9] ^ 0x20);
+  const std::size_t last_name_byte = record - kOriginBytes - 9;
+  renamed[last_name_byte] = static_cast<char>(renamed[last_name_byte] ^ 0x20);
   std::istringstream renamed_file(renamed);
   std::unique_ptr<octomap::AbstractOcTree> refused(octomap::AbstractOcTree::read(renamed_file));
   ASSERT_NE(dynamic_cast<SemanticOcTree*>(refused.get()), nullptr);
@@ -392,12 +396,13 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
       << dynamic_cast<SemanticOcTree*>(rescaled.get())->readError();
   // Files of the previous formats still load: V3 (no resolution under the checksum) and V2 (the
   // checksum of the node data alone).
+  constexpr std::size_t kV4Bytes = 8 + kOriginBytes;
   std::string v3 = seekable;
-  v3.erase(record - 8, 8);
+  v3.erase(record - kV4Bytes, kV4Bytes);
   v3.replace(magic_at, 22, "ISM_SEMANTIC_OCTREE_V3");
   const std::uint64_t without_resolution =
-      fnv1a(table.substr(0, table.size() - 8) + expected_nodes);
-  std::memcpy(&v3[record - 8 + 16], &without_resolution, 8);
+      fnv1a(table.substr(0, table.size() - kV4Bytes) + expected_nodes);
+  std::memcpy(&v3[record - kV4Bytes + 16], &without_resolution, 8);
   std::istringstream v3_file(v3);
   std::unique_ptr<octomap::AbstractOcTree> v3_format(octomap::AbstractOcTree::read(v3_file));
   ASSERT_NE(dynamic_cast<SemanticOcTree*>(v3_format.get()), nullptr);
@@ -406,7 +411,7 @@ TEST(SemanticOcTreeIo, TheNodeDataIsOctomapsFullFormatByteForByteOnAnyStream) {
   std::string v2 = v3;
   v2.replace(magic_at, 22, "ISM_SEMANTIC_OCTREE_V2");
   const std::uint64_t nodes_only = fnv1a(expected_nodes);
-  std::memcpy(&v2[record - 8 + 16], &nodes_only, 8);
+  std::memcpy(&v2[record - kV4Bytes + 16], &nodes_only, 8);
   std::istringstream v2_file(v2);
   std::unique_ptr<octomap::AbstractOcTree> old_format(octomap::AbstractOcTree::read(v2_file));
   ASSERT_NE(dynamic_cast<SemanticOcTree*>(old_format.get()), nullptr);

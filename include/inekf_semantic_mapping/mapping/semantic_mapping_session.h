@@ -175,6 +175,15 @@ class SemanticMappingSession {
   // An empty map, no pending scans, statistics from zero.
   void reset();
 
+  // The map frame's place on the Earth, saved with the map (none: unknown).
+  const std::optional<GeodeticOrigin>& geodeticOrigin() const { return tree_->geodeticOrigin(); }
+  // The localization's map origin, for the map to agree with. A map built here takes it; a map
+  // saved under another origin (more than a voxel away) returns why its scans must not go in
+  // (each would be written a second time, shifted by the difference), drops the scans waiting,
+  // and addScan refuses with that reason until load() or reset(); a map loaded without one stays
+  // unknown. Empty when they agree.
+  std::string agreeOnGeodeticOrigin(const GeodeticOrigin& localization);
+
  private:
   // Throws std::invalid_argument for a label image that cannot be used (stamp, view, or the
   // camera when given), counting it as refused.
@@ -241,6 +250,8 @@ class SemanticMappingSession {
   LabelWarning label_warning_;
   ScanWarning scan_warning_;
   InsertedCallback inserted_callback_;
+  bool map_from_file_ = false;  // load() since the start or the last reset()
+  std::string origin_refusal_;  // agreeOnGeodeticOrigin's reason, until load() or reset()
   ScanLabelPairing pairing_;
   std::optional<CameraModel> last_camera_;
   // The latest label images with a known camera, newest last (label_neighbour_s).

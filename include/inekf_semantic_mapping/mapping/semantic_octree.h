@@ -19,6 +19,7 @@
 #include <array>
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -94,6 +95,18 @@ struct LabeledScan {
   std::uint32_t unknown_label_id = 0xFFFFFFFF;  // label id that carries no class evidence
 };
 
+// Where a map's frame lies on the Earth (WGS84): the localization's map origin when the map was
+// saved. A map resumed under another origin would be written a second time, shifted.
+struct GeodeticOrigin {
+  double lat_deg = 0.0;
+  double lon_deg = 0.0;
+  double alt_m = 0.0;
+};
+
+// East, north and up of `to` from `from` in metres (local tangent plane at `from`; within a few
+// millimetres for origins kilometres apart).
+Eigen::Vector3d enuOffset(const GeodeticOrigin& from, const GeodeticOrigin& to);
+
 class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
  public:
   explicit SemanticOcTree(double resolution);
@@ -106,6 +119,9 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
   ClassSet& mutableClassSet() { return classes_; }
   const FusionModel& fusionModel() const { return fusion_; }
   void setFusionModel(const FusionModel& fusion) { fusion_ = fusion; }
+  // Saved with the map and read back (none: unknown, e.g. a map of a sequence's own poses).
+  const std::optional<GeodeticOrigin>& geodeticOrigin() const { return geodetic_origin_; }
+  void setGeodeticOrigin(const std::optional<GeodeticOrigin>& origin) { geodetic_origin_ = origin; }
   // octomap's setProbHit, setProbMiss and clamping thresholds in one call (a new tree has
   // octomap's defaults, clamping 0.1192 / 0.971, not OccupancyModel's).
   void setOccupancyModel(const OccupancyModel& model);
@@ -201,6 +217,7 @@ class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
 
   ClassSet classes_;
   FusionModel fusion_;
+  std::optional<GeodeticOrigin> geodetic_origin_;
   int ray_casting_threads_ = 1;
   double grazing_truncation_voxels_ = 0.0;
   std::string read_error_;

@@ -11,6 +11,7 @@
 #include <ros/wall_timer.h>
 #include <std_srvs/Empty.h>
 
+#include <functional>
 #include <string>
 
 #include "inekf_semantic_mapping/LoadMap.h"
@@ -33,6 +34,10 @@ class MapServices {
   void autosave();
   // The save when the node finishes: as autosave, and says where the map went.
   void finalAutosave();
+  // Called after ~load_map replaced the map or ~reset emptied it.
+  void setMapReplacedCallback(std::function<void()> callback) {
+    map_replaced_ = std::move(callback);
+  }
   // The last ~save_map and autosave (for /diagnostics).
   const SaveRecord& lastSave() const { return last_save_; }
   const SaveRecord& lastAutosave() const { return last_autosave_; }
@@ -50,6 +55,7 @@ class MapServices {
   ros::ServiceServer save_srv_, load_srv_, reset_srv_;
   ros::WallTimer autosave_timer_;
   SaveRecord last_save_, last_autosave_;
+  std::function<void()> map_replaced_;
 };
 
 // The node's periodic log line: scans in the map, with labels, pending, without pose; label
