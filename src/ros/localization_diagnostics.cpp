@@ -72,6 +72,11 @@ void LocalizationMonitor::noteImu(double stamp_s, double wall_s,
   newest_s_ = stamp_s;
   last_imu_wall_s_ = wall_s;
   imu_.add(stamp_s);
+  // The fix windows end at the newest data too: a GPS that went quiet showed its last window's
+  // rate, counts and NIS for good.
+  fixes_.expire(stamp_s);
+  accepted_.expire(stamp_s);
+  rejected_.expire(stamp_s);
   noteCounters(stamp_s, session);
 }
 

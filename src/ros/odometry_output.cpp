@@ -19,6 +19,7 @@ OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader) {
   reader->read("tf_max_heading_sigma_deg", &options.tf_max_heading_sigma_deg);
   reader->read("map_frame", &options.map_frame);
   reader->read("base_frame", &options.base_frame);
+  reader->read("odom_frame", &options.odom_frame);
   reader->read("imu_frame", &options.imu_frame);
   reader->read("max_path_length", &options.max_path_length);
   reader->read("path_publish_period_s", &options.path_publish_period_s);
@@ -29,6 +30,7 @@ OdometryOutput::OdometryOutput(ros::NodeHandle& nh, const OdometryOutputOptions&
     : publish_tf_(options.publish_tf),
       tf_max_heading_sigma_deg_(options.tf_max_heading_sigma_deg),
       base_frame_(frames::tfFrameId(options.base_frame)),
+      odom_frame_(frames::tfFrameId(options.odom_frame)),
       imu_frame_(frames::tfFrameId(options.imu_frame)),
       max_path_length_(std::max(options.max_path_length, 1)),
       path_publish_period_s_(options.path_publish_period_s) {
@@ -54,7 +56,11 @@ void OdometryOutput::publish(const ros::Time& stamp,
   }
   odometry_publisher_.publish(odometry);
   if (publish_tf_ && !holdTf(odometry)) {
-    tf_broadcaster_.sendTransform(transformOfOdometry(odometry));
+    if (odom_frame_.empty()) {
+      tf_broadcaster_.sendTransform(transformOfOdometry(odometry));
+    } else if (const auto T_odom_base = odomFromBase(stamp)) {
+      tf_broadcaster_.sendTransform(mapToOdomTransform(odometry, *T_odom_base, odom_frame_));
+    }
   }
   appendToPath(odometry, static_cast<std::size_t>(max_path_length_), &path_);
   if (last_path_publish_.isZero() || stamp < last_path_publish_ ||
@@ -89,6 +95,20 @@ bool OdometryOutput::holdTf(const nav_msgs::Odometry& odometry) {
                                          "once the car drives");
   }
   return true;
+}
+
+std::optional<Eigen::Isometry3d> OdometryOutput::odomFromBase(const ros::Time& stamp) {
+  try {
+    return toIsometry(tf_buffer_.lookupTransform(odom_frame_, base_frame_, stamp).transform);
+  } catch (const tf2::TransformException&) {
+  }
+  std::string why;
+  if (auto latest = latestTransform(odom_frame_, base_frame_, &why)) return latest;
+  ROS_WARN_STREAM_THROTTLE(10, "inekf_node: no tf " << odom_frame_ << " -> " << base_frame_
+                                                    << " (~odom_frame: the wheel odometry's), so "
+                                                    << path_.header.frame_id << " -> "
+                                                    << odom_frame_ << " is not published: " << why);
+  return std::nullopt;
 }
 
 void OdometryOutput::clearPath() {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "inekf_semantic_mapping/ros/kitti_bag_conventions.h"
 #include "inekf_semantic_mapping/ros/localization_conversions.h"
 #include "inekf_semantic_mapping/ros/localization_diagnostics.h"
 #include "inekf_semantic_mapping/ros/names.h"
@@ -293,6 +294,32 @@ TEST(Transform, IsTheOdometrysPoseBetweenItsFrames) {
   EXPECT_DOUBLE_EQ(transform.transform.rotation.w, 1.0);
 }
 
+// With a wheel odometry publishing odom -> base_link, the filter publishes map -> odom: the chain
+// map -> odom -> base_link is the filter's pose of base_link (REP-105), whatever odom says.
+TEST(Transform, MapToOdomComposesWithOdomToBaseIntoTheOdometrysPose) {
+  nav_msgs::Odometry odometry;
+  odometry.header.frame_id = "map";
+  odometry.header.stamp = ros::Time(12.5);
+  odometry.child_frame_id = "base_link";
+  const Eigen::Quaterniond map_yaw(Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()));
+  odometry.pose.pose.position.x = 10.0;
+  odometry.pose.pose.position.y = -4.0;
+  odometry.pose.pose.position.z = 0.5;
+  odometry.pose.pose.orientation.w = map_yaw.w();
+  odometry.pose.pose.orientation.z = map_yaw.z();
+  Eigen::Isometry3d T_odom_base = Eigen::Isometry3d::Identity();
+  T_odom_base.translate(Eigen::Vector3d(3.0, 1.0, 0.0));
+  T_odom_base.rotate(Eigen::AngleAxisd(-0.4, Eigen::Vector3d::UnitZ()));
+  const geometry_msgs::TransformStamped map_odom =
+      mapToOdomTransform(odometry, T_odom_base, "odom");
+  EXPECT_EQ(map_odom.header.frame_id, "map");
+  EXPECT_EQ(map_odom.child_frame_id, "odom");
+  EXPECT_EQ(map_odom.header.stamp, ros::Time(12.5));
+  const Eigen::Isometry3d T_map_base = toIsometry(map_odom.transform) * T_odom_base;
+  EXPECT_TRUE(T_map_base.translation().isApprox(Eigen::Vector3d(10.0, -4.0, 0.5), 1e-12));
+  EXPECT_TRUE(Eigen::Quaterniond(T_map_base.rotation()).isApprox(map_yaw, 1e-12));
+}
+
 TEST(FilterStatus, CountsTheSessionsDropsWithTheFiltersOwn) {
   estimation::LocalizationSession session{estimation::LocalizationSessionConfig()};
   estimation::ImuEvent bad;
@@ -366,6 +393,34 @@ TEST(LocalizationMonitor, WithoutFixesTheStatusTurnsWarnThenError) {
   diagnostic_updater::DiagnosticStatusWrapper later;
   monitor.fill(session, t + 10.0, &later);
   EXPECT_EQ(later.level, DiagnosticStatus::ERROR);
+}
+
+// The fix windows are of data time up to the newest IMU stamp: a GPS that goes quiet reads no
+// rate and no fixes in the window once its last fix is a window old (they showed the last
+// window's figures for good).
+TEST(LocalizationMonitor, AQuietGpsLeavesTheFixWindowsEmpty) {
+  LocalizationDiagnosticsOptions options;
+  options.window_s = 10.0;
+  estimation::LocalizationSession session{estimation::LocalizationSessionConfig{}};
+  LocalizationMonitor monitor(options);
+  double t = 100.0;
+  for (; t < 106.0; t += 0.1) {
+    session.addImu(stillImu(t));
+    monitor.noteImu(t, t, session);
+    if (std::fmod(t - 100.0 + 1e-6, 1.0) < 0.05) monitor.noteFix(t, t, session);  // 1 Hz
+  }
+  diagnostic_updater::DiagnosticStatusWrapper with_fixes;
+  monitor.fill(session, t, &with_fixes);
+  EXPECT_NEAR(std::stod(valueOf(with_fixes, "fix rate (Hz)")), 1.0, 0.05);
+  for (; t < 125.0; t += 0.1) {  // the GPS is silent from 105 s
+    session.addImu(stillImu(t));
+    monitor.noteImu(t, t, session);
+  }
+  diagnostic_updater::DiagnosticStatusWrapper quiet;
+  monitor.fill(session, t, &quiet);
+  EXPECT_EQ(valueOf(quiet, "fix rate (Hz)"), "0.00");
+  EXPECT_EQ(valueOf(quiet, "fixes accepted in window"), "0");
+  EXPECT_EQ(valueOf(quiet, "fixes rejected in window"), "0");
 }
 
 // A GPS on another clock than the IMU: the status says so (ERROR), not only that no fix came.

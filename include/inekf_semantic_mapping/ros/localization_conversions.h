@@ -97,6 +97,12 @@ nav_msgs::Odometry odometryOfBase(const nav_msgs::Odometry& imu_odometry,
 
 // The map -> base transform of an odometry message (its header and child frame, its pose).
 geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& odometry);
+// REP-105's map -> odom when another node (the wheel odometry) publishes odom -> base:
+// T_map_odom = T_map_base T_odom_base^-1, stamped as the odometry, so that map -> odom -> base
+// is the odometry's pose and base keeps one parent.
+geometry_msgs::TransformStamped mapToOdomTransform(const nav_msgs::Odometry& odometry,
+                                                   const Eigen::Isometry3d& T_odom_base,
+                                                   const std::string& odom_frame);
 
 // The session's FilterStatus (biases once started, counts, last innovation); stamp and frame
 // are set by the caller.

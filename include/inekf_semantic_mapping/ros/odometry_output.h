@@ -34,13 +34,17 @@ struct OdometryOutputOptions {
   double tf_max_heading_sigma_deg = 10.0;
   std::string map_frame = frames::kMap;
   std::string base_frame = frames::kBaseLink;
+  // REP-105: when another node publishes odom_frame -> base_frame (a wheel odometry, e.g.
+  // diff_drive_controller), tf is map_frame -> odom_frame (base_frame had two parents and the
+  // tree broke). Empty: map_frame -> base_frame.
+  std::string odom_frame;
   std::string imu_frame;  // empty: the IMU messages' frame_id (see OdometryOutput::noteImuFrame)
   int max_path_length = 5000;  // poses
   double path_publish_period_s = 1.0;
 };
 
-// The private parameters publish_tf, tf_max_heading_sigma_deg, map_frame, base_frame, imu_frame,
-// max_path_length and path_publish_period_s (defaults above).
+// The private parameters publish_tf, tf_max_heading_sigma_deg, map_frame, base_frame, odom_frame,
+// imu_frame, max_path_length and path_publish_period_s (defaults above).
 OdometryOutputOptions readOdometryOutputOptions(common::YamlReader* reader);
 
 class OdometryOutput {
@@ -85,12 +89,15 @@ class OdometryOutput {
   // True until the odometry's heading sigma is first at or below tf_max_heading_sigma_deg after
   // a start (the wait and its end are said once).
   bool holdTf(const nav_msgs::Odometry& odometry);
+  // tf odom_frame -> base_frame at `stamp`, else its latest (a wheel odometry a little behind the
+  // IMU); nullopt while there is none (said once a while).
+  std::optional<Eigen::Isometry3d> odomFromBase(const ros::Time& stamp);
 
   bool publish_tf_ = true;
   double tf_max_heading_sigma_deg_ = 10.0;
   bool heading_known_ = false;  // since the start: tf flows
   bool said_held_ = false;      // the wait was said
-  std::string base_frame_, imu_frame_;
+  std::string base_frame_, odom_frame_, imu_frame_;
   int max_path_length_ = 5000;
   double path_publish_period_s_ = 1.0;
   bool found_base_imu_ = false, warned_no_base_imu_ = false;
