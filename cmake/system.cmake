@@ -13,6 +13,8 @@ if(CATKIN_ENABLE_TESTING)
   add_rostest(test/ros/e2e_synthetic.test ARGS nodelets:=true
     DEPENDENCIES ${ISM_PIPELINE_TARGETS} ${PROJECT_NAME}_nodelets evaluate_map)
   add_rostest(test/ros/e2e_real_oxts.test DEPENDENCIES kitti2bag inekf_node)
+  # The closing line of scripts/test.sh: scripts/count_test_results.py on written result files.
+  add_rostest(test/ros/count_test_results.test)
   # launch/robot.launch on a simulated robot that is not KITTI's (mounting and lever arm from tf,
   # an IMU without orientation, an Ouster-like cloud): needs no data.
   add_rostest(test/ros/own_robot.test

@@ -36,8 +36,18 @@ if ((fix)); then
   exit 0
 fi
 start_ns=$(date +%s%N)
-mapfile -t bad < <(clang-format-14 --dry-run -Werror "${files[@]}" 2>&1 |
+set +e
+output=$(clang-format-14 --dry-run -Werror "${files[@]}" 2>&1)
+status=$?
+set -e
+mapfile -t bad < <(printf '%s\n' "$output" |
   grep -oE '^[^:]+\.(cpp|h|hpp):[0-9]+:[0-9]+: error' | cut -d: -f1 | sort -u)
+# clang-format failing for another reason (an unreadable .clang-format) listed no file and passed.
+if ((status != 0 && ${#bad[@]} == 0)); then
+  echo "[format] ERROR: clang-format-14 failed (exit $status): $(printf '%s\n' "$output" | head -n 3)" >&2
+  write_junit 0.000 clang_format_14 "clang-format-14 failed (exit $status)"
+  exit 1
+fi
 elapsed_ms=$((($(date +%s%N) - start_ns) / 1000000))
 elapsed=$((elapsed_ms / 1000)).$(printf %03d $((elapsed_ms % 1000)))
 if ((${#bad[@]})); then

@@ -19,18 +19,27 @@ ism_source_workspace() {
 # Writes a JUnit file with one case, where catkin_test_results counts it:
 # ism_junit_case FILE SUITE CLASS CASE SECONDS [FAILURE_MESSAGE] (no message: the case passed).
 ism_junit_case() {
-  local failure="" failures=0
+  local failure="" failures=0 suite classname name message
+  # Escaped: a file that does not parse was left out of the counts without a word.
+  suite=$(ism_xml_escape "$2")
+  classname=$(ism_xml_escape "$3")
+  name=$(ism_xml_escape "$4")
   if [[ -n ${6:-} ]]; then
-    failure="<failure message=\"$6\"/>"
+    message=$(ism_xml_escape "$6")
+    failure="<failure message=\"$message\"/>"
     failures=1
   fi
   mkdir -p "$(dirname "$1")"
   cat >"$1" <<XML
 <?xml version="1.0" encoding="UTF-8"?>
-<testsuite name="$2" tests="1" failures="$failures" errors="0" time="$5">
-  <testcase classname="$3" name="$4" time="$5">$failure</testcase>
+<testsuite name="$suite" tests="1" failures="$failures" errors="0" time="$5">
+  <testcase classname="$classname" name="$name" time="$5">$failure</testcase>
 </testsuite>
 XML
+}
+ism_xml_escape() {
+  # sed, not ${//}: bash 5.2 puts the match where a replacement says '&'.
+  printf '%s' "$1" | sed -e 's/&/\&amp;/g' -e 's/</\&lt;/g' -e 's/>/\&gt;/g' -e 's/"/\&quot;/g'
 }
 # ism_junit_failure FILE SUITE CASE MESSAGE: one failed case (for a step that fails before it
 # can report itself).
