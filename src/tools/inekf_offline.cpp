@@ -311,6 +311,14 @@ int main(int argc, char** argv) {
     }
     ism::ScopedTimer write_timer("write_outputs");
     ism::common::AtomicFileSet outputs;
+    // Each line is its frame's: a frame without an estimate of its own (before the start, held)
+    // repeats the pose it is given but keeps its own stamp (TUM readers took the repeated stamps
+    // as one pose); a misstamped frame keeps the estimate's, its own is the one that is wrong.
+    std::vector<bool> misstamped(frames.size(), false);
+    for (const int k : run.misstamped_frames) misstamped[static_cast<std::size_t>(k)] = true;
+    const auto frameStamp = [&](std::size_t k) {
+      return misstamped[k] ? run.states[k].stamp_s : frames[k].stampSeconds();
+    };
     addOutput(&outputs, cli.get("--output-kitti"), [&](std::ostream& out) {
       for (const auto& s : run.states) out << ism::kitti::kittiPoseLine(s.rotation, s.position_map);
     });
@@ -323,9 +331,10 @@ int main(int argc, char** argv) {
       addOutput(&outputs, cli.get("--output-tum"), [&](std::ostream& out) {
         out.precision(6);
         out << std::fixed;
-        for (const auto& s : run.states) {
+        for (std::size_t k = 0; k < run.states.size(); ++k) {
+          const auto& s = run.states[k];
           const Eigen::Quaterniond q(s.rotation);
-          out << s.stamp_s << ' ' << s.position_map.x() << ' ' << s.position_map.y() << ' '
+          out << frameStamp(k) << ' ' << s.position_map.x() << ' ' << s.position_map.y() << ' '
               << s.position_map.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << q.w()
               << '\n';
         }
@@ -342,7 +351,7 @@ int main(int argc, char** argv) {
           const auto& s = run.states[k];
           const Eigen::Quaterniond q(s.rotation);
           char stamp[32];
-          std::snprintf(stamp, sizeof(stamp), "%.6f", s.stamp_s);
+          std::snprintf(stamp, sizeof(stamp), "%.6f", frameStamp(k));
           out << stamp << ',' << s.position_map.x() << ',' << s.position_map.y() << ','
               << s.position_map.z() << ',' << q.x() << ',' << q.y() << ',' << q.z() << ',' << q.w()
               << ',' << s.velocity_map.x() << ',' << s.velocity_map.y() << ',' << s.velocity_map.z()

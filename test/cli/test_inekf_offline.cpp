@@ -58,6 +58,33 @@ TEST_F(InekfOfflineTest, LocalizesASyntheticDrive) {
   EXPECT_LT(std::stod(output.substr(at + 4)), 3.0) << output;
 }
 
+// Each line of --output-tum and --output-states carries its own frame's stamp, also the frames
+// before the start (without the OXTS attitude the filter starts at the first fix, later): they
+// repeated the start's stamp, and TUM readers saw one pose three times.
+TEST_F(InekfOfflineTest, EveryOutputLineCarriesItsFramesStamp) {
+  const std::string tum = dir_ + "/poses.tum", states = dir_ + "/states.csv";
+  const auto [status, output] =
+      run("--oxts " + oxts_ + " --output-kitti " + dir_ + "/poses_tum.txt --output-tum " + tum +
+          " --output-states " + states + " --imu-gps-only");
+  ASSERT_EQ(status, 0) << output;
+  std::vector<std::int64_t> truth_ns;
+  for (const auto& stamp : ism::kitti::readTimestampLines(oxts_ + "/timestamps.txt")) {
+    ASSERT_TRUE(stamp.has_value());
+    truth_ns.push_back(*stamp);
+  }
+  std::ifstream tum_in(tum), states_in(states);
+  std::string header;
+  std::getline(states_in, header);
+  std::size_t k = 0;
+  for (std::string line, row; std::getline(tum_in, line) && std::getline(states_in, row); ++k) {
+    ASSERT_LT(k, truth_ns.size());
+    const double expected = static_cast<double>(truth_ns[k]) * 1e-9;
+    EXPECT_NEAR(std::stod(line.substr(0, line.find(' '))), expected, 2e-6) << "frame " << k;
+    EXPECT_NEAR(std::stod(row.substr(0, row.find(','))), expected, 2e-6) << "frame " << k;
+  }
+  EXPECT_EQ(k, truth_ns.size());
+}
+
 // Every frame without a GPS solution (posmode 0): the filter never starts. It used to write the
 // unstarted defaults for every frame and print "ATE 0.000 m".
 // Simulated wheel odometry: the speeds are used once the heading is known and said in the log;
