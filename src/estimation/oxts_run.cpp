@@ -302,6 +302,17 @@ Pass runPass(const std::vector<kitti::OxtsFrame>& frames, const OxtsRunOptions& 
         session.statistics().resets == resets_before) {
       epoch = recordStep(epochs.back().filtered, imu.sample, session,
                          config.localizer.imu_noise.gravity_mps2);
+      const NavState& before = epochs.back().filtered;
+      if (!epoch.has_step && session.state().stamp_s == before.stamp_s &&
+          session.state().position_map == before.position_map &&
+          session.state().velocity_map == before.velocity_map) {
+        // The session dropped this frame's sample (a duplicate stamp): the filter did not move,
+        // an identity step, as for a misstamped frame; the smoother restarted here before.
+        epoch.has_step = true;
+        epoch.predicted = before;
+        epoch.predicted_covariance = epochs.back().filtered_covariance;
+        epoch.transition = Matrix15d::Identity();
+      }
       if (!epoch.has_step) ++run.smoother_breaks;
     }
     if (options.wheel_speed_sigma_mps > 0.0) {

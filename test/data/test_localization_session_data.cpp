@@ -133,6 +133,35 @@ TEST(LocalizationSession, AMisstampedFrameIsHeldAndTheDriveGoesOn) {
   }
 }
 
+// A frame stamped as the one before it (a duplicated line of timestamps.txt): the session drops
+// its sample, the filter does not move, and the smoother takes an identity step there rather than
+// restarting. The frames before it differ from the clean run's by what the lost sample and fix
+// change (0.26 m at most; 1.47 m with the restart, frame 49 left at its filtered estimate), the
+// ATE 0.885 m against 0.860 (0.925 with the restart).
+TEST(LocalizationSession, ADuplicatedStampDoesNotBreakTheSmoother) {
+  const std::string drive = "data/kitti_raw/2011_09_26/2011_09_26_drive_0009_sync/oxts";
+  ISM_REQUIRE_SHARED(drive);
+  std::vector<kitti::OxtsFrame> clean = kitti::readOxtsFolder(test::sharedPath(drive));
+  ASSERT_GT(clean.size(), 300u);
+  clean.resize(300);
+  std::vector<kitti::OxtsFrame> duplicated = clean;
+  duplicated[50].stamp_ns = duplicated[49].stamp_ns;
+  OxtsRunOptions options;
+  options.gps = protocolGps();
+  options.smooth = true;
+  const OxtsRunResult reference = runLocalizerOnOxts(clean, options);
+  const OxtsRunResult run = runLocalizerOnOxts(duplicated, options);
+  EXPECT_EQ(run.smoother_breaks, 0);
+  ASSERT_EQ(run.states.size(), clean.size());
+  double worst_difference_m = 0.0;  // before the duplicate, where the two runs saw the same data
+  for (int k = 30; k < 49; ++k) {
+    worst_difference_m = std::max(
+        worst_difference_m, (run.states[k].position_map - reference.states[k].position_map).norm());
+  }
+  EXPECT_LT(worst_difference_m, 0.5);
+  EXPECT_LT(compareWithTruth(run).ate_m, compareWithTruth(reference).ate_m + 0.04);
+}
+
 // inekf_node's path against inekf_offline's on the same data: the events kitti_player /
 // kitti2bag publish for the first 450 frames of 2011_09_30_drive_0027 under the protocol (IMU
 // with the OXTS orientation, GPS velocity in the map frame, the degraded fix with its
