@@ -575,7 +575,10 @@ std::string SemanticMappingSession::agreeOnGeodeticOrigin(const GeodeticOrigin& 
     if (!map_from_file_) tree_->setGeodeticOrigin(localization);
     return "";
   }
-  const Eigen::Vector3d offset = enuOffset(*map, localization);
+  // The localization's origin in the map's own frame (the same projection as inekf_node's map).
+  const Eigen::Vector3d offset =
+      kitti::MercatorProjection(map->lat_deg, map->lon_deg, map->alt_m)
+          .toMap(localization.lat_deg, localization.lon_deg, localization.alt_m);
   if (offset.norm() <= config_.resolution_m) {
     origin_refusal_.clear();
     return "";

@@ -88,20 +88,6 @@ SemanticOcTree::StaticMemberInitializer::StaticMemberInitializer() {
   octomap::AbstractOcTree::registerTreeType(prototype);
 }
 
-Eigen::Vector3d enuOffset(const GeodeticOrigin& from, const GeodeticOrigin& to) {
-  // WGS84 radii of curvature at `from`: meridian (north) and prime vertical (east).
-  constexpr double kA = 6378137.0, kE2 = 6.69437999014e-3, kDegToRad = M_PI / 180.0;
-  const double lat = from.lat_deg * kDegToRad;
-  const double w = std::sqrt(1.0 - kE2 * std::sin(lat) * std::sin(lat));
-  const double north_radius = kA * (1.0 - kE2) / (w * w * w) + from.alt_m;
-  const double east_radius = kA / w + from.alt_m;
-  double dlon = to.lon_deg - from.lon_deg;
-  if (dlon > 180.0) dlon -= 360.0;
-  if (dlon < -180.0) dlon += 360.0;
-  return {dlon * kDegToRad * east_radius * std::cos(lat),
-          (to.lat_deg - from.lat_deg) * kDegToRad * north_radius, to.alt_m - from.alt_m};
-}
-
 SemanticOcTree::SemanticOcTree(double resolution)
     : SemanticOcTree(resolution, ClassSet::cityscapes(), FusionModel()) {}
 

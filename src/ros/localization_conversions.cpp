@@ -285,25 +285,12 @@ geometry_msgs::TransformStamped transformOfOdometry(const nav_msgs::Odometry& od
 geometry_msgs::TransformStamped mapToOdomTransform(const nav_msgs::Odometry& odometry,
                                                    const Eigen::Isometry3d& T_odom_base,
                                                    const std::string& odom_frame) {
-  const geometry_msgs::Pose& pose = odometry.pose.pose;
-  Eigen::Isometry3d T_map_base = Eigen::Isometry3d::Identity();
-  T_map_base.translation() << pose.position.x, pose.position.y, pose.position.z;
-  T_map_base.linear() = Eigen::Quaterniond(pose.orientation.w, pose.orientation.x,
-                                           pose.orientation.y, pose.orientation.z)
-                            .normalized()
-                            .toRotationMatrix();
-  const Eigen::Isometry3d T_map_odom = T_map_base * T_odom_base.inverse();
-  const Eigen::Quaterniond q(T_map_odom.rotation());
-  geometry_msgs::TransformStamped transform;
+  Eigen::Isometry3d T_map_base;
+  tf2::fromMsg(odometry.pose.pose, T_map_base);
+  geometry_msgs::TransformStamped transform =
+      tf2::eigenToTransform(T_map_base * T_odom_base.inverse());
   transform.header = odometry.header;
   transform.child_frame_id = odom_frame;
-  transform.transform.translation.x = T_map_odom.translation().x();
-  transform.transform.translation.y = T_map_odom.translation().y();
-  transform.transform.translation.z = T_map_odom.translation().z();
-  transform.transform.rotation.w = q.w();
-  transform.transform.rotation.x = q.x();
-  transform.transform.rotation.y = q.y();
-  transform.transform.rotation.z = q.z();
   return transform;
 }
 

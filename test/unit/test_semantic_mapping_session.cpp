@@ -778,17 +778,6 @@ TEST(SemanticMappingSessionTest, SaveLoadAndReset) {
   std::filesystem::remove_all(dir);
 }
 
-TEST(GeodeticOrigin, OffsetsAreEastNorthUpInMetres) {
-  const GeodeticOrigin karlsruhe{49.0, 8.4, 110.0};
-  const Eigen::Vector3d north = enuOffset(karlsruhe, {49.0 + 1e-5, 8.4, 110.0});
-  EXPECT_NEAR(north.y(), 1.1117, 0.001);  // a degree of latitude is 111.2 km there
-  EXPECT_NEAR(north.x(), 0.0, 1e-9);
-  const Eigen::Vector3d east = enuOffset(karlsruhe, {49.0, 8.4 + 1e-5, 112.5});
-  EXPECT_NEAR(east.x(), 0.7310, 0.001);  // shrunk by cos(49 deg)
-  EXPECT_NEAR(east.z(), 2.5, 1e-12);
-  EXPECT_NEAR(enuOffset({0.0, 179.99999, 0.0}, {0.0, -179.99999, 0.0}).x(), 2.2264, 0.001);
-}
-
 // A map remembers where its frame lies on the Earth: a map built here takes the localization's
 // origin and saves it; resumed under another origin (a new launch starts at its own first fix),
 // its scans would be mapped a second time a few metres off, so the session says why they must
@@ -813,6 +802,8 @@ TEST(SemanticMappingSessionTest, AResumedMapRefusesAnotherGeodeticOrigin) {
   const GeodeticOrigin second{49.013137, 8.4378193, 115.934};  // 2.8 m S, 1.6 m W, 1.9 m down
   const std::string refusal = other.agreeOnGeodeticOrigin(second);
   EXPECT_NE(refusal.find(" 3.7"), std::string::npos) << refusal;
+  // East, north and up of the new origin in the map's frame (the projection of inekf_node's map).
+  EXPECT_NE(refusal.find("(east -1.57, north -2.82, up -1.88)"), std::string::npos) << refusal;
   EXPECT_NE(refusal.find("origin_lat:=49.0131623 origin_lon:=8.4378408 origin_alt:=117.818"),
             std::string::npos)
       << refusal;

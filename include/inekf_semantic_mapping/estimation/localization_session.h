@@ -71,9 +71,7 @@
 namespace inekf_semantic_mapping {
 namespace estimation {
 
-struct GeodeticOrigin {
-  double lat_deg = 0.0, lon_deg = 0.0, alt_m = 0.0;
-};
+using GeodeticOrigin = kitti::GeodeticOrigin;
 
 struct LocalizationSessionConfig {
   LocalizerConfig localizer;

@@ -12,6 +12,11 @@ namespace kitti {
 
 constexpr double kEarthRadiusM = 6378137.0;  // the devkit's er
 
+// A place on the Earth (WGS84): a map frame's origin (the localization's, and a saved map's).
+struct GeodeticOrigin {
+  double lat_deg = 0.0, lon_deg = 0.0, alt_m = 0.0;
+};
+
 // A place the projection can take: finite, |latitude| < 90 deg (it diverges at the poles),
 // |longitude| <= 180 deg. A first fix outside it would make the origin, and so every later
 // fix, not finite.

@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "inekf_semantic_mapping/kitti/mercator.h"
 #include "inekf_semantic_mapping/mapping/occupancy_model.h"
 #include "inekf_semantic_mapping/mapping/semantic_classes.h"
 
@@ -95,17 +96,9 @@ struct LabeledScan {
   std::uint32_t unknown_label_id = 0xFFFFFFFF;  // label id that carries no class evidence
 };
 
-// Where a map's frame lies on the Earth (WGS84): the localization's map origin when the map was
-// saved. A map resumed under another origin would be written a second time, shifted.
-struct GeodeticOrigin {
-  double lat_deg = 0.0;
-  double lon_deg = 0.0;
-  double alt_m = 0.0;
-};
-
-// East, north and up of `to` from `from` in metres (local tangent plane at `from`; within a few
-// millimetres for origins kilometres apart).
-Eigen::Vector3d enuOffset(const GeodeticOrigin& from, const GeodeticOrigin& to);
+// Where a map's frame lies on the Earth: the localization's map origin when the map was saved.
+// A map resumed under another origin would be written a second time, shifted.
+using GeodeticOrigin = kitti::GeodeticOrigin;
 
 class SemanticOcTree : public octomap::OccupancyOcTreeBase<SemanticOcTreeNode> {
  public:
