@@ -24,7 +24,6 @@ import time
 import unittest
 
 import numpy as np
-import rosbag
 import rosgraph
 import rospy
 import rostest
@@ -41,13 +40,6 @@ CAMERA_INFO_TOPIC = "/kitti/camera_color_left/camera_info"
 # at the same stamp, what the Python kitti2bag's /tf did to inekf_node's map -> base_link).
 TF_WARNING = re.compile(r"TF_(REPEATED_DATA|OLD_DATA|SELF_TRANSFORM|NAN_INPUT|DENORMALIZED_QUATERNION|"
                         r"NO_FRAME_ID|NO_CHILD_FRAME_ID)")
-
-
-def skip(test_case, message):
-    message = "SKIPPED: " + message
-    sys.stderr.write("\n*** %s ***\n" % message)
-    rospy.logwarn(message)
-    test_case.skipTest(message)
 
 
 def fixture_bag(drive, calib_dir, own_bag):
@@ -203,7 +195,7 @@ class KittiBagConventions(unittest.TestCase):
             drive = os.path.join(e2e.shared_dir(), "data", "kitti_raw", drive_name)
             for needed in ("oxts", "velodyne_points"):
                 if not os.path.isdir(os.path.join(drive, needed)):
-                    skip(self, "%s not found (../shared absent?): the real-drive kitti2bag_py test "
+                    e2e.skip_loudly(self, "%s not found (../shared absent?): the real-drive kitti2bag_py test "
                                "is not run" % os.path.join(drive, needed))
         e2e.require_executables(self, "kitti2bag", "kitti_bag_adapter", "inekf_node",
                                 "semantic_octomap_node")

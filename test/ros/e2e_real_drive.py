@@ -31,13 +31,6 @@ ROAD, VEGETATION, CAR = 7, 21, 26
 CLASS_NAMES = {ROAD: "road", VEGETATION: "vegetation", CAR: "car"}
 
 
-def skip(test_case, message):
-    message = "SKIPPED: " + message
-    sys.stderr.write("\n*** %s ***\n" % message)
-    rospy.logwarn(message)
-    test_case.skipTest(message)
-
-
 def first_oxts_fix(drive):
     """lat lon alt of the drive's first OXTS frame: the map origin of the ground truth."""
     first = sorted(os.listdir(os.path.join(drive, "oxts", "data")))[0]
@@ -73,10 +66,10 @@ class EndToEndRealDrive(unittest.TestCase):
         model = os.path.join(e2e.shared_dir(), p("model", "models/enet-cityscapes/enet-model.net"))
         for needed in ("oxts", "velodyne_points", "image_02"):
             if not os.path.isdir(os.path.join(drive, needed)):
-                skip(self, "%s not found (../shared absent?): real-drive e2e test not run" %
+                e2e.skip_loudly(self, "%s not found (../shared absent?): real-drive e2e test not run" %
                      os.path.join(drive, needed))
         if not os.path.isfile(model):
-            skip(self, "the Cityscapes ENet %s not found (third-party, not in the repository): "
+            e2e.skip_loudly(self, "the Cityscapes ENet %s not found (third-party, not in the repository): "
                        "real-drive e2e test not run" % model)
         e2e.require_executables(self, "kitti2bag", "inekf_node", "segmentation_node",
                                 "semantic_octomap_node")

@@ -6,7 +6,6 @@ played through inekf_node, and the odometry is compared with the OXTS ground tru
 (and passes) when ../shared is absent, as in a fresh clone.
 """
 import os
-import sys
 import tempfile
 import time
 import unittest
@@ -25,10 +24,7 @@ class EndToEndRealOxts(unittest.TestCase):
         p = e2e.param
         drive = os.path.join(e2e.shared_dir(), "data", "kitti_raw", p("drive", "2011_09_26/2011_09_26_drive_0036_sync"))
         if not os.path.isdir(os.path.join(drive, "oxts")):
-            message = "SKIPPED: %s not found (../shared absent): real-data e2e test not run" % drive
-            sys.stderr.write("\n*** %s ***\n" % message)
-            rospy.logwarn(message)
-            self.skipTest(message)
+            e2e.skip_loudly(self, "%s not found (../shared absent): real-data e2e test not run" % drive)
         e2e.require_executables(self, "kitti2bag", "inekf_node")
         bag = e2e.kitti2bag(drive, ["--calib-dir", os.path.dirname(drive)] +
                             p("bag_args", e2e.PROTOCOL_BAG_ARGS).split())

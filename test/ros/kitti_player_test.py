@@ -246,7 +246,7 @@ class KittiPlayerTest(unittest.TestCase):
         if not os.path.isdir(oxts_dir):
             print('\n*** SKIPPED kitti_player_test: shared data not found: %s\n' % oxts_dir,
                   file=sys.stderr)
-            return
+            self.skipTest('shared data not found: %s' % oxts_dir)
         with open(os.path.join(oxts_dir, 'timestamps.txt')) as f:
             stamps = [stamp_ns(line) for line in f if line.strip()]
         duration_ns = int(rospy.get_param('~duration_s') * 1e9)

@@ -11,7 +11,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 import unittest
 
@@ -57,10 +56,7 @@ class TwoHost(unittest.TestCase):
             output = log.read()
         print(output)  # the measured figures go into the test log
         if result.returncode == SKIP_EXIT:
-            message = "SKIPPED: two-namespace test not run: " + output.strip().splitlines()[-1]
-            rospy.logwarn(message)
-            sys.stderr.write("\n*** %s ***\n" % message)
-            self.skipTest(message)
+            e2e.skip_loudly(self, "two-namespace test not run: " + output.strip().splitlines()[-1])
         self.assertEqual(result.returncode, 0, "two_host_demo.sh exited %d:\n%s" % (result.returncode, output[-3000:]))
         with open(os.path.join(out_dir, "run", "summary.json")) as f:
             summary = json.load(f)

@@ -7,7 +7,6 @@ map must hold exactly its own bag's scans (a map fed the other pipeline's data t
 both), each filter must publish its own odometry, and /diagnostics must carry both pipelines'
 statuses under their own names.
 """
-import os
 import subprocess
 import sys
 import threading
