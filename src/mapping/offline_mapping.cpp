@@ -14,6 +14,7 @@
 #include "inekf_semantic_mapping/kitti/calibration.h"
 #include "inekf_semantic_mapping/kitti/errors.h"
 #include "inekf_semantic_mapping/kitti/mercator.h"
+#include "inekf_semantic_mapping/kitti/oxts.h"
 #include "inekf_semantic_mapping/kitti/poses.h"
 #include "inekf_semantic_mapping/kitti/raw_drive.h"
 #include "inekf_semantic_mapping/kitti/timestamps.h"
@@ -332,8 +333,31 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
   }
 }
 
+std::optional<GeodeticOrigin> rawDriveMapOrigin(const std::string& drive_dir,
+                                                const std::string& calib_dir) {
+  const kitti::RawDrive raw(drive_dir, calib_dir);
+  if (!raw.hasOxts() || raw.oxts().size() == 0) return std::nullopt;
+  const kitti::OxtsRecord first = kitti::readOxtsFile(raw.oxts().framePath(0));
+  return GeodeticOrigin{first.lat, first.lon, first.alt};
+}
+
 void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress) {
+  // Saved with the map, so that a node resuming it checks that its own map frame is this one.
+  if (const std::optional<GeodeticOrigin> origin =
+          rawDriveMapOrigin(drive.drive_dir, drive.calib_dir)) {
+    const std::string refusal = session->agreeOnGeodeticOrigin(*origin);
+    if (!refusal.empty()) throw std::runtime_error(drive.drive_dir + ": " + refusal);
+    if (progress) {
+      std::ostringstream line;
+      line.precision(10);
+      line
+          << "[semantic_map_offline] map frame: east-north-up at the drive's first OXTS frame (lat "
+          << origin->lat_deg << ", lon " << origin->lon_deg << ", alt " << origin->alt_m
+          << "), saved with the map\n";
+      *progress << line.str();
+    }
+  }
   forEachRawDriveScan(
       drive,
       [&](const RawDriveScan& scan) {

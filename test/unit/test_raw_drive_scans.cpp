@@ -299,6 +299,40 @@ TEST(RawDriveScans, APosesFileCoversWhatItHas) {
   }
 }
 
+// A map made offline keeps its frame's geodetic origin (the first OXTS frame, where the OXTS
+// solution and inekf_offline's poses put the map frame), so that a node resuming it can check
+// its own frame against it; a drive whose poses file is the only pose source has none.
+TEST(RawDriveScans, TheMapKeepsTheDrivesFirstOxtsFrameAsItsOrigin) {
+  const ScratchDrive scratch("2011_09_26_drive_0005_sync");
+  const std::vector<double> times = evenTimes(4, 0.1, 2.0);
+  writeOxts(scratch.drive_dir + "/oxts", times);
+  writeSensor(scratch.drive_dir + "/velodyne_points", times, ".bin", std::string(16, 0));
+  OfflineRawDrive drive;
+  drive.drive_dir = scratch.drive_dir;
+  SemanticMappingSession session{SemanticMappingConfig()};
+  std::ostringstream log;
+  mapRawDrive(drive, &session, nullptr, &log);
+  ASSERT_TRUE(session.geodeticOrigin().has_value()) << log.str();
+  const kitti::OxtsRecord first = recordAt(2.0);
+  EXPECT_DOUBLE_EQ(session.geodeticOrigin()->lat_deg, first.lat);
+  EXPECT_DOUBLE_EQ(session.geodeticOrigin()->lon_deg, first.lon);
+  EXPECT_DOUBLE_EQ(session.geodeticOrigin()->alt_m, first.alt);
+  EXPECT_NE(log.str().find("map frame: east-north-up at the drive's first OXTS frame (lat 49, lon "
+                           "8.4002"),
+            std::string::npos)
+      << log.str();
+
+  fs::remove_all(scratch.drive_dir + "/oxts");
+  std::string poses;
+  for (int k = 0; k < 4; ++k) poses += "1 0 0 " + std::to_string(k) + " 0 1 0 0 0 0 1 0\n";
+  writeFile(scratch.date_dir + "/poses.txt", poses);
+  drive.poses_path = scratch.date_dir + "/poses.txt";
+  SemanticMappingSession without_oxts{SemanticMappingConfig()};
+  mapRawDrive(drive, &without_oxts, nullptr, nullptr);
+  EXPECT_EQ(without_oxts.statistics().scans_inserted, 4u);
+  EXPECT_FALSE(without_oxts.geodeticOrigin().has_value());
+}
+
 }  // namespace
 }  // namespace mapping
 }  // namespace inekf_semantic_mapping

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -69,6 +70,12 @@ struct OfflineRawDrive {
   std::function<void(const Eigen::Isometry3d& T_map_velo)> on_scan_inserted;
 };
 
+// The geodetic origin of a raw drive's map frame: east-north-up at its first OXTS frame, where
+// both pose sources put it (the OXTS solution, and inekf_offline for the poses it writes). None
+// for a drive without oxts/ (its poses file's frame is not known).
+std::optional<GeodeticOrigin> rawDriveMapOrigin(const std::string& drive_dir,
+                                                const std::string& calib_dir = "");
+
 // One velodyne frame of a raw drive, as mapRawDrive inserts it.
 struct RawDriveScan {
   std::string stem;        // its file's 10-digit number (velodyne_points/data/<stem>.bin)
@@ -95,7 +102,8 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
 
 // Inserts every velodyne frame of the drive (forEachRawDriveScan) with camera labels from
 // `camera_labels` (stem: the scan's image_stem) when given; warnings and progress go to
-// `progress`. Map frame: the devkit's Mercator frame at the first fix.
+// `progress`. Map frame: the devkit's Mercator frame at the first fix; its geodetic origin
+// (rawDriveMapOrigin) goes into the session's map, which saves it.
 void mapRawDrive(const OfflineRawDrive& drive, SemanticMappingSession* session,
                  const CameraLabelSource* camera_labels, std::ostream* progress);
 
