@@ -19,6 +19,8 @@ if(CATKIN_ENABLE_TESTING)
   # an IMU without orientation, an Ouster-like cloud): needs no data.
   add_rostest(test/ros/own_robot.test
     DEPENDENCIES inekf_node semantic_octomap_node ${PROJECT_NAME}_generate_messages_py)
+  # inekf_node with wheel odometry in a frame turned from base_link, through a GPS outage.
+  add_rostest(test/ros/wheel_odometry.test DEPENDENCIES inekf_node)
   # Two pipelines in two namespaces on one master, each on its own bag (occupancy only).
   add_rostest(test/ros/two_pipelines.test DEPENDENCIES ${ISM_PIPELINE_TARGETS})
   # Real lidar + camera through the whole pipeline with the ENet from ../shared (skips without).
