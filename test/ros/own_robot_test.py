@@ -19,49 +19,11 @@ import rospy
 import rostest
 import tf2_ros
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, PointCloud2, PointField
+from sensor_msgs.msg import Imu, NavSatFix, PointCloud2, PointField
 
 from inekf_semantic_mapping.msg import SemanticMapInfo
-
-LAT0, LON0, ALT0 = 48.0, 11.0, 500.0
-EARTH_RADIUS_M = 6378137.0
-RADIUS_M, SPEED_MPS, ACCEL_MPS2, REST_S = 40.0, 8.0, 2.0, 2.0
-YAW0 = math.radians(30.0)
-GRAVITY = 9.81
-BASE_FROM_IMU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # yaw 90 deg
-ANTENNA_IN_BASE = np.array([1.0, 0.0, 1.5])
-LIDAR_HEIGHT_M = 1.8
-WALL_RADIUS_M = 55.0  # around the circle's centre
-
-
-def rotation_z(angle):
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def truth(t):
-    """base_link's position (map, east-north-up from the start), yaw, speed, acceleration along
-    the path and yaw rate at t seconds."""
-    if t < REST_S:
-        along, speed, accel = 0.0, 0.0, 0.0
-    else:
-        ta, t_full = t - REST_S, SPEED_MPS / ACCEL_MPS2
-        if ta < t_full:
-            along, speed, accel = 0.5 * ACCEL_MPS2 * ta * ta, ACCEL_MPS2 * ta, ACCEL_MPS2
-        else:
-            along = 0.5 * ACCEL_MPS2 * t_full ** 2 + SPEED_MPS * (ta - t_full)
-            speed, accel = SPEED_MPS, 0.0
-    yaw = YAW0 + along / RADIUS_M
-    centre = np.array([-RADIUS_M * math.sin(YAW0), RADIUS_M * math.cos(YAW0), 0.0])
-    position = centre + RADIUS_M * np.array([math.sin(yaw), -math.cos(yaw), 0.0])
-    return position, yaw, speed, accel, speed / RADIUS_M, centre
-
-
-def geodetic(p):
-    lat = LAT0 + math.degrees(p[1] / EARTH_RADIUS_M)
-    lon = LON0 + math.degrees(p[0] / (EARTH_RADIUS_M * math.cos(math.radians(LAT0))))
-    return lat, lon, ALT0 + p[2]
-
+from simulated_robot import LIDAR_HEIGHT_M, WALL_RADIUS_M, fix_message, imu_message, rotation_z, \
+    truth, yaw_error_deg
 
 class OwnRobotTest(unittest.TestCase):
     def test_localizes_and_maps_another_robot(self):
@@ -100,26 +62,11 @@ class OwnRobotTest(unittest.TestCase):
                 break
             t = 0.01 * k
             stamp = start + rospy.Duration(t)
-            position, yaw, speed, accel, yaw_rate, centre = truth(t)
+            position, yaw, _, _, _, centre = truth(t)
             truth_at[stamp.to_nsec()] = (position, yaw)
-            imu = Imu()
-            imu.header.stamp, imu.header.frame_id = stamp, "imu_turned"
-            gyro = BASE_FROM_IMU.T.dot([0.0, 0.0, yaw_rate])
-            force = BASE_FROM_IMU.T.dot([accel, speed * yaw_rate, GRAVITY])
-            imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = gyro
-            imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = force
-            imu.orientation_covariance[0] = -1.0  # sensor_msgs: no orientation
-            imu_pub.publish(imu)
+            imu_pub.publish(imu_message(stamp, t))
             if k % 20 == 0:
-                antenna = position + rotation_z(yaw).dot(ANTENNA_IN_BASE)
-                antenna[:2] += rng.normal(0.0, 0.3, 2)
-                fix = NavSatFix()
-                fix.header.stamp, fix.header.frame_id = stamp, "gps_antenna"
-                fix.status.status, fix.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
-                fix.latitude, fix.longitude, fix.altitude = geodetic(antenna)
-                fix.position_covariance = [0.09, 0, 0, 0, 0.09, 0, 0, 0, 0.25]
-                fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
-                fix_pub.publish(fix)
+                fix_pub.publish(fix_message(stamp, t, rng))
             if k % 10 == 5:
                 cloud_pub.publish(self.cloud(stamp, position, yaw, centre))
                 clouds += 1
@@ -133,10 +80,9 @@ class OwnRobotTest(unittest.TestCase):
         errors, yaw_errors = [], []
         for message in settled:
             position, yaw = truth_at[message.header.stamp.to_nsec()]
-            p, q = message.pose.pose.position, message.pose.pose.orientation
+            p = message.pose.pose.position
             errors.append(math.hypot(p.x - position[0], p.y - position[1]))
-            estimated = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
-            yaw_errors.append(abs(math.degrees(math.remainder(estimated - yaw, 2 * math.pi))))
+            yaw_errors.append(yaw_error_deg(message.pose.pose.orientation, yaw))
         rospy.loginfo("own_robot_test: %d poses after %.0f s: horizontal RMS %.2f m, max yaw "
                       "error %.2f deg", len(settled), settle_s,
                       math.sqrt(np.mean(np.square(errors))), max(yaw_errors))

@@ -2,7 +2,7 @@
 """rostest for inekf_node's wheel odometry (nav_msgs/Odometry on ~wheel_odom), live on the wall
 clock.
 
-The robot of own_robot_test.py (IMU at 100 Hz turned 90 deg without orientation, 5 Hz fixes of an
+The robot of simulated_robot.py (IMU at 100 Hz turned 90 deg without orientation, 5 Hz fixes of an
 antenna 1.0 m ahead and 1.5 m up) drives a circle of 40 m radius at 8 m/s. Its wheel odometry
 (20 Hz, 0.05 m/s of noise) is stated in the frame wheels_reversed, turned 180 deg from base_link:
 the node must turn it through tf (its twist's x is minus the forward speed). From GPS_END_S the
@@ -23,9 +23,9 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from sensor_msgs.msg import Imu, NavSatFix
 
-from own_robot_test import BASE_FROM_IMU, ANTENNA_IN_BASE, GRAVITY, geodetic, rotation_z, truth
+from simulated_robot import fix_message, imu_message, truth, yaw_error_deg
 
 GPS_END_S, OUTAGE_S = 22.0, 15.0
 BIAS_STEP_MPS2 = 0.4  # along base_link's x, from GPS_END_S on
@@ -72,27 +72,12 @@ class WheelOdometryTest(unittest.TestCase):
                 break
             t = 0.01 * k
             stamp = start + rospy.Duration(t)
-            position, yaw, speed, accel, yaw_rate, _ = truth(t)
+            position, yaw, speed, _, yaw_rate, _ = truth(t)
             truth_at[stamp.to_nsec()] = (position, yaw)
-            bias = [BIAS_STEP_MPS2 if t >= GPS_END_S else 0.0, 0.0, 0.0]
-            imu = Imu()
-            imu.header.stamp, imu.header.frame_id = stamp, "imu_turned"
-            gyro = BASE_FROM_IMU.T.dot([0.0, 0.0, yaw_rate])
-            force = BASE_FROM_IMU.T.dot(np.add([accel, speed * yaw_rate, GRAVITY], bias))
-            imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = gyro
-            imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = force
-            imu.orientation_covariance[0] = -1.0  # sensor_msgs: no orientation
-            imu_pub.publish(imu)
+            bias = (BIAS_STEP_MPS2 if t >= GPS_END_S else 0.0, 0.0, 0.0)
+            imu_pub.publish(imu_message(stamp, t, bias))
             if k % 20 == 0 and t < GPS_END_S:
-                antenna = position + rotation_z(yaw).dot(ANTENNA_IN_BASE)
-                antenna[:2] += rng.normal(0.0, 0.3, 2)
-                fix = NavSatFix()
-                fix.header.stamp, fix.header.frame_id = stamp, "gps_antenna"
-                fix.status.status, fix.status.service = NavSatStatus.STATUS_FIX, NavSatStatus.SERVICE_GPS
-                fix.latitude, fix.longitude, fix.altitude = geodetic(antenna)
-                fix.position_covariance = [0.09, 0, 0, 0, 0.09, 0, 0, 0, 0.25]
-                fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_DIAGONAL_KNOWN
-                fix_pub.publish(fix)
+                fix_pub.publish(fix_message(stamp, t, rng))
             if wheel_every and k % wheel_every == 0:
                 wheels = Odometry()
                 wheels.header.stamp, wheels.header.frame_id = stamp, "odom"
@@ -113,9 +98,7 @@ class WheelOdometryTest(unittest.TestCase):
         yaw_errors = []
         for message in in_outage:
             _, yaw = truth_at[message.header.stamp.to_nsec()]
-            q = message.pose.pose.orientation
-            estimated = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2))
-            yaw_errors.append(abs(math.degrees(math.remainder(estimated - yaw, 2 * math.pi))))
+            yaw_errors.append(yaw_error_deg(message.pose.pose.orientation, yaw))
         last = in_outage[-1]
         position, _ = truth_at[last.header.stamp.to_nsec()]
         p = last.pose.pose.position
