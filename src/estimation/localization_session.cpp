@@ -150,6 +150,12 @@ void LocalizationSession::reset(const std::string& why, Update* update) {
   update->note = why;
 }
 
+LocalizationSession::Update LocalizationSession::restart(const std::string& why) {
+  Update update;
+  reset(why, &update);
+  return update;
+}
+
 void LocalizationSession::dropHeldJump() {
   statistics_.messages_off_the_time_line += static_cast<std::int64_t>(held_jump_->events.size());
   held_jump_.reset();
@@ -272,7 +278,7 @@ bool LocalizationSession::admit(double stamp_s, const Event& event, Update* upda
   if (behind) {
     std::ostringstream why;
     why << std::fixed << std::setprecision(3) << "time jumped back (" << source << " stamp "
-        << stamp_s << " s, newest " << *newest_stamp_s_ << " s)";
+        << stamp_s << " s, newest " << *newest_stamp_s_ << " s: a bag loop, a restarted player?)";
     const double old_end = *newest_stamp_s_;
     reset(why.str(), update);
     old_timeline_end_s_ = old_end;

@@ -7,6 +7,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/NavSatFix.h>
+#include <std_srvs/Trigger.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -82,6 +83,7 @@ class InekfNodeCore::Impl {
     velocity_subscriber_ = nh.subscribe(topics::kGpsVelocity, 10, &Impl::onVelocity, this);
     wheel_subscriber_ = nh.subscribe(topics::kWheelOdometry, 100, &Impl::onWheelOdometry, this,
                                      ros::TransportHints().tcpNoDelay());
+    reset_service_ = private_nh.advertiseService("reset", &Impl::onReset, this);
     ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " filter, config "
                                    << config_file_ << ", waiting for IMU on "
                                    << imu_subscriber_.getTopic() << " and GPS on "
@@ -136,9 +138,19 @@ class InekfNodeCore::Impl {
     origin_kept_ = true;
   }
 
+  // ~reset (std_srvs/Trigger): the filter starts over at the next fix, in the same map frame.
+  // Served on the callbacks' own thread (ros::spin), so it never runs inside a message's update.
+  bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+    report(session_.restart("~reset called"));
+    response.success = true;
+    response.message =
+        "filter and path reset: the filter starts again at the next fix, in the same map frame";
+    return true;
+  }
+
   void report(const LocalizationSession::Update& update) {
     if (update.reset) {
-      ROS_WARN_STREAM("inekf_node: " << update.note << ": filter and path reset (bag loop?)");
+      ROS_WARN_STREAM("inekf_node: " << update.note << ": filter and path reset");
       output_.clearPath();
     } else if (update.started) {
       ROS_INFO_STREAM("inekf_node: " << filterStatus().filter_type << " " << update.note);
@@ -370,6 +382,7 @@ class InekfNodeCore::Impl {
   std::deque<ros::Time> recent_imu_stamps_;  // of the latest IMU samples received
   ros::Publisher status_publisher_;
   ros::Subscriber imu_subscriber_, fix_subscriber_, velocity_subscriber_, wheel_subscriber_;
+  ros::ServiceServer reset_service_;
   bool wheel_logged_ = false;
   LocalizationMonitor monitor_;
   NodeDiagnostics diagnostics_;

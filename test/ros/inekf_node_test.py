@@ -38,7 +38,7 @@ import tf2_ros
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
-from std_srvs.srv import SetBool
+from std_srvs.srv import SetBool, Trigger
 
 from inekf_semantic_mapping.msg import FilterStatus
 
@@ -203,14 +203,15 @@ class InekfNodeTest(unittest.TestCase):
         return message
 
     def play(self, drive, rate, gps_every, sigma_h, sigma_v, rng, frames=None, faults=False,
-             fix_before_imu=False, fix_delay_frames=0):
+             fix_before_imu=False, fix_delay_frames=0, reset_at_frame=0):
         """Publishes the drive's frames at `rate` times real time. With faults: a duplicate of
         frame 100's IMU message, at frame 120 an IMU message and a fix with a NaN, and at frame
         150 the IMU message of frame 145 (out of order). With fix_before_imu: frame 0's fix
         reaches the node well before frame 0's IMU and velocity messages (which of the
         connections delivers first is otherwise a race). With fix_delay_frames: each fix after
         the first is published that many frames after its own (a GPS receiver or link that is
-        slower than the IMU)."""
+        slower than the IMU). With reset_at_frame: the node's ~reset service is called before
+        that frame; its response is kept in self.reset_response."""
         count = len(drive.records) if frames is None else min(frames, len(drive.records))
         delayed_fixes = []  # (frame index to publish at, message)
         for index in range(count):
@@ -222,6 +223,9 @@ class InekfNodeTest(unittest.TestCase):
                 noise = rng.standard_normal(3) * [sigma_h, sigma_h, sigma_v]
                 self.fix_publisher.publish(self.fix_message(record, stamp, noise, sigma_h, sigma_v))
                 time.sleep(0.3)
+            if reset_at_frame and index == reset_at_frame:
+                time.sleep(0.3)  # the frames before it through first (another connection)
+                self.reset_response = rospy.ServiceProxy("/inekf_node/reset", Trigger)()
             imu = self.imu_message(record, stamp)
             self.velocity_publisher.publish(self.velocity_message(record, stamp))
             self.imu_publisher.publish(imu)
@@ -365,12 +369,16 @@ class InekfNodeTest(unittest.TestCase):
         fix_delay_frames = rospy.get_param("~fix_delay_frames", 0)
         max_yaw_error_deg = rospy.get_param("~max_yaw_error_deg", 5.0)
         settle_s = rospy.get_param("~settle_s", 0.0)
+        reset_at_frame = rospy.get_param("~reset_at_frame", 0)
         rng = np.random.default_rng(rospy.get_param("~seed", 1))
         drive = OxtsDrive(self.oxts_dir, first_frame, frames)
         self.wait_for_node()
 
+        if reset_at_frame:
+            rospy.wait_for_service("/inekf_node/reset", timeout=10.0)
         self.play(drive, rate, gps_every, sigma_h, sigma_v, rng, faults=inject_faults,
-                  fix_before_imu=fix_before_imu, fix_delay_frames=fix_delay_frames)
+                  fix_before_imu=fix_before_imu, fix_delay_frames=fix_delay_frames,
+                  reset_at_frame=reset_at_frame)
         first_pass = list(self.odometry)
         self.assertGreater(len(first_pass), 0.8 * len(drive.records),
                            "inekf_node published %d odometry messages for %d IMU frames" %
@@ -422,6 +430,19 @@ class InekfNodeTest(unittest.TestCase):
                                     "the duplicate, NaN and out-of-order IMU messages were not counted")
             self.assertGreaterEqual(status.gps_fixes_rejected, 1, "the NaN fix was not counted")
         self.assertTrue(self.paths and len(self.paths[-1].poses) > 0, "no path on /inekf/path")
+        if reset_at_frame:
+            # ~reset: the filter started over at the next fix and went on; the path holds only
+            # poses from then on.
+            self.assertTrue(self.reset_response.success, self.reset_response.message)
+            self.assertEqual(status.resets, 1)
+            reset_stamp = drive.stamps[reset_at_frame - 1]
+            self.assertGreater(self.paths[-1].poses[0].header.stamp, reset_stamp)
+            after = [m for m in first_pass if m.header.stamp > reset_stamp]
+            restart = after[0].header.stamp
+            self.assertLessEqual((restart - reset_stamp).to_sec(), gps_every * 0.1 + 0.15,
+                                 "no start at the first fix after the reset")
+            sys.stderr.write("[inekf_node_test] ~reset before frame %d: started again %.2f s "
+                             "later\n" % (reset_at_frame, (restart - reset_stamp).to_sec()))
 
         if loop_frames > 0:
             # Time jumps back to the start of the drive: the node must reset and localize again.

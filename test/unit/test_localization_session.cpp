@@ -359,6 +359,30 @@ TEST(LocalizationSession, ABagLoopIsOneResetAndTheOldLoopsLeftoversAreDropped) {
   EXPECT_EQ(session.statistics().messages_of_previous_time_line, 2);
 }
 
+// inekf_node's ~reset: the filter starts over at the next fix (not at the IMU alone), in the map
+// frame of the first start (a start at its own fix's position would move the map under the map).
+TEST(LocalizationSession, ARestartOnRequestStartsOverAtTheNextFixInTheSameFrame) {
+  LocalizationSession session{LocalizationSessionConfig()};  // origin: the first fix
+  standStill(&session, 100.0, 2.0);
+  ASSERT_TRUE(session.started());
+  ASSERT_TRUE(session.projection().has_value());
+  const double origin_lat = session.projection()->lat0Deg();
+  const LocalizationSession::Update restart = session.restart("~reset called");
+  EXPECT_TRUE(restart.reset);
+  EXPECT_EQ(restart.note, "~reset called");
+  EXPECT_FALSE(session.started());
+  EXPECT_EQ(session.statistics().resets, 1);
+  EXPECT_FALSE(session.addImu(restingImu(102.1)).new_estimate);
+  session.addGpsVelocity(stillAt(102.2));
+  session.addImu(restingImu(102.2));
+  const LocalizationSession::Update start = session.addFix(fixAt(102.2, 30.0));
+  ASSERT_TRUE(start.started) << start.note;
+  EXPECT_NEAR(session.state().position_map.x(), 30.0, 1e-6);  // the first start's frame
+  EXPECT_EQ(session.projection()->lat0Deg(), origin_lat);
+  expectEstimatesGoOn(&session, 102.2, 10);
+  EXPECT_EQ(session.statistics().resets, 1);
+}
+
 // Found by review: one fix stamped 1000 s ahead (a receiver's glitch) became the newest stamp,
 // and the next ordinary IMU sample a jump back that reset a healthy filter. A message far ahead
 // is dropped until a second one confirms the jump.

@@ -201,6 +201,10 @@ class LocalizationSession {
   // jump, a loop, another clock) is stale and only counted, so it never moves the session's time.
   // The note says the first stale one after a used one.
   Update addWheelSpeed(const WheelSpeedEvent& event);
+  // Starts over on request (a filter the user sees diverged), as a confirmed jump back does: the
+  // filter and the held data are dropped and the next start waits for a fix; the map origin
+  // stays. The Update says reset, with `why` as its note.
+  Update restart(const std::string& why);
   // Whether a GPS velocity source exists (default true): without one the start does not wait.
   void setGpsVelocityExpected(bool expected) { gps_velocity_expected_ = expected; }
   // The IMU's axes in base_link's (Localizer::setImuMounting); false: not a rotation, not taken.
