@@ -97,6 +97,15 @@ CorrectionResult rejectBadFix() {
 // ImuFilterBase
 
 void ImuFilterBase::initialize(const NavState& state, const ErrorCovariance& covariance) {
+  // A non-finite start would be kept, and every later step refused without a word.
+  if (!state.rotation.allFinite() || !state.velocity_map.allFinite() ||
+      !state.position_map.allFinite() || !state.gyro_bias.allFinite() ||
+      !state.accel_bias.allFinite() || !std::isfinite(state.stamp_s)) {
+    throw std::invalid_argument("filter initialised with a non-finite state");
+  }
+  if (!covariance.allFinite()) {
+    throw std::invalid_argument("filter initialised with a non-finite covariance");
+  }
   state_ = state;
   state_.rotation = lie::normalizeRotation(state.rotation);
   covariance_ = symmetrized(covariance);

@@ -5,7 +5,9 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <limits>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 #include "inekf_semantic_mapping/estimation/error_dynamics.h"
@@ -164,6 +166,20 @@ TEST(Filters, NoiseFreePropagationReproducesTheDrive) {
     EXPECT_LT(worst_angle, 1e-9) << toString(type);
     EXPECT_NEAR(filter->state().stamp_s, drive.truth.back().stamp_s, 1e-9);
     EXPECT_GT((drive.truth.back().position_map - drive.truth[0].position_map).norm(), 50.0);
+  }
+}
+
+// Found by review: a non-finite covariance was taken, and every later propagation refused
+// without a word (the stamp never advanced).
+TEST(Filters, ANonFiniteStartIsRefused) {
+  for (FilterType type : kAllFilters) {
+    auto filter = makeFilter(type, ImuNoise());
+    NavState state;
+    ErrorCovariance covariance = ErrorCovariance::Identity();
+    covariance(4, 4) = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_THROW(filter->initialize(state, covariance), std::invalid_argument) << toString(type);
+    state.position_map.x() = std::numeric_limits<double>::infinity();
+    EXPECT_THROW(filter->initialize(state, ErrorCovariance::Identity()), std::invalid_argument);
   }
 }
 

@@ -49,6 +49,7 @@ class NavigationFilter {
   virtual FilterType type() const = 0;
 
   // Sets the state and its covariance, in this filter's own error coordinates (order above).
+  // Throws std::invalid_argument on a non-finite state or covariance.
   virtual void initialize(const NavState& state, const ErrorCovariance& covariance) = 0;
 
   // Integrates one IMU sample held constant over dt seconds (closed form on SE_2(3) with the
