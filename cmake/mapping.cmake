@@ -89,9 +89,14 @@ ism_add_ros_executable(semantic_octomap_node
 ism_add_gtest(test_mapping_diagnostics
   SOURCES test/unit/test_mapping_diagnostics.cpp
   LINK ${PROJECT_NAME}_mapping_ros)
-if(TARGET test_mapping_diagnostics)
-  target_include_directories(test_mapping_diagnostics PRIVATE ${ISM_ROS_INCLUDE_DIRS})
-endif()
+ism_add_gtest(test_label_camera
+  SOURCES test/unit/test_label_camera.cpp
+  LINK ${PROJECT_NAME}_mapping_ros)
+foreach(mapping_ros_test test_mapping_diagnostics test_label_camera)
+  if(TARGET ${mapping_ros_test})
+    target_include_directories(${mapping_ros_test} PRIVATE ${ISM_ROS_INCLUDE_DIRS})
+  endif()
+endforeach()
 
 # The segmentation and map nodes as nodelets in one library (nodelet_plugins.xml).
 ism_add_ros_library(${PROJECT_NAME}_nodelets

@@ -289,7 +289,14 @@ std::size_t SemanticMappingSession::addLabelImage(double stamp, const LabelImage
   // Known now: checked now, so that a label image that does not fit its camera is reported as it
   // comes.
   std::optional<CameraModel> camera;
-  if (camera_lookup_) camera = camera_lookup_(camera_frame, labels.width, labels.height);
+  if (camera_lookup_) {
+    try {
+      camera = camera_lookup_(camera_frame, labels.width, labels.height);
+    } catch (const std::invalid_argument&) {
+      ++statistics_.label_images_refused;  // its camera refuses it
+      throw;
+    }
+  }
   if (camera) checkLabelImage(stamp, labels, &*camera);
   std::shared_ptr<PendingLabels> copy = PendingLabels::copyOf(stamp, labels);
   copy->camera_frame = camera_frame;

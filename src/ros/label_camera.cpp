@@ -3,6 +3,9 @@
 #include <ros/console.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include <stdexcept>
+#include <string>
+
 #include "inekf_semantic_mapping/ros/mapping_conversions.h"
 #include "inekf_semantic_mapping/ros/names.h"
 
@@ -13,7 +16,15 @@ std::optional<mapping::CameraModel> LabelCamera::cameraFor(const std::string& ca
                                                            int width, int height) const {
   if (file_camera_) {
     mapping::CameraModel camera = *file_camera_;
-    camera.width = width;
+    if (camera.width > 0 && camera.height > 0 &&
+        (camera.width != width || camera.height != height)) {
+      throw std::invalid_argument(
+          "label image is " + std::to_string(width) + "x" + std::to_string(height) +
+          ", the rectified size (S_rect) of " + file_camera_source_ + " says " +
+          std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+          ": the calibration of another recording day or camera? (~calib_dir)");
+    }
+    camera.width = width;  // a calibration without S_rect: the images' own size
     camera.height = height;
     return camera;
   }

@@ -134,12 +134,15 @@ class SemanticOctomapNodeCore::Impl {
                       << options_.map_file << " (" << session_->tree().size() << " nodes)");
     }
     std::optional<mapping::CameraModel> file_camera;
+    std::string file_camera_source;
     if (!options_.calib_dir.empty()) {
       const kitti::CameraProjection c =
           kitti::readRawCalibration(options_.calib_dir).projection(options_.camera_index);
       file_camera = mapping::CameraModel{c.P_rect, c.R_rect, c.T_cam0_velo, c.width, c.height};
+      file_camera_source = options_.calib_dir + "/calib_cam_to_cam.txt (camera " +
+                           std::to_string(options_.camera_index) + ")";
     }
-    label_camera_ = std::make_unique<LabelCamera>(tf_buffer_, file_camera);
+    label_camera_ = std::make_unique<LabelCamera>(tf_buffer_, file_camera, file_camera_source);
     label_camera_->serve(session_.get());
     cloud_pub_ = nh_.advertise<sensor_msgs::PointCloud2>(topics::kLabeledCloud, 2);
     camera_info_sub_ = nh_.subscribe(topics::kCameraColorLeftInfo, 1, &LabelCamera::setCameraInfo,

@@ -19,9 +19,12 @@ namespace ros_conversions {
 class LabelCamera {
  public:
   // file_camera: the camera from calibration files, at its own image size (then tf and
-  // camera_info are not used).
-  LabelCamera(const tf2_ros::Buffer& tf, std::optional<mapping::CameraModel> file_camera)
-      : tf_(tf), file_camera_(std::move(file_camera)) {}
+  // camera_info are not used); file_camera_source names them in errors.
+  LabelCamera(const tf2_ros::Buffer& tf, std::optional<mapping::CameraModel> file_camera,
+              std::string file_camera_source = "")
+      : tf_(tf),
+        file_camera_(std::move(file_camera)),
+        file_camera_source_(std::move(file_camera_source)) {}
 
   void setCameraInfo(const sensor_msgs::CameraInfo& info) { camera_info_ = info; }
   // The frame of the clouds (the camera's pose is looked up against it).
@@ -29,7 +32,9 @@ class LabelCamera {
 
   // The camera of a width x height label image in `camera_frame` (empty: camera_info's frame);
   // nullopt while something is missing (said once in a while in the log). Throws
-  // std::invalid_argument for an unusable camera_info (non-finite P, zero size).
+  // std::invalid_argument for an unusable camera_info (non-finite P, zero size), and for a label
+  // image of another size than the calibration files' rectified one (another day's calibration:
+  // every label would land off by the difference).
   std::optional<mapping::CameraModel> cameraFor(const std::string& camera_frame, int width,
                                                 int height) const;
   // Makes this the session's camera lookup, and its label warnings log lines naming the topic
@@ -44,6 +49,7 @@ class LabelCamera {
 
   const tf2_ros::Buffer& tf_;
   std::optional<mapping::CameraModel> file_camera_;
+  std::string file_camera_source_;
   std::optional<sensor_msgs::CameraInfo> camera_info_;
   std::string lidar_frame_;
 };
