@@ -78,19 +78,40 @@ std::vector<std::string> RawDrive::missingParts() const {
   check(oxts_);
   check(velodyne_);
   for (const auto& camera : cameras_) check(camera);
-  if (!hasCalibration()) {
-    // Which of the three files, where some are there (a drive written without one had been
-    // reported as having none).
-    const std::vector<std::string> files = missingRawCalibrationFiles(calibration_search_dir_);
-    std::string which = "no calib_*.txt";
-    if (files.size() < 3) {
-      which.clear();
-      for (const std::string& file : files)
-        which += (which.empty() ? "" : ", ") + file + " missing";
-    }
-    missing.push_back("calibration (" + which + " in " + calibration_search_dir_ + ")");
-  }
+  if (!hasCalibration()) missing.push_back("calibration (" + calibrationProblem() + ")");
   return missing;
+}
+
+std::string RawDrive::calibrationProblem() const {
+  if (hasCalibration()) return "";
+  // Which of the three files, where some are there (a drive written without one had been
+  // reported as having none).
+  const std::vector<std::string> files = missingRawCalibrationFiles(calibration_search_dir_);
+  std::string which = "no calib_*.txt";
+  if (files.size() < 3) {
+    which.clear();
+    for (const std::string& file : files) which += (which.empty() ? "" : ", ") + file + " missing";
+  }
+  return which + " in " + calibration_search_dir_;
+}
+
+void RawDrive::requireCalibrationFor(bool velodyne, bool camera, const std::string& calib_option,
+                                     const std::string& leave_out) const {
+  if (hasCalibration()) return;
+  std::vector<std::string> parts;
+  if (velodyne && hasVelodyne()) parts.push_back("velodyne_points/");
+  if (camera && hasCamera(2)) parts.push_back("image_02/");
+  if (parts.empty()) return;
+  const std::string what = parts.size() == 2 ? parts[0] + " and " + parts[1] : parts[0];
+  std::string message = what + " need" + (parts.size() == 2 ? "" : "s") +
+                        " the calibration to be placed, and there is none (" +
+                        calibrationProblem() + "): give the drive's date folder with " +
+                        calib_option;
+  if (!leave_out.empty()) {
+    message +=
+        std::string(", or leave ") + (parts.size() == 2 ? "them" : "it") + " out with " + leave_out;
+  }
+  throw KittiFormatError(drive_dir_, message);
 }
 
 std::vector<std::string> RawDrive::frameWarnings() const {

@@ -269,9 +269,7 @@ void forEachRawDriveScan(const OfflineRawDrive& drive, const RawDriveScanVisitor
   if (drive.max_scans == 0) throw std::invalid_argument("max_scans 0: no scan to map");
   const kitti::RawDrive raw(drive.drive_dir, drive.calib_dir);
   if (!raw.hasVelodyne()) throw std::runtime_error(drive.drive_dir + ": no velodyne_points/");
-  if (!raw.hasCalibration()) {
-    throw std::runtime_error(drive.drive_dir + ": no calibration (calib_*.txt) found");
-  }
+  raw.requireCalibrationFor(true, false, "--calib-dir", "");
   const kitti::SensorStream& velodyne = raw.velodyne();
   std::size_t frames = velodyne.size();
   // An empty drive would be written out as an empty map, with no word of why.

@@ -57,10 +57,8 @@ class KittiPlayer {
     for (const std::string& step : drive_->stampWarnings()) {
       ROS_WARN_STREAM("kitti_player: " << step << " (published in stamp order)");
     }
-    if (drive_->hasCamera(2) && !drive_->hasCalibration()) {
-      ROS_WARN("kitti_player: image_02 present but no calibration: camera not published");
-      options_.timeline.cameras[2] = false;
-    }
+    drive_->requireCalibrationFor(options_.timeline.velodyne, options_.timeline.cameras[2],
+                                  "~calib_dir", "~publish_velodyne / ~publish_camera false");
     timeline_ = kitti::buildDriveTimeline(*drive_, options_.timeline);
     if (timeline_.empty()) throw std::invalid_argument("nothing to play in the chosen window");
     conv::checkTimelineFitsRosTime(options_.drive_dir, timeline_.front().stamp_ns,

@@ -118,11 +118,10 @@ int run(const Arguments& args) {
   for (const std::string& step : drive.stampWarnings()) {
     std::cerr << "kitti2bag: warning: " << step << " (the bag is written in stamp order)\n";
   }
-  kitti::TimelineOptions timeline_options = args.timeline;
-  if (timeline_options.cameras[2] && drive.hasCamera(2) && !drive.hasCalibration()) {
-    std::cerr << "kitti2bag: warning: image_02 without calibration: camera not written\n";
-    timeline_options.cameras[2] = false;
-  }
+  const kitti::TimelineOptions& timeline_options = args.timeline;
+  // Before anything is written: a bag of clouds without imu_link -> velo_link maps nothing.
+  drive.requireCalibrationFor(timeline_options.velodyne, timeline_options.cameras[2], "--calib-dir",
+                              "--no-velodyne / --no-camera");
   conv::DriveMessageFactory factory(drive, args.gps);
   const std::vector<kitti::TimelineEvent> timeline =
       kitti::buildDriveTimeline(drive, timeline_options);

@@ -115,6 +115,29 @@ TEST(KittiConversions, Kitti2bagWritesEverySensorConsistently) {
   EXPECT_EQ(calib_status, 2) << calib_output;
   EXPECT_NE(calib_output.find("no_such_calib: no such folder"), std::string::npos) << calib_output;
   EXPECT_FALSE(fs::exists(bag_path + ".5"));
+  // Found by review: a drive reached through a link in another folder (no calib_*.txt beside it)
+  // gave a bag of clouds without imu_link -> velo_link, exit 0, and a pipeline that mapped nothing.
+  // Refused now, naming the folder searched and the ways out.
+  const std::string elsewhere = test::makeTempDir("kitti_link");
+  fs::create_directory_symlink(drive, elsewhere + "/2011_01_01_drive_0001_sync");
+  const std::string linked = elsewhere + "/2011_01_01_drive_0001_sync";
+  const auto [link_status, link_output] = test::runCommand(
+      std::string(KITTI2BAG_PATH) + " --drive " + linked + " --output " + bag_path + ".6");
+  EXPECT_EQ(link_status, 1) << link_output;
+  EXPECT_NE(link_output.find("velodyne_points/ and image_02/ need the calibration to be placed, "
+                             "and there is none (no calib_*.txt in " +
+                             elsewhere +
+                             "): give the drive's date folder with --calib-dir, or "
+                             "leave them out with --no-velodyne / --no-camera"),
+            std::string::npos)
+      << link_output;
+  EXPECT_FALSE(fs::exists(bag_path + ".6"));
+  const auto [oxts_status, oxts_output] =
+      test::runCommand(std::string(KITTI2BAG_PATH) + " --drive " + linked + " --output " +
+                       bag_path + ".7 --no-velodyne --no-camera");
+  EXPECT_EQ(oxts_status, 0) << oxts_output;
+  EXPECT_TRUE(fs::exists(bag_path + ".7"));
+  fs::remove_all(elsewhere);
   // A full disk (simulated with a file size limit) fails cleanly, naming the output, instead of
   // aborting inside rosbag's destructor; no partial bag stays behind.
   const std::string full_disk = "bash -c 'trap \"\" XFSZ; ulimit -f 64; " +

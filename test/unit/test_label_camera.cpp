@@ -31,8 +31,7 @@ mapping::CameraModel kittiCamera(int width, int height) {
 // What addLabelImage throws for a width x height label image ("" when it takes it).
 std::string refusal(mapping::SemanticMappingSession* session, int width, int height) {
   const std::vector<std::uint8_t> pixels(static_cast<std::size_t>(width * height), 7);
-  const mapping::LabelImageView view{pixels.data(), width, height,
-                                     static_cast<std::size_t>(width)};
+  const mapping::LabelImageView view{pixels.data(), width, height, static_cast<std::size_t>(width)};
   try {
     session->addLabelImage(1.0, view, "camera_color_left");
   } catch (const std::invalid_argument& e) {

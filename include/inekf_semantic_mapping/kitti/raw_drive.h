@@ -41,11 +41,21 @@ class RawDrive {
   const std::string& calibrationDir() const { return calibration_dir_; }
   bool hasCalibration() const { return !calibration_dir_.empty(); }
   RawCalibration readCalibration() const;  // throws when !hasCalibration()
+  // Throws KittiFormatError when the lidar (velodyne) or the colour left camera (camera) is to be
+  // used and present but the calibration is not: its scans or images could not be placed (a bag
+  // with clouds and no imu_link -> velo_link maps nothing). The message names the folder searched,
+  // `calib_option` (how the tool is given the date folder) and `leave_out` (how it leaves them
+  // out; "": it cannot). kitti2bag, kitti_player and semantic_map_offline refuse alike.
+  void requireCalibrationFor(bool velodyne, bool camera, const std::string& calib_option,
+                             const std::string& leave_out) const;
 
   // Human-readable names of what is absent ("velodyne_points", "image_02", "oxts (no frames in
   // DIR)", "calibration (no calib_*.txt in DIR)"), for one warning that tells the user what will
   // not be published.
   std::vector<std::string> missingParts() const;
+  // Why hasCalibration() is false ("no calib_*.txt in DIR", "calib_velo_to_cam.txt missing in
+  // DIR"); "" when it is true.
+  std::string calibrationProblem() const;
   // Every present sensor's frames left out (SensorStream::warnings), for one warning each.
   std::vector<std::string> frameWarnings() const;
   // Every present sensor's timestamps.txt steps that go back or jump ahead by more than a second
