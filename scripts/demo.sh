@@ -102,6 +102,10 @@ else
   drive=$(cd "$drive" && pwd)
   generate_s=0
 fi
+# The calibration is in the date folder: beside the drive as given, or beside the folder a link to
+# the drive points to.
+calib_dir=$(dirname "$drive")
+[[ -f $calib_dir/calib_cam_to_cam.txt ]] || calib_dir=$(dirname "$(cd "$drive" && pwd -P)")
 
 # The map frame is the devkit Mercator frame at the drive's first fix (as the ground truth's):
 # inekf_node gets that origin instead of its first noisy fix, so the two trajectories compare.
@@ -109,7 +113,7 @@ read -r origin_lat origin_lon origin_alt _ <"$(ls "$drive"/oxts/data/*.txt | hea
 
 log "converting $drive into a bag (kitti2bag, GPS: 1.5 m / 3 m noise, every 10th fix)"
 t0=$(date +%s)
-"$ISM_BIN/kitti2bag" --drive "$drive" --calib-dir "$(dirname "$drive")" --output "$out/drive.bag" \
+"$ISM_BIN/kitti2bag" --drive "$drive" --calib-dir "$calib_dir" --output "$out/drive.bag" \
   --gps-sigma-h 1.5 --gps-sigma-v 3 --gps-every 10 --seed 1 >"$out/kitti2bag.log" 2>&1 ||
   { tail -n 20 "$out/kitti2bag.log"; exit 1; }
 convert_s=$(($(date +%s) - t0))
