@@ -142,6 +142,47 @@ class KittiPlayerTest(unittest.TestCase):
         self.assertNotEqual(code, 0, output)
         self.assertIn("'gps_seed' must be >= 0", output)
 
+    def test_a_drive_its_calibration_cannot_place_is_refused_before_playing(self):
+        """Needs no ../shared. Found by review: with another day's calibration every image was
+        refused, one error a frame, and the drive played on without its camera, exit 0; without
+        a calibration the clouds played with no imu_link -> velo_link. Both stop at the start,
+        naming the file or the folder searched (kitti2bag and semantic_map_offline do the same)."""
+        def refusal(spoil):
+            root = tempfile.mkdtemp(prefix='ism_refused_player_')
+            try:
+                drive = write_synthetic_drive(root)
+                spoil(os.path.dirname(drive))
+                player = subprocess.run(
+                    [roslib.packages.find_node(PKG, 'kitti_player')[0], '__name:=refused_player',
+                     '_drive_dir:=' + drive, '_wait_for_subscribers_s:=0'],
+                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=30,
+                    universal_newlines=True)
+                return player.returncode, player.stdout, os.path.dirname(drive)
+            finally:
+                shutil.rmtree(root)
+
+        def other_size(date_dir):
+            path = os.path.join(date_dir, 'calib_cam_to_cam.txt')
+            with open(path) as f:
+                text = f.read()
+            with open(path, 'w') as f:
+                f.write(text.replace('S_rect_02: 40 30', 'S_rect_02: 41 30'))
+
+        code, output, _ = refusal(other_size)
+        self.assertNotEqual(code, 0, output)
+        self.assertIn("0000000000.png: 40x30, the calibration's rectified size (S_rect) says 41x30",
+                      output)
+        self.assertNotIn('skipping frame', output)
+
+        def no_calibration(date_dir):
+            for name in ('calib_imu_to_velo.txt', 'calib_velo_to_cam.txt', 'calib_cam_to_cam.txt'):
+                os.remove(os.path.join(date_dir, name))
+
+        code, output, date_dir = refusal(no_calibration)
+        self.assertNotEqual(code, 0, output)
+        self.assertIn('velodyne_points/ and image_02/ need the calibration to be placed, and there '
+                      'is none (no calib_*.txt in %s)' % date_dir, output)
+
     def test_synthetic_drive_with_lidar_and_camera(self):
         """Needs no ../shared: a second player on a drive the test writes, topics remapped."""
         got = {'cloud': [], 'image': [], 'info': [], 'tf': [], 'imu': []}
