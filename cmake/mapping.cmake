@@ -47,7 +47,7 @@ ism_add_gtest(test_projection_data
   LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti)
 ism_add_gtest(test_project_cloud
   SOURCES test/cli/test_project_cloud.cpp
-  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti
+  LINK ${PROJECT_NAME}_projection ${PROJECT_NAME}_kitti ${OpenCV_LIBS}
   TOOL project_cloud TOOL_MACRO PROJECT_CLOUD_PATH)
 # The lidar-geometry check on camera labels (ground estimate, flat / raised classes).
 ism_add_gtest(test_label_geometry

@@ -1,7 +1,8 @@
-// project_cloud: projects a velodyne scan into camera 2 of a KITTI object-format calibration.
+// project_cloud: projects a velodyne scan into camera 2 of a KITTI object-format calibration or
+// of a raw drive's date folder.
 //
-//   project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png --output POINTS.csv
-//                 [--overlay OVERLAY.png]
+//   project_cloud (--calib CALIB.txt | --calib-dir DATE_DIR) --velodyne SCAN.bin --image IMG.png
+//                 --output POINTS.csv [--overlay OVERLAY.png]
 // CSV: header `index,u,v,depth`, one row per point inside the image with depth > 0 (index = the
 // point's row in the .bin, u/v in pixels, depth in metres). The image is read for its size and
 // as the overlay's background (points colored by depth).
@@ -22,8 +23,32 @@
 namespace {
 
 constexpr char kUsage[] =
-    "usage: project_cloud --calib CALIB.txt --velodyne SCAN.bin --image IMG.png "
-    "--output POINTS.csv [--overlay OVERLAY.png]\n";
+    "usage: project_cloud (--calib CALIB.txt | --calib-dir DATE_DIR) --velodyne SCAN.bin "
+    "--image IMG.png --output POINTS.csv [--overlay OVERLAY.png]\n"
+    "  --calib      an object or odometry calib.txt (P0..P3, Tr_velo_to_cam or Tr)\n"
+    "  --calib-dir  a raw drive's date folder (calib_cam_to_cam.txt, calib_velo_to_cam.txt); the\n"
+    "               image must have its rectified size (S_rect_02)\n";
+
+// Camera 2 of the calibration the command line names, for an image of the given size.
+inekf_semantic_mapping::kitti::CameraProjection cameraOf(
+    const inekf_semantic_mapping::common::CommandLine& cli, const cv::Mat& image) {
+  using namespace inekf_semantic_mapping;
+  if (cli.has("--calib-dir")) {
+    const kitti::CameraProjection camera =
+        kitti::readRawCalibration(cli.get("--calib-dir")).projection(2);
+    camera.checkRectifiedImageSize(cli.get("--image"), image.cols, image.rows);
+    return camera;
+  }
+  const std::string calib = cli.get("--calib");
+  const std::string name = std::filesystem::path(calib).filename().string();
+  if (name == "calib_cam_to_cam.txt" || name == "calib_velo_to_cam.txt" ||
+      name == "calib_imu_to_velo.txt") {
+    throw std::invalid_argument(calib +
+                                ": a raw drive's calibration file; give its folder with "
+                                "--calib-dir (--calib reads an object or odometry calib.txt)");
+  }
+  return kitti::readObjectCalibration(calib).projection(2, image.cols, image.rows);
+}
 
 // The tool once the command line is read (errors propagate to runCli: exit 1).
 int run(const inekf_semantic_mapping::common::CommandLine& cli) {
@@ -34,8 +59,7 @@ int run(const inekf_semantic_mapping::common::CommandLine& cli) {
     image = cv::imread(cli.get("--image"), cv::IMREAD_COLOR);
     if (image.empty()) throw std::runtime_error(cli.get("--image") + ": cannot read image");
   }
-  const kitti::CameraProjection camera =
-      kitti::readObjectCalibration(cli.get("--calib")).projection(2, image.cols, image.rows);
+  const kitti::CameraProjection camera = cameraOf(cli, image);
   const kitti::VelodyneScan scan = kitti::readVelodyneBin(cli.get("--velodyne"));
   const perception::PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo,
                                              image.cols, image.rows);
@@ -104,10 +128,13 @@ int run(const inekf_semantic_mapping::common::CommandLine& cli) {
 int main(int argc, char** argv) {
   using namespace inekf_semantic_mapping;
   return common::runCli("project_cloud", kUsage, [&] {
-    const common::CommandLine cli(argc, argv,
-                                  {"--calib", "--velodyne", "--image", "--output", "--overlay"});
+    const common::CommandLine cli(
+        argc, argv, {"--calib", "--calib-dir", "--velodyne", "--image", "--output", "--overlay"});
     if (cli.helpRequested()) return common::printUsage(kUsage);
-    for (const char* flag : {"--calib", "--velodyne", "--image", "--output"}) cli.require(flag);
+    if (cli.has("--calib") == cli.has("--calib-dir")) {
+      throw std::invalid_argument("give one of --calib (CALIB.txt) and --calib-dir (DATE_DIR)");
+    }
+    for (const char* flag : {"--velodyne", "--image", "--output"}) cli.require(flag);
     const std::vector<std::string> outputs = cli.valuesOf({"--output", "--overlay"});
     common::checkOutputPaths(outputs);
     common::checkOutputsAreNotInputs(outputs, cli.valuesOf({"--calib", "--velodyne", "--image"}));

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "inekf_semantic_mapping/kitti/calibration.h"
@@ -17,6 +18,13 @@
 namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
+
+// A 1226x370 PNG (another day's size) in dir, for a calibration of 1242x375.
+std::string croppedImage(const std::string& dir) {
+  const std::string path = dir + "/cropped.png";
+  cv::imwrite(path, cv::Mat(370, 1226, CV_8UC3, cv::Scalar(40, 50, 60)));
+  return path;
+}
 
 PointProjector objectProjector(int width, int height) {
   const std::string calib_path = test::sharedPath("data/kitti_object/training/calib/000000.txt");
@@ -78,6 +86,64 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
   std::ifstream calib(dir + "/calib.txt");
   std::getline(calib, line);
   EXPECT_EQ(line.rfind("P0:", 0), 0u) << line;
+  std::filesystem::remove_all(dir);
+}
+
+// A raw drive's calibration (found by review: project_cloud read only object-format files and
+// said "missing key 'P0'" for a calib_cam_to_cam.txt): --calib-dir takes the date folder, checks
+// the image against its rectified size, and gives the library's projection.
+TEST(Projection, ProjectCloudToolTakesARawDrivesDateFolder) {
+  ISM_REQUIRE_SHARED("data/kitti_raw/2011_09_26/2011_09_26_drive_0013_sync/velodyne_points");
+  const std::string date_dir = test::sharedPath("data/kitti_raw/2011_09_26");
+  const std::string drive = date_dir + "/2011_09_26_drive_0013_sync";
+  const std::string scan_path = drive + "/velodyne_points/data/0000000000.bin";
+  const std::string image_path = drive + "/image_02/data/0000000000.png";
+  const std::string dir = test::makeTempDir("project_cloud_raw");
+  const auto [status, output] = test::runCommand(
+      std::string(PROJECT_CLOUD_PATH) + " --calib-dir " + date_dir + " --velodyne " + scan_path +
+      " --image " + image_path + " --output " + dir + "/points.csv");
+  ASSERT_EQ(status, 0) << output;
+  const kitti::CameraProjection camera = kitti::readRawCalibration(date_dir).projection(2);
+  const PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo, 1242, 375);
+  const kitti::VelodyneScan scan = kitti::readVelodyneBin(scan_path);
+  Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+      scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
+  ProjectedPoints projected;
+  projector.project(buffer.topRows<3>(), &projected);
+  std::ifstream csv(dir + "/points.csv");
+  std::string line;
+  std::size_t rows = 0;
+  std::getline(csv, line);
+  while (std::getline(csv, line)) {
+    std::istringstream fields(line);
+    std::size_t index;
+    char comma;
+    double u, v;
+    ASSERT_TRUE(fields >> index >> comma >> u >> comma >> v) << line;
+    ASSERT_TRUE(projected.valid[index]) << line;
+    EXPECT_NEAR(u, projected.u[index], 2e-3);
+    EXPECT_NEAR(v, projected.v[index], 2e-3);
+    ++rows;
+  }
+  EXPECT_EQ(rows, projected.validCount());
+  EXPECT_GT(rows, 10000u);
+
+  // An image of another size than S_rect_02, and a raw file given to --calib: refused, named.
+  const std::string other_size = std::string(PROJECT_CLOUD_PATH) + " --calib-dir " + date_dir +
+                                 " --velodyne " + scan_path + " --image " + croppedImage(dir) +
+                                 " --output " + dir + "/other.csv";
+  const auto [size_status, size_output] = test::runCommand(other_size);
+  EXPECT_NE(size_status, 0) << size_output;
+  EXPECT_NE(size_output.find("the calibration's rectified size (S_rect) says 1242x375"),
+            std::string::npos)
+      << size_output;
+  const auto [file_status, file_output] = test::runCommand(
+      std::string(PROJECT_CLOUD_PATH) + " --calib " + date_dir + "/calib_cam_to_cam.txt" +
+      " --velodyne " + scan_path + " --image " + image_path + " --output " + dir + "/file.csv");
+  EXPECT_NE(file_status, 0) << file_output;
+  EXPECT_NE(file_output.find("a raw drive's calibration file; give its folder with --calib-dir"),
+            std::string::npos)
+      << file_output;
   std::filesystem::remove_all(dir);
 }
 
