@@ -106,6 +106,18 @@ ism::mapping::SemanticMappingConfig configFrom(const ism::common::CommandLine& c
               << " (--classes chooses; a node must be configured with the map's set to load it)"
               << std::endl;
   }
+  // The node's camera keys: the tool has its own flags (found by review: a camera_index: 3 in the
+  // YAML was dropped without a word).
+  if (cli.has("--config")) {
+    const YAML::Node yaml = ism::common::loadYamlFile(cli.get("--config"));
+    const bool calib_dir_set = yaml["calib_dir"] && !yaml["calib_dir"].as<std::string>("").empty();
+    const bool camera_set = yaml["camera_index"] && yaml["camera_index"].as<int>(2) != 2;
+    if (calib_dir_set || camera_set) {
+      std::cerr << "[semantic_map_offline] " << cli.get("--config") << ": calib_dir and "
+                << "camera_index are semantic_octomap_node's; here --calib-dir and --camera "
+                << "choose (the drive's date folder and camera 2 by default)" << std::endl;
+    }
+  }
   config.resolution_m = cli.getDouble("--resolution", config.resolution_m);
   config.max_range_m = cli.getDouble("--max-range", config.max_range_m);
   config.fusion.correct_probability =

@@ -84,6 +84,25 @@ TEST_F(OfflineMappingTest, AConfigsClassSetOtherThanTheLabelSourcesIsNamed) {
             semantickitti.info(2).name);
 }
 
+// The node's camera keys in --config are named, not dropped without a word (the tool's flags
+// choose); the default values say nothing.
+TEST_F(OfflineMappingTest, TheNodesCameraKeysInTheConfigAreNamed) {
+  const std::string command = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
+                              "/velodyne --labels " + dir_ + "/labels --poses " + dir_ +
+                              "/poses.txt --calib " + dir_ + "/calib.txt --output " + dir_ +
+                              "/sk.ot --max-scans 1 --config ";
+  const std::string note = "calib_dir and camera_index are semantic_octomap_node's";
+  std::ofstream(dir_ + "/camera3.yaml") << "class_set: semantickitti\ncamera_index: 3\n";
+  const auto [status, output] = test::runCommand(command + dir_ + "/camera3.yaml");
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find(dir_ + "/camera3.yaml: " + note), std::string::npos) << output;
+  std::ofstream(dir_ + "/defaults.yaml")
+      << "class_set: semantickitti\ncamera_index: 2\ncalib_dir: \"\"\n";
+  const auto [default_status, default_output] = test::runCommand(command + dir_ + "/defaults.yaml");
+  ASSERT_EQ(default_status, 0) << default_output;
+  EXPECT_EQ(default_output.find(note), std::string::npos) << default_output;
+}
+
 // --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.
 TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   std::vector<Eigen::Vector3d> origins;
