@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <limits>
@@ -298,13 +299,37 @@ std::vector<std::string> mapServerGridPaths(const std::string& stem) {
   return {stem + ".pgm", stem + ".yaml"};
 }
 
-std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::string& stem) {
+namespace {
+
+// A YAML double-quoted scalar: a file name with ": ", " #", "[" or "&" in it, written plain, did
+// not parse or named another file (everything after " #" a comment).
+std::string yamlQuoted(const std::string& text) {
+  std::string quoted = "\"";
+  for (const char c : text) {
+    if (c == '"' || c == '\\') {
+      quoted += '\\';
+      quoted += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char escape[8];
+      std::snprintf(escape, sizeof(escape), "\\x%02x", static_cast<unsigned char>(c));
+      quoted += escape;
+    } else {
+      quoted += c;
+    }
+  }
+  return quoted + "\"";
+}
+
+}  // namespace
+
+std::vector<std::string> addMapServerGrid(const Grid2D& grid, const std::string& stem,
+                                          common::AtomicFileSet* files) {
   const std::vector<std::string> paths = mapServerGridPaths(stem);
   const std::string& pgm_path = paths[0];
   const std::string& yaml_path = paths[1];
   // map_server with negate 0: p = (255 - value) / 255; occupied above occupied_thresh, free below
   // free_thresh, unknown between.
-  common::writeStreamAtomically(pgm_path, [&](std::ostream& out) {
+  files->addStream(pgm_path, [&](std::ostream& out) {
     out << "P5\n" << grid.width << " " << grid.height << "\n255\n";
     std::string row(static_cast<std::size_t>(grid.width), '\0');
     for (int iy = grid.height - 1; iy >= 0; --iy) {  // image top = largest y
@@ -315,14 +340,21 @@ std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::strin
       out.write(row.data(), static_cast<std::streamsize>(row.size()));
     }
   });
-  std::ostringstream yaml;
-  yaml.precision(10);
-  yaml << "image: " << std::filesystem::path(pgm_path).filename().string() << "\n"
-       << "resolution: " << grid.resolution << "\n"
-       << "origin: [" << grid.origin_x << ", " << grid.origin_y << ", 0.0]\n"
-       << "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n";
-  common::writeTextAtomically(yaml_path, yaml.str());
-  return {pgm_path, yaml_path};
+  files->addStream(yaml_path, [&](std::ostream& yaml) {
+    yaml.precision(10);
+    yaml << "image: " << yamlQuoted(std::filesystem::path(pgm_path).filename().string()) << "\n"
+         << "resolution: " << grid.resolution << "\n"
+         << "origin: [" << grid.origin_x << ", " << grid.origin_y << ", 0.0]\n"
+         << "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n";
+  });
+  return paths;
+}
+
+std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::string& stem) {
+  common::AtomicFileSet files;
+  const std::vector<std::string> paths = addMapServerGrid(grid, stem, &files);
+  files.commit();
+  return paths;
 }
 
 }  // namespace mapping

@@ -73,13 +73,24 @@ class MirrorColorOcTree : public octomap::ColorOcTree {
 }  // namespace
 
 MapFormat parseMapFormat(const std::string& format, const std::string& path) {
-  if (format == "ot") return MapFormat::kSemanticOt;
-  if (format == "color_ot") return MapFormat::kColorOt;
-  if (format == "ply") return MapFormat::kPly;
+  const std::string extension = std::filesystem::path(path).extension().string();
+  // A format asked for by name under another format's extension (.bt: octomap's binary format)
+  // gave a file every tool that goes by the name fails to read (PLY text named .ot, an octree
+  // named .ply); another extension (or none) is the user's choice.
+  const auto named = [&](MapFormat chosen, const char* own) {
+    const bool other = extension == ".ot" || extension == ".ply" || extension == ".bt";
+    if (other && extension != own) {
+      throw MapIoError(path + ": format '" + format + "' under the extension '" + extension +
+                       "', which other tools read as another format (name it " + own + ")");
+    }
+    return chosen;
+  };
+  if (format == "ot") return named(MapFormat::kSemanticOt, ".ot");
+  if (format == "color_ot") return named(MapFormat::kColorOt, ".ot");
+  if (format == "ply") return named(MapFormat::kPly, ".ply");
   if (format.empty()) {
     // From the extension; another one (.bt: octomap's own binary format, which tools would try
     // and fail to read) is refused rather than given a semantic octree under its name.
-    const std::string extension = std::filesystem::path(path).extension().string();
     if (extension == ".ply") return MapFormat::kPly;
     if (extension == ".ot") return MapFormat::kSemanticOt;
     throw MapIoError(path + ": no format given and the extension '" + extension +
@@ -195,13 +206,15 @@ std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat for
 }
 
 std::vector<std::size_t> saveMaps(SemanticOcTree& tree,
-                                  const std::vector<std::pair<std::string, MapFormat>>& outputs) {
+                                  const std::vector<std::pair<std::string, MapFormat>>& outputs,
+                                  const std::function<void(common::AtomicFileSet*)>& stage_also) {
   tree.updateInnerOccupancy();
   common::AtomicFileSet set;
   std::vector<std::size_t> counts;
   for (const auto& [path, format] : outputs)
     counts.push_back(saveMapInto(tree, path, format, &set));
   try {
+    if (stage_also) stage_also(&set);
     set.commit();
   } catch (const common::AtomicWriteError& error) {
     throw MapIoError("cannot write map to '" + error.path() + "': " + error.reason());

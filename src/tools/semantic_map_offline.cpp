@@ -464,10 +464,25 @@ int main(int argc, char** argv) {
     if (cli.has("--color-ot")) {
       outputs.emplace_back(cli.get("--color-ot"), mapping::MapFormat::kColorOt);
     }
+    // The grids too: the map, its exports and the grids appear together or not at all.
+    mapping::ProjectedGrids grids;
+    const std::pair<const char*, const mapping::Grid2D*> grid_outputs[] = {
+        {kGridNames[0], &grids.occupancy}, {kGridNames[1], &grids.drivable}};
+    std::vector<std::vector<std::string>> grid_paths;
+    if (cli.has("--grid")) {
+      ism::ScopedTimer timer("semantic_map/grids");
+      session.tree().updateInnerOccupancy();
+      grids = mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
+    }
     std::vector<std::size_t> counts;
     {
       ism::ScopedTimer timer("semantic_map/save");
-      counts = mapping::saveMaps(session.tree(), outputs);
+      counts = mapping::saveMaps(session.tree(), outputs, [&](ism::common::AtomicFileSet* files) {
+        if (!cli.has("--grid")) return;
+        for (const auto& [name, grid] : grid_outputs) {
+          grid_paths.push_back(mapping::addMapServerGrid(*grid, gridStem(cli, name), files));
+        }
+      });
     }
     // The insertion grid's figures were printed when its map moved into the tree (mapRawDrive,
     // mapSequence): the session holds the tree alone now.
@@ -479,24 +494,16 @@ int main(int argc, char** argv) {
     for (std::size_t i = 1; i < outputs.size(); ++i) {
       std::cerr << "[semantic_map_offline] wrote " << outputs[i].first << "\n";
     }
-    if (cli.has("--grid")) {
-      mapping::ProjectedGrids grids;
-      {
-        ism::ScopedTimer timer("semantic_map/grids");
-        grids = mapping::projectGrids(session.tree(), grid_config, ground_trace.samples());
+    for (std::size_t g = 0; g < grid_paths.size(); ++g) {
+      const auto& [name, grid] = grid_outputs[g];
+      std::size_t cell_counts[3] = {0, 0, 0};  // free, occupied, unknown
+      for (std::int8_t cell : grid->cells) {
+        ++cell_counts[cell == mapping::kGridFree ? 0 : cell == mapping::kGridOccupied ? 1 : 2];
       }
-      for (const auto& [name, grid] :
-           {std::pair<const char*, const mapping::Grid2D*>{kGridNames[0], &grids.occupancy},
-            {kGridNames[1], &grids.drivable}}) {
-        std::size_t counts[3] = {0, 0, 0};  // free, occupied, unknown
-        for (std::int8_t cell : grid->cells) {
-          ++counts[cell == mapping::kGridFree ? 0 : cell == mapping::kGridOccupied ? 1 : 2];
-        }
-        const auto paths = mapping::writeMapServerGrid(*grid, gridStem(cli, name));
-        std::cerr << "[semantic_map_offline] wrote " << paths[0] << " and " << paths[1] << " ("
-                  << name << ": " << grid->width << " x " << grid->height << " cells, " << counts[0]
-                  << " free, " << counts[1] << " occupied, " << counts[2] << " unknown)\n";
-      }
+      std::cerr << "[semantic_map_offline] wrote " << grid_paths[g][0] << " and "
+                << grid_paths[g][1] << " (" << name << ": " << grid->width << " x " << grid->height
+                << " cells, " << cell_counts[0] << " free, " << cell_counts[1] << " occupied, "
+                << cell_counts[2] << " unknown)\n";
     }
     if (cli.has("--label-images")) {
       ism::mapping::MapLabelImageOptions options;

@@ -104,6 +104,8 @@ TEST_F(OfflineMappingTest, TheNodesCameraKeysInTheConfigAreNamed) {
 }
 
 // --grid: the node's two grids in map_server's format; the ground under the scans' lidar poses.
+// The stem has " #" and ": " in it (found by review: the image name was written unquoted, and
+// map_server's YAML read "grid" and a comment).
 TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   std::vector<Eigen::Vector3d> origins;
   OfflineSequence sequence = options();
@@ -117,13 +119,13 @@ TEST_F(OfflineMappingTest, CommandLineToolWritesTheGrids) {
   const std::string command = std::string(SEMANTIC_MAP_OFFLINE_PATH) + " --scans " + dir_ +
                               "/velodyne --labels " + dir_ + "/labels --poses " + dir_ +
                               "/poses.txt --calib " + dir_ +
-                              "/calib.txt --resolution 0.1 --output " + dir_ + "/map.ot --grid " +
-                              dir_ + "/grid 2>/dev/null";
+                              "/calib.txt --resolution 0.1 --output " + dir_ + "/map.ot --grid '" +
+                              dir_ + "/grid #1: a' 2>/dev/null";
   ASSERT_EQ(std::system(command.c_str()), 0) << command;
   for (const char* name : {"projected", "drivable"}) {
-    const std::string stem = dir_ + "/grid_" + name;
+    const std::string stem = dir_ + "/grid #1: a_" + name;
     const YAML::Node yaml = YAML::LoadFile(stem + ".yaml");
-    EXPECT_EQ(yaml["image"].as<std::string>(), std::string("grid_") + name + ".pgm");
+    EXPECT_EQ(yaml["image"].as<std::string>(), std::string("grid #1: a_") + name + ".pgm");
     EXPECT_DOUBLE_EQ(yaml["resolution"].as<double>(), 0.1);
     std::ifstream pgm(stem + ".pgm", std::ios::binary);
     std::string magic;

@@ -14,6 +14,7 @@
 #include <set>
 #include <sstream>
 
+#include "inekf_semantic_mapping/common/atomic_file.h"
 #include "inekf_semantic_mapping/mapping/map_io.h"
 #include "inekf_semantic_mapping/mapping/semantic_octree.h"
 #include "inekf_semantic_mapping/perception/cityscapes.h"
@@ -587,7 +588,16 @@ TEST(SemanticOcTreeIo, UnwritablePathFailsClearly) {
   for (const char* path : {"x.bt", "x.xyz", "x"}) {
     EXPECT_THROW(parseMapFormat("", path), MapIoError) << path;
   }
-  EXPECT_EQ(parseMapFormat("ot", "x.bt"), MapFormat::kSemanticOt);  // asked for by name
+  // Found by review: a format asked for by name under another format's extension was written
+  // (PLY text as y.ot, an octree as z.ply, a semantic octree as x.bt): refused; another extension
+  // is the user's choice.
+  for (const auto& [format, path] : std::vector<std::pair<std::string, std::string>>{
+           {"ot", "x.bt"}, {"ot", "x.ply"}, {"color_ot", "z.ply"}, {"ply", "y.ot"}}) {
+    EXPECT_THROW(parseMapFormat(format, path), MapIoError) << format << " " << path;
+  }
+  EXPECT_EQ(parseMapFormat("ot", "x.map"), MapFormat::kSemanticOt);
+  EXPECT_EQ(parseMapFormat("color_ot", "x.ot"), MapFormat::kColorOt);
+  EXPECT_EQ(parseMapFormat("ply", "x"), MapFormat::kPly);
 }
 
 // A tool's map and its exports appear together or not at all.
@@ -597,6 +607,15 @@ TEST(SemanticOcTreeIo, SeveralFormatsAreWrittenAsASet) {
   std::filesystem::create_directories(dir + "/blocked.ply");
   EXPECT_THROW(saveMaps(tree, {{dir + "/map.ot", MapFormat::kSemanticOt},
                                {dir + "/blocked.ply", MapFormat::kPly}}),
+               MapIoError);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/map.ot"));
+  // A tool's other outputs staged with the map (semantic_map_offline's grids): one that cannot
+  // be written, and the map is not written either.
+  EXPECT_THROW(saveMaps(tree, {{dir + "/map.ot", MapFormat::kSemanticOt}},
+                        [&](common::AtomicFileSet* files) {
+                          files->addStream(dir + "/no_such_folder/grid.pgm",
+                                           [](std::ostream& out) { out << "P5"; });
+                        }),
                MapIoError);
   EXPECT_FALSE(std::filesystem::exists(dir + "/map.ot"));
   const std::vector<std::size_t> counts = saveMaps(

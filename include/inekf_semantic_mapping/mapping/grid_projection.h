@@ -32,6 +32,12 @@
 #include <string>
 #include <vector>
 
+namespace inekf_semantic_mapping {
+namespace common {
+class AtomicFileSet;
+}  // namespace common
+}  // namespace inekf_semantic_mapping
+
 namespace YAML {
 class Node;
 }
@@ -116,9 +122,12 @@ class GroundTrace {
 };
 
 // map_server's format: `<stem>.pgm` (free 254, occupied 0, unknown 205, top row = largest y)
-// and `<stem>.yaml` (image, resolution, origin, negate, thresholds), both written atomically.
-// Returns the two paths written (mapServerGridPaths).
+// and `<stem>.yaml` (image (quoted), resolution, origin, negate, thresholds), written as one set:
+// both or neither. Returns the two paths written (mapServerGridPaths).
 std::vector<std::string> writeMapServerGrid(const Grid2D& grid, const std::string& stem);
+// The same two files staged in `files`, which the caller commits with its other outputs.
+std::vector<std::string> addMapServerGrid(const Grid2D& grid, const std::string& stem,
+                                          common::AtomicFileSet* files);
 // The two files writeMapServerGrid writes for `stem`: {stem.pgm, stem.yaml}.
 std::vector<std::string> mapServerGridPaths(const std::string& stem);
 

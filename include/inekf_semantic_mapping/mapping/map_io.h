@@ -4,11 +4,18 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
+
+namespace inekf_semantic_mapping {
+namespace common {
+class AtomicFileSet;
+}  // namespace common
+}  // namespace inekf_semantic_mapping
 
 namespace inekf_semantic_mapping {
 namespace mapping {
@@ -35,9 +42,11 @@ MapFormat parseMapFormat(const std::string& format, const std::string& path);
 // nodes first.
 std::size_t saveMap(SemanticOcTree& tree, const std::string& path, MapFormat format);
 // Several formats of one map (a tool's --output, --export-ply, --color-ot) as a set: all are
-// written, or none replaces its target. Returns saveMap's count for each.
-std::vector<std::size_t> saveMaps(SemanticOcTree& tree,
-                                  const std::vector<std::pair<std::string, MapFormat>>& outputs);
+// written, or none replaces its target; `stage_also` adds the tool's other outputs of the run
+// (its grids) to the same set. Returns saveMap's count for each.
+std::vector<std::size_t> saveMaps(
+    SemanticOcTree& tree, const std::vector<std::pair<std::string, MapFormat>>& outputs,
+    const std::function<void(common::AtomicFileSet*)>& stage_also = nullptr);
 
 // Reads a .ot written by saveMap (through octomap's factory); throws MapIoError if the file is
 // missing, unreadable or holds another tree type.
