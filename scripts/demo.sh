@@ -2,6 +2,7 @@
 # The whole system on one drive, headless, in a few minutes:
 #   scripts/demo.sh                                   # synthetic 30 s drive (fixed seed), generated here
 #   scripts/demo.sh KITTI_DRIVE_DIR --model MODEL     # a KITTI raw <date>_drive_<nnnn>_sync folder
+#   ... [--output DIR]                                # where the results go (output/demo)
 # MODEL is the segmentation network for the drive's camera images (ONNX, Torch7 .net, ...): for a
 # real drive the network adapted to the KITTI camera (output/models/kitti/kitti_adapted.onnx from
 # scripts/adapt_segmentation.sh), the Cityscapes ENet (.../enet-cityscapes/enet-model.net), or
@@ -11,7 +12,8 @@
 # Installs what is missing and builds (scripts/build.sh), converts the drive into a bag with
 # kitti2bag (GPS degraded as in the evaluation protocol: 1.5 m / 3 m noise, 1 Hz), runs
 # launch/kitti_bag.launch with rviz on a virtual display (Xvfb + Mesa), saves the map with
-# ~save_map, and writes output/demo/: trajectory.png, metrics.json, semantic_map.ot,
+# ~save_map, and writes output/demo/ (or --output DIR, emptied first: a folder of its own, or one
+# an earlier demo wrote): trajectory.png, metrics.json, semantic_map.ot,
 # semantic_map.ply, rviz.png (+ logs), and prints a summary (trajectory error against the OXTS
 # truth, scans in the map, label images per second, scan-to-map latency).
 # Environment: ISM_DEMO_MODEL (same as --model; the synthetic drive's default is
@@ -26,11 +28,15 @@ start=$(date +%s)
 usage() { sed -n '2,/^[^#]/{/^#/p}' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
 drive=""
 model=${ISM_DEMO_MODEL:-}
+out=$ISM_ROOT/output/demo
 while (($#)); do
   case $1 in
     --model) [[ $# -ge 2 ]] || { echo "[demo] --model needs a value (a model file or none)" >&2; exit 2; }
              model=$2; shift 2 ;;
     --model=*) model=${1#--model=}; shift ;;
+    --output) [[ $# -ge 2 ]] || { echo "[demo] --output needs a folder" >&2; exit 2; }
+              out=$2; shift 2 ;;
+    --output=*) out=${1#--output=}; shift ;;
     -h | --help) usage; exit 0 ;;
     -*) echo "[demo] unknown option $1" >&2; usage >&2; exit 2 ;;
     *) [[ -z $drive ]] || { echo "[demo] one drive only (got $drive and $1)" >&2; exit 2; }
@@ -68,7 +74,15 @@ duration=${ISM_DEMO_DURATION:-30}
 seed=${ISM_DEMO_SEED:-42}
 rate=${ISM_DEMO_RATE:-1.0}
 generator_args=${ISM_DEMO_GENERATOR_ARGS---lidar-beams 32 --azimuth-step-deg 0.4 --image-size 621x188}
-out=$ISM_ROOT/output/demo
+# The folder is emptied below: only the default one, an empty or new one, or one a demo wrote
+# (its marker file) -- never a folder of the user's with other things in it.
+out=$(realpath -m "$out")
+marker=.ism_demo_output
+if [[ $out != $(realpath -m "$ISM_ROOT/output/demo") && -d $out && -n $(ls -A "$out") &&
+      ! -f $out/$marker ]]; then
+  echo "[demo] --output $out holds files a demo did not write: give a new or empty folder" >&2
+  exit 2
+fi
 log() { echo "[demo $(($(date +%s) - start))s] $*"; }
 
 mkdir -p "$ISM_ROOT/output"
@@ -86,6 +100,7 @@ done
 
 rm -rf "$out"
 mkdir -p "$out"
+touch "$out/$marker"
 ground_truth=""
 if [[ -z $drive ]]; then
   log "generating a ${duration} s synthetic drive (seed $seed)"
