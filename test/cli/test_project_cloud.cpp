@@ -19,6 +19,41 @@ namespace inekf_semantic_mapping {
 namespace perception {
 namespace {
 
+// Checks project_cloud's CSV against the library's projection of `scan` (header, one row per
+// point inside the width x height image with depth > 0, values within the CSV's rounding);
+// returns the rows.
+std::size_t checkCsv(const std::string& csv_path, const kitti::VelodyneScan& scan,
+                     const PointProjector& projector, int width, int height) {
+  Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
+      scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
+  ProjectedPoints projected;
+  projector.project(buffer.topRows<3>(), &projected);
+  std::ifstream csv(csv_path);
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line, "index,u,v,depth");
+  std::size_t rows = 0;
+  while (std::getline(csv, line)) {
+    std::istringstream fields(line);
+    std::size_t index;
+    char comma;
+    double u, v, depth;
+    if (!(fields >> index >> comma >> u >> comma >> v >> comma >> depth) || index >= scan.size() ||
+        !projected.valid[index]) {
+      ADD_FAILURE() << "not a row of a projected point: " << line;
+      return rows;
+    }
+    EXPECT_NEAR(u, projected.u[index], 2e-3);
+    EXPECT_NEAR(v, projected.v[index], 2e-3);
+    EXPECT_GT(depth, 0.0);
+    // In the image: pixel k covers [k - 0.5, k + 0.5) (the CSV rounds to 1e-3).
+    EXPECT_TRUE(u >= -0.5005 && u < width - 0.4995 && v >= -0.5005 && v < height - 0.4995) << line;
+    ++rows;
+  }
+  EXPECT_EQ(rows, projected.validCount());
+  return rows;
+}
+
 // A 1226x370 PNG (another day's size) in dir, for a calibration of 1242x375.
 std::string croppedImage(const std::string& dir) {
   const std::string path = dir + "/cropped.png";
@@ -47,33 +82,8 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/overlay.png"));
 
   const kitti::VelodyneScan scan = kitti::readVelodyneBin(base + "velodyne/000000.bin");
-  const PointProjector projector = objectProjector(1224, 370);  // the PNG's size
-  Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
-      scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
-  ProjectedPoints projected;
-  projector.project(buffer.topRows<3>(), &projected);
-
-  std::ifstream csv(dir + "/points.csv");
-  std::string line;
-  std::getline(csv, line);
-  EXPECT_EQ(line, "index,u,v,depth");
-  std::size_t rows = 0;
-  while (std::getline(csv, line)) {
-    std::istringstream fields(line);
-    std::size_t index;
-    char comma;
-    double u, v, depth;
-    ASSERT_TRUE(fields >> index >> comma >> u >> comma >> v >> comma >> depth) << line;
-    ASSERT_LT(index, scan.size());
-    ASSERT_TRUE(projected.valid[index]) << line;
-    EXPECT_NEAR(u, projected.u[index], 2e-3);
-    EXPECT_NEAR(v, projected.v[index], 2e-3);
-    EXPECT_GT(depth, 0.0);
-    // In the image: pixel k covers [k - 0.5, k + 0.5) (the CSV rounds to 1e-3).
-    EXPECT_TRUE(u >= -0.5005 && u < 1223.5005 && v >= -0.5005 && v < 369.5005) << line;
-    ++rows;
-  }
-  EXPECT_EQ(rows, projected.validCount());
+  // The PNG's size.
+  EXPECT_GT(checkCsv(dir + "/points.csv", scan, objectProjector(1224, 370), 1224, 370), 0u);
 
   // An output that names an input is refused and the input kept (it was replaced by the CSV).
   std::filesystem::copy_file(base + "calib/000000.txt", dir + "/calib.txt");
@@ -84,6 +94,7 @@ TEST(Projection, ProjectCloudToolWritesTheCsvContract) {
   EXPECT_NE(status, 0) << output;
   EXPECT_NE(output.find("is an input"), std::string::npos) << output;
   std::ifstream calib(dir + "/calib.txt");
+  std::string line;
   std::getline(calib, line);
   EXPECT_EQ(line.rfind("P0:", 0), 0u) << line;
   std::filesystem::remove_all(dir);
@@ -105,28 +116,8 @@ TEST(Projection, ProjectCloudToolTakesARawDrivesDateFolder) {
   ASSERT_EQ(status, 0) << output;
   const kitti::CameraProjection camera = kitti::readRawCalibration(date_dir).projection(2);
   const PointProjector projector(camera.P_rect, camera.R_rect, camera.T_cam0_velo, 1242, 375);
-  const kitti::VelodyneScan scan = kitti::readVelodyneBin(scan_path);
-  Eigen::Map<const Eigen::Matrix<float, 4, Eigen::Dynamic>> buffer(
-      scan.xyzi.data(), 4, static_cast<Eigen::Index>(scan.size()));
-  ProjectedPoints projected;
-  projector.project(buffer.topRows<3>(), &projected);
-  std::ifstream csv(dir + "/points.csv");
-  std::string line;
-  std::size_t rows = 0;
-  std::getline(csv, line);
-  while (std::getline(csv, line)) {
-    std::istringstream fields(line);
-    std::size_t index;
-    char comma;
-    double u, v;
-    ASSERT_TRUE(fields >> index >> comma >> u >> comma >> v) << line;
-    ASSERT_TRUE(projected.valid[index]) << line;
-    EXPECT_NEAR(u, projected.u[index], 2e-3);
-    EXPECT_NEAR(v, projected.v[index], 2e-3);
-    ++rows;
-  }
-  EXPECT_EQ(rows, projected.validCount());
-  EXPECT_GT(rows, 10000u);
+  EXPECT_GT(checkCsv(dir + "/points.csv", kitti::readVelodyneBin(scan_path), projector, 1242, 375),
+            10000u);
 
   // An image of another size than S_rect_02, and a raw file given to --calib: refused, named.
   const std::string other_size = std::string(PROJECT_CLOUD_PATH) + " --calib-dir " + date_dir +
