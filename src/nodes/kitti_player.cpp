@@ -62,9 +62,7 @@ class KittiPlayer {
     // The first image against the calibration's rectified size, before anything plays: another
     // day's calibration refused every image, one error a frame, and the drive played on without
     // its camera (kitti2bag and semantic_map_offline stop at once).
-    if (options_.timeline.cameras[2] && drive_->hasCamera(2) && drive_->camera(2).size() > 0) {
-      factory_->cameraMessages(2, 0);
-    }
+    if (options_.timeline.cameras[2] && drive_->hasCamera(2)) factory_->checkCameraImageSize(2);
     timeline_ = kitti::buildDriveTimeline(*drive_, options_.timeline);
     if (timeline_.empty()) throw std::invalid_argument("nothing to play in the chosen window");
     conv::checkTimelineFitsRosTime(options_.drive_dir, timeline_.front().stamp_ns,

@@ -309,6 +309,19 @@ std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> DriveMessageFactory::came
   return {std::move(image), toCameraInfoMessage(projection, frame_id, stamp)};
 }
 
+void DriveMessageFactory::checkCameraImageSize(int camera_index) const {
+  if (!calibration_) throw std::logic_error("camera messages need the calibration");
+  const kitti::SensorStream& camera = drive_.camera(camera_index);
+  const kitti::CameraProjection projection = calibration_->projection(camera_index);
+  for (std::size_t frame = 0; frame < camera.size(); ++frame) {
+    const std::string path = camera.framePath(frame);
+    const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+    if (image.empty()) continue;
+    projection.checkRectifiedImageSize(path, image.cols, image.rows);
+    return;
+  }
+}
+
 std::vector<geometry_msgs::TransformStamped> DriveMessageFactory::staticTransformMessages(
     const ros::Time& stamp) const {
   return staticTransforms(calibration_, stamp);

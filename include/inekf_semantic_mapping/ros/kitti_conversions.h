@@ -133,6 +133,10 @@ class DriveMessageFactory {
   // Requires calibration for camera_info; throws std::logic_error otherwise.
   std::pair<sensor_msgs::Image, sensor_msgs::CameraInfo> cameraMessages(int camera_index,
                                                                         std::size_t frame) const;
+  // Throws KittiFormatError when the camera's first readable image is not of the calibration's
+  // rectified size (another day's calibration: every image would be refused); an image that
+  // does not read is left to its own frame.
+  void checkCameraImageSize(int camera_index) const;
   std::vector<geometry_msgs::TransformStamped> staticTransformMessages(
       const ros::Time& stamp) const;
 
