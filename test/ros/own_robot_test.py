@@ -19,19 +19,18 @@ import rospy
 import rostest
 import tf2_ros
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, PointCloud2, PointField
+from sensor_msgs.msg import PointCloud2, PointField
 
 from inekf_semantic_mapping.msg import SemanticMapInfo
-from simulated_robot import LIDAR_HEIGHT_M, WALL_RADIUS_M, fix_message, imu_message, rotation_z, \
-    truth, yaw_error_deg
+from simulated_robot import LIDAR_HEIGHT_M, WALL_RADIUS_M, fix_message, imu_and_fix_publishers, \
+    imu_message, rotation_z, truth, wait_for_subscribers, yaw_error_deg
 
 class OwnRobotTest(unittest.TestCase):
     def test_localizes_and_maps_another_robot(self):
         rospy.init_node("own_robot_test")
         duration_s = rospy.get_param("~duration_s", 25.0)
         settle_s = rospy.get_param("~settle_s", 15.0)
-        imu_pub = rospy.Publisher("/imu/data", Imu, queue_size=200)
-        fix_pub = rospy.Publisher("/gps/fix", NavSatFix, queue_size=20)
+        imu_pub, fix_pub = imu_and_fix_publishers()
         cloud_pub = rospy.Publisher("/points", PointCloud2, queue_size=20)
         lock = threading.Lock()
         odometry, info = [], {}
@@ -48,11 +47,7 @@ class OwnRobotTest(unittest.TestCase):
         rospy.Subscriber("/semantic_map/info", SemanticMapInfo, on_info, queue_size=5)
         tf_buffer = tf2_ros.Buffer(cache_time=rospy.Duration(600))
         tf2_ros.TransformListener(tf_buffer)
-        deadline = time.time() + 30.0
-        while (imu_pub.get_num_connections() == 0 or fix_pub.get_num_connections() == 0 or
-               cloud_pub.get_num_connections() == 0) and time.time() < deadline:
-            time.sleep(0.1)
-        time.sleep(1.0)
+        wait_for_subscribers([imu_pub, fix_pub, cloud_pub])
         rng = np.random.default_rng(3)
         # The clouds are made before the run, not in its 100 Hz loop: made there (numpy, under
         # the GIL with the publishers' threads) a loaded CI machine lost 20 of 250 of them.

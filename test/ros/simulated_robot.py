@@ -7,8 +7,10 @@ GPS is of an antenna ANTENNA_IN_BASE from base_link (frame gps_antenna). The .te
 the static tf.
 """
 import math
+import time
 
 import numpy as np
+import rospy
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 
 LAT0, LON0, ALT0 = 48.0, 11.0, 500.0
@@ -49,6 +51,20 @@ def geodetic(p):
     lat = LAT0 + math.degrees(p[1] / EARTH_RADIUS_M)
     lon = LON0 + math.degrees(p[0] / (EARTH_RADIUS_M * math.cos(math.radians(LAT0))))
     return lat, lon, ALT0 + p[2]
+
+
+def imu_and_fix_publishers():
+    """The publishers of the robot's IMU (/imu/data) and GPS (/gps/fix)."""
+    return (rospy.Publisher("/imu/data", Imu, queue_size=200),
+            rospy.Publisher("/gps/fix", NavSatFix, queue_size=20))
+
+
+def wait_for_subscribers(publishers, timeout_s=30.0):
+    """Until each publisher has a subscriber (a message sent before is lost), and 1 s more."""
+    deadline = time.time() + timeout_s
+    while any(p.get_num_connections() == 0 for p in publishers) and time.time() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.0)
 
 
 def imu_message(stamp, t, force_bias_in_base=(0.0, 0.0, 0.0)):

@@ -23,9 +23,9 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix
 
-from simulated_robot import fix_message, imu_message, truth, yaw_error_deg
+from simulated_robot import fix_message, imu_and_fix_publishers, imu_message, truth, \
+    wait_for_subscribers, yaw_error_deg
 
 GPS_END_S, OUTAGE_S = 22.0, 15.0
 BIAS_STEP_MPS2 = 0.4  # along base_link's x, from GPS_END_S on
@@ -37,8 +37,7 @@ class WheelOdometryTest(unittest.TestCase):
     def test_wheels_hold_the_track_through_an_outage(self):
         rospy.init_node("wheel_odometry_test")
         wheel_rate_hz = rospy.get_param("~wheel_rate_hz", 20.0)
-        imu_pub = rospy.Publisher("/imu/data", Imu, queue_size=200)
-        fix_pub = rospy.Publisher("/gps/fix", NavSatFix, queue_size=20)
+        imu_pub, fix_pub = imu_and_fix_publishers()
         wheel_pub = rospy.Publisher("/wheel_odom", Odometry, queue_size=50)
         lock = threading.Lock()
         odometry, diagnostics = [], {}
@@ -56,11 +55,7 @@ class WheelOdometryTest(unittest.TestCase):
 
         rospy.Subscriber("/inekf/odometry", Odometry, on_odometry, queue_size=1000)
         rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics, queue_size=20)
-        deadline = time.time() + 30.0
-        publishers = [imu_pub, fix_pub] + ([wheel_pub] if wheel_rate_hz > 0 else [])
-        while any(p.get_num_connections() == 0 for p in publishers) and time.time() < deadline:
-            time.sleep(0.1)
-        time.sleep(1.0)
+        wait_for_subscribers([imu_pub, fix_pub] + ([wheel_pub] if wheel_rate_hz > 0 else []))
         rng = np.random.default_rng(5)
         start = rospy.Time.now()
         truth_at = {}
